@@ -1,0 +1,1 @@
+"""Motion exporters to interchange formats (glTF binary, ...)."""

@@ -1,0 +1,95 @@
+"""Plain-array exports: NPZ archives and JSON frames."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from ..motion import Motion
+from .targets import Target, get_target, to_target
+
+Array = npt.NDArray[np.float64]
+
+
+def motion_arrays(motion: Motion) -> dict[str, Any]:
+    """The arrays of a motion for archiving (no pickled objects; strings as unicode arrays).
+
+    Keys: ``positions (F, J, 3)`` global joint positions, ``rotations (F, J, 4)`` local quaternions
+    (x, y, z, w), ``global_rotations (F, J, 4)``, ``root_positions (F, 3)``, ``offsets (J, 3)``,
+    ``end_site_positions (F, E, 3)``, ``end_site_parents (E,)``, ``names (J,)``, ``parents (J,)``,
+    ``fps`` and ``units`` (scalars).
+    """
+    pos, grot = motion.fk()
+    return {
+        "positions": np.ascontiguousarray(pos),
+        "rotations": np.ascontiguousarray(motion.rotations),
+        "global_rotations": np.ascontiguousarray(grot),
+        "root_positions": motion.root_positions,
+        "offsets": motion.skeleton.offsets,
+        "end_site_positions": motion.end_site_positions(pos, grot),
+        "end_site_parents": motion.skeleton.end_site_parents,
+        "names": np.array(motion.skeleton.names, dtype=str),
+        "parents": motion.skeleton.parents,
+        "fps": np.float64(motion.fps),
+        "units": np.array(motion.units),
+    }
+
+
+def npz_bytes(motion: Motion, target: str | Target = "gltf", units: str | None = None) -> bytes:
+    """An NPZ archive of :func:`motion_arrays`.
+
+    Positions stay in the motion's own units (a BVH file's units) unless ``units`` is given or the
+    target implies a change of axes (``unity``/``unreal``, in their own units).
+    """
+    tgt = get_target(target) if isinstance(target, str) else target
+    if tgt.name not in ("gltf", "godot"):
+        motion = to_target(motion, tgt)
+    elif units is not None:
+        motion = motion.to_units(units)
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **motion_arrays(motion), target=np.array(tgt.name))
+    return buf.getvalue()
+
+
+def motion_json(motion: Motion, target: str | Target = "gltf", decimals: int = 5) -> dict[str, Any]:
+    """A JSON-ready dict: skeleton plus per-frame global positions and local rotations.
+
+    Lengths in the target's units (metres for gltf/godot/unity, centimetres for unreal); the
+    motion's units must be known or are taken as metres.
+    """
+    tgt = get_target(target) if isinstance(target, str) else target
+    moved = to_target(motion, tgt)
+    pos = np.round(np.ascontiguousarray(moved.global_positions()), decimals)
+    q = np.round(np.ascontiguousarray(moved.rotations), 6)
+    sk = moved.skeleton
+    return {
+        "format": "segue.frames/1",
+        "name": motion.name,
+        "fps": motion.fps,
+        "frame_count": motion.num_frames,
+        "convention": tgt.describe(),
+        "joints": list(sk.names),
+        "parents": [int(p) for p in sk.parents],
+        "offsets": np.round(sk.offsets, decimals).tolist(),
+        "frames": [
+            {"t": round(i / motion.fps, 6), "positions": p, "rotations": r}
+            for i, (p, r) in enumerate(zip(pos.tolist(), q.tolist(), strict=True))
+        ],
+    }
+
+
+def write_json(motion: Motion, path: str | Path, target: str | Target = "gltf") -> None:
+    """Write :func:`motion_json` compactly (one line) to ``path``."""
+    Path(path).write_text(json.dumps(motion_json(motion, target), separators=(",", ":")), encoding="utf-8")
+
+
+def write_npz(
+    motion: Motion, path: str | Path, target: str | Target = "gltf", units: str | None = None
+) -> None:
+    """Write :func:`npz_bytes` to ``path``."""
+    Path(path).write_bytes(npz_bytes(motion, target, units))

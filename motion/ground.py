@@ -1,0 +1,174 @@
+"""The ground-plane frame of a body: floor position and heading per frame, and the explicit
+ground root joint used by exports.
+
+Conventions (DESIGN.md): Y up; floor positions are ``[x, z]``; heading is the facing direction as
+a rotation about +Y, 0 = facing +Z, +pi/2 = facing +X (the body's left is +X when it faces +Z).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import replace
+
+import numpy as np
+import numpy.typing as npt
+
+from . import rotations as rot
+from .errors import MotionError
+from .mirror import mirror_map
+from .motion import Motion
+from .skeleton import Skeleton
+
+Array = npt.NDArray[np.float64]
+
+_HIP_NAMES = re.compile(r"thigh|upleg|upperleg|hip|buttock|femur", re.IGNORECASE)
+_SHOULDER_NAMES = re.compile(
+    r"shoulder|shldr|upperarm|uparm|humerus|collar|clavicle|^[lr]?arm$", re.IGNORECASE
+)
+
+
+def facing_pairs(skeleton: Skeleton) -> list[tuple[int, int]]:
+    """``(left, right)`` joint pairs whose difference points to the body's left: the hips and the
+    shoulders when their names say so, otherwise the paired joints nearest the root."""
+    partner, side = mirror_map(skeleton.names)
+    lefts = [j for j in range(skeleton.num_joints) if side[j] == 1]
+    if not lefts:
+        return []
+    depth = skeleton.depth()
+    pairs: list[tuple[int, int]] = []
+    for pattern in (_HIP_NAMES, _SHOULDER_NAMES):
+        named = [j for j in lefts if pattern.search(skeleton.names[j])]
+        if named:
+            j = min(named, key=lambda k: (depth[k], k))
+            pairs.append((j, int(partner[j])))
+    if not pairs:
+        j = min(lefts, key=lambda k: (depth[k], k))
+        pairs.append((j, int(partner[j])))
+    return pairs
+
+
+def heading(motion: Motion, positions: Array | None = None) -> Array:
+    """``(F,)`` facing direction (radians about +Y; 0 = +Z, pi/2 = +X), unwrapped over time.
+
+    From the floor projection of the left-minus-right vectors of the hips and shoulders (see
+    :func:`facing_pairs`): forward = left x up. Skeletons without left/right names fall back to
+    the root joint's rotated +Z axis.
+    """
+    pairs = facing_pairs(motion.skeleton)
+    if not pairs:
+        return np.unwrap(rot.yaw(motion.rotations[:, 0]))
+    pos = motion.global_positions() if positions is None else positions
+    across = np.zeros((motion.num_frames, 3))
+    for left, right in pairs:
+        v = pos[:, left] - pos[:, right]
+        n = np.linalg.norm(v[:, [0, 2]], axis=-1, keepdims=True)
+        across += v / np.maximum(n, 1e-12)
+    # forward = across x up = (-across_z, 0, across_x)
+    return np.asarray(np.unwrap(np.arctan2(-across[:, 2], across[:, 0])))
+
+
+def ground_frames(motion: Motion, positions: Array | None = None) -> tuple[Array, Array]:
+    """Per frame, the root's floor position ``(F, 2)`` ``[x, z]`` and the heading ``(F,)`` radians."""
+    pos = motion.global_positions() if positions is None else positions
+    return np.asarray(pos[:, 0][:, [0, 2]]), heading(motion, pos)
+
+
+def to_ground_frame(points: Array, origin_xz: Array, heading_rad: Array) -> Array:
+    """Express points ``(F, ..., 3)`` in each frame's ground frame: origin at ``origin_xz (F, 2)`` on
+    the floor (heights unchanged), +Z along the heading ``(F,)``, +X to the body's left."""
+    p = np.array(points, dtype=np.float64, copy=True)
+    extra = (1,) * (p.ndim - 2)
+    ox = origin_xz[:, 0].reshape(-1, *extra)
+    oz = origin_xz[:, 1].reshape(-1, *extra)
+    c = np.cos(heading_rad).reshape(-1, *extra)
+    s = np.sin(heading_rad).reshape(-1, *extra)
+    x = p[..., 0] - ox
+    z = p[..., 2] - oz
+    # rotate by -heading about +Y
+    p[..., 0] = c * x - s * z
+    p[..., 2] = s * x + c * z
+    return p
+
+
+def from_ground_frame(points: Array, origin_xz: Array, heading_rad: Array) -> Array:
+    """Inverse of :func:`to_ground_frame`."""
+    p = np.array(points, dtype=np.float64, copy=True)
+    extra = (1,) * (p.ndim - 2)
+    c = np.cos(heading_rad).reshape(-1, *extra)
+    s = np.sin(heading_rad).reshape(-1, *extra)
+    x, z = p[..., 0].copy(), p[..., 2].copy()
+    p[..., 0] = c * x + s * z + origin_xz[:, 0].reshape(-1, *extra)
+    p[..., 2] = -s * x + c * z + origin_xz[:, 1].reshape(-1, *extra)
+    return p
+
+
+def smooth_signal(x: Array, window: int) -> Array:
+    """Centred moving average over ``window`` frames (odd), edges padded by reflection."""
+    if window <= 1 or x.shape[0] < 2:
+        return np.asarray(x, dtype=np.float64)
+    w = window | 1
+    half = w // 2
+    pad = np.pad(x, [(half, half)] + [(0, 0)] * (x.ndim - 1), mode="reflect" if x.shape[0] > half else "edge")
+    c = np.cumsum(pad, axis=0)
+    c = np.concatenate((np.zeros((1, *x.shape[1:])), c), axis=0)
+    return np.asarray((c[w:] - c[:-w]) / w)
+
+
+GROUND_ROOT_NAME = "ground"
+
+
+def add_ground_root(motion: Motion, *, name: str = GROUND_ROOT_NAME, smooth_s: float = 0.0) -> Motion:
+    """A copy of the motion under an explicit ground root joint (for root motion in engines).
+
+    The new joint 0 sits on the floor (y = 0) under the old root, rotated about +Y by the heading;
+    the old root becomes its child, animated relative to it (its BVH channels gain positions).
+    Global positions of all original joints are unchanged.
+
+    Parameters
+    ----------
+    name:
+        Name of the new root (must not already exist).
+    smooth_s:
+        Width in seconds of a moving average applied to the ground path and heading (0 = none),
+        for a steadier root motion.
+    """
+    sk = motion.skeleton
+    if name in sk.names:
+        raise MotionError(f"the skeleton already has a joint named {name!r}")
+    pos = motion.global_positions()
+    xz, yaw = ground_frames(motion, pos)
+    window = int(round(smooth_s * motion.fps))
+    if window > 1:
+        xz, yaw = smooth_signal(xz, window), smooth_signal(yaw, window)
+    ground_pos = np.stack((xz[:, 0], np.zeros(motion.num_frames), xz[:, 1]), axis=-1)
+    ground_rot = rot.from_yaw(yaw)
+    inv = rot.conjugate(ground_rot)
+    old_root_local_pos = rot.rotate(inv, motion.root_positions - ground_pos)
+    old_root_local_rot = rot.multiply(inv, motion.rotations[:, 0])
+
+    old_channels = sk.channels[0]
+    root_channels = (
+        old_channels
+        if any(c.endswith("position") for c in old_channels)
+        else ("Xposition", "Yposition", "Zposition", *old_channels)
+    )
+    new_sk = Skeleton(
+        (name, *sk.names),
+        np.concatenate(([-1], sk.parents + 1)),
+        np.concatenate((np.zeros((1, 3)), sk.offsets)),
+        (
+            ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"),
+            root_channels,
+            *sk.channels[1:],
+        ),
+        sk.end_site_parents + 1,
+        sk.end_site_offsets,
+    )
+    # joint 1 (the old root) now carries animated translations, ahead of the previous ones
+    jt = np.concatenate((old_root_local_pos[:, None], motion.joint_translations), axis=1)
+    rotations = np.concatenate(
+        (ground_rot[:, None], old_root_local_rot[:, None], motion.rotations[:, 1:]), axis=1
+    )
+    return replace(
+        motion, skeleton=new_sk, root_positions=ground_pos, rotations=rotations, joint_translations=jt
+    )

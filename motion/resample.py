@@ -1,0 +1,53 @@
+"""Resampling a motion to another frame rate (linear positions, slerp rotations)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import numpy.typing as npt
+
+from . import rotations as rot
+from .errors import MotionError
+from .motion import Motion
+
+Array = npt.NDArray[np.float64]
+
+
+def sample_at(motion: Motion, frames: Array) -> Motion:
+    """The motion sampled at fractional frame indices ``frames (N,)`` in ``[0, F-1]``.
+
+    Root positions and animated translations are interpolated linearly, rotations by slerp along
+    the shorter arc. The result keeps ``motion.fps``; callers set the rate they mean.
+    """
+    f = np.asarray(frames, dtype=np.float64)
+    n = motion.num_frames
+    if f.ndim != 1 or f.size == 0:
+        raise MotionError("frames must be a non-empty 1-D array of frame indices")
+    if not np.all(np.isfinite(f)) or f.min() < 0 or f.max() > n - 1:
+        raise MotionError(f"frame indices must lie in [0, {n - 1}]")
+    i0 = np.minimum(np.floor(f).astype(np.intp), max(n - 2, 0))
+    i1 = np.minimum(i0 + 1, n - 1)
+    a = f - i0
+    lerp_w = a[:, None]
+    root = motion.root_positions[i0] * (1 - lerp_w) + motion.root_positions[i1] * lerp_w
+    jt = (
+        motion.joint_translations[i0] * (1 - a[:, None, None])
+        + motion.joint_translations[i1] * a[:, None, None]
+    )
+    q = rot.slerp(motion.rotations[i0], motion.rotations[i1], a[:, None])
+    return replace(motion, root_positions=root, rotations=q, joint_translations=jt)
+
+
+def resample(motion: Motion, fps: float) -> Motion:
+    """The motion at ``fps`` frames per second over the same duration.
+
+    The new frame count is ``floor(duration * fps + 1e-9) + 1``; frame 0 is unchanged.
+    """
+    if not (np.isfinite(fps) and 0 < fps <= 10_000):
+        raise MotionError(f"fps must be in (0, 10000], got {fps}")
+    if fps == motion.fps:
+        return motion
+    n_new = int(np.floor(motion.duration_s * fps + 1e-9)) + 1
+    frames = np.minimum(np.arange(n_new) * (motion.fps / fps), motion.num_frames - 1)
+    return replace(sample_at(motion, frames), fps=float(fps))

@@ -1,0 +1,78 @@
+"""Length units: the table of known units, standing height and a guess of a file's unit.
+
+BVH files do not declare their unit. Segue estimates the standing height in the file's own unit
+and picks the known unit that makes it closest to an adult's height (1.7 m); the guess is only a
+default: callers can declare the unit instead.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+METRES_PER_UNIT: dict[str, float] = {
+    "m": 1.0,
+    "cm": 0.01,
+    "mm": 0.001,
+    "in": 0.0254,
+    "ft": 0.3048,
+    "cmu": 0.0254 / 0.45,  # CMU ASF length unit (1/0.45 inch), kept by many CMU BVH conversions
+}
+TYPICAL_HEIGHT_M = 1.7
+PLAUSIBLE_HEIGHT_M = (0.9, 2.4)
+
+
+@dataclass(frozen=True, slots=True)
+class UnitGuess:
+    """Result of :func:`guess_units`.
+
+    Attributes
+    ----------
+    units: the best unit name (a key of :data:`METRES_PER_UNIT`).
+    height: standing height in the file's unit.
+    height_m: that height in metres under the guessed unit.
+    plausible: whether ``height_m`` lies in :data:`PLAUSIBLE_HEIGHT_M`.
+    """
+
+    units: str
+    height: float
+    height_m: float
+    plausible: bool
+
+
+def vertical_extent(points: npt.NDArray[np.float64]) -> float:
+    """Y extent (max - min) of points ``(..., 3)``."""
+    y = np.asarray(points)[..., 1]
+    return float(y.max() - y.min()) if y.size else 0.0
+
+
+def standing_height(frame_points: npt.NDArray[np.float64]) -> float:
+    """Standing height in the points' unit: the median over frames of the vertical extent.
+
+    Parameters
+    ----------
+    frame_points:
+        ``(F, P, 3)`` joint and End Site positions over a motion, Y up.
+
+    Rest poses are not used: many files (e.g. Bandai-Namco) define them lying down. The median
+    is robust to a few crouching, jumping or arms-up frames; a clip that never stands upright
+    (crawling) under-reports, and callers can declare units instead.
+    """
+    fp = np.asarray(frame_points)
+    if fp.size == 0:
+        return 0.0
+    per_frame = fp[..., 1].max(axis=-1) - fp[..., 1].min(axis=-1)
+    return float(np.median(per_frame))
+
+
+def guess_units(height: float) -> UnitGuess:
+    """The known unit that makes ``height`` (file units) closest to 1.7 m, on a log scale."""
+    if not (height > 0 and math.isfinite(height)):
+        return UnitGuess("m", float(height), float(height), False)
+    best = min(METRES_PER_UNIT, key=lambda u: abs(math.log(height * METRES_PER_UNIT[u] / TYPICAL_HEIGHT_M)))
+    h_m = height * METRES_PER_UNIT[best]
+    lo, hi = PLAUSIBLE_HEIGHT_M
+    return UnitGuess(best, float(height), float(h_m), lo <= h_m <= hi)

@@ -1,0 +1,1 @@
+"""Segue's front door: the command-line interface (and, with the service issue, the HTTP API)."""

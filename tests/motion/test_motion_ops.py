@@ -1,0 +1,109 @@
+"""Ground frames, mirroring, resampling and motion container behaviour."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from motion import Motion, MotionError
+from motion import rotations as rot
+from motion.ground import add_ground_root, from_ground_frame, ground_frames, heading, to_ground_frame
+from motion.mirror import mirror, mirror_map
+from motion.resample import resample, sample_at
+
+from .synthetic import walking_biped
+
+
+@pytest.mark.parametrize("heading_deg", [0.0, 90.0, -135.0])
+def test_heading_follows_walking_direction(heading_deg: float) -> None:
+    m = walking_biped(heading_deg=heading_deg)
+    h = heading(m)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (h - np.radians(heading_deg)))), 0.0, atol=0.05)
+
+
+def test_ground_frame_round_trip_and_forward_axis() -> None:
+    m = walking_biped(heading_deg=90.0)
+    pos = m.global_positions()
+    origin, h = ground_frames(m, pos)
+    local = to_ground_frame(pos, origin, h)
+    np.testing.assert_allclose(from_ground_frame(local, origin, h), pos, atol=1e-12)
+    # the left thigh is on the body's left: +X in the ground frame
+    assert np.all(local[:, m.skeleton.index("lThigh"), 0] > 0)
+    np.testing.assert_allclose(local[:, 0, [0, 2]], 0.0, atol=1e-12)
+
+
+def test_add_ground_root_keeps_global_positions() -> None:
+    m = walking_biped(heading_deg=30.0)
+    g = add_ground_root(m, smooth_s=0.2)
+    assert g.skeleton.names[0] == "ground" and g.num_joints == m.num_joints + 1
+    np.testing.assert_allclose(g.global_positions()[:, 1:], m.global_positions(), atol=1e-12)
+    np.testing.assert_allclose(g.root_positions[:, 1], 0.0)
+    with pytest.raises(MotionError):
+        add_ground_root(g)
+
+
+def test_mirror_pairs_and_exact_reflection() -> None:
+    m = walking_biped()
+    partner, side = mirror_map(m.skeleton.names)
+    assert m.skeleton.names[partner[m.skeleton.index("lThigh")]] == "rThigh"
+    assert side[m.skeleton.index("lHand")] == 1 and side[m.skeleton.index("rHand")] == -1
+    assert side[m.skeleton.index("spine")] == 0
+    mm = mirror(m)
+    expected = m.global_positions()[:, partner] * np.array([-1.0, 1, 1])
+    np.testing.assert_allclose(mm.global_positions(), expected, atol=1e-12)
+    np.testing.assert_allclose(mirror(mm).global_positions(), m.global_positions(), atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("names", "pairs"),
+    [
+        (("LeftArm", "RightArm", "Spine"), {"LeftArm": "RightArm"}),
+        (("Hand_L", "Hand_R", "Head"), {"Hand_L": "Hand_R"}),
+        (("lhand", "rhand", "lowerback"), {"lhand": "rhand"}),
+        (("CC_Base_L_Foot", "CC_Base_R_Foot"), {"CC_Base_L_Foot": "CC_Base_R_Foot"}),
+        (("hand.L", "hand.R"), {"hand.L": "hand.R"}),
+    ],
+)
+def test_mirror_map_spellings(names: tuple[str, ...], pairs: dict[str, str]) -> None:
+    partner, side = mirror_map(names)
+    for left, right in pairs.items():
+        assert names[partner[names.index(left)]] == right
+        assert side[names.index(left)] == 1
+    assert sum(side == 0) == len(names) - 2 * len(pairs)
+
+
+def test_resample_halves_and_keeps_shape() -> None:
+    m = walking_biped(frames=121, fps=60.0)
+    r = resample(m, 30.0)
+    assert r.fps == 30.0 and r.num_frames == 61
+    np.testing.assert_allclose(r.global_positions(), m.global_positions()[::2], atol=1e-12)
+    up = resample(m, 120.0)
+    assert up.num_frames == 241
+    # halfway samples are slerps: their rotation is halfway between the neighbours
+    a, b, mid = m.rotations[10], m.rotations[11], up.rotations[21]
+    np.testing.assert_allclose(rot.angle_between(a, mid), rot.angle_between(mid, b), atol=1e-9)
+    with pytest.raises(MotionError):
+        resample(m, 0.0)
+    with pytest.raises(MotionError):
+        sample_at(m, np.array([-1.0]))
+
+
+def test_motion_validation_and_slicing() -> None:
+    m = walking_biped(frames=10)
+    with pytest.raises(MotionError):
+        Motion(m.skeleton, m.root_positions[:5], m.rotations, 30.0)
+    with pytest.raises(MotionError):
+        replace(m, fps=0.0)
+    with pytest.raises(MotionError):
+        replace(m, units="furlongs")
+    with pytest.raises(MotionError):
+        m.slice(20)
+    s = m.slice(2, 5)
+    assert s.num_frames == 3
+    np.testing.assert_allclose(s.global_positions(), m.global_positions()[2:5])
+    cm = m.to_units("cm")
+    np.testing.assert_allclose(cm.global_positions(), m.global_positions() * 100)
+    with pytest.raises(MotionError):
+        m.with_units("unknown").to_units("m")

@@ -1,0 +1,107 @@
+"""The ``segue`` command line, run in-process and as the installed console script."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from motion import read_bvh
+from motion.samples import SAMPLES, sample_path
+from service.cli import main
+
+
+def test_inspect_json_on_sample(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", "sample:salsa-leader", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["frames"] == 2242 and len(info["joints"]) == 43 and info["fps"] == 120.0
+    assert info["units_guess"]["plausible"]
+    assert 1.0 < info["height_m"] < 1.3
+
+
+def test_inspect_text_and_declared_units(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", "sample:walk", "--units", "cm"]) == 0
+    out = capsys.readouterr().out
+    assert "317 at 120 fps" in out and "cm (declared)" in out
+
+
+def test_convert_all_formats(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    src = sample_path("walk")
+    for ext in ("bvh", "bvh.gz", "glb", "json", "npz"):
+        assert main(["convert", str(src), str(tmp_path / f"w.{ext}"), "--frames", "1:61", "-q"]) == 0
+    z = np.load(tmp_path / "w.npz", allow_pickle=False)
+    ref = read_bvh(src).slice(1, 61).global_positions()
+    np.testing.assert_allclose(z["positions"], ref, atol=1e-9)  # file units (cm)
+    again = read_bvh(tmp_path / "w.bvh")
+    np.testing.assert_allclose(again.global_positions(), ref, atol=1e-4)
+
+
+def test_convert_fps_units_and_target(tmp_path: Path) -> None:
+    out = tmp_path / "w.npz"
+    assert main(["convert", "sample:walk", str(out), "--fps", "30", "--units", "m", "-q"]) == 0
+    z = np.load(out, allow_pickle=False)
+    assert float(z["fps"]) == 30.0 and z["positions"].shape[0] == 80 and str(z["units"]) == "m"
+    assert main(["convert", "sample:walk", str(tmp_path / "u.json"), "--target", "unreal", "-q"]) == 0
+    doc = json.loads((tmp_path / "u.json").read_text())
+    assert doc["convention"]["up"] == "+Z"
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["inspect", "/no/such/file.bvh"], "cannot read file"),
+        (["inspect", "sample:nope"], "no bundled sample"),
+        (["convert", "sample:walk", "out.fbx"], "unsupported file type"),
+        (["convert", "sample:walk", "out.npz", "--frames", "a:b"], "--frames"),
+        (["convert", "sample:walk", "out.npz", "--fps", "-5"], "fps"),
+    ],
+)
+def test_bad_input_exits_2_with_message(
+    argv: list[str],
+    message: str,
+    capsys: pytest.CaptureFixture[str],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("segue: error:") and message in err
+
+
+def test_malformed_bvh_names_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.bvh"
+    bad.write_text(
+        "HIERARCHY\nROOT a\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xrotation Yrotation Zrotation\n}\n"
+        "MOTION\nFrames: 2\nFrame Time: 0.1\n1 2 3\n1 x 3\n"
+    )
+    assert main(["inspect", str(bad)]) == 2
+    assert "bad.bvh:11" in capsys.readouterr().err
+
+
+def test_samples_and_demo(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["samples"]) == 0
+    listed = capsys.readouterr().out
+    assert all(f"sample:{name}" in listed for name in SAMPLES)
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    assert {p.name for p in tmp_path.iterdir()} == {
+        "salsa-leader.glb",
+        "salsa-leader.json",
+        "salsa-leader.npz",
+    }
+
+
+@pytest.mark.skipif(shutil.which("segue") is None, reason="console script not installed")
+def test_console_script_is_installed() -> None:
+    r = subprocess.run(
+        ["segue", "inspect", "sample:start-walk-stop", "--json"],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    )
+    assert json.loads(r.stdout)["frames"] > 0
