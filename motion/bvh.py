@@ -40,7 +40,10 @@ Array = npt.NDArray[np.float64]
 DEFAULT_MAX_JOINTS = 1024
 DEFAULT_MAX_FRAMES = 2_000_000
 DEFAULT_MAX_BYTES = 1 << 30
-_FPS_SNAP = 1e-3  # snap 1/frame_time to an integer rate within this relative tolerance
+_FPS_SNAP = 1e-3
+MAX_ABS_VALUE = 1e9
+"""Largest magnitude accepted for any channel value (any unit): beyond it a file is corrupt, and
+kinematics would overflow."""  # snap 1/frame_time to an integer rate within this relative tolerance
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,12 +119,15 @@ def parse_bvh(
     if units is not None and units not in METRES_PER_UNIT:
         raise BvhError(f"unknown units {units!r}; use one of {', '.join(METRES_PER_UNIT)}", source=source)
     data = _maybe_gunzip(bytes(data), lim, source)
+    if data.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte order mark (Windows editors)
+        data = data[3:]
     if len(data) > lim.max_bytes:
         raise BvhError(f"file is larger than the {lim.max_bytes}-byte limit", source=source)
     m = re.search(rb"(?m)^[ \t]*MOTION\b", data)
     if m is None:
         if not data.strip():
             raise BvhError("file is empty", source=source)
+        _parse_hierarchy(_decode(data, source), lim, source)  # a broken hierarchy is the better message
         raise BvhError("no MOTION section", line=data.count(b"\n") + 1, source=source)
     header_text = _decode(data[: m.start()], source)
     skeleton = _parse_hierarchy(header_text, lim, source)
@@ -157,18 +163,32 @@ def _subsample(motion: Motion, step: int) -> Motion:
 
 
 def _maybe_gunzip(data: bytes, lim: BvhLimits, source: str) -> bytes:
+    """Decompress gzip content (all members, as ``gzip`` does), within the byte limit."""
     if not data.startswith(b"\x1f\x8b"):
         return data
+    out: list[bytes] = []
+    size = 0
+    rest = data
     try:
-        d = zlib.decompressobj(16 + zlib.MAX_WBITS)
-        out = d.decompress(data, lim.max_bytes + 1)
-        if len(out) > lim.max_bytes:
-            raise BvhError(f"decompressed file is larger than the {lim.max_bytes}-byte limit", source=source)
-        if not d.eof:
-            raise BvhError("gzip stream is truncated", source=source)
-        return out
+        while rest:
+            d = zlib.decompressobj(16 + zlib.MAX_WBITS)
+            chunk = d.decompress(rest, lim.max_bytes + 1 - size)
+            size += len(chunk)
+            out.append(chunk)
+            if size > lim.max_bytes or d.unconsumed_tail:
+                raise BvhError(
+                    f"decompressed file is larger than the {lim.max_bytes}-byte limit", source=source
+                )
+            if not d.eof:
+                raise BvhError("gzip stream is truncated", source=source)
+            rest = d.unused_data
+            if rest and not rest.startswith(b"\x1f\x8b"):
+                if rest.strip(b"\x00"):
+                    raise BvhError("trailing garbage after the gzip data", source=source)
+                break
     except zlib.error as exc:
         raise BvhError(f"corrupt gzip data ({exc})", source=source) from None
+    return b"".join(out)
 
 
 def _decode(raw: bytes, source: str) -> str:
@@ -191,8 +211,8 @@ def _parse_float(tok: str, lineno: int, what: str, source: str) -> float:
         v = float(tok)
     except ValueError:
         raise BvhError(f"{what}: {tok!r} is not a number", lineno, source) from None
-    if not math.isfinite(v):
-        raise BvhError(f"{what}: {tok!r} is not a finite number", lineno, source)
+    if not math.isfinite(v) or abs(v) > MAX_ABS_VALUE:
+        raise BvhError(f"{what}: {tok!r} is not a finite number within +-{MAX_ABS_VALUE:g}", lineno, source)
     return v
 
 
@@ -289,6 +309,9 @@ def _parse_hierarchy(text: str, lim: BvhLimits, source: str) -> Skeleton:
             if not 0 <= count <= 6:
                 raise BvhError(f"CHANNELS count {count} is outside 0..6", lineno, source)
             chans = rest[1 : 1 + count]
+            listed = len(list(takewhile(lambda t: t in VALID_CHANNELS, rest[1:])))
+            if listed > count:
+                raise BvhError(f"CHANNELS declares {count} channels but lists {listed}", lineno, source)
             if len(chans) != count:
                 raise BvhError(f"CHANNELS declares {count} channels but lists {len(chans)}", lineno, source)
             bad = [c for c in chans if c not in VALID_CHANNELS]
@@ -310,14 +333,16 @@ def _parse_hierarchy(text: str, lim: BvhLimits, source: str) -> Skeleton:
         raise BvhError("HIERARCHY ends inside an open block (missing '}')", last_line, source)
     if not names:
         raise BvhError("HIERARCHY has no ROOT", last_line, source)
+    # End Sites by parent joint (stable), the order the writer emits them in
+    es_order = np.argsort(np.array(es_parents, dtype=np.intp), kind="stable")
     try:
         return Skeleton(
             tuple(names),
             np.array(parents, dtype=np.intp),
             np.array(offsets, dtype=np.float64),
             tuple(c or () for c in channels),
-            np.array(es_parents, dtype=np.intp),
-            np.array(es_offsets, dtype=np.float64).reshape(-1, 3),
+            np.array(es_parents, dtype=np.intp)[es_order],
+            np.array(es_offsets, dtype=np.float64).reshape(-1, 3)[es_order],
         )
     except MotionError as exc:
         raise BvhError(str(exc), None, source) from None
@@ -354,7 +379,7 @@ def _parse_motion_header(
     frame_time = _parse_float(time_tok, time_line, "Frame Time", source)
     if not 1e-5 <= frame_time <= 10.0:
         raise BvhError(f"Frame Time: {frame_time} s is not a plausible frame interval", time_line, source)
-    data_line = time_line + 1
+    data_line = time_line + 1 if m.group(0).endswith(b"\n") else time_line
     return n_frames, frame_time, m.end(), data_line
 
 
@@ -363,35 +388,30 @@ def _parse_table(
 ) -> Array:
     """``(F, C)`` channel values from the MOTION block starting at byte ``start``."""
     expected = n_frames * n_channels
-    values = parse_decimals(data, start) if start >= 8 else None
+    values = parse_decimals(data, start, row_length=n_channels) if start >= 8 else None
     if values is None:  # exponents, '+' signs, long mantissas...: the general C parser
-        try:
-            values = np.array(data[start:].split(), dtype=np.float64)
-        except ValueError:
-            values = None
-        if values is not None and not np.all(np.isfinite(values)):
-            values = None
-    if values is not None and values.size == expected and _row_count(data, start, n_frames) == n_frames:
+        lines = [line.split() for line in data[start:].split(b"\n")]
+        lines = [t for t in lines if t]
+        if all(len(t) == n_channels for t in lines):
+            try:
+                values = np.array([v for t in lines for v in t], dtype=np.float64)
+            except ValueError:
+                values = None
+            if values is not None and not np.all(np.isfinite(values)):
+                values = None
+    if (
+        values is not None
+        and values.size == expected
+        and (values.size == 0 or float(np.abs(values).max()) <= MAX_ABS_VALUE)
+    ):
         return values.reshape(n_frames, n_channels)
     return _parse_table_slow(data, start, first_line, n_frames, n_channels, source)
-
-
-def _row_count(data: bytes, start: int, expected: int) -> int:
-    """Number of non-blank lines from byte ``start``; one ``count`` when it equals ``expected``."""
-    end = len(data)
-    while end > start and data[end - 1 : end].isspace():
-        end -= 1  # ignore trailing whitespace and blank lines
-    if end <= start:
-        return 0
-    if data.count(b"\n", start, end) + 1 == expected and not data[start : start + 1].isspace():
-        return expected  # that many lines, the first not blank: blank ones would leave too few values
-    return sum(1 for line in data[start:end].split(b"\n") if line.strip())
 
 
 def _parse_table_slow(
     data: bytes, start: int, first_line: int, n_frames: int, n_channels: int, source: str
 ) -> Array:
-    out = np.empty((n_frames, n_channels))
+    rows: list[list[float]] = []  # not preallocated: a file may declare far more frames than it holds
     row = 0
     lineno = first_line - 1
     for lineno, raw in enumerate(data[start:].split(b"\n"), start=first_line):
@@ -411,13 +431,15 @@ def _parse_table_slow(
             raise BvhError(
                 f"frame {row}: {bad.decode('latin-1')!r} is not a number", lineno, source
             ) from None
-        if not all(math.isfinite(v) for v in vals):
-            raise BvhError(f"frame {row}: non-finite value", lineno, source)
-        out[row] = vals
+        if not all(math.isfinite(v) and abs(v) <= MAX_ABS_VALUE for v in vals):
+            raise BvhError(
+                f"frame {row}: a value is not finite or beyond +-{MAX_ABS_VALUE:g}", lineno, source
+            )
+        rows.append(vals)
         row += 1
     if row < n_frames:
         raise BvhError(f"file ends after {row} of the {n_frames} declared frames", lineno, source)
-    return out
+    return np.array(rows, dtype=np.float64).reshape(n_frames, n_channels)
 
 
 def _is_float(tok: bytes) -> bool:

@@ -29,7 +29,7 @@ _SIGNED_POW10 = np.concatenate((10.0 ** np.arange(9), -(10.0 ** np.arange(9)))) 
 _POW10_INT = np.array([10**n for n in range(9)], dtype=np.uint64)
 _EXACT_LIMIT = 2**53
 _PAD = 8
-_MINUS, _DOT = 45, 46
+_MINUS, _DOT, _NEWLINE = 45, 46, 10
 
 
 def _byte_words(data: bytes) -> npt.NDArray[np.uint64]:
@@ -53,7 +53,9 @@ def _swar_digits(
 _CHUNK_BYTES = 1 << 19
 
 
-def parse_decimals(data: bytes, start: int = 0) -> npt.NDArray[np.float64] | None:
+def parse_decimals(
+    data: bytes, start: int = 0, row_length: int | None = None
+) -> npt.NDArray[np.float64] | None:
     """Parse plain decimal numbers separated by ASCII whitespace.
 
     Parameters
@@ -63,11 +65,15 @@ def parse_decimals(data: bytes, start: int = 0) -> npt.NDArray[np.float64] | Non
     start:
         Offset in ``data`` where the numbers begin (a whole file can be passed without copying its
         tail; the bytes before ``start`` are ignored).
+    row_length:
+        When given, every non-blank line must hold exactly this many numbers (else ``None``).
 
     Returns
     -------
-    The values in order, float64, or ``None`` when some token is outside the plain grammar
-    (the caller then uses a general parser).
+    The values in order, float64, or ``None`` when some token is outside the plain grammar, a
+    mantissa exceeds 2**53, or a line has the wrong count (the caller then uses a general
+    parser). Separators are ASCII whitespace (tab, LF, VT, FF, CR, space); other control bytes
+    make a token invalid, as in ``float()``.
 
     Notes
     -----
@@ -91,7 +97,7 @@ def parse_decimals(data: bytes, start: int = 0) -> npt.NDArray[np.float64] | Non
     while pos < end:
         stop = data.find(b"\n", min(pos + _CHUNK_BYTES, end))
         stop = end if stop < 0 else stop + 1
-        piece = _parse_piece(whole, words, pos, stop)
+        piece = _parse_piece(whole, words, pos, stop, row_length)
         if piece is None:
             return None
         pieces.append(piece)
@@ -102,11 +108,15 @@ def parse_decimals(data: bytes, start: int = 0) -> npt.NDArray[np.float64] | Non
 
 
 def _parse_piece(
-    whole: npt.NDArray[np.uint8], words: npt.NDArray[np.uint64], start: int, stop: int
+    whole: npt.NDArray[np.uint8],
+    words: npt.NDArray[np.uint64],
+    start: int,
+    stop: int,
+    row_length: int | None,
 ) -> npt.NDArray[np.float64] | None:
-    """Parse ``whole[start:stop]`` (``start >= 8``; ``stop`` at a whitespace boundary or the end)."""
+    """Parse ``whole[start:stop]`` (``start >= 8``; ``stop`` just after a line end or at the end)."""
     b = whole[start - 1 : stop]
-    token = b > 32
+    token = (b != 32) & ((b < 9) | (b > 13))  # not ASCII whitespace
     token[0] = False  # the byte before `start` is context only
     edges = np.flatnonzero(token[1:] != token[:-1])
     if token[-1]:
@@ -117,8 +127,13 @@ def _parse_piece(
     if n == 0:
         return np.zeros(0)
 
+    if row_length is not None:
+        line_ends = np.flatnonzero(b == _NEWLINE)
+        per_line = np.diff(np.searchsorted(starts, line_ends), prepend=0, append=n)
+        if np.any((per_line != 0) & (per_line != row_length)):
+            return None
     negative = b[starts] == _MINUS  # a '-' anywhere else fails the digit checks below
-    dots = np.flatnonzero(b == _DOT)
+    dots = np.flatnonzero(b[1:] == _DOT) + 1  # b[0] is context before `start`
     if dots.size == n and np.all(dots > starts) and np.all(dots < ends):
         point = dots  # the usual case: every token has exactly one decimal point
         n_frac = ends - point - 1
