@@ -52,7 +52,7 @@ def motion_to_arrays(motion: Motion, prefix: str = "") -> dict[str, npt.NDArray[
             f"{prefix}root_positions": np.ascontiguousarray(motion.root_positions),
             f"{prefix}rotations": np.ascontiguousarray(motion.rotations),
             f"{prefix}joint_translations": np.ascontiguousarray(motion.joint_translations),
-            f"{prefix}fps": np.float64(motion.fps),
+            f"{prefix}fps": np.array(motion.fps, dtype=np.float64),
             f"{prefix}units": np.array(motion.units),
             f"{prefix}name": np.array(motion.name),
         }
