@@ -25,7 +25,7 @@ from motion.samples import sample_path
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--file", help="BVH file (.bvh or .bvh.gz); default: bundled salsa leader")
-    ap.add_argument("--runs", type=int, default=15, help="timed runs (median reported)")
+    ap.add_argument("--runs", type=int, default=31, help="timed runs (median reported)")
     args = ap.parse_args(argv)
     tune_allocator()  # as in every Segue process (see motion/allocator.py)
     path = Path(args.file) if args.file else sample_path("salsa-leader")

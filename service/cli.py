@@ -6,6 +6,10 @@ Commands::
     segue convert IN OUT [--fps N] [--target T]   BVH -> .bvh/.bvh.gz/.glb/.json/.npz
     segue samples                                 list the bundled sample clips
     segue demo [--out DIR]                        inspect + convert a bundled sample
+    segue build SPEC.json --out DIR               build a database (same JSON as POST /v1/databases)
+    segue synth REQUEST.json --db DIR --out OUT   run a job in-process (same JSON as POST /v1/jobs)
+    segue serve [--host H] [--port P] [--redis URL]   the HTTP/WebSocket API (+ embedded workers)
+    segue worker --redis URL                      a Redis job worker
 
 ``FILE``/``IN`` may be ``sample:NAME`` for a bundled sample (see ``segue samples``). Bad input
 exits with status 2 and a one-line message naming the problem.
@@ -21,6 +25,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from pydantic import ValidationError
+
+from engines.base import EngineError
+from engines.registry import UnavailableError, load_plugins
 from motion import Motion, MotionError
 from motion.allocator import tune_allocator
 from motion.bvh import BvhLimits, detect_units
@@ -30,6 +38,9 @@ from motion.io import OUTPUT_SUFFIXES, load_motion, save_motion
 from motion.resample import resample
 from motion.samples import SAMPLES, sample_path
 from motion.units import METRES_PER_UNIT
+from schemas import EventType, JobEvent
+from schemas.jobs import RequestError
+from workers.execute import JobFailure
 
 SAMPLE_PREFIX = "sample:"
 
@@ -141,6 +152,107 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _validation_message(exc: ValidationError) -> str:
+    parts = []
+    for err in exc.errors()[:5]:
+        where = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        parts.append(f"{where}: {err['msg']}")
+    more = f" (+{len(exc.errors()) - 5} more)" if len(exc.errors()) > 5 else ""
+    return "; ".join(parts) + more
+
+
+def _echo(event: JobEvent) -> None:
+    if event.type == EventType.progress:
+        print(
+            f"  {100 * event.data.get('fraction', 0):5.1f}%  {event.data.get('message', '')}", file=sys.stderr
+        )
+    elif event.type == EventType.solution:
+        print(
+            f"  solution {event.data['result']}: score {event.data['score']:.6g} "
+            f"after {event.data['elapsed_ms']:.0f} ms",
+            file=sys.stderr,
+        )
+    elif event.type == EventType.failed:
+        print(f"  failed: {event.data['error']['message']}", file=sys.stderr)
+
+
+def cmd_build(args: argparse.Namespace) -> int:
+    from workers.local import EventWriter, build_to_dir
+
+    spec_path = Path(args.spec)
+    with _events_sink(args.events) as sink:
+        info = build_to_dir(
+            spec_path, Path(args.out), EventWriter("build", sink, None if args.quiet else _echo)
+        )
+    if not args.quiet:
+        print(
+            f"built {info.kind} database {info.id[:12]} in {args.out}: {len(info.clips)} clips, "
+            f"{info.frames} frames at {info.fps:g} fps"
+        )
+    return 0
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
+    from workers.local import EventWriter, synth_from_dir, write_result
+
+    with _events_sink(args.events) as sink:
+        writer = EventWriter("local", sink, None if args.quiet else _echo)
+        result = synth_from_dir(Path(args.request), Path(args.db), writer, args.budget)
+    if result is None:
+        failed = [e for e in writer.events if e.type == EventType.failed]
+        msg = failed[-1].data["error"]["message"] if failed else "no result"
+        raise MotionError(f"synthesis failed: {msg}")
+    motion, report = result
+    for note in write_result(motion, report, Path(args.out), Path(args.report) if args.report else None):
+        print(f"segue: note: {note}", file=sys.stderr)
+    if not args.quiet:
+        print(f"wrote {args.out}: {motion.num_frames} frames at {motion.fps:g} fps, score {report.score:.6g}")
+    return 0
+
+
+class _events_sink:  # noqa: N801 - a tiny context manager used like a function
+    def __init__(self, path: str | None) -> None:
+        self.path = path
+        self.fh: Any = None
+
+    def __enter__(self) -> Any:
+        if self.path:
+            self.fh = open(self.path, "w", encoding="utf-8")
+        return self.fh
+
+    def __exit__(self, *exc: object) -> None:
+        if self.fh is not None:
+            self.fh.close()
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    import os
+
+    import uvicorn
+
+    if args.data:
+        os.environ["SEGUE_DATA_DIR"] = args.data
+    if args.redis:
+        os.environ["SEGUE_REDIS_URL"] = args.redis
+    if args.workers is not None:
+        os.environ["SEGUE_WORKERS"] = str(args.workers)
+    from service.app import create_app
+
+    uvicorn.run(create_app(), host=args.host, port=args.port, log_level=args.log_level)
+    return 0
+
+
+def cmd_worker(args: argparse.Namespace) -> int:
+    from workers.redis_worker import main as worker_main
+
+    argv = ["--redis", args.redis]
+    if args.data:
+        argv += ["--data", args.data]
+    if args.name:
+        argv += ["--name", args.name]
+    return int(worker_main(argv) or 0)
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="segue", description="Segue: motion synthesis by example from motion capture."
@@ -186,6 +298,38 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="inspect a bundled salsa clip and convert it to GLB, JSON and NPZ")
     p.add_argument("--out", default="segue-demo", help="output directory (default ./segue-demo)")
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("build", help="build a database from a spec file (clip paths relative to it)")
+    p.add_argument("spec", help='database spec JSON, e.g. {"kind": "clips", "clips": [{"bvh": "a.bvh"}]}')
+    p.add_argument("--out", required=True, help="database directory to write")
+    p.add_argument("--events", help="also write the job's events as JSON lines here")
+    p.add_argument("--quiet", "-q", action="store_true")
+    p.set_defaults(func=cmd_build)
+
+    p = sub.add_parser("synth", help="run a synthesis request against a database directory")
+    p.add_argument("request", help='job request JSON, e.g. {"engine": "clip", "clip": "a"}')
+    p.add_argument("--db", required=True, help="database directory from segue build")
+    p.add_argument("--out", required=True, help="output motion: " + ", ".join(OUTPUT_SUFFIXES))
+    p.add_argument("--report", help="write the report JSON here")
+    p.add_argument("--events", help="write the events as JSON lines here")
+    p.add_argument("--budget", type=float, help="search budget in seconds (overrides the request's budget_s)")
+    p.add_argument("--quiet", "-q", action="store_true")
+    p.set_defaults(func=cmd_synth)
+
+    p = sub.add_parser("serve", help="run the HTTP/WebSocket API (embedded workers unless --redis)")
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=8000)
+    p.add_argument("--data", help="data directory (default $SEGUE_DATA_DIR or ./segue-data)")
+    p.add_argument("--redis", help="Redis URL: queue jobs for `segue worker` processes instead")
+    p.add_argument("--workers", type=int, help="embedded worker processes (default 2)")
+    p.add_argument("--log-level", default="info")
+    p.set_defaults(func=cmd_serve)
+
+    p = sub.add_parser("worker", help="a job worker consuming the Redis queue")
+    p.add_argument("--redis", required=True, help="Redis URL, e.g. redis://127.0.0.1:6379/0")
+    p.add_argument("--data", help="data directory shared with the API (default $SEGUE_DATA_DIR)")
+    p.add_argument("--name", help="worker name (default host-pid)")
+    p.set_defaults(func=cmd_worker)
     return ap
 
 
@@ -193,10 +337,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     tune_allocator()
     parser = build_parser()
     args = parser.parse_args(argv)
+    load_plugins()
     try:
         return int(args.func(args))
-    except MotionError as exc:
+    except ValidationError as exc:
+        print(f"segue: error: invalid JSON: {_validation_message(exc)}", file=sys.stderr)
+        return 2
+    except JobFailure as exc:
+        print(f"segue: error: {exc.message}", file=sys.stderr)
+        return 2
+    except (MotionError, RequestError, UnavailableError, EngineError) as exc:
         print(f"segue: error: {exc}", file=sys.stderr)
+        return 2
+    except json.JSONDecodeError as exc:
+        print(f"segue: error: invalid JSON: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
         print(f"segue: error: {exc}", file=sys.stderr)

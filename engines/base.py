@@ -1,0 +1,94 @@
+"""What every engine shares: the solution type and the interfaces between engines and the runtime.
+
+Engines follow the estimator style of DESIGN.md: a database object is built once from a motion
+library (:mod:`engines.library`) and stored as arrays; a loaded engine then answers
+``search(request, budget_s, emit, should_stop)``, calling ``emit.solution`` every time its best
+score improves (anytime) and polling ``should_stop`` (cancel). Engines never import the service,
+the workers or Redis.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from motion import Motion
+
+from .library import MotionLibrary
+
+Arrays = dict[str, npt.NDArray[Any]]
+ShouldStop = Callable[[], bool]
+
+
+class EngineError(ValueError):
+    """A request an engine cannot serve (bad clip name, impossible constraint...): a client error."""
+
+
+@dataclass(slots=True)
+class Solution:
+    """One result of a search.
+
+    Attributes
+    ----------
+    motion: the synthesized motion (metres, Y up).
+    score: total cost, lower is better.
+    terms: the score's terms by name.
+    provenance: per output frame, ``(clip name, source frame)``.
+    constraint_errors: per constraint, its error (metres, degrees, frames...).
+    metrics: extra quality figures; the runtime adds foot slip and jerk.
+    annotations: per-frame annotations propagated to the output (e.g. contacts).
+    """
+
+    motion: Motion
+    score: float
+    terms: dict[str, float] = field(default_factory=dict)
+    provenance: list[tuple[str, int]] = field(default_factory=list)
+    constraint_errors: dict[str, Any] = field(default_factory=dict)
+    metrics: dict[str, float] = field(default_factory=dict)
+    annotations: dict[str, Any] = field(default_factory=dict)
+
+
+class Emitter(Protocol):
+    """What the runtime gives a running engine to report with."""
+
+    def solution(self, solution: Solution) -> str:
+        """Publish an improved solution; returns its result id."""
+        ...
+
+    def progress(self, fraction: float, message: str = "") -> None:
+        """Publish progress of a long step, ``fraction`` in [0, 1]."""
+        ...
+
+
+class Engine(ABC):
+    """A loaded engine: a database ready to answer requests.
+
+    Subclasses set ``name`` (the request's ``engine``) and ``kind`` (the database kind it needs),
+    implement :meth:`build` (the kind-specific arrays) and :meth:`search`.
+    """
+
+    name: ClassVar[str]
+    kind: ClassVar[str]
+
+    def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
+        self.library = library
+        self.arrays = arrays
+
+    @classmethod
+    def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+        """Kind-specific database arrays computed from the library (default: none)."""
+        return {}
+
+    @abstractmethod
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+        """Answer a request, calling ``emit.solution`` for every improvement, until done, out of
+        budget or ``should_stop()``."""
+
+
+def empty_arrays() -> Arrays:
+    return {"_": np.zeros(0)}

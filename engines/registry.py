@@ -1,0 +1,60 @@
+"""Which engines and database kinds this installation has.
+
+Engine issues add themselves here. Kinds named in the schemas whose engine has not landed yet are
+refused with a clear message instead of being half-built.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+
+from .base import Engine
+from .clip import ClipEngine
+
+ENGINES: dict[str, type[Engine]] = {ClipEngine.name: ClipEngine}
+KIND_ENGINES: dict[str, type[Engine]] = {cls.kind: cls for cls in ENGINES.values()}
+
+PLUGINS_ENV = "SEGUE_ENGINE_PLUGINS"
+"""Comma-separated modules imported at start-up that call :func:`register` (extra engines, e.g. the
+test suite's scripted engine). Every process that runs jobs must see the same value."""
+
+
+def register(engine: type[Engine]) -> type[Engine]:
+    """Add an engine (usable as a class decorator)."""
+    ENGINES[engine.name] = engine
+    KIND_ENGINES.setdefault(engine.kind, engine)
+    return engine
+
+
+def load_plugins(spec: str | None = None) -> list[str]:
+    """Import the plugin modules named in ``spec`` (default: the environment variable)."""
+    names = [n.strip() for n in (spec if spec is not None else os.environ.get(PLUGINS_ENV, "")).split(",")]
+    loaded = []
+    for name in filter(None, names):
+        importlib.import_module(name)
+        loaded.append(name)
+    return loaded
+
+
+class UnavailableError(LookupError):
+    """A kind or engine that exists in the contract but not (yet) in this installation."""
+
+
+def engine_class(name: str) -> type[Engine]:
+    try:
+        return ENGINES[name]
+    except KeyError:
+        raise UnavailableError(
+            f"engine {name!r} is not available in this installation (available: {', '.join(ENGINES)})"
+        ) from None
+
+
+def kind_class(kind: str) -> type[Engine]:
+    try:
+        return KIND_ENGINES[kind]
+    except KeyError:
+        raise UnavailableError(
+            f"database kind {kind!r} is not available yet: its engine has not landed "
+            f"(available kinds: {', '.join(KIND_ENGINES)})"
+        ) from None

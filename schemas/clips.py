@@ -1,0 +1,80 @@
+"""Clips: uploaded motions, and references to them inside database specs."""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+from pydantic import Field, field_validator, model_validator
+
+from .common import Strict
+
+
+class LabelRange(Strict):
+    """A label on a frame range ``[start, end)`` of a clip (source frames)."""
+
+    label: str = Field(min_length=1, max_length=64)
+    start: int = Field(ge=0)
+    end: int = Field(gt=0)
+    value: int = Field(default=1, description="+1 the label applies, -1 it does not")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> LabelRange:
+        if self.end <= self.start:
+            raise ValueError(f"label {self.label!r}: end ({self.end}) must be after start ({self.start})")
+        if self.value not in (-1, 1):
+            raise ValueError("label value must be 1 or -1")
+        return self
+
+
+class ClipSource(Strict):
+    """A clip inside a database spec.
+
+    ``bvh`` names the motion: in a spec file for the CLI, a path relative to the spec file; through the
+    API, the file name of an uploaded clip (or ``clip`` gives an uploaded clip's id). ``name`` is how
+    reports refer to the clip (default: the file name without ``.bvh``).
+    """
+
+    bvh: str | None = Field(default=None, min_length=1, max_length=1024, examples=["60_01_scaled.bvh"])
+    clip: str | None = Field(default=None, description="id of an uploaded clip (API only)")
+    name: str | None = Field(default=None, min_length=1, max_length=128)
+    labels: list[LabelRange] = Field(default_factory=list)
+    units: str | None = Field(default=None, description="declared length unit of the file (default: guessed)")
+
+    @model_validator(mode="after")
+    def _one_source(self) -> ClipSource:
+        if (self.bvh is None) == (self.clip is None):
+            raise ValueError(
+                "give exactly one of 'bvh' (a file name or path) or 'clip' (an uploaded clip id)"
+            )
+        return self
+
+    @field_validator("units")
+    @classmethod
+    def _known_units(cls, v: str | None) -> str | None:
+        from motion.units import METRES_PER_UNIT
+
+        if v is not None and v not in METRES_PER_UNIT:
+            raise ValueError(f"unknown units {v!r}; use one of {', '.join(METRES_PER_UNIT)}")
+        return v
+
+    def display_name(self) -> str:
+        if self.name:
+            return self.name
+        base = (self.bvh or self.clip or "clip").replace("\\", "/").rsplit("/", 1)[-1]
+        for suffix in (".gz", ".bvh"):
+            base = base.removesuffix(suffix)
+        return base
+
+
+class ClipInfo(Strict):
+    """An uploaded clip (stored once per content hash)."""
+
+    id: str = Field(description="sha256 of the uploaded bytes")
+    name: str = Field(description="file name given at upload")
+    frames: int
+    fps: float
+    joints: list[str]
+    units: str
+    height_m: float
+    size_bytes: int
+    created_at: datetime

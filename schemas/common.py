@@ -1,0 +1,29 @@
+"""Shared pieces of the contract: the schema version and the error body."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field
+
+SCHEMA_VERSION = 1
+"""Bumped whenever a change to the specs changes what a database build produces (part of the
+content address of databases)."""
+
+
+class Strict(BaseModel):
+    """Base for request models: unknown fields are errors (a typo must not be silently ignored)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class ErrorBody(BaseModel):
+    code: str = Field(description="stable machine-readable code, e.g. 'invalid_bvh', 'not_found'")
+    message: str = Field(description="what went wrong, for a person")
+    details: Any | None = Field(default=None, description="structured details (e.g. validation errors)")
+
+
+class ErrorResponse(BaseModel):
+    """Every 4xx/5xx response body."""
+
+    error: ErrorBody

@@ -1,0 +1,101 @@
+"""Database build specs (a discriminated union on ``kind``) and database status."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from datetime import datetime
+from enum import StrEnum
+from typing import Annotated, Any, Literal
+
+from pydantic import Field, TypeAdapter
+
+from .clips import ClipSource
+from .common import SCHEMA_VERSION, Strict
+
+
+class DatabaseSpecBase(Strict):
+    """Settings every database kind shares."""
+
+    kind: str
+    clips: list[ClipSource] = Field(min_length=1, max_length=2000)
+    fps: float | None = Field(default=None, gt=0, le=1000, description="resample every clip to this rate")
+    name: str | None = Field(default=None, max_length=128)
+
+
+class ClipsDatabaseSpec(DatabaseSpecBase):
+    """A plain motion library: the clips parsed, resampled to one rate and converted to metres.
+
+    Serves the ``clip`` engine (excerpts) and is the common part of every other kind."""
+
+    kind: Literal["clips"] = "clips"
+
+
+class ControlDatabaseSpec(DatabaseSpecBase):
+    """Control-by-example database (Hsu et al. 2004); settings arrive with the control engine."""
+
+    kind: Literal["control"] = "control"
+
+
+class GraphDatabaseSpec(DatabaseSpecBase):
+    """Motion-graph database (Arikan & Forsyth 2002); settings arrive with the graph engine."""
+
+    kind: Literal["graph"] = "graph"
+
+
+class AnnotatedDatabaseSpec(DatabaseSpecBase):
+    """Annotated database (Arikan et al. 2003); settings arrive with the annotation engine."""
+
+    kind: Literal["annotated"] = "annotated"
+
+
+class RhythmDatabaseSpec(DatabaseSpecBase):
+    """Rhythmic-motion database (Kim et al. 2003)."""
+
+    kind: Literal["rhythm"] = "rhythm"
+    beats_per_movement: int = Field(default=4, ge=1, le=16)
+
+
+DatabaseSpec = Annotated[
+    ClipsDatabaseSpec | ControlDatabaseSpec | GraphDatabaseSpec | AnnotatedDatabaseSpec | RhythmDatabaseSpec,
+    Field(discriminator="kind"),
+]
+_SPEC_ADAPTER: TypeAdapter[Any] = TypeAdapter(DatabaseSpec)
+
+
+def parse_database_spec(data: Any) -> DatabaseSpecBase:
+    """Validate a database spec (dict or JSON text); raises pydantic's ValidationError."""
+    if isinstance(data, str | bytes):
+        return _SPEC_ADAPTER.validate_json(data)  # type: ignore[no-any-return]
+    return _SPEC_ADAPTER.validate_python(data)  # type: ignore[no-any-return]
+
+
+def database_id(spec: DatabaseSpecBase, clip_hashes: list[str]) -> str:
+    """Content address of a database: sha256 of the clips' content hashes (in spec order), the
+    canonical spec JSON (sorted keys, clip file references replaced by hashes) and the schema version."""
+    canonical = spec.model_dump(mode="json", exclude={"name"})
+    for entry, digest in zip(canonical["clips"], clip_hashes, strict=True):
+        entry.pop("bvh", None)
+        entry["clip"] = digest
+    payload = json.dumps({"schema": SCHEMA_VERSION, "spec": canonical}, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(payload.encode()).hexdigest()
+
+
+class DatabaseStatus(StrEnum):
+    queued = "queued"
+    building = "building"
+    ready = "ready"
+    failed = "failed"
+
+
+class DatabaseInfo(Strict):
+    id: str
+    kind: str
+    name: str | None = None
+    status: DatabaseStatus
+    clips: list[str] = Field(description="clip names as used in reports")
+    frames: int = 0
+    fps: float | None = None
+    build_job: str | None = Field(default=None, description="the job building it (events show progress)")
+    error: str | None = None
+    created_at: datetime

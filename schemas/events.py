@@ -1,0 +1,37 @@
+"""Job events: what a job reports while it runs, in order, with increasing ids (resume with ``after``)."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import Any
+
+from pydantic import BaseModel, Field
+
+
+class EventType(StrEnum):
+    queued = "queued"
+    started = "started"
+    progress = "progress"
+    solution = "solution"
+    done = "done"
+    failed = "failed"
+    cancelled = "cancelled"
+
+    @property
+    def terminal(self) -> bool:
+        return self in (EventType.done, EventType.failed, EventType.cancelled)
+
+
+class JobEvent(BaseModel):
+    """One event of a job.
+
+    ``data`` by type: ``progress`` ``{"fraction": 0..1, "message"}``; ``solution`` ``{"score",
+    "terms", "elapsed_ms", "result"}`` (score: lower is better); ``done``/``cancelled`` ``{"result"}``
+    (the best result, or null); ``failed`` ``{"error": {"code", "message"}}``.
+    """
+
+    id: int = Field(ge=1)
+    job: str
+    type: EventType
+    time: float = Field(description="unix time, seconds")
+    data: dict[str, Any] = Field(default_factory=dict)

@@ -1,0 +1,141 @@
+"""The Segue HTTP API: ``create_app(settings)`` builds the FastAPI app; ``run`` serves it.
+
+The lifespan loads engine plugins, opens the :class:`~workers.store.Store` and starts the job
+backend: an :class:`~workers.embedded.EmbeddedBackend` (a local process pool) by default, or
+``workers.redis_backend.RedisBackend`` when ``SEGUE_REDIS_URL`` is set. ``app.state`` holds the
+settings, store, backend and metrics; routes reach them through :mod:`service.deps`.
+
+Run it with ``segue serve``, :func:`run`, or ``uvicorn --factory service.app:create_app``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import time
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import FastAPI
+from fastapi.openapi.utils import get_openapi
+from pydantic import TypeAdapter
+
+from engines.registry import PLUGINS_ENV, load_plugins
+from schemas.jobs import JobRequest
+from workers.backend import JobBackend
+from workers.embedded import EmbeddedBackend
+from workers.store import Store
+
+from .errors import install_error_handlers
+from .metrics import HttpMetricsMiddleware, Metrics, observe_terminal_events
+from .routes import clips, databases, events, health, jobs
+from .settings import Settings, get_settings
+
+log = logging.getLogger("segue.service")
+
+API_VERSION = "1"
+
+DESCRIPTION = """Motion synthesis by example. Upload BVH clips, build a database from them, submit
+jobs against it and stream their events; download results as BVH, GLB, JSON frames or NPZ.
+
+Every error body is `{"error": {"code", "message", "details"?}}`. When the server sets
+`SEGUE_API_TOKENS`, every write (POST, DELETE) and every WebSocket needs `Authorization: Bearer <token>`
+(WebSockets may pass `?token=` instead)."""
+
+
+def make_backend(settings: Settings, store: Store) -> JobBackend:
+    """The job backend the settings ask for (the Redis backend is imported only when used)."""
+    if settings.redis_url:
+        try:
+            from workers.redis_backend import RedisBackend  # type: ignore[import-not-found,unused-ignore]
+        except ImportError as exc:
+            raise RuntimeError(
+                f"SEGUE_REDIS_URL is set but the Redis backend is not available: {exc}"
+            ) from exc
+        backend: JobBackend = RedisBackend(store, settings.redis_url)
+        return backend
+    return EmbeddedBackend(store, settings.workers)
+
+
+@asynccontextmanager
+async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+    """Start the store and the backend; stop the backend at shutdown."""
+    settings: Settings = app.state.settings
+    if settings.engine_plugins is not None:
+        os.environ[PLUGINS_ENV] = settings.engine_plugins  # worker processes load the same plugins
+    load_plugins(settings.engine_plugins)
+    store = Store(settings.data_dir)
+    backend = make_backend(settings, store)
+    observe_terminal_events(backend.hub, app.state.metrics, since=time.time())
+    await backend.start()
+    app.state.store, app.state.backend = store, backend
+    log.info("segue API ready: data in %s, %s backend", settings.data_dir, type(backend).__name__)
+    try:
+        yield
+    finally:
+        app.state.backend = None
+        # let callbacks of the last events run before close() blocks the loop (an event still being
+        # recorded would otherwise hold the embedded backend's close for its 5 s join timeout)
+        for _ in range(5):
+            await asyncio.sleep(0)
+        await backend.close()
+
+
+def _add_job_request_schema(schema: dict[str, Any]) -> None:
+    """Document ``POST /v1/jobs``'s body as the built-in :data:`schemas.jobs.JobRequest` union."""
+    request_schema = TypeAdapter(JobRequest).json_schema(ref_template="#/components/schemas/{model}")
+    components = schema.setdefault("components", {}).setdefault("schemas", {})
+    components.update(request_schema.pop("$defs", {}))
+    components["JobRequest"] = request_schema
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """The FastAPI app (``settings`` default: :func:`~service.settings.get_settings`, i.e. ``SEGUE_*``)."""
+    settings = settings or get_settings()
+    app = FastAPI(
+        title="Segue",
+        version=API_VERSION,
+        description=DESCRIPTION,
+        lifespan=lifespan,
+        openapi_tags=[
+            {"name": "clips", "description": "uploaded motions"},
+            {"name": "databases", "description": "clips + a build spec, built by a job"},
+            {"name": "jobs", "description": "synthesis requests, results and reports"},
+            {"name": "events", "description": "job events (WebSocket stream, HTTP fallback)"},
+            {"name": "health", "description": "liveness and metrics"},
+        ],
+    )
+    app.state.settings = settings
+    app.state.metrics = Metrics()
+    app.state.backend = None
+    install_error_handlers(app)
+    for module in (clips, databases, jobs, events, health):
+        app.include_router(module.router)
+    app.add_middleware(HttpMetricsMiddleware, metrics=app.state.metrics)
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            schema = get_openapi(
+                title=app.title,
+                version=app.version,
+                description=app.description,
+                routes=app.routes,
+                tags=app.openapi_tags,
+            )
+            _add_job_request_schema(schema)
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
+    return app
+
+
+def run(
+    host: str = "127.0.0.1", port: int = 8000, settings: Settings | None = None, log_level: str = "info"
+) -> None:
+    """Serve the API with uvicorn in this process (the embedded backend spawns its own workers)."""
+    import uvicorn
+
+    uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level)

@@ -1,0 +1,179 @@
+"""Errors as JSON: every error body is a :class:`schemas.ErrorResponse`.
+
+Routes raise :class:`ApiError` (or let a domain error through); :func:`install_error_handlers` maps
+each to a status and a stable code, so a client mistake is always a 4xx with a message, never a 500:
+
+=========================================  ======  =====================
+exception                                  status  code
+=========================================  ======  =====================
+``workers.store.NotFoundError``            404     ``not_found``
+``motion.BvhError`` / ``motion.MotionError``  400  ``invalid_bvh``
+``RequestValidationError`` / ``ValidationError``  422  ``invalid_request``
+``schemas.jobs.RequestError``              422     ``invalid_request``
+``engines.registry.UnavailableError``      422     ``unavailable``
+:class:`ApiError`                          its own (413 ``too_large``, 409 ``database_not_ready``...)
+``HTTPException`` (routing: 404, 405)      its own ``http_<status>``
+anything else                              500     ``internal`` (a bug; logged)
+=========================================  ======  =====================
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, cast
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import ValidationError
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from engines.registry import UnavailableError
+from motion import MotionError
+from schemas import ErrorBody, ErrorResponse
+from schemas.jobs import RequestError
+from workers.store import NotFoundError
+
+log = logging.getLogger("segue.service")
+
+
+class ApiError(Exception):
+    """An error response: HTTP status, stable code, message for a person and optional details."""
+
+    def __init__(
+        self,
+        status: int,
+        code: str,
+        message: str,
+        details: Any = None,
+        headers: dict[str, str] | None = None,
+    ) -> None:
+        super().__init__(message)
+        self.status = status
+        self.code = code
+        self.message = message
+        self.details = details
+        self.headers = headers
+
+
+def conflict(code: str, message: str, details: Any = None) -> ApiError:
+    """409: the resource is not in a state that allows the request (e.g. a database still building)."""
+    return ApiError(409, code, message, details)
+
+
+def too_large(limit: int) -> ApiError:
+    """413: an upload over ``SEGUE_MAX_UPLOAD_BYTES``."""
+    return ApiError(413, "too_large", f"the upload is larger than the {limit}-byte limit", {"limit": limit})
+
+
+def unauthorized(message: str, invalid: bool = False) -> ApiError:
+    """401 with a ``WWW-Authenticate: Bearer`` challenge."""
+    challenge = 'Bearer error="invalid_token"' if invalid else "Bearer"
+    code = "invalid_token" if invalid else "unauthorized"
+    return ApiError(401, code, message, headers={"WWW-Authenticate": challenge})
+
+
+def error_body(code: str, message: str, details: Any = None) -> dict[str, Any]:
+    """The JSON of an :class:`~schemas.ErrorResponse`."""
+    return ErrorResponse(error=ErrorBody(code=code, message=message, details=details)).model_dump(
+        mode="json", exclude_none=True
+    )
+
+
+def error_response(
+    status: int, code: str, message: str, details: Any = None, headers: dict[str, str] | None = None
+) -> JSONResponse:
+    """A JSON error response."""
+    return JSONResponse(error_body(code, message, details), status_code=status, headers=headers)
+
+
+def validation_details(errors: list[Any]) -> list[dict[str, Any]]:
+    """Pydantic errors reduced to JSON-safe ``{"loc", "msg", "type"}`` entries."""
+    return [
+        {
+            "loc": [str(p) for p in e.get("loc", ())],
+            "msg": str(e.get("msg", "")),
+            "type": str(e.get("type", "")),
+        }
+        for e in errors
+    ]
+
+
+def validation_message(details: list[dict[str, Any]], limit: int = 3) -> str:
+    """One line for a person: the first few errors as ``where: what``."""
+    parts = [f"{'.'.join(d['loc']) or 'body'}: {d['msg']}" for d in details[:limit]]
+    more = f" (+{len(details) - limit} more)" if len(details) > limit else ""
+    return "invalid request: " + "; ".join(parts) + more
+
+
+async def _api_error(request: Request, exc: Exception) -> JSONResponse:
+    exc = cast(ApiError, exc)
+    return error_response(exc.status, exc.code, exc.message, exc.details, exc.headers)
+
+
+async def _not_found(request: Request, exc: Exception) -> JSONResponse:
+    return error_response(404, "not_found", str(exc))
+
+
+async def _motion_error(request: Request, exc: Exception) -> JSONResponse:
+    return error_response(400, "invalid_bvh", str(exc))
+
+
+async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
+    details = validation_details(list(cast(RequestValidationError | ValidationError, exc).errors()))
+    return error_response(422, "invalid_request", validation_message(details), details)
+
+
+async def _request_error(request: Request, exc: Exception) -> JSONResponse:
+    return error_response(422, "invalid_request", str(exc))
+
+
+async def _unavailable(request: Request, exc: Exception) -> JSONResponse:
+    return error_response(422, "unavailable", str(exc))
+
+
+async def _http_error(request: Request, exc: Exception) -> JSONResponse:
+    exc = cast(StarletteHTTPException, exc)
+    headers = dict(exc.headers) if exc.headers else None
+    return error_response(exc.status_code, f"http_{exc.status_code}", str(exc.detail), headers=headers)
+
+
+async def _internal(request: Request, exc: Exception) -> JSONResponse:
+    log.exception("unhandled error on %s %s", request.method, request.url.path, exc_info=exc)
+    return error_response(500, "internal", f"internal error ({type(exc).__name__}); see the server log")
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    """Register the handlers of the table in the module docstring."""
+    app.add_exception_handler(ApiError, _api_error)
+    app.add_exception_handler(NotFoundError, _not_found)
+    app.add_exception_handler(MotionError, _motion_error)
+    app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(ValidationError, _validation_error)
+    app.add_exception_handler(RequestError, _request_error)
+    app.add_exception_handler(UnavailableError, _unavailable)
+    app.add_exception_handler(StarletteHTTPException, _http_error)
+    app.add_exception_handler(Exception, _internal)
+
+
+ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
+    status: {"model": ErrorResponse, "description": text}
+    for status, text in {
+        400: "invalid BVH content (the message names the file and line)",
+        401: "a bearer token is required (auth enabled) or the token is not valid",
+        404: "no such clip, database, job or result",
+        409: "the resource is not ready (database building, job without a result...)",
+        413: "the upload is over the size limit",
+        422: "the request is invalid (details lists each problem)",
+    }.items()
+}
+"""OpenAPI error responses (all :class:`~schemas.ErrorResponse`), picked per route."""
+
+
+def responses(
+    *statuses: int, extra: dict[int, dict[str, Any]] | None = None
+) -> dict[int | str, dict[str, Any]]:
+    """The OpenAPI ``responses`` entry for the given error statuses (plus ``extra`` entries)."""
+    out: dict[int | str, dict[str, Any]] = {k: v for k, v in (extra or {}).items()}
+    out.update({s: ERROR_RESPONSES[s] for s in statuses})
+    return out

@@ -1,0 +1,5 @@
+"""One ``APIRouter`` per resource."""
+
+from . import clips, databases, events, health, jobs
+
+__all__ = ["clips", "databases", "events", "health", "jobs"]

@@ -1,0 +1,202 @@
+"""Job events: a WebSocket stream (``/v1/jobs/{id}/events``) and a plain-HTTP fallback.
+
+The WebSocket relays the backend's events through a bounded per-socket
+:class:`~service.streaming.EventQueue` (a slow client gets the newest solution), sends each as
+``JobEvent`` JSON and closes with 1000 after the terminal event (``done``, ``failed`` or
+``cancelled``). ``?after=N`` resumes after the last event a client saw. Close codes: 4401 missing or
+invalid token (when the server cannot answer the handshake with HTTP 401), 4404 unknown job, 1011
+backend error.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from typing import Annotated
+
+import anyio
+from fastapi import APIRouter, Query, WebSocket
+from fastapi.websockets import WebSocketDisconnect
+from starlette.websockets import WebSocketState
+
+from schemas import EventType, JobEvent
+from workers.backend import JobBackend
+from workers.store import NotFoundError
+
+from ..deps import BackendDep, MetricsDep, SettingsDep, bearer_token, token_problem
+from ..errors import error_response, responses
+from ..metrics import Metrics
+from ..streaming import EventQueue, pump
+
+log = logging.getLogger("segue.service.events")
+
+router = APIRouter(prefix="/v1/jobs", tags=["events"])
+
+After = Annotated[int, Query(ge=0, description="resume: only events with a larger id")]
+
+
+async def collect_events(backend: JobBackend, job_id: str, after: int, wait: float) -> list[JobEvent]:
+    """The events after ``after`` available now, waiting up to ``wait`` seconds for the first one."""
+    events = backend.events(job_id, after)
+    out: list[JobEvent] = []
+    timeout = max(wait, 0.05)
+    try:
+        while True:
+            try:
+                event = await asyncio.wait_for(anext(events), timeout)
+            except (StopAsyncIteration, TimeoutError):
+                break
+            out.append(event)
+            timeout = 0.02  # the rest of what is already there
+    finally:
+        with contextlib.suppress(RuntimeError):
+            await events.aclose()  # type: ignore[attr-defined]
+    return out
+
+
+@router.get("/{job_id}/events", response_model=list[JobEvent], responses=responses(404, 422))
+async def list_events(
+    job_id: str,
+    backend: BackendDep,
+    after: After = 0,
+    wait: Annotated[float, Query(ge=0, le=60, description="long-poll: seconds to wait for a new event")] = 0,
+) -> list[JobEvent]:
+    """The job's events after ``after`` (no streaming; poll with the last id, or use the WebSocket)."""
+    await backend.status(job_id)  # 404 for unknown jobs
+    return await collect_events(backend, job_id, after, wait)
+
+
+async def _refuse(websocket: WebSocket, status: int, code: str, message: str, ws_code: int) -> None:
+    """Refuse a handshake: an HTTP response when the server supports it, else accept and close."""
+    if "websocket.http.response" in websocket.scope.get("extensions", {}):
+        headers = {"WWW-Authenticate": "Bearer"} if status == 401 else None
+        await websocket.send_denial_response(error_response(status, code, message, headers=headers))
+        return
+    await websocket.accept()
+    await websocket.close(code=ws_code, reason=message[:120])
+
+
+async def _send_events(websocket: WebSocket, queue: EventQueue, metrics: Metrics) -> JobEvent | None:
+    """Send queued events until the terminal one (returned) or the producer ends (None)."""
+    while True:
+        event = await queue.get()
+        if event is None:
+            return None
+        await websocket.send_text(event.model_dump_json())
+        metrics.inc("segue_events_sent_total")
+        if event.type.terminal:
+            return event
+
+
+async def _until_disconnect(websocket: WebSocket) -> None:
+    """Read (and ignore) client messages until the client goes away."""
+    with contextlib.suppress(WebSocketDisconnect):
+        while True:
+            message = await websocket.receive()
+            if message["type"] == "websocket.disconnect":
+                return
+
+
+async def _ending(backend: JobBackend, job_id: str, after: int) -> tuple[JobEvent | None, int, str]:
+    """After the backend's iterator ended without a terminal event: a terminal event rebuilt from
+    the job's status (when the client has not seen it), and the close code and reason."""
+    info = await backend.status(job_id)
+    if not info.status.finished:
+        return None, 1011, "the event stream ended before the job finished; reconnect with after="
+    if info.last_event <= after:
+        return None, 1000, f"job {info.status.value}; no events after {after}"
+    type_ = EventType(info.status.value)
+    data: dict[str, object] = {"result": info.result}
+    if type_ == EventType.failed:
+        data = {"error": {"code": "failed", "message": info.error or "the job failed"}}
+    when = (info.finished_at or info.created_at).timestamp()
+    return JobEvent(id=info.last_event, job=job_id, type=type_, time=when, data=data), 1000, "finished"
+
+
+@router.websocket("/{job_id}/events")
+async def stream_events(
+    websocket: WebSocket,
+    job_id: str,
+    backend: BackendDep,
+    settings: SettingsDep,
+    metrics: MetricsDep,
+    after: After = 0,
+    token: Annotated[str | None, Query(description="bearer token (or the Authorization header)")] = None,
+) -> None:
+    """Stream a job's events as JSON text messages, ending with the terminal event (see module doc)."""
+    problem = token_problem(settings, bearer_token(websocket, token))
+    if problem is not None:
+        await _refuse(websocket, 401, problem.code, problem.message, 4401)
+        return
+    try:
+        await backend.status(job_id)
+    except NotFoundError as exc:
+        await websocket.accept()
+        await websocket.close(code=4404, reason=str(exc)[:120])
+        return
+    await websocket.accept()
+    metrics.inc("segue_ws_connections")
+    relay = _Relay(websocket, backend, job_id, after, EventQueue(settings.ws_queue), metrics)
+    try:
+        await relay.run()
+    finally:
+        metrics.inc("segue_events_coalesced_total", relay.queue.dropped)
+        metrics.inc("segue_ws_connections", -1)
+
+
+class _Relay:
+    """One socket's stream: a producer (backend -> queue), a watcher (client messages) and the sender."""
+
+    def __init__(
+        self,
+        websocket: WebSocket,
+        backend: JobBackend,
+        job_id: str,
+        after: int,
+        queue: EventQueue,
+        metrics: Metrics,
+    ) -> None:
+        self.websocket, self.backend, self.job_id, self.after = websocket, backend, job_id, after
+        self.queue, self.metrics = queue, metrics
+        self.error: Exception | None = None
+        self.gone = False
+
+    async def run(self) -> None:
+        """Relay until the terminal event (then close 1000) or until the client goes away."""
+        code, reason = 1000, ""
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(self._produce)
+            tg.start_soon(self._watch, tg.cancel_scope)
+            try:
+                last = await _send_events(self.websocket, self.queue, self.metrics)
+                if last is None:
+                    code, reason = await self._end_without_terminal()
+            except (WebSocketDisconnect, RuntimeError, OSError):
+                self.gone = True  # the client went away mid-send
+            tg.cancel_scope.cancel()
+        if not self.gone and self.websocket.client_state == WebSocketState.CONNECTED:
+            with contextlib.suppress(RuntimeError, WebSocketDisconnect, OSError):
+                await self.websocket.close(code=code, reason=reason)
+
+    async def _produce(self) -> None:
+        try:
+            await pump(self.backend.events(self.job_id, self.after), self.queue)
+        except Exception as exc:  # reported to the client as a 1011 close
+            log.warning("event stream of job %s failed: %r", self.job_id, exc)
+            self.error = exc
+
+    async def _watch(self, scope: anyio.CancelScope) -> None:
+        await _until_disconnect(self.websocket)
+        self.gone = True
+        scope.cancel()
+
+    async def _end_without_terminal(self) -> tuple[int, str]:
+        """The producer ended without a terminal event: an error, or a job that already finished."""
+        if self.error is not None:
+            return 1011, f"event stream error: {self.error}"[:120]
+        synthetic, code, reason = await _ending(self.backend, self.job_id, self.after)
+        if synthetic is not None:
+            await self.websocket.send_text(synthetic.model_dump_json())
+            self.metrics.inc("segue_events_sent_total")
+        return code, reason

@@ -1,0 +1,79 @@
+"""Reading uploads under a size limit: raw bodies and ``multipart/form-data`` with a ``file`` field.
+
+The limit is enforced while reading (``Content-Length`` first, then the bytes actually received),
+so an oversized upload is refused with 413 before it is held in memory.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncGenerator
+from pathlib import PurePosixPath
+
+from starlette.datastructures import UploadFile
+from starlette.formparsers import MultiPartException, MultiPartParser
+from starlette.requests import Request
+
+from .errors import ApiError, too_large
+
+MULTIPART_OVERHEAD = 64 * 1024
+"""Room for the multipart envelope (boundaries, part headers, small fields) above the file limit."""
+
+
+async def _limited(request: Request, limit: int, overhead: int = 0) -> AsyncGenerator[bytes, None]:
+    """The body's chunks; 413 (naming ``limit``) once more than ``limit + overhead`` bytes arrive."""
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.isdigit() and int(declared) > limit + overhead:
+        raise too_large(limit)
+    total = 0
+    async for chunk in request.stream():
+        total += len(chunk)
+        if total > limit + overhead:
+            raise too_large(limit)
+        yield chunk
+
+
+def clean_name(name: str) -> str:
+    """A file name without directories or control characters (``"upload.bvh"`` when nothing is left)."""
+    base = PurePosixPath(name.replace("\\", "/")).name
+    base = "".join(c for c in base if c.isprintable()).strip()
+    return base[:255] or "upload.bvh"
+
+
+async def read_body(request: Request, limit: int) -> bytes:
+    """The whole request body, refusing (413) more than ``limit`` bytes while reading."""
+    return b"".join([chunk async for chunk in _limited(request, limit)])
+
+
+async def read_upload(request: Request, limit: int, name: str | None) -> tuple[str, bytes]:
+    """The uploaded file's name and bytes.
+
+    A ``multipart/form-data`` body must carry the file in a field named ``file`` (its file name is
+    the clip's name unless ``name`` is given); any other body is the file itself and ``name`` is
+    required. Raises :class:`~service.errors.ApiError` (413 over ``limit``, 422 otherwise).
+    """
+    content_type = request.headers.get("content-type", "")
+    if content_type.startswith("multipart/form-data"):
+        stream = _limited(request, limit, MULTIPART_OVERHEAD)
+        try:
+            form = await MultiPartParser(request.headers, stream, max_files=1, max_fields=8).parse()
+        except MultiPartException as exc:
+            raise ApiError(422, "invalid_request", f"invalid multipart upload: {exc.message}") from None
+        upload = form.get("file")
+        if not isinstance(upload, UploadFile):
+            raise ApiError(
+                422, "invalid_request", "a multipart upload needs the BVH file in a field named 'file'"
+            )
+        if upload.size is not None and upload.size > limit:
+            raise too_large(limit)
+        data = await upload.read()
+        await upload.close()
+        if len(data) > limit:
+            raise too_large(limit)
+        return clean_name(name or upload.filename or ""), data
+    if not name:
+        raise ApiError(
+            422,
+            "invalid_request",
+            "name the clip: POST the file as multipart field 'file', or the raw bytes with ?name=FILE.bvh",
+        )
+    return clean_name(name), await read_body(request, limit)

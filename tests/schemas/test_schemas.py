@@ -1,0 +1,61 @@
+"""The contract: specs, requests and their validation messages."""
+
+from __future__ import annotations
+
+import pytest
+from pydantic import ValidationError
+
+from schemas import parse_database_spec, parse_job_request
+from schemas.databases import database_id
+from schemas.jobs import RequestError
+
+
+def test_database_spec_union_on_kind() -> None:
+    spec = parse_database_spec({"kind": "rhythm", "clips": [{"bvh": "a.bvh"}], "beats_per_movement": 3})
+    assert spec.kind == "rhythm" and spec.beats_per_movement == 3  # type: ignore[attr-defined]
+    assert parse_database_spec('{"kind": "clips", "clips": [{"clip": "abc", "name": "x"}]}').kind == "clips"
+
+
+@pytest.mark.parametrize(
+    ("spec", "fragment"),
+    [
+        ({"kind": "nope", "clips": [{"bvh": "a.bvh"}]}, "does not match"),
+        ({"kind": "clips", "clips": []}, "at least 1"),
+        ({"kind": "clips", "clips": [{}]}, "exactly one of"),
+        ({"kind": "clips", "clips": [{"bvh": "a", "clip": "b"}]}, "exactly one of"),
+        ({"kind": "clips", "clips": [{"bvh": "a.bvh"}], "fps": -1}, "greater than 0"),
+        ({"kind": "clips", "clips": [{"bvh": "a.bvh", "units": "furlong"}]}, "unknown units"),
+        (
+            {"kind": "clips", "clips": [{"bvh": "a.bvh", "labels": [{"label": "x", "start": 5, "end": 2}]}]},
+            "end",
+        ),
+        ({"kind": "clips", "clips": [{"bvh": "a.bvh"}], "typo": 1}, "Extra inputs"),
+    ],
+)
+def test_bad_specs_name_the_problem(spec: dict, fragment: str) -> None:
+    with pytest.raises(ValidationError, match=fragment):
+        parse_database_spec(spec)
+
+
+def test_content_address_ignores_file_names_but_not_settings() -> None:
+    a = parse_database_spec({"kind": "clips", "clips": [{"bvh": "x/a.bvh", "name": "a"}], "fps": 30})
+    b = parse_database_spec({"kind": "clips", "clips": [{"bvh": "elsewhere/a.bvh", "name": "a"}], "fps": 30})
+    c = parse_database_spec({"kind": "clips", "clips": [{"bvh": "x/a.bvh", "name": "a"}], "fps": 60})
+    assert database_id(a, ["h1"]) == database_id(b, ["h1"])
+    assert database_id(a, ["h1"]) != database_id(a, ["h2"])
+    assert database_id(a, ["h1"]) != database_id(c, ["h1"])
+
+
+def test_job_requests() -> None:
+    r = parse_job_request({"engine": "clip", "clip": "walk", "start": 2, "end": 9})
+    assert r.engine == "clip" and r.budget_s == 10.0  # type: ignore[attr-defined]
+    with pytest.raises(RequestError, match="unknown engine"):
+        parse_job_request({"engine": "warp-drive"})
+    with pytest.raises(RequestError, match="object"):
+        parse_job_request("[1, 2]")
+    with pytest.raises(RequestError, match="not valid JSON"):
+        parse_job_request("{")
+    with pytest.raises(ValidationError, match="end"):
+        parse_job_request({"engine": "clip", "clip": "w", "start": 9, "end": 3})
+    with pytest.raises(ValidationError, match="less than or equal"):
+        parse_job_request({"engine": "clip", "clip": "w", "budget_s": 1e9})

@@ -1,0 +1,131 @@
+"""`segue build` and `segue synth`: the CLI face of the job runtime."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from motion import read_bvh
+from motion.samples import sample_path
+from service.cli import main
+
+
+@pytest.fixture
+def spec_dir(tmp_path: Path) -> Path:
+    shutil.copy(sample_path("walk"), tmp_path / "walk.bvh.gz")
+    (tmp_path / "db.json").write_text(
+        json.dumps({"kind": "clips", "clips": [{"bvh": "walk.bvh.gz"}], "fps": 60})
+    )
+    return tmp_path
+
+
+def test_build_then_synth_every_format(spec_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert (
+        main(
+            [
+                "build",
+                str(spec_dir / "db.json"),
+                "--out",
+                str(spec_dir / "db"),
+                "--events",
+                str(spec_dir / "build.jsonl"),
+            ]
+        )
+        == 0
+    )
+    info = json.loads((spec_dir / "db" / "info.json").read_text())
+    assert info["status"] == "ready" and info["clips"] == ["walk"] and info["fps"] == 60.0
+    events = [json.loads(line) for line in (spec_dir / "build.jsonl").read_text().splitlines()]
+    assert events[0]["type"] == "started" and events[-1]["type"] == "done"
+    assert [e["id"] for e in events] == list(range(1, len(events) + 1))
+
+    (spec_dir / "req.json").write_text(json.dumps({"engine": "clip", "clip": "walk", "start": 10, "end": 70}))
+    for ext in ("bvh", "glb", "json", "npz"):
+        out = spec_dir / f"out.{ext}"
+        assert (
+            main(
+                [
+                    "synth",
+                    str(spec_dir / "req.json"),
+                    "--db",
+                    str(spec_dir / "db"),
+                    "--out",
+                    str(out),
+                    "--report",
+                    str(spec_dir / "report.json"),
+                    "--events",
+                    str(spec_dir / "ev.jsonl"),
+                    "-q",
+                ]
+            )
+            == 0
+        )
+        assert out.stat().st_size > 0
+    report = json.loads((spec_dir / "report.json").read_text())
+    assert report["frames"] == 60 and len(report["provenance"]) == 60
+    assert report["provenance"][0] == {"clip": "walk", "frame": 10, "weights": None}
+    out = read_bvh(spec_dir / "out.bvh", units="m")
+    src = read_bvh(sample_path("walk")).to_units("m")
+    np.testing.assert_allclose(
+        out.global_positions()[0], src.global_positions()[20], atol=1e-5
+    )  # 60 of 120 fps
+    types = [json.loads(line)["type"] for line in (spec_dir / "ev.jsonl").read_text().splitlines()]
+    assert types == ["started", "solution", "done"]
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ({"kind": "clips", "clips": [{"bvh": "missing.bvh"}]}, "missing.bvh"),
+        ({"kind": "graph", "clips": [{"bvh": "walk.bvh.gz"}]}, "not available yet"),
+        ({"kind": "clips", "clips": [{"bvh": "walk.bvh.gz"}], "fps": 0}, "fps"),
+    ],
+)
+def test_build_errors(spec_dir: Path, spec: dict, message: str, capsys: pytest.CaptureFixture[str]) -> None:
+    (spec_dir / "bad.json").write_text(json.dumps(spec))
+    assert main(["build", str(spec_dir / "bad.json"), "--out", str(spec_dir / "x"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("segue: error:") and message in err
+
+
+def test_synth_errors(spec_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["build", str(spec_dir / "db.json"), "--out", str(spec_dir / "db"), "-q"]) == 0
+    cases = [
+        ({"engine": "clip", "clip": "nope"}, "no clip named 'nope'"),
+        ({"engine": "teleport"}, "unknown engine"),
+        ({"engine": "clip", "clip": "walk", "start": 99999}, "outside clip"),
+    ]
+    for request, message in cases:
+        (spec_dir / "r.json").write_text(json.dumps(request))
+        code = main(
+            [
+                "synth",
+                str(spec_dir / "r.json"),
+                "--db",
+                str(spec_dir / "db"),
+                "--out",
+                str(spec_dir / "o.bvh"),
+                "-q",
+            ]
+        )
+        assert code == 2
+        assert message in capsys.readouterr().err
+    (spec_dir / "r.json").write_text(json.dumps({"engine": "clip", "clip": "walk"}))
+    assert (
+        main(
+            [
+                "synth",
+                str(spec_dir / "r.json"),
+                "--db",
+                str(spec_dir / "nodb"),
+                "--out",
+                str(spec_dir / "o.bvh"),
+            ]
+        )
+        == 2
+    )
+    assert "not a database directory" in capsys.readouterr().err

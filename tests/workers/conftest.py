@@ -1,0 +1,259 @@
+"""Fixtures for the runtime tests: a real ``redis-server`` on a free port, stores, databases, workers.
+
+The server is started once per session (``--save "" --appendonly no``, bound to 127.0.0.1) and
+flushed around every test that uses ``redis_url``. Without the binary the Redis tests are skipped
+with the reason; under CI (``CI=true``) a missing binary is an error, since ``.ci/run`` installs it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from collections.abc import Callable, Coroutine, Iterator
+from pathlib import Path
+from typing import Any, TypeVar
+
+import pytest
+import redis
+
+import tests.workers.scripted_engine  # noqa: F401  (registers the scripted engine in this process)
+from motion.samples import sample_path
+from schemas import DatabaseInfo, DatabaseStatus, EventType, JobInfo, JobStatus
+from schemas.databases import database_id, parse_database_spec
+from schemas.jobs import JobKind
+from workers.execute import EngineCache, execute_job
+from workers.redis_worker import run_worker
+from workers.store import Store, now
+
+REPO = Path(__file__).resolve().parents[2]
+PLUGINS = "tests.workers.scripted_engine"
+T = TypeVar("T")
+
+
+def run(coro: Coroutine[Any, Any, T]) -> T:
+    """Run a coroutine to completion (the suite has no asyncio plugin)."""
+    return asyncio.run(coro)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="session")
+def redis_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """URL of a private redis-server (never the one on 6379)."""
+    binary = shutil.which("redis-server")
+    if binary is None:
+        reason = (
+            "redis-server is not installed (apt-get install redis-server); the Redis backend tests need it"
+        )
+        if os.environ.get("CI") == "true":
+            pytest.fail(reason)
+        pytest.skip(reason)
+    workdir = tmp_path_factory.mktemp("redis")
+    for _attempt in range(3):
+        port = _free_port()
+        proc = subprocess.Popen(
+            [
+                binary,
+                "--port",
+                str(port),
+                "--bind",
+                "127.0.0.1",
+                "--save",
+                "",
+                "--appendonly",
+                "no",
+                "--dir",
+                str(workdir),
+                "--loglevel",
+                "warning",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        url = f"redis://127.0.0.1:{port}/0"
+        client = redis.Redis.from_url(url)
+        deadline = time.monotonic() + 10
+        while proc.poll() is None and time.monotonic() < deadline:
+            try:
+                client.ping()
+                break
+            except redis.ConnectionError:
+                time.sleep(0.02)
+        else:
+            proc.kill()
+            proc.wait()
+            continue  # the port was taken meanwhile, or the server did not start: try another
+        client.close()
+        try:
+            yield url
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        return
+    pytest.fail("could not start redis-server")
+
+
+@pytest.fixture
+def redis_url(redis_server: str) -> Iterator[str]:
+    """The test server, flushed before and after the test."""
+    client = redis.Redis.from_url(redis_server)
+    client.flushall()
+    try:
+        yield redis_server
+    finally:
+        client.flushall()
+        client.close()
+
+
+@pytest.fixture
+def rclient(redis_url: str) -> Iterator[redis.Redis]:
+    client = redis.Redis.from_url(redis_url, decode_responses=True)
+    yield client
+    client.close()
+
+
+@pytest.fixture
+def store(tmp_path: Path) -> Store:
+    return Store(tmp_path / "data")
+
+
+def add_database(store: Store, build: bool = True, fps: float = 30.0) -> str:
+    """A clips database of the bundled walk sample (built in-process unless ``build`` is False)."""
+    clip = store.put_clip("walk.bvh.gz", sample_path("walk").read_bytes())
+    spec = parse_database_spec({"kind": "clips", "clips": [{"clip": clip.id, "name": "walk"}], "fps": fps})
+    db_id = database_id(spec, [clip.id])
+    info = DatabaseInfo(
+        id=db_id, kind="clips", status=DatabaseStatus.queued, clips=["walk"], created_at=now()
+    )
+    store.put_database_info(info, spec.model_dump(mode="json"))
+    if build:
+        events: list[EventType] = []
+        execute_job(
+            store,
+            "build0",
+            "build",
+            {"database": db_id},
+            lambda t, d: events.append(t),
+            lambda: False,
+            EngineCache(),
+        )
+        if events[-1] != EventType.done:
+            raise RuntimeError(f"test database build failed: {events}")
+    return db_id
+
+
+def new_job(store: Store, kind: str, payload: dict[str, Any]) -> JobInfo:
+    """A job stored on disk (status queued), as the API stores it before submitting."""
+    request = payload.get("request", {})
+    info = JobInfo(
+        id=uuid.uuid4().hex,
+        kind=JobKind(kind),
+        engine=request.get("engine"),
+        database=request.get("database") or payload.get("database"),
+        status=JobStatus.queued,
+        created_at=now(),
+    )
+    store.put_job(info, {"kind": kind, "payload": payload})
+    return info
+
+
+def synth(store: Store, db_id: str, **request: Any) -> tuple[JobInfo, dict[str, Any]]:
+    payload = {"request": {"engine": "scripted", "database": db_id, **request}}
+    return new_job(store, "synth", payload), payload
+
+
+@contextlib.contextmanager
+def worker_thread(redis_url: str, store: Store, name: str, **kwargs: Any) -> Iterator[threading.Event]:
+    """A worker running in a thread of this process; stopped (and joined) on exit."""
+    stop = threading.Event()
+    kwargs.setdefault("heartbeat_s", 0.2)
+    kwargs.setdefault("ttl_s", 1.0)
+    kwargs.setdefault("block_ms", 100)
+    thread = threading.Thread(
+        target=run_worker,
+        args=(redis_url, store.root),
+        kwargs={"name": name, "stop": stop, **kwargs},
+        daemon=True,
+    )
+    thread.start()
+    try:
+        yield stop
+    finally:
+        stop.set()
+        thread.join(timeout=15)
+        if thread.is_alive():
+            raise RuntimeError(f"worker thread {name} did not stop")
+
+
+def spawn_worker(redis_url: str, store: Store, name: str, *extra: str) -> subprocess.Popen[bytes]:
+    """A ``python -m workers.redis_worker`` process (heartbeat 0.2 s, TTL 1 s)."""
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
+        SEGUE_ENGINE_PLUGINS=PLUGINS,
+    )
+    cmd = [
+        sys.executable,
+        "-m",
+        "workers.redis_worker",
+        "--redis",
+        redis_url,
+        "--data",
+        str(store.root),
+        "--name",
+        name,
+        "--heartbeat",
+        "0.2",
+        "--ttl",
+        "1.0",
+        "--block-ms",
+        "100",
+        "--log-level",
+        "WARNING",
+        *extra,
+    ]
+    return subprocess.Popen(cmd, env=env, cwd=REPO)
+
+
+@contextlib.contextmanager
+def worker_processes(
+    redis_url: str, store: Store, names: list[str]
+) -> Iterator[dict[str, subprocess.Popen[bytes]]]:
+    procs = {name: spawn_worker(redis_url, store, name) for name in names}
+    try:
+        yield procs
+    finally:
+        for proc in procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGKILL)
+            proc.wait(timeout=10)
+
+
+def wait_for(
+    condition: Callable[[], Any], timeout: float = 20.0, interval: float = 0.02, what: str = ""
+) -> Any:
+    """Poll until ``condition()`` is truthy; returns its value (fails the test on timeout)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        time.sleep(interval)
+    pytest.fail(f"timed out after {timeout} s waiting for {what or condition}")

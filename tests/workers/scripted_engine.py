@@ -1,0 +1,53 @@
+"""A scripted anytime engine for runtime tests (loaded with SEGUE_ENGINE_PLUGINS).
+
+It improves its score ``steps`` times, ``step_s`` seconds apart, polling ``should_stop`` between
+steps, so tests can observe solutions arriving, cancel mid-search, or kill a worker mid-job. Each
+solution is a real excerpt of the database's first clip (10 + i frames), so results download.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Literal
+
+from pydantic import Field
+
+from engines.base import Emitter, Engine, EngineError, ShouldStop, Solution
+from engines.registry import register
+from schemas.jobs import JobRequestBase, register_request_model
+
+
+class ScriptedRequest(JobRequestBase):
+    engine: Literal["scripted"] = "scripted"
+    steps: int = Field(default=5, ge=1, le=1000)
+    step_s: float = Field(default=0.1, ge=0, le=60)
+    fail_at: int | None = Field(default=None, description="raise an engine error at this step")
+
+
+@register
+class ScriptedEngine(Engine):
+    name = "scripted"
+    kind = "clips"
+
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+        clip = self.library.motions[0]
+        name = self.library.names[0]
+        t0 = time.monotonic()
+        for i in range(request.steps):
+            if should_stop() or time.monotonic() - t0 > budget_s:
+                return
+            if request.fail_at == i:
+                raise EngineError(f"scripted failure at step {i}")
+            time.sleep(request.step_s)
+            n = min(10 + i, clip.num_frames)
+            emit.solution(
+                Solution(
+                    motion=clip.slice(0, n),
+                    score=float(request.steps - i),
+                    terms={"remaining": float(request.steps - i)},
+                    provenance=[(name, f) for f in range(n)],
+                )
+            )
+
+
+register_request_model("scripted", ScriptedRequest)

@@ -1,0 +1,314 @@
+"""Running one job: a database build or a synthesis, reporting through events.
+
+:func:`execute_job` is what every backend runs in a worker process. It only publishes events
+(``started``, ``progress``, ``solution``, then exactly one of ``done``/``failed``/``cancelled``) and
+writes files through the :class:`~workers.store.Store`; job status is a fold over those events
+(:func:`apply_event`), so every backend derives it the same way.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any
+
+from pydantic import ValidationError
+
+from engines.base import Engine, EngineError, Solution
+from engines.library import ClipInput, MotionLibrary, build_library, library_from_arrays, library_to_arrays
+from engines.registry import UnavailableError, engine_class, kind_class
+from motion import Motion, MotionError
+from motion.metrics import foot_slip, jerk
+from schemas import DatabaseStatus, EventType, JobInfo, JobStatus, ProvenanceEntry, Report
+from schemas.databases import DatabaseSpecBase, parse_database_spec
+from schemas.jobs import JobRequestBase, parse_job_request
+
+from .store import NotFoundError, Store, load_npz, now, npz_bytes
+
+log = logging.getLogger("segue.worker")
+
+Publish = Callable[[EventType, dict[str, Any]], None]
+ShouldStop = Callable[[], bool]
+LoadDatabaseBytes = Callable[[str], bytes]
+
+
+class JobFailure(Exception):
+    """A job that cannot complete, with an error code for the ``failed`` event."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+
+class EngineCache:
+    """Loaded engines by database id, least recently used evicted (per worker process)."""
+
+    def __init__(self, capacity: int = 4) -> None:
+        self.capacity = capacity
+        self._items: OrderedDict[str, Engine] = OrderedDict()
+
+    def get(self, db_id: str, engine_cls: type[Engine], load_bytes: LoadDatabaseBytes) -> Engine:
+        key = f"{db_id}/{engine_cls.name}"
+        engine = self._items.get(key)
+        if engine is None:
+            arrays = load_npz(load_bytes(db_id))
+            engine = engine_cls(library_from_arrays(arrays), arrays)
+            self._items[key] = engine
+            while len(self._items) > self.capacity:
+                self._items.popitem(last=False)
+        self._items.move_to_end(key)
+        return engine
+
+
+SaveResult = Callable[[str, Motion, Report], None]
+
+
+class SolutionRecorder:
+    """The engine-facing side of a job (an ``engines.base.Emitter``): turns each solution into a
+    result (motion + :class:`~schemas.Report`, saved through ``save``) and a ``solution`` event."""
+
+    def __init__(
+        self, job_id: str, engine: str, publish: Publish, save: SaveResult, attempt: int = 1
+    ) -> None:
+        self.job_id, self.engine, self.publish, self.save = job_id, engine, publish, save
+        # a re-run after a lost worker numbers its results apart, so earlier events stay valid
+        self.prefix = "r" if attempt <= 1 else f"a{attempt}r"
+        self.t0 = time.perf_counter()
+        self.count = 0
+        self.best: tuple[float, str] | None = None
+
+    def solution(self, solution: Solution) -> str:
+        self.count += 1
+        rid = f"{self.prefix}{self.count}"
+        motion = solution.motion
+        metrics = (
+            {"foot_slip_m_s": foot_slip(motion), "jerk_m_s3": jerk(motion)} if motion.num_frames > 3 else {}
+        )
+        metrics.update(solution.metrics)
+        report = Report(
+            job=self.job_id,
+            result=rid,
+            engine=self.engine,
+            score=float(solution.score),
+            terms={k: float(v) for k, v in solution.terms.items()},
+            constraint_errors=solution.constraint_errors,
+            metrics={k: float(v) for k, v in metrics.items()},
+            frames=motion.num_frames,
+            fps=motion.fps,
+            provenance=[ProvenanceEntry(clip=c, frame=int(f)) for c, f in solution.provenance],
+            annotations=solution.annotations,
+        )
+        self.save(rid, motion, report)
+        if self.best is None or solution.score < self.best[0]:
+            self.best = (float(solution.score), rid)
+        elapsed_ms = (time.perf_counter() - self.t0) * 1e3
+        self.publish(
+            EventType.solution,
+            {
+                "score": float(solution.score),
+                "terms": report.terms,
+                "elapsed_ms": round(elapsed_ms, 1),
+                "result": rid,
+            },
+        )
+        return rid
+
+    def progress(self, fraction: float, message: str = "") -> None:
+        self.publish(
+            EventType.progress, {"fraction": float(min(max(fraction, 0.0), 1.0)), "message": message}
+        )
+
+    @property
+    def best_result(self) -> str | None:
+        return None if self.best is None else self.best[1]
+
+
+def execute_job(
+    store: Store,
+    job_id: str,
+    kind: str,
+    payload: dict[str, Any],
+    publish: Publish,
+    should_stop: ShouldStop,
+    cache: EngineCache,
+    load_database_bytes: LoadDatabaseBytes | None = None,
+    save_database_bytes: Callable[[str, bytes], None] | None = None,
+    attempt: int = 1,
+) -> None:
+    """Run a job to its terminal event (never raises for job-level problems).
+
+    Parameters
+    ----------
+    kind:
+        ``"build"`` (payload ``{"database": id}``) or ``"synth"`` (payload ``{"request": {...}}``).
+    publish:
+        Called with each event type and data, in order.
+    should_stop:
+        True once the job is cancelled (polled by the engine).
+    load_database_bytes, save_database_bytes:
+        Database array access (default: the store's files; the Redis backend adds its cache).
+    """
+    load = load_database_bytes or store.database_arrays_bytes
+    publish(EventType.started, {})
+    try:
+        if kind == "build":
+            _build(store, payload["database"], publish, should_stop, save_database_bytes)
+        elif kind == "synth":
+            _synth(store, job_id, payload["request"], publish, should_stop, cache, load, attempt)
+        else:
+            raise JobFailure("invalid_job", f"unknown job kind {kind!r}")
+    except JobFailure as exc:
+        publish(EventType.failed, {"error": {"code": exc.code, "message": exc.message}})
+    except (EngineError, MotionError, UnavailableError, NotFoundError, ValidationError) as exc:
+        publish(EventType.failed, {"error": {"code": "invalid_request", "message": str(exc)}})
+    except Exception as exc:  # a bug: report it, keep the worker alive
+        log.exception("job %s crashed", job_id)
+        publish(EventType.failed, {"error": {"code": "internal", "message": f"{type(exc).__name__}: {exc}"}})
+
+
+def build_database_bytes(
+    spec: DatabaseSpecBase, clips: list[ClipInput], publish: Publish, should_stop: ShouldStop
+) -> tuple[bytes, MotionLibrary]:
+    """The npz bytes of a database (motion library + the kind's arrays), with progress events.
+
+    Raises :class:`JobFailure` with code ``cancelled`` when stopped."""
+    engine_cls = kind_class(spec.kind)
+    publish(EventType.progress, {"fraction": 0.1, "message": f"reading {len(clips)} clips"})
+    library = build_library(clips, spec.fps)
+    if should_stop():
+        raise JobFailure("cancelled", "build cancelled")
+    publish(
+        EventType.progress,
+        {"fraction": 0.5, "message": f"{library.total_frames} frames at {library.fps:g} fps"},
+    )
+    recorder = SolutionRecorder("build", engine_cls.name, publish, lambda *_: None)
+    extra = engine_cls.build(spec, library, recorder, should_stop)
+    if should_stop():
+        raise JobFailure("cancelled", "build cancelled")
+    arrays = library_to_arrays(library)
+    arrays.update(extra)
+    return npz_bytes(arrays), library
+
+
+def _build(
+    store: Store,
+    db_id: str,
+    publish: Publish,
+    should_stop: ShouldStop,
+    save: Callable[[str, bytes], None] | None,
+) -> None:
+    info = store.database_info(db_id)
+    spec = parse_database_spec(store.database_spec(db_id))
+    kind_class(spec.kind)
+    store.put_database_info(info.model_copy(update={"status": DatabaseStatus.building}))
+    try:
+        clips = []
+        for source in spec.clips:
+            if source.clip is None:
+                raise JobFailure(
+                    "invalid_request", f"clip {source.display_name()!r} was not resolved to an upload"
+                )
+            labels = [lb.model_dump() for lb in source.labels]
+            clips.append(
+                ClipInput(source.display_name(), store.clip_bytes(source.clip), source.units, labels)
+            )
+        data, library = build_database_bytes(spec, clips, publish, should_stop)
+        store.put_database_arrays(db_id, data)
+        if save is not None:
+            save(db_id, data)
+    except JobFailure as exc:
+        store.put_database_info(
+            info.model_copy(update={"status": DatabaseStatus.failed, "error": exc.message})
+        )
+        if exc.code == "cancelled":
+            publish(EventType.cancelled, {"result": None})
+            return
+        raise
+    except Exception as exc:
+        store.put_database_info(info.model_copy(update={"status": DatabaseStatus.failed, "error": str(exc)}))
+        raise
+    store.put_database_info(
+        info.model_copy(
+            update={
+                "status": DatabaseStatus.ready,
+                "frames": library.total_frames,
+                "fps": library.fps,
+                "error": None,
+            }
+        )
+    )
+    publish(EventType.progress, {"fraction": 1.0, "message": "built"})
+    publish(EventType.done, {"result": None, "database": db_id})
+
+
+def run_search(
+    engine: Engine,
+    request: JobRequestBase,
+    job_id: str,
+    publish: Publish,
+    should_stop: ShouldStop,
+    save: SaveResult,
+    attempt: int = 1,
+) -> None:
+    """Run an engine's search and publish the terminal event (``done`` or ``cancelled`` with the
+    best result); raises :class:`JobFailure` when it found nothing."""
+    recorder = SolutionRecorder(job_id, engine.name, publish, save, attempt)
+    engine.search(request, request.budget_s, recorder, should_stop)
+    best = recorder.best_result
+    if should_stop():
+        publish(EventType.cancelled, {"result": best})
+    elif best is None:
+        raise JobFailure("no_solution", "the engine found no solution within the budget")
+    else:
+        publish(EventType.done, {"result": best})
+
+
+def _synth(
+    store: Store,
+    job_id: str,
+    request_data: dict[str, Any],
+    publish: Publish,
+    should_stop: ShouldStop,
+    cache: EngineCache,
+    load: LoadDatabaseBytes,
+    attempt: int = 1,
+) -> None:
+    request = parse_job_request(request_data)
+    if request.database is None:
+        raise JobFailure("invalid_request", "the request names no database")
+    info = store.database_info(request.database)
+    if info.status != DatabaseStatus.ready:
+        raise JobFailure("database_not_ready", f"database {request.database} is {info.status.value}")
+    engine_cls = engine_class(request.engine)  # type: ignore[attr-defined]
+    if engine_cls.kind != info.kind:
+        raise JobFailure(
+            "invalid_request",
+            f"engine {engine_cls.name!r} needs a {engine_cls.kind!r} database, not {info.kind!r}",
+        )
+    engine = cache.get(request.database, engine_cls, load)
+
+    def save(rid: str, motion: Motion, report: Report) -> None:
+        store.put_result(job_id, rid, motion, report)
+
+    run_search(engine, request, job_id, publish, should_stop, save, attempt)
+
+
+def apply_event(info: JobInfo, event_type: EventType, data: dict[str, Any], event_id: int) -> JobInfo:
+    """The job status after an event (status is a fold over the job's events)."""
+    update: dict[str, Any] = {"last_event": event_id}
+    if event_type == EventType.started:
+        update.update(status=JobStatus.running, started_at=now())
+    elif event_type == EventType.solution:
+        update["result"] = data.get("result")
+    elif event_type in (EventType.done, EventType.cancelled):
+        update.update(
+            status=JobStatus.done if event_type == EventType.done else JobStatus.cancelled,
+            finished_at=now(),
+            result=data.get("result") or info.result,
+        )
+    elif event_type == EventType.failed:
+        update.update(status=JobStatus.failed, finished_at=now(), error=data.get("error", {}).get("message"))
+    return info.model_copy(update=update)

@@ -1,0 +1,352 @@
+"""The Redis job backend (``SEGUE_REDIS_URL``): the API side of the distributed runtime.
+
+Jobs run in ``segue worker`` processes (:mod:`workers.redis_worker`); this module gives the API the
+same semantics as the embedded backend (event ids from 1, resume with ``after``, cancel keeps the
+best result, every job ends with exactly one of ``done``/``failed``/``cancelled``). Keys are listed in
+:mod:`workers.redis_keys`; events are published with :mod:`workers.redis_events`.
+
+- **submit**: ``SET segue:job:<job> <JobInfo> NX`` (a second submit of the same job id is a no-op:
+  jobs are idempotent), the ``queued`` event (id 1), then ``XADD segue:jobs {job, kind, payload}``.
+- **status**: the JobInfo in Redis, else the store's ``info.json`` (kept in step by every publisher).
+- **cancel**: ``SET segue:cancel:<job> 1 EX``; the worker's ``should_stop`` sees it within ~50 ms and
+  the job ends ``cancelled`` with its best result. A job still queued ends ``cancelled`` at once (the
+  worker that later receives it finds the terminal marker and skips it).
+- **events**: one reader task per job per API process ``XRANGE``\\ s the job's stream after the hub's
+  last event id (entry ids are ``<event id>-0``), then follows it until the terminal event, appending
+  to the :class:`~workers.backend.EventHub`; any number of sockets follow the hub. The blocking part
+  is shared: one ``XREAD BLOCK`` over every followed job's stream (:class:`_StreamPump`), so an API
+  process holds one blocked connection, not one per job (redis-py pools default to 100
+  connections). A job Redis has forgotten replays from the store's ``events.jsonl`` archive.
+- **health**: live workers (heartbeat keys), queue length, pending entries, dead letters.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import functools
+import json
+import logging
+import uuid
+from collections.abc import AsyncIterator
+from typing import Any, cast
+
+import redis
+import redis.asyncio as aredis
+
+from schemas import EventType, JobEvent, JobInfo, JobStatus
+
+from .backend import EventHub, JobLog
+from .redis_events import (
+    RETENTION_S,
+    AsyncEventPublisher,
+    Entries,
+    decode_event,
+    read_archive,
+    stream_id,
+)
+from .redis_keys import DEFAULT_PREFIX, RedisKeys
+from .store import NotFoundError, Store
+
+log = logging.getLogger("segue.redis.backend")
+
+
+class RedisBackend:
+    """Jobs through Redis streams, run by ``segue worker`` processes (see the module docstring)."""
+
+    def __init__(
+        self,
+        store: Store,
+        redis_url: str,
+        *,
+        prefix: str = DEFAULT_PREFIX,
+        block_ms: int = 2000,
+        cancel_ttl_s: int = RETENTION_S,
+        hub_capacity: int = 2000,
+        max_connections: int = 100,
+    ) -> None:
+        self.store = store
+        self.redis_url = redis_url
+        self.keys = RedisKeys(prefix)
+        self.block_ms = block_ms
+        self.max_connections = max_connections
+        self.cancel_ttl_s = cancel_ttl_s
+        self.hub = EventHub(hub_capacity)
+        self._client: aredis.Redis | None = None
+        self._publisher: AsyncEventPublisher | None = None
+        self.quiet_check_s = 5.0
+        self._readers: dict[str, asyncio.Task[None]] = {}
+        self._ready: dict[str, asyncio.Event] = {}
+        self._pump_: _StreamPump | None = None
+
+    # -- lifecycle ------------------------------------------------------------------------------
+    async def start(self) -> None:
+        # a blocking pool: a burst of requests waits for a connection instead of failing; blocking
+        # reads must end before the socket timeout (redis-py's default is 5 s)
+        pool = aredis.BlockingConnectionPool.from_url(
+            self.redis_url,
+            decode_responses=True,
+            socket_timeout=self.block_ms / 1000 + 5,
+            max_connections=self.max_connections,
+            timeout=30,
+        )
+        client = aredis.Redis.from_pool(pool)
+        await client.ping()
+        try:
+            await client.xgroup_create(self.keys.jobs, self.keys.group, id="0", mkstream=True)
+        except redis.ResponseError as exc:
+            if "BUSYGROUP" not in str(exc):
+                raise
+        self._client = client
+        self._publisher = AsyncEventPublisher(client, self.store, self.keys)
+        self._pump_ = _StreamPump(client, self.hub, self.keys, self.block_ms)
+        self._pump_.start()
+
+    async def close(self) -> None:
+        readers = list(self._readers.values())
+        for task in readers:
+            task.cancel()
+        for task in readers:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        self._readers.clear()
+        if self._pump_ is not None:
+            await self._pump_.stop()
+            self._pump_ = None
+        if self._client is not None:
+            await self._client.aclose()
+            self._client = None
+            self._publisher = None
+
+    def _redis(self) -> tuple[aredis.Redis, AsyncEventPublisher]:
+        if self._client is None or self._publisher is None:
+            raise RuntimeError("the Redis backend is not started")
+        return self._client, self._publisher
+
+    @property
+    def _pump(self) -> _StreamPump:
+        if self._pump_ is None:
+            raise RuntimeError("the Redis backend is not started")
+        return self._pump_
+
+    # -- jobs -------------------------------------------------------------------------------------
+    async def submit(self, info: JobInfo, kind: str, payload: dict[str, Any]) -> JobInfo:
+        client, publisher = self._redis()
+        self.store.job_dir(info.id)  # NotFoundError for an invalid id
+        if not await client.set(self.keys.job(info.id), info.model_dump_json(), nx=True):
+            return await self.status(info.id)  # submitted before: nothing to do
+        await publisher.publish(info.id, EventType.queued, {})
+        await client.xadd(self.keys.jobs, {"job": info.id, "kind": kind, "payload": json.dumps(payload)})
+        return await self.status(info.id)
+
+    async def status(self, job_id: str) -> JobInfo:
+        client, _ = self._redis()
+        self.store.job_dir(job_id)  # NotFoundError for an invalid id
+        raw = await client.get(self.keys.job(job_id))
+        if raw:
+            return JobInfo.model_validate_json(raw)
+        return self.store.job_info(job_id)
+
+    async def cancel(self, job_id: str) -> JobInfo:
+        client, publisher = self._redis()
+        info = await self.status(job_id)
+        if info.status.finished:
+            return info
+        await client.set(self.keys.cancel(job_id), "1", ex=self.cancel_ttl_s)
+        if info.status == JobStatus.queued:
+            # no worker has it yet: end it now; a worker receiving it later finds the terminal marker
+            floor = self.hub.log(job_id).last_id if self.hub.has(job_id) else 0
+            await publisher.publish(job_id, EventType.cancelled, {"result": info.result}, floor=floor)
+        return await self.status(job_id)
+
+    # -- events ------------------------------------------------------------------------------------
+    async def events(self, job_id: str, after: int = 0) -> AsyncIterator[JobEvent]:
+        await self.status(job_id)  # NotFoundError for unknown jobs
+        job_log = self.hub.log(job_id)
+        if not job_log.terminal:
+            await self._ensure_reader(job_id).wait()
+            reader = self._readers.get(job_id)
+            if not job_log.terminal and (reader is None or reader.done()):
+                # the reader has nothing more to give (the job's events are gone): what we have
+                for event in [e for e in job_log.events if e.id > after]:
+                    yield event
+                return
+        async for event in self.hub.follow(job_id, after):
+            yield event
+
+    def _ensure_reader(self, job_id: str) -> asyncio.Event:
+        """The job's reader task (started if needed); returns an event set once it caught up."""
+        task = self._readers.get(job_id)
+        if task is not None and not task.done():
+            return self._ready[job_id]
+        ready = self._ready[job_id] = asyncio.Event()
+        task = asyncio.create_task(self._read_job(job_id, ready), name=f"segue-events-{job_id}")
+        self._readers[job_id] = task
+        task.add_done_callback(functools.partial(self._reader_done, job_id))
+        return ready
+
+    def _reader_done(self, job_id: str, task: asyncio.Task[None]) -> None:
+        if self._readers.get(job_id) is task:
+            del self._readers[job_id]
+            self._ready.pop(job_id, None)
+        if not task.cancelled() and task.exception() is not None:
+            log.error("event reader of job %s failed", job_id, exc_info=task.exception())
+
+    async def _catch_up(self, client: aredis.Redis, job_id: str) -> int:
+        """Append every event in Redis after the hub's last one; returns how many."""
+        job_log = self.hub.log(job_id)
+        added = 0
+        while True:
+            entries = cast(
+                Entries,
+                await client.xrange(self.keys.events(job_id), min=stream_id(job_log.last_id + 1), count=1000),
+            )
+            for _, fields in entries:
+                added += await self.hub.append(decode_event(fields))
+            if len(entries) < 1000:
+                return added
+
+    async def _read_archive(self, job_id: str) -> None:
+        for event in read_archive(self.store, job_id):
+            await self.hub.append(event)
+
+    async def _read_job(self, job_id: str, ready: asyncio.Event) -> None:
+        """Catch up with XRANGE, then follow through the pump until the terminal event."""
+        client, _ = self._redis()
+        job_log = self.hub.log(job_id)
+        caught_up, followed, backoff = False, False, 0.1
+        try:
+            while not job_log.terminal:
+                try:
+                    if not caught_up:
+                        await self._catch_up(client, job_id)
+                        if job_log.last_id == 0 and not await client.exists(self.keys.events(job_id)):
+                            await self._read_archive(job_id)  # Redis forgot the job (retention, flush)
+                        caught_up = True
+                        ready.set()
+                        if not followed and not job_log.terminal:
+                            await self._pump.add(job_id)
+                            followed = True
+                        continue
+                    last = job_log.last_id
+                    try:
+                        await asyncio.wait_for(_changed(job_log, last), self.quiet_check_s)
+                    except TimeoutError:
+                        # quiet: stop if the job ended without its terminal event reaching us
+                        if (await self.status(job_id)).status.finished:
+                            await self._catch_up(client, job_id)
+                            if not job_log.terminal:
+                                await self._read_archive(job_id)
+                            return
+                except (redis.ConnectionError, redis.TimeoutError) as exc:
+                    log.warning("event reader of job %s: %s; retrying in %.1f s", job_id, exc, backoff)
+                    await asyncio.sleep(backoff)
+                    backoff, caught_up = min(backoff * 2, 5.0), False
+        finally:
+            if self._pump_ is not None:
+                self._pump_.remove(job_id)
+            ready.set()
+
+    # -- health ------------------------------------------------------------------------------------
+    async def health(self) -> dict[str, Any]:
+        client, _ = self._redis()
+        facts: dict[str, Any] = {"backend": "redis"}
+        try:
+            pattern, cut = self.keys.worker_pattern, len(self.keys.worker(""))
+            names = sorted([key[cut:] async for key in client.scan_iter(match=pattern, count=500)])
+            pending = 0
+            with contextlib.suppress(redis.ResponseError):  # no stream yet
+                for group in await client.xinfo_groups(self.keys.jobs):
+                    if group["name"] == self.keys.group:
+                        pending = int(group["pending"])
+            length = int(await client.xlen(self.keys.jobs))  # finished entries are deleted
+            facts.update(
+                redis="ok",
+                workers=len(names),
+                worker_names=names,
+                queued=max(length - pending, 0),
+                pending=pending,
+                dead_letters=int(await client.xlen(self.keys.dead)),
+                followed_jobs=len(self._readers),
+            )
+        except redis.RedisError as exc:
+            facts.update(redis="unreachable", error=str(exc))
+        return facts
+
+
+async def _changed(job_log: JobLog, last: int) -> None:
+    """Wait until a job's log has an event after ``last`` (or ended)."""
+    async with job_log.cond:
+        await job_log.cond.wait_for(lambda: job_log.last_id > last or job_log.terminal)
+
+
+class _StreamPump:
+    """One blocking ``XREAD`` for every job an API process follows: one connection, not one per job.
+
+    Each round reads all followed streams from the hub's last id of each job, plus this process's
+    wake stream: adding a job ``XADD``\\ s to it, so a read blocked on the old set returns at once.
+    """
+
+    def __init__(self, client: aredis.Redis, hub: EventHub, keys: RedisKeys, block_ms: int) -> None:
+        self.client, self.hub, self.keys, self.block_ms = client, hub, keys, block_ms
+        self.jobs: set[str] = set()
+        self._wake_key = keys.api_wake(uuid.uuid4().hex)
+        self._wake_cursor = "0-0"
+        self._changed = asyncio.Event()
+        self._task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        self._task = asyncio.create_task(self._run(), name="segue-event-pump")
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+            self._task = None
+        with contextlib.suppress(redis.RedisError):
+            await self.client.delete(self._wake_key)
+
+    async def add(self, job_id: str) -> None:
+        self.jobs.add(job_id)
+        self._changed.set()
+        async with self.client.pipeline(transaction=False) as pipe:
+            pipe.xadd(self._wake_key, {"wake": "1"}, maxlen=1, approximate=False)
+            pipe.expire(self._wake_key, 3600)
+            await pipe.execute()
+
+    def remove(self, job_id: str) -> None:
+        self.jobs.discard(job_id)
+
+    async def _run(self) -> None:
+        backoff = 0.1
+        while True:
+            try:
+                if not self.jobs:
+                    self._changed.clear()
+                    await self._changed.wait()
+                    continue
+                streams = {self.keys.events(j): stream_id(self.hub.log(j).last_id) for j in self.jobs}
+                streams[self._wake_key] = self._wake_cursor
+                response = cast(
+                    list[tuple[str, Entries]] | None,
+                    await self.client.xread(streams, count=500, block=self.block_ms),  # type: ignore[arg-type]
+                )
+                backoff = 0.1
+                for key, entries in response or []:
+                    if key == self._wake_key:
+                        self._wake_cursor = entries[-1][0]
+                        continue
+                    for _, fields in entries:
+                        await self.hub.append(decode_event(fields))
+                self.jobs = {j for j in self.jobs if not self.hub.log(j).terminal}
+            except (redis.ConnectionError, redis.TimeoutError) as exc:
+                log.warning("event pump: %s; retrying in %.1f s", exc, backoff)
+                await asyncio.sleep(backoff)
+                backoff = min(backoff * 2, 5.0)
+            except Exception:  # a bug: keep following the other jobs
+                log.exception("event pump failed; restarting it")
+                await asyncio.sleep(1.0)
+
+
+__all__ = ["NotFoundError", "RedisBackend"]

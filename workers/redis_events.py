@@ -1,0 +1,258 @@
+"""Publishing job events through Redis: one protocol for the API (asyncio) and the workers (threads).
+
+Publishing one event is one optimistic transaction (``WATCH`` the job's counter, status and terminal
+marker; ``MULTI``/``EXEC``; retried if another process published in between):
+
+1. if the terminal marker ``segue:job:<job>:terminal`` exists, the event is dropped: nothing follows
+   a terminal event, and a job's terminal event is published exactly once;
+2. the id is ``INCR segue:events:<job>:seq``: contiguous 1, 2, 3... whichever process publishes (a
+   lost counter restarts after the stream's last entry or the last id the publisher saw, so a flushed
+   Redis never reuses ids clients already have);
+3. a terminal event sets the marker (``SET NX``) in the same transaction;
+4. ``XADD segue:events:<job> MAXLEN ~ 10000 <id>-0 event <JobEvent JSON>``: the entry id *is* the
+   event id, so resuming after event ``N`` is ``XRANGE N+1-0 +`` then ``XREAD`` from ``N-0``;
+5. the job's JobInfo, folded with :func:`workers.execute.apply_event`, is written in the same
+   transaction, so a client that sees an event also sees the status after it;
+6. once terminal, the stream, counter, marker and status expire after the retention period.
+
+After the transaction the JobInfo is also written to the store's ``info.json`` when the status
+changes (``queued``, ``started``, the terminal event; not for every progress or solution event, which
+would cost a file write each), and the process that published the terminal event archives the whole
+stream to the store's ``events.jsonl`` (the file the embedded backend writes), so finished jobs
+replay after Redis forgot them.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass
+from typing import Any, cast
+
+import redis
+import redis.asyncio as aredis
+
+from schemas import EventType, JobEvent, JobInfo
+
+from .execute import apply_event
+from .redis_keys import EVENTS_MAXLEN, RedisKeys
+from .store import NotFoundError, Store, _atomic_write
+
+log = logging.getLogger("segue.redis")
+
+Entries = list[tuple[str, dict[str, str]]]
+"""Stream entries as a ``decode_responses=True`` client returns them: (entry id, fields)."""
+
+DISK_STATUS_EVENTS = frozenset(
+    {EventType.queued, EventType.started, EventType.done, EventType.failed, EventType.cancelled}
+)
+"""Events after which the store's ``info.json`` is rewritten (status changes)."""
+
+RETENTION_S = 7 * 24 * 3600
+"""How long Redis keeps a finished job's events and status (the store keeps them for good)."""
+
+
+def stream_id(event_id: int) -> str:
+    """The stream entry id of an event."""
+    return f"{event_id}-0"
+
+
+def decode_event(fields: dict[str, str]) -> JobEvent:
+    """A JobEvent from a stream entry's fields."""
+    return JobEvent.model_validate_json(fields["event"])
+
+
+def fold_info(current: JobInfo, event: JobEvent) -> JobInfo | None:
+    """The JobInfo after ``event``, or None when the event must not change it (stale or late)."""
+    if current.status.finished or current.last_event >= event.id:
+        return None
+    return apply_event(current, event.type, event.data, event.id)
+
+
+def archive_events(store: Store, job_id: str, entries: Entries) -> None:
+    """Write a job's events to the store's ``events.jsonl`` (atomically, whole file)."""
+    lines = [decode_event(fields).model_dump_json() for _, fields in entries]
+    try:
+        _atomic_write(store.job_dir(job_id) / "events.jsonl", ("\n".join(lines) + "\n").encode())
+    except (OSError, NotFoundError):
+        log.exception("could not archive the events of job %s", job_id)
+
+
+def read_archive(store: Store, job_id: str) -> list[JobEvent]:
+    """The events archived in the store (empty when there are none)."""
+    try:
+        path = store.job_dir(job_id) / "events.jsonl"
+    except NotFoundError:
+        return []
+    if not path.exists():
+        return []
+    return [
+        JobEvent.model_validate(json.loads(line)) for line in path.read_text("utf-8").splitlines() if line
+    ]
+
+
+@dataclass(slots=True)
+class _Plan:
+    event: JobEvent
+    info: JobInfo | None
+    recovered: bool  # the counter was lost: SET it instead of INCR
+
+
+def _plan(
+    store: Store,
+    job_id: str,
+    type_: EventType,
+    data: dict[str, Any],
+    when: float,
+    seq: str | None,
+    job: str | None,
+    last_entry: str | None,
+    floor: int,
+) -> _Plan:
+    if seq is None:
+        event_id = max(int(last_entry.split("-")[0]) if last_entry else 0, floor) + 1
+    else:
+        event_id = int(seq) + 1
+    event = JobEvent(id=event_id, job=job_id, type=type_, time=when, data=data)
+    try:
+        current = JobInfo.model_validate_json(job) if job else store.job_info(job_id)
+    except NotFoundError:
+        log.warning("job %s has no stored info; its status is not updated", job_id)
+        current = None
+    return _Plan(event, None if current is None else fold_info(current, event), seq is None)
+
+
+def _queue(pipe: Any, keys: RedisKeys, plan: _Plan, maxlen: int, retention_s: int) -> None:
+    """Queue the writes of one event in a MULTI block (sync or asyncio pipeline)."""
+    event, job_id = plan.event, plan.event.job
+    if plan.recovered:
+        pipe.set(keys.event_seq(job_id), event.id)
+    else:
+        pipe.incr(keys.event_seq(job_id))
+    if event.type.terminal:
+        pipe.set(keys.terminal(job_id), event.id, nx=True)
+    pipe.xadd(
+        keys.events(job_id),
+        {"event": event.model_dump_json()},
+        id=stream_id(event.id),
+        maxlen=maxlen,
+        approximate=True,
+    )
+    if plan.info is not None:
+        pipe.set(
+            keys.job(job_id),
+            plan.info.model_dump_json(),
+            ex=retention_s if plan.info.status.finished else None,
+        )
+    if event.type.terminal:
+        for key in (keys.event_seq(job_id), keys.events(job_id), keys.terminal(job_id)):
+            pipe.expire(key, retention_s)
+
+
+class EventPublisher:
+    """Publishes events from a worker (synchronous client, ``decode_responses=True``)."""
+
+    def __init__(
+        self,
+        client: redis.Redis,
+        store: Store,
+        keys: RedisKeys,
+        maxlen: int = EVENTS_MAXLEN,
+        retention_s: int = RETENTION_S,
+    ) -> None:
+        self.client, self.store, self.keys = client, store, keys
+        self.maxlen, self.retention_s = maxlen, retention_s
+        self._last: dict[str, int] = {}  # last event id published per running job (survives a flush)
+
+    def publish(
+        self, job_id: str, type_: EventType, data: dict[str, Any], when: float | None = None
+    ) -> JobEvent | None:
+        """Publish one event; returns it, or None when dropped (the job already has its terminal event)."""
+        keys, when = self.keys, when or time.time()
+        watched = [keys.event_seq(job_id), keys.job(job_id), keys.terminal(job_id)]
+        with self.client.pipeline() as pipe:
+            while True:
+                try:
+                    pipe.watch(*watched)  # type: ignore[no-untyped-call]
+                    seq, job, terminal = cast(list[str | None], pipe.mget(watched))
+                    if terminal is not None:
+                        self._last.pop(job_id, None)
+                        log.info("job %s: %s dropped, the job already ended", job_id, type_.value)
+                        return None
+                    last = None
+                    if seq is None:
+                        tail = cast(list[tuple[str, Any]], pipe.xrevrange(keys.events(job_id), count=1))
+                        last = tail[0][0] if tail else None
+                    plan = _plan(
+                        self.store, job_id, type_, data, when, seq, job, last, self._last.get(job_id, 0)
+                    )
+                    pipe.multi()
+                    _queue(pipe, keys, plan, self.maxlen, self.retention_s)
+                    pipe.execute()
+                    break
+                except redis.WatchError:
+                    continue
+        event = plan.event
+        if plan.info is not None and type_ in DISK_STATUS_EVENTS:
+            self.store.put_job(plan.info)
+        if type_.terminal:
+            self._last.pop(job_id, None)
+            entries = cast(Entries, self.client.xrange(keys.events(job_id)))
+            archive_events(self.store, job_id, entries)
+        else:
+            self._last[job_id] = event.id
+        return event
+
+    def forget(self, job_id: str) -> None:
+        """Drop what this publisher remembers of a job (its run in this process is over)."""
+        self._last.pop(job_id, None)
+
+
+class AsyncEventPublisher:
+    """Publishes events from the API process (``redis.asyncio`` client, ``decode_responses=True``)."""
+
+    def __init__(
+        self,
+        client: aredis.Redis,
+        store: Store,
+        keys: RedisKeys,
+        maxlen: int = EVENTS_MAXLEN,
+        retention_s: int = RETENTION_S,
+    ) -> None:
+        self.client, self.store, self.keys = client, store, keys
+        self.maxlen, self.retention_s = maxlen, retention_s
+
+    async def publish(
+        self, job_id: str, type_: EventType, data: dict[str, Any], when: float | None = None, floor: int = 0
+    ) -> JobEvent | None:
+        """Publish one event; returns it, or None when dropped (the job already has its terminal event).
+
+        ``floor``: the last event id this process knows of (used only if Redis lost the counter).
+        """
+        keys, when = self.keys, when or time.time()
+        watched = [keys.event_seq(job_id), keys.job(job_id), keys.terminal(job_id)]
+        async with self.client.pipeline() as pipe:
+            while True:
+                try:
+                    await pipe.watch(*watched)
+                    seq, job, terminal = cast(list[str | None], await pipe.mget(watched))
+                    if terminal is not None:
+                        return None
+                    last = None
+                    if seq is None:
+                        tail = cast(Entries, await pipe.xrevrange(keys.events(job_id), count=1))
+                        last = tail[0][0] if tail else None
+                    plan = _plan(self.store, job_id, type_, data, when, seq, job, last, floor)
+                    pipe.multi()  # type: ignore[no-untyped-call]
+                    _queue(pipe, keys, plan, self.maxlen, self.retention_s)
+                    await pipe.execute()
+                    break
+                except redis.WatchError:
+                    continue
+        if plan.info is not None and type_ in DISK_STATUS_EVENTS:
+            self.store.put_job(plan.info)
+        if type_.terminal:
+            entries = cast(Entries, await self.client.xrange(keys.events(job_id)))
+            archive_events(self.store, job_id, entries)
+        return plan.event

@@ -1,0 +1,662 @@
+"""``segue worker``: a process that runs jobs from the Redis jobs stream (any number, any machine).
+
+Protocol (key names in :mod:`workers.redis_keys`):
+
+- **Delivery.** Workers share the consumer group ``segue-workers`` on ``segue:jobs`` (created with
+  ``MKSTREAM``) and take one entry at a time with ``XREADGROUP ... >``. An entry stays in the group's
+  pending list until the job's terminal event is published; then ``XACK`` + ``XDEL``.
+- **Heartbeats.** A background thread ``SET segue:worker:<name> ... EX ttl`` every ``heartbeat_s``.
+  While a job runs it also resets the entry's idle time (``XCLAIM ... JUSTID``, only if the entry is
+  still ours) until the job's deadline (2 × budget + grace; builds: one hour), and extends the build
+  lock it holds.
+- **Reclaim.** Before reading, a worker scans ``XPENDING``: entries of consumers whose heartbeat key
+  is gone (the worker died), and entries idle longer than ``reclaim_idle_s`` (a hung worker: its
+  heartbeat thread stopped refreshing them), are taken over with ``XCLAIM`` (``min-idle-time`` makes
+  the takeover race-free: only one worker wins). At start-up a worker also takes back what a previous
+  process with its name left pending.
+- **Dead letters.** An entry delivered more than ``max_deliveries`` times (its workers keep dying) is
+  copied to ``segue:jobs:dead``, its job fails with code ``dead_letter``, and it is acked and deleted.
+  Malformed entries go there directly.
+- **Idempotency.** Event publishing drops anything after a job's terminal event (exactly one terminal
+  event, :mod:`workers.redis_events`); a delivered job that already ended (terminal marker in Redis or
+  a finished status on disk) is acked and skipped. A job re-run after its worker died publishes a
+  second ``started`` (its data names the worker and the attempt) and continues the same event ids.
+- **Cancel.** ``should_stop`` checks ``segue:cancel:<job>`` (and the terminal marker) at most every
+  50 ms; :func:`workers.execute.execute_job` then publishes ``cancelled`` with the best result so far.
+- **Databases.** Loaded through the Redis cache (:mod:`workers.redis_cache`) falling back to the
+  store's ``data.npz``; loaded engines stay in a per-worker LRU (:class:`~workers.execute.EngineCache`).
+  A build takes ``segue:lock:build:<db>`` (``SET NX EX``); a second build of the same database waits
+  for the lock, then reuses the ready database instead of building it again.
+- **Stopping.** SIGTERM/SIGINT: finish the current job, then exit. A second signal releases the job
+  at once (not acked; the heartbeat key is deleted so another worker reclaims it immediately).
+
+All processes must see the same data directory (the store holds clips, databases and results).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import logging
+import os
+import signal
+import socket
+import threading
+import time
+import uuid
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from types import FrameType
+from typing import Any, cast
+
+import redis
+
+from schemas import DatabaseStatus, EventType
+
+from .execute import EngineCache, execute_job
+from .redis_cache import DatabaseCache
+from .redis_events import EventPublisher
+from .redis_keys import CHUNK_SIZE, DEAD_MAXLEN, DEFAULT_PREFIX, RedisKeys
+from .store import NotFoundError, Store
+
+log = logging.getLogger("segue.redis.worker")
+
+REDIS_URL_ENV = "SEGUE_REDIS_URL"
+CACHE_URL_ENV = "SEGUE_REDIS_CACHE_URL"
+DATA_DIR_ENV = "SEGUE_DATA_DIR"
+
+# Reset the idle time of an entry we still own (so the idle backstop leaves running jobs alone).
+_TOUCH_LUA = """
+local p = redis.call('XPENDING', KEYS[1], ARGV[1], ARGV[3], ARGV[3], 1)
+if #p == 0 or p[1][2] ~= ARGV[2] then return 0 end
+redis.call('XCLAIM', KEYS[1], ARGV[1], ARGV[2], 0, ARGV[3], 'JUSTID')
+return 1
+"""
+# Extend / release a lock only while it holds our token.
+_EXTEND_LUA = """
+if redis.call('GET', KEYS[1]) == ARGV[1] then return redis.call('PEXPIRE', KEYS[1], ARGV[2]) end
+return 0
+"""
+_RELEASE_LUA = """
+if redis.call('GET', KEYS[1]) == ARGV[1] then return redis.call('DEL', KEYS[1]) end
+return 0
+"""
+
+Entry = tuple[str, dict[str, str], int]
+"""A delivered jobs-stream entry: id, fields, delivery count."""
+
+
+@dataclass(slots=True)
+class WorkerSettings:
+    """How a worker runs (see :func:`run_worker` for the meaning of each field)."""
+
+    redis_url: str
+    data_dir: str
+    name: str
+    heartbeat_s: float = 1.0
+    ttl_s: float = 5.0
+    max_deliveries: int = 3
+    block_ms: int = 1000
+    prefix: str = DEFAULT_PREFIX
+    cache_url: str | None = None
+    chunk_size: int = CHUNK_SIZE
+    reclaim_idle_s: float = 30.0
+    engine_cache: int = 4
+    cancel_poll_s: float = 0.05
+    lock_ttl_s: float = 30.0
+    hang_grace_s: float = 120.0
+    build_timeout_s: float = 3600.0
+
+
+@dataclass(slots=True)
+class _Running:
+    """The job a worker is running (read by the heartbeat thread)."""
+
+    entry_id: str
+    job_id: str
+    deadline: float
+    lock: tuple[str, str] | None = None
+
+
+def default_name() -> str:
+    """A unique consumer name: host, pid and a random suffix."""
+    return f"{socket.gethostname()}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
+
+
+class Worker:
+    """One worker process's loop (see the module docstring)."""
+
+    def __init__(self, settings: WorkerSettings) -> None:
+        if settings.ttl_s <= settings.heartbeat_s:
+            raise ValueError("ttl_s must be longer than heartbeat_s")
+        if settings.max_deliveries < 1:
+            raise ValueError("max_deliveries must be at least 1")
+        self.settings = s = settings
+        self.name = s.name
+        self.keys = RedisKeys(s.prefix)
+        self.store = Store(s.data_dir)
+        # blocking reads must end before the socket timeout (redis-py's default is 5 s)
+        timeout = s.block_ms / 1000 + 5
+        self.client = redis.Redis.from_url(s.redis_url, decode_responses=True, socket_timeout=timeout)
+        self.cache_client = redis.Redis.from_url(s.cache_url or s.redis_url)
+        self.publisher = EventPublisher(self.client, self.store, self.keys)
+        self.db_cache = DatabaseCache(self.cache_client, self.store, self.keys, chunk_size=s.chunk_size)
+        self.engines = EngineCache(s.engine_cache)
+        self._touch = self.client.register_script(_TOUCH_LUA)
+        self._extend = self.client.register_script(_EXTEND_LUA)
+        self._release = self.client.register_script(_RELEASE_LUA)
+        self._running: _Running | None = None
+        self._stop = threading.Event()
+        self._next_reclaim = 0.0
+        self._next_cleanup = 0.0
+        self.processed = 0
+
+    # -- main loop ----------------------------------------------------------------------------
+    def run(self, stop: threading.Event | None = None) -> int:
+        """Process jobs until ``stop`` is set; returns the number of jobs processed."""
+        if stop is not None:
+            self._stop = stop
+        beat_stop = threading.Event()
+        beater = threading.Thread(
+            target=self._heartbeat_loop, args=(beat_stop,), name="segue-heartbeat", daemon=True
+        )
+        startup = True
+        backoff = 0.1
+        try:
+            while not self._stop.is_set():  # Redis may come up after the workers (docker compose)
+                try:
+                    self._ensure_group()
+                    self.client.set(self.keys.worker(self.name), "{}", px=int(self.settings.ttl_s * 1000))
+                    break
+                except (redis.ConnectionError, redis.TimeoutError) as exc:
+                    log.warning("waiting for Redis (%s); retrying in %.1f s", exc, backoff)
+                    self._stop.wait(backoff)
+                    backoff = min(backoff * 2, 5.0)
+            if self._stop.is_set():
+                return self.processed
+            self._beat()
+            beater.start()
+            log.info("worker %s ready (group %s on %s)", self.name, self.keys.group, self.keys.jobs)
+            while not self._stop.is_set():
+                try:
+                    entry = self._reclaim(startup)
+                    startup = startup and entry is not None  # at start-up: until nothing is left
+                    if entry is None:
+                        entry = self._read()
+                    if entry is not None:
+                        self._process(entry)
+                    backoff = 0.1
+                except redis.ResponseError as exc:
+                    if "NOGROUP" in str(exc):
+                        log.warning("the jobs stream or group is gone (Redis flushed?); recreating it")
+                        self._ensure_group()
+                        continue
+                    log.exception("Redis refused a command; retrying in %.1f s", backoff)
+                    self._stop.wait(backoff)
+                    backoff = min(backoff * 2, 5.0)
+                except (redis.ConnectionError, redis.TimeoutError) as exc:
+                    log.warning("Redis unavailable (%s); retrying in %.1f s", exc, backoff)
+                    self._stop.wait(backoff)
+                    backoff = min(backoff * 2, 5.0)
+                except Exception:  # e.g. the store's disk: the entry stays pending and is retried later
+                    log.exception(
+                        "worker %s: job processing failed; continuing in %.1f s", self.name, backoff
+                    )
+                    self._stop.wait(backoff)
+                    backoff = min(backoff * 2, 5.0)
+        finally:
+            beat_stop.set()
+            if beater.is_alive():
+                beater.join(timeout=5)
+            # gone at once: other workers reclaim anything we leave pending without waiting the TTL
+            with contextlib.suppress(redis.RedisError):
+                self.client.delete(self.keys.worker(self.name))
+            self.client.close()
+            self.cache_client.close()
+            log.info("worker %s stopped after %d jobs", self.name, self.processed)
+        return self.processed
+
+    def _ensure_group(self) -> None:
+        try:
+            self.client.xgroup_create(self.keys.jobs, self.keys.group, id="0", mkstream=True)
+        except redis.ResponseError as exc:
+            if "BUSYGROUP" not in str(exc):
+                raise
+
+    def _read(self) -> Entry | None:
+        response = cast(
+            list[Any],
+            self.client.xreadgroup(
+                self.keys.group, self.name, {self.keys.jobs: ">"}, count=1, block=self.settings.block_ms
+            ),
+        )
+        for _stream, entries in response or []:
+            for entry_id, fields in entries:
+                return str(entry_id), dict(fields or {}), 1
+        return None
+
+    # -- heartbeats -----------------------------------------------------------------------------
+    def _heartbeat_loop(self, beat_stop: threading.Event) -> None:
+        while not beat_stop.wait(self.settings.heartbeat_s):
+            self._beat()
+
+    def _beat(self) -> None:
+        running = self._running
+        info = {"pid": os.getpid(), "host": socket.gethostname(), "job": running.job_id if running else None}
+        try:
+            self.client.set(self.keys.worker(self.name), json.dumps(info), px=int(self.settings.ttl_s * 1000))
+            if running is None:
+                return
+            if time.monotonic() < running.deadline:
+                self._touch(keys=[self.keys.jobs], args=[self.keys.group, self.name, running.entry_id])
+            if running.lock is not None:
+                self._extend(
+                    keys=[running.lock[0]], args=[running.lock[1], int(self.settings.lock_ttl_s * 1000)]
+                )
+        except redis.RedisError as exc:
+            log.warning("heartbeat failed: %s", exc)
+
+    # -- reclaim and dead letters -----------------------------------------------------------------
+    def _reclaim(self, startup: bool) -> Entry | None:
+        """Take over one entry whose worker died or hung (None when there is none)."""
+        now = time.monotonic()
+        if not startup and now < self._next_reclaim:
+            return None
+        self._next_reclaim = now + self.settings.heartbeat_s / 2
+        if now >= self._next_cleanup:
+            self._next_cleanup = now + 60.0
+            self._forget_dead_consumers()
+        pending = cast(
+            list[dict[str, Any]],
+            self.client.xpending_range(self.keys.jobs, self.keys.group, "-", "+", count=100),
+        )
+        if not pending:
+            return None
+        others = sorted({str(p["consumer"]) for p in pending} - {self.name})
+        with self.client.pipeline(transaction=False) as pipe:
+            for consumer in others:
+                pipe.exists(self.keys.worker(consumer))
+            alive = dict(zip(others, (bool(x) for x in pipe.execute()), strict=True))
+        idle_limit = int(self.settings.reclaim_idle_s * 1000)
+        for p in pending:
+            consumer, idle = str(p["consumer"]), int(p["time_since_delivered"])
+            if consumer == self.name:
+                stale, min_idle = startup or idle >= idle_limit, 0 if startup else idle_limit
+            else:
+                stale, min_idle = not alive[consumer] or idle >= idle_limit, max(idle // 2, 1)
+            if not stale:
+                continue
+            entry_id = str(p["message_id"])
+            claimed = cast(
+                list[Any],
+                self.client.xclaim(self.keys.jobs, self.keys.group, self.name, min_idle, [entry_id]),
+            )
+            if not claimed:
+                continue  # another worker was faster
+            _, fields = claimed[0]
+            if not fields:  # deleted while pending
+                self._ack(entry_id)
+                continue
+            deliveries = int(p["times_delivered"]) + 1
+            why = "died" if consumer != self.name and not alive.get(consumer, True) else f"idle {idle} ms"
+            log.warning(
+                "reclaimed %s (job %s) from %s (%s), delivery %d",
+                entry_id,
+                fields.get("job"),
+                consumer,
+                why,
+                deliveries,
+            )
+            return entry_id, dict(fields), deliveries
+        return None
+
+    def _forget_dead_consumers(self) -> None:
+        """Remove group consumers with nothing pending whose heartbeat is gone (keeps XINFO short)."""
+        try:
+            consumers = self.client.xinfo_consumers(self.keys.jobs, self.keys.group)
+        except redis.ResponseError:
+            return
+        for c in consumers:
+            name = str(c["name"])
+            idle_and_empty = int(c["pending"]) == 0 and int(c["idle"]) > 60_000
+            if name != self.name and idle_and_empty and not self.client.exists(self.keys.worker(name)):
+                self.client.xgroup_delconsumer(self.keys.jobs, self.keys.group, name)
+
+    def _dead_letter(self, entry_id: str, fields: dict[str, str], deliveries: int, reason: str) -> None:
+        job_id = fields.get("job")
+        record: dict[Any, Any] = dict(fields)
+        record.update(
+            entry=entry_id,
+            deliveries=str(deliveries),
+            reason=reason,
+            worker=self.name,
+            time=f"{time.time():.3f}",
+        )
+        self.client.xadd(self.keys.dead, record, maxlen=DEAD_MAXLEN, approximate=True)
+        log.error("job %s dead-lettered: %s", job_id, reason)
+        if job_id:
+            try:
+                self.publisher.publish(
+                    job_id, EventType.failed, {"error": {"code": "dead_letter", "message": reason}}
+                )
+            except NotFoundError:
+                log.error("dead-lettered entry %s names an invalid job id %r", entry_id, job_id)
+        self._ack(entry_id)
+
+    def _ack(self, entry_id: str) -> None:
+        with self.client.pipeline(transaction=True) as pipe:
+            pipe.xack(self.keys.jobs, self.keys.group, entry_id)
+            pipe.xdel(self.keys.jobs, entry_id)
+            pipe.execute()
+
+    # -- one job ---------------------------------------------------------------------------------
+    def _finished(self, job_id: str) -> bool:
+        if self.client.exists(self.keys.terminal(job_id)):
+            return True
+        try:
+            return self.store.job_info(job_id).status.finished
+        except NotFoundError:
+            return False
+
+    def _process(self, entry: Entry) -> None:
+        entry_id, fields, deliveries = entry
+        try:
+            job_id, kind = fields["job"], fields["kind"]
+            payload = json.loads(fields["payload"])
+            if not isinstance(payload, dict):
+                raise ValueError("payload is not an object")
+            self.store.job_dir(job_id)  # validates the id
+        except (KeyError, ValueError, NotFoundError) as exc:
+            self._dead_letter(entry_id, fields, deliveries, f"malformed job entry: {exc}")
+            return
+        if self._finished(job_id):
+            log.info("job %s already ended; dropping its entry %s", job_id, entry_id)
+            self._ack(entry_id)
+            return
+        if deliveries > self.settings.max_deliveries:
+            self._dead_letter(
+                entry_id,
+                fields,
+                deliveries,
+                f"job delivered {deliveries} times (limit {self.settings.max_deliveries}): "
+                "its workers kept dying",
+            )
+            return
+        self._running = _Running(entry_id, job_id, time.monotonic() + self._time_limit(kind, payload))
+        try:
+            publish = self._publisher_for(job_id, deliveries)
+            should_stop = self._stop_check(job_id)
+            if kind == "build" and isinstance(payload.get("database"), str):
+                self._build(job_id, payload, publish, should_stop)
+            else:
+                execute_job(
+                    self.store,
+                    job_id,
+                    kind,
+                    payload,
+                    publish,
+                    should_stop,
+                    self.engines,
+                    load_database_bytes=self.db_cache.load,
+                    save_database_bytes=self.db_cache.save,
+                    attempt=deliveries,
+                )
+        finally:
+            self._running = None
+            self.publisher.forget(job_id)
+        self._ack(entry_id)
+        self.processed += 1
+
+    def _time_limit(self, kind: str, payload: dict[str, Any]) -> float:
+        if kind == "build":
+            return self.settings.build_timeout_s
+        request = payload.get("request")
+        budget = request.get("budget_s", 10.0) if isinstance(request, dict) else 10.0
+        budget = float(budget) if isinstance(budget, int | float) else 10.0
+        return 2 * budget + self.settings.hang_grace_s
+
+    def _publisher_for(self, job_id: str, attempt: int) -> Callable[[EventType, dict[str, Any]], None]:
+        def publish(type_: EventType, data: dict[str, Any]) -> None:
+            if type_ == EventType.started:
+                data = {**data, "worker": self.name, "attempt": attempt}
+            self.publisher.publish(job_id, type_, data)
+
+        return publish
+
+    def _stop_check(self, job_id: str) -> Callable[[], bool]:
+        keys = (self.keys.cancel(job_id), self.keys.terminal(job_id))
+        poll = self.settings.cancel_poll_s
+        state = {"next": 0.0, "stop": False}
+
+        def should_stop() -> bool:
+            if state["stop"]:
+                return True
+            now = time.monotonic()
+            if now >= state["next"]:
+                state["next"] = now + poll
+                try:
+                    state["stop"] = bool(self.client.exists(*keys))
+                except redis.RedisError as exc:
+                    log.warning("cancel check failed: %s", exc)
+            return bool(state["stop"])
+
+        return should_stop
+
+    # -- builds ----------------------------------------------------------------------------------
+    def _database_ready(self, db_id: str) -> bool:
+        try:
+            ready = self.store.database_info(db_id).status == DatabaseStatus.ready
+            return ready and (self.store.db_dir(db_id) / "data.npz").exists()
+        except NotFoundError:
+            return False
+
+    def _build(
+        self,
+        job_id: str,
+        payload: dict[str, Any],
+        publish: Callable[[EventType, dict[str, Any]], None],
+        should_stop: Callable[[], bool],
+    ) -> None:
+        db_id = str(payload["database"])
+        lock_key, token = self.keys.build_lock(db_id), f"{self.name}/{job_id}/{uuid.uuid4().hex[:8]}"
+        lock_px = int(self.settings.lock_ttl_s * 1000)
+        next_check = 0.0
+        while True:
+            if self._database_ready(db_id):
+                self._reuse_build(db_id, publish)
+                return
+            if self.client.set(lock_key, token, nx=True, px=lock_px):
+                break
+            if should_stop():
+                publish(EventType.started, {})
+                publish(EventType.cancelled, {"result": None})
+                return
+            if time.monotonic() >= next_check:
+                next_check = time.monotonic() + self.settings.heartbeat_s
+                self._break_stale_lock(lock_key)
+            time.sleep(0.05)  # another worker builds this database: wait, then reuse its result
+        running = self._running
+        if running is not None:
+            running.lock = (lock_key, token)
+        try:
+            if self._database_ready(db_id):
+                self._reuse_build(db_id, publish)
+                return
+            execute_job(
+                self.store,
+                job_id,
+                "build",
+                payload,
+                publish,
+                should_stop,
+                self.engines,
+                load_database_bytes=self.db_cache.load,
+                save_database_bytes=self.db_cache.save,
+            )
+        finally:
+            if running is not None:
+                running.lock = None
+            self._release(keys=[lock_key], args=[token])
+
+    def _break_stale_lock(self, lock_key: str) -> None:
+        """Delete a build lock whose holder's heartbeat is gone (it died mid-build)."""
+        holder = cast(str | None, self.client.get(lock_key))
+        if holder is None:
+            return
+        owner = holder.rsplit("/", 2)[0]
+        dead = owner != self.name and not self.client.exists(self.keys.worker(owner))
+        if dead and self._release(keys=[lock_key], args=[holder]):
+            log.warning("build lock %s of dead worker %s released", lock_key, owner)
+
+    def _reuse_build(self, db_id: str, publish: Callable[[EventType, dict[str, Any]], None]) -> None:
+        log.info("database %s is ready already; not building it again", db_id)
+        publish(EventType.started, {})
+        publish(EventType.progress, {"fraction": 1.0, "message": "built by another job"})
+        publish(EventType.done, {"result": None, "database": db_id, "reused": True})
+
+
+# -- entry points ----------------------------------------------------------------------------------
+def _install_signals(stop: threading.Event) -> Callable[[], None]:
+    """SIGTERM/SIGINT: first finish the current job; a second signal releases it at once."""
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        if stop.is_set():
+            log.warning("second signal: releasing the current job")
+            raise KeyboardInterrupt
+        log.info("signal %d: finishing the current job, then stopping (again to stop now)", signum)
+        stop.set()
+
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGTERM, signal.SIGINT)}
+
+    def restore() -> None:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+    return restore
+
+
+def run_worker(
+    redis_url: str,
+    data_dir: str | os.PathLike[str],
+    name: str | None = None,
+    stop: threading.Event | None = None,
+    heartbeat_s: float = 1.0,
+    ttl_s: float = 5.0,
+    max_deliveries: int = 3,
+    block_ms: int = 1000,
+    *,
+    prefix: str = DEFAULT_PREFIX,
+    cache_url: str | None = None,
+    chunk_size: int = CHUNK_SIZE,
+    reclaim_idle_s: float = 30.0,
+    engine_cache: int = 4,
+) -> int:
+    """Run a worker until ``stop`` is set (or SIGTERM/SIGINT when called from the main thread).
+
+    Parameters
+    ----------
+    redis_url:
+        The queue Redis (``noeviction``).
+    data_dir:
+        The store's root directory, shared with the API.
+    name:
+        Consumer name (default: host-pid-random); must be unique among live workers.
+    heartbeat_s, ttl_s:
+        Heartbeat period and the heartbeat key's lifetime: a worker silent for ``ttl_s`` is dead.
+    max_deliveries:
+        Attempts per job before it is dead-lettered.
+    block_ms:
+        ``XREADGROUP`` block time (also bounds how long a stop request waits when idle).
+    prefix, cache_url, chunk_size:
+        Key prefix; a separate cache Redis (``allkeys-lru``; default: the queue Redis); cache chunk size.
+    reclaim_idle_s:
+        Backstop: entries not refreshed for this long are taken over even if their worker beats.
+    engine_cache:
+        Loaded databases kept in memory (LRU).
+
+    Returns the number of jobs processed.
+    """
+    from engines.registry import load_plugins
+    from motion.allocator import tune_allocator
+
+    tune_allocator()
+    load_plugins()
+    settings = WorkerSettings(
+        redis_url=redis_url,
+        data_dir=os.fspath(data_dir),
+        name=name or default_name(),
+        heartbeat_s=heartbeat_s,
+        ttl_s=ttl_s,
+        max_deliveries=max_deliveries,
+        block_ms=block_ms,
+        prefix=prefix,
+        cache_url=cache_url,
+        chunk_size=chunk_size,
+        reclaim_idle_s=reclaim_idle_s,
+        engine_cache=engine_cache,
+    )
+    stop = stop or threading.Event()
+    restore = _install_signals(stop) if threading.current_thread() is threading.main_thread() else None
+    try:
+        return Worker(settings).run(stop)
+    finally:
+        if restore is not None:
+            restore()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m workers.redis_worker --redis URL --data DIR [--name N]``."""
+    parser = argparse.ArgumentParser(prog="segue worker", description="Run Segue jobs from a Redis queue.")
+    parser.add_argument(
+        "--redis", default=os.environ.get(REDIS_URL_ENV), help=f"queue Redis URL (${REDIS_URL_ENV})"
+    )
+    parser.add_argument(
+        "--cache-redis", default=os.environ.get(CACHE_URL_ENV), help=f"cache Redis (${CACHE_URL_ENV})"
+    )
+    parser.add_argument(
+        "--data",
+        default=os.environ.get(DATA_DIR_ENV, "segue-data"),
+        help=f"data directory shared with the API (${DATA_DIR_ENV}, default ./segue-data as for segue serve)",
+    )
+    parser.add_argument("--name", default=None, help="consumer name (default: host-pid-random)")
+    parser.add_argument("--prefix", default=DEFAULT_PREFIX, help="Redis key prefix")
+    parser.add_argument("--heartbeat", type=float, default=1.0, help="heartbeat period, seconds")
+    parser.add_argument("--ttl", type=float, default=5.0, help="heartbeat lifetime, seconds")
+    parser.add_argument(
+        "--max-deliveries", type=int, default=3, help="attempts before a job is dead-lettered"
+    )
+    parser.add_argument("--block-ms", type=int, default=1000, help="XREADGROUP block time")
+    parser.add_argument("--reclaim-idle", type=float, default=30.0, help="idle backstop for hung workers, s")
+    parser.add_argument("--chunk-size", type=int, default=CHUNK_SIZE, help="database cache chunk size, bytes")
+    parser.add_argument("--log-level", default=os.environ.get("SEGUE_LOG_LEVEL", "INFO"))
+    args = parser.parse_args(argv)
+    if not args.redis:
+        parser.error(f"give --redis or set {REDIS_URL_ENV}")
+    logging.basicConfig(
+        level=args.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
+    try:
+        run_worker(
+            args.redis,
+            args.data,
+            name=args.name,
+            heartbeat_s=args.heartbeat,
+            ttl_s=args.ttl,
+            max_deliveries=args.max_deliveries,
+            block_ms=args.block_ms,
+            prefix=args.prefix,
+            cache_url=args.cache_redis,
+            chunk_size=args.chunk_size,
+            reclaim_idle_s=args.reclaim_idle,
+        )
+    except KeyboardInterrupt:
+        return 130
+    except (ValueError, redis.RedisError) as exc:
+        log.error("worker stopped: %s", exc)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
