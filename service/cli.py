@@ -148,7 +148,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         save_motion(motion, out / name, **kwargs)
         size_mb = (out / name).stat().st_size / 1e6
         print(f"  wrote {out / name} ({size_mb:.1f} MB, {time.perf_counter() - t0:.2f} s)")
-    print("open the .glb in any glTF viewer (e.g. https://gltf-viewer.donmccurdy.com) to watch it dance")
+    print("open the .glb in any glTF viewer (Blender, the three.js editor, ...) to watch it dance")
     return 0
 
 
