@@ -48,12 +48,8 @@ Every error body is `{"error": {"code", "message", "details"?}}`. When the serve
 def make_backend(settings: Settings, store: Store) -> JobBackend:
     """The job backend the settings ask for (the Redis backend is imported only when used)."""
     if settings.redis_url:
-        try:
-            from workers.redis_backend import RedisBackend  # type: ignore[import-not-found,unused-ignore]
-        except ImportError as exc:
-            raise RuntimeError(
-                f"SEGUE_REDIS_URL is set but the Redis backend is not available: {exc}"
-            ) from exc
+        from workers.redis_backend import RedisBackend
+
         backend: JobBackend = RedisBackend(store, settings.redis_url)
         return backend
     return EmbeddedBackend(store, settings.workers)
@@ -76,8 +72,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         yield
     finally:
         app.state.backend = None
-        # let callbacks of the last events run before close() blocks the loop (an event still being
-        # recorded would otherwise hold the embedded backend's close for its 5 s join timeout)
+        # let callbacks of the last events run before the backend closes
         for _ in range(5):
             await asyncio.sleep(0)
         await backend.close()
