@@ -10,7 +10,7 @@ from starlette.concurrency import run_in_threadpool
 from engines.registry import engine_class
 from motion import ExportError
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
-from schemas.jobs import JobKind
+from schemas.jobs import JobKind, JobStatus
 from workers.backend import JobBackend
 
 from ..deps import AuthDep, BackendDep, MetricsDep, SettingsDep, StoreDep
@@ -68,6 +68,21 @@ async def submit(
         )
     payload = {"request": job_request.model_dump(mode="json")}
     return await submit_job(store, backend, metrics, JobKind.synth, payload, engine=engine, database=db.id)
+
+
+@router.get("", response_model=list[JobInfo], responses=responses(422))
+async def list_jobs(
+    store: StoreDep,
+    status_filter: Annotated[
+        JobStatus | None, Query(alias="status", description="only jobs in this state")
+    ] = None,
+    limit: Annotated[int, Query(ge=1, le=1000, description="at most this many, newest first")] = 100,
+) -> list[JobInfo]:
+    """Jobs, newest first (status as last recorded in the store)."""
+    jobs = await run_in_threadpool(store.list_jobs)
+    if status_filter is not None:
+        jobs = [j for j in jobs if j.status == status_filter]
+    return jobs[::-1][:limit]
 
 
 @router.get("/{job_id}", response_model=JobInfo, responses=responses(404, 422))

@@ -257,6 +257,13 @@ def test_clip_job_streams_to_done_and_results_download(client: TestClient, walk_
     assert [e["id"] for e in later] == [3, 4]
     assert client.get(f"/v1/jobs/{job['id']}/events", params={"after": 4}).json() == []
 
+    # the job list: newest first, filterable by status
+    listed = client.get("/v1/jobs").json()
+    assert listed[0]["id"] == job["id"] and walk_db["build_job"] in {j["id"] for j in listed}
+    done = client.get("/v1/jobs", params={"status": "done", "limit": 1}).json()
+    assert [j["id"] for j in done] == [job["id"]]
+    assert client.get("/v1/jobs", params={"status": "exploded"}).status_code == 422
+
 
 def test_result_errors(client: TestClient, walk_db: dict[str, Any]) -> None:
     job_id = walk_db["build_job"]  # a build job: no result
