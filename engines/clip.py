@@ -13,7 +13,7 @@ import numpy as np
 
 from motion import MotionError
 from motion import rotations as rot
-from motion.ground import heading
+from motion.ground import body_root, heading
 from motion.mirror import mirror
 
 from .base import Emitter, Engine, EngineError, ShouldStop, Solution
@@ -43,7 +43,7 @@ class ClipEngine(Engine):
             yaw0 = float(heading(motion, pos)[0])
             target_yaw = yaw0 if request.heading_deg is None else np.radians(request.heading_deg)
             turn = rot.from_yaw(np.float64(target_yaw - yaw0))
-            start_xz = motion.root_positions[0, [0, 2]]
+            start_xz = pos[0, body_root(motion.skeleton), [0, 2]]  # the body, not a static joint 0
             goal_xz = start_xz if request.position is None else np.asarray(request.position, dtype=np.float64)
             rel = motion.root_positions - np.array([start_xz[0], 0.0, start_xz[1]])
             root = rot.rotate(turn, rel) + np.array([goal_xz[0], 0.0, goal_xz[1]])

@@ -13,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .errors import MotionError
-from .ground import ground_frames, to_ground_frame
+from .ground import body_root, ground_frames, to_ground_frame
 from .motion import Motion
 
 Array = npt.NDArray[np.float64]
@@ -91,7 +91,7 @@ def torso_features(
     zero = np.zeros_like(origin)
     world_vel = _derivative(pos[:, idx], motion.fps)
     vel = to_ground_frame(world_vel, zero, yaw)
-    root = pos[:, 0]
+    root = pos[:, body_root(motion.skeleton)]
     root_vel_w = _derivative(root, motion.fps)
     root_acc_w = _derivative(root_vel_w, motion.fps)
     root_vel = to_ground_frame(root_vel_w[:, None], zero, yaw)[:, 0]

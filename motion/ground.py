@@ -21,36 +21,56 @@ from .skeleton import Skeleton
 
 Array = npt.NDArray[np.float64]
 
-_HIP_NAMES = re.compile(r"thigh|upleg|upperleg|hip|buttock|femur", re.IGNORECASE)
+_THIGH_NAMES = re.compile(r"thigh|upleg|upperleg|femur", re.IGNORECASE)
+_HIP_NAMES = re.compile(r"thigh|upleg|upperleg|femur|hip|buttock", re.IGNORECASE)
 _SHOULDER_NAMES = re.compile(
     r"shoulder|shldr|upperarm|uparm|humerus|collar|clavicle|^[lr]?arm$", re.IGNORECASE
 )
 
 
 def facing_pairs(skeleton: Skeleton) -> list[tuple[int, int]]:
-    """``(left, right)`` joint pairs whose difference points to the body's left: the hips and the
-    shoulders when their names say so, otherwise the paired joints nearest the root."""
+    """``(left, right)`` joint pairs whose difference points to the body's left: the hips (thighs)
+    when their names say so, else the shoulders, else the paired joints nearest the root.
+
+    The hips alone define the facing: the shoulders counter-rotate against the pelvis by several
+    degrees at every step, and the pelvis is what carries the body (and root motion)."""
     partner, side = mirror_map(skeleton.names)
     lefts = [j for j in range(skeleton.num_joints) if side[j] == 1]
     if not lefts:
         return []
     depth = skeleton.depth()
-    pairs: list[tuple[int, int]] = []
-    for pattern in (_HIP_NAMES, _SHOULDER_NAMES):
+    for pattern in (_THIGH_NAMES, _HIP_NAMES, _SHOULDER_NAMES):
         named = [j for j in lefts if pattern.search(skeleton.names[j])]
         if named:
             j = min(named, key=lambda k: (depth[k], k))
-            pairs.append((j, int(partner[j])))
-    if not pairs:
-        j = min(lefts, key=lambda k: (depth[k], k))
-        pairs.append((j, int(partner[j])))
-    return pairs
+            return [(j, int(partner[j]))]
+    j = min(lefts, key=lambda k: (depth[k], k))
+    return [(j, int(partner[j]))]
+
+
+def body_root(skeleton: Skeleton) -> int:
+    """The joint that carries the body: the nearest common ancestor of the hip (thigh) joints
+    (``Hips`` in Bandai-Namco files, whose joint 0 is a static ``joint_Root``; ``hip`` in CMU
+    files), or joint 0 when there are no left/right hips."""
+    pairs = facing_pairs(skeleton)
+    if not pairs or not _HIP_NAMES.search(skeleton.names[pairs[0][0]]):
+        return 0
+    left, right = pairs[0]
+    ancestors = set()
+    j = left
+    while j >= 0:
+        ancestors.add(j)
+        j = int(skeleton.parents[j])
+    j = right
+    while j not in ancestors:
+        j = int(skeleton.parents[j])
+    return j
 
 
 def heading(motion: Motion, positions: Array | None = None) -> Array:
     """``(F,)`` facing direction (radians about +Y; 0 = +Z, pi/2 = +X), unwrapped over time.
 
-    From the floor projection of the left-minus-right vectors of the hips and shoulders (see
+    From the floor projection of the left-minus-right vector of the hips (see
     :func:`facing_pairs`): forward = left x up. Skeletons without left/right names fall back to
     the root joint's rotated +Z axis.
     """
@@ -68,9 +88,10 @@ def heading(motion: Motion, positions: Array | None = None) -> Array:
 
 
 def ground_frames(motion: Motion, positions: Array | None = None) -> tuple[Array, Array]:
-    """Per frame, the root's floor position ``(F, 2)`` ``[x, z]`` and the heading ``(F,)`` radians."""
+    """Per frame, the body's floor position ``(F, 2)`` ``[x, z]`` (the :func:`body_root` joint
+    projected on the floor) and the heading ``(F,)`` radians."""
     pos = motion.global_positions() if positions is None else positions
-    return np.asarray(pos[:, 0][:, [0, 2]]), heading(motion, pos)
+    return np.asarray(pos[:, body_root(motion.skeleton)][:, [0, 2]]), heading(motion, pos)
 
 
 def to_ground_frame(points: Array, origin_xz: Array, heading_rad: Array) -> Array:

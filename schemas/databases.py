@@ -38,9 +38,24 @@ class ControlDatabaseSpec(DatabaseSpecBase):
 
 
 class GraphDatabaseSpec(DatabaseSpecBase):
-    """Motion-graph database (Arikan & Forsyth 2002); settings arrive with the graph engine."""
+    """Motion-graph database (Arikan & Forsyth 2002).
+
+    Transition costs compare joint positions and velocities in the torso frame and the torso's
+    velocity and acceleration, each normalised by the database's largest frame-to-frame change, so
+    ``tau`` is in units of "one frame of typical motion"."""
 
     kind: Literal["graph"] = "graph"
+    fps: float | None = Field(
+        default=30.0, gt=0, le=1000, description="database rate (graphs work at 30 fps)"
+    )
+    tau: float = Field(default=1.0, gt=0, le=100, description="edge threshold on the transition cost")
+    joint_weights: dict[str, float] = Field(
+        default_factory=dict, description="per joint name; default: feet 4, legs 2, hands 0.5, others 1"
+    )
+    velocity_weight: float = Field(default=1.0, ge=0, le=100)
+    min_jump_frames: int = Field(
+        default=10, ge=1, le=10000, description="ignore cuts within a clip closer than this to playing on"
+    )
 
 
 class AnnotatedDatabaseSpec(DatabaseSpecBase):

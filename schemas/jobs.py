@@ -109,3 +109,10 @@ class JobInfo(Strict):
     result: str | None = Field(default=None, description="id of the best result so far")
     error: str | None = None
     last_event: int = Field(default=0, description="id of the newest event")
+
+
+# Engine request models defined in their own modules (they import JobRequestBase from here).
+from .graph import GraphRequest  # noqa: E402
+
+JobRequest = Annotated[ClipRequest | GraphRequest, Field(discriminator="engine")]  # type: ignore[misc,assignment]
+REQUEST_MODELS["graph"] = GraphRequest

@@ -185,7 +185,10 @@ def build_database_bytes(
         {"fraction": 0.5, "message": f"{library.total_frames} frames at {library.fps:g} fps"},
     )
     recorder = SolutionRecorder("build", engine_cls.name, publish, lambda *_: None)
-    extra = engine_cls.build(spec, library, recorder, should_stop)
+    try:
+        extra = engine_cls.build(spec, library, recorder, should_stop)
+    except InterruptedError:
+        raise JobFailure("cancelled", "build cancelled") from None
     if should_stop():
         raise JobFailure("cancelled", "build cancelled")
     arrays = library_to_arrays(library)

@@ -107,3 +107,29 @@ def test_motion_validation_and_slicing() -> None:
     np.testing.assert_allclose(cm.global_positions(), m.global_positions() * 100)
     with pytest.raises(MotionError):
         m.with_units("unknown").to_units("m")
+
+
+def test_body_root_is_the_hips_even_under_a_static_root() -> None:
+    from motion import Skeleton
+    from motion.ground import body_root
+    from motion.skeleton import default_channels
+
+    m = walking_biped(frames=30)
+    assert m.skeleton.names[body_root(m.skeleton)] == "hips"
+    # a Bandai-style static joint 0 above the hips: the ground frame follows the hips
+    sk = m.skeleton
+    names = ("joint_Root", *sk.names)
+    channels = list(default_channels(len(names)))
+    channels[1] = channels[0]  # the hips carry positions too, as in Bandai-Namco files
+    static = Skeleton(
+        names,
+        np.concatenate(([-1], sk.parents + 1)),
+        np.concatenate((np.zeros((1, 3)), sk.offsets)),
+        tuple(channels),
+    )
+    rot0 = np.concatenate((rot.identity((30, 1)), m.rotations), axis=1)
+    jt = m.root_positions[:, None]
+    moved = Motion(static, np.zeros((30, 3)), rot0, 30.0, jt, "m")
+    assert static.names[body_root(static)] == "hips"
+    origin, _ = ground_frames(moved)
+    np.testing.assert_allclose(origin, m.root_positions[:, [0, 2]], atol=1e-12)
