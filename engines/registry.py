@@ -15,6 +15,16 @@ from .clip import ClipEngine
 ENGINES: dict[str, type[Engine]] = {ClipEngine.name: ClipEngine}
 KIND_ENGINES: dict[str, type[Engine]] = {cls.kind: cls for cls in ENGINES.values()}
 
+_BUILT_IN: dict[str, tuple[str, str]] = {"graph": ("engines.graph.engine", "GraphEngine")}
+"""Engines imported on first use (name and kind are the same): keeps the CLI quick to start."""
+
+
+def _load_built_in(name: str) -> None:
+    target = _BUILT_IN.get(name)
+    if target is not None and name not in ENGINES:
+        register(getattr(importlib.import_module(target[0]), target[1]))
+
+
 PLUGINS_ENV = "SEGUE_ENGINE_PLUGINS"
 """Comma-separated modules imported at start-up that call :func:`register` (extra engines, e.g. the
 test suite's scripted engine). Every process that runs jobs must see the same value."""
@@ -42,19 +52,22 @@ class UnavailableError(LookupError):
 
 
 def engine_class(name: str) -> type[Engine]:
+    _load_built_in(name)
     try:
         return ENGINES[name]
     except KeyError:
         raise UnavailableError(
-            f"engine {name!r} is not available in this installation (available: {', '.join(ENGINES)})"
+            f"engine {name!r} is not available in this installation "
+            f"(available: {', '.join(sorted(set(ENGINES) | set(_BUILT_IN)))})"
         ) from None
 
 
 def kind_class(kind: str) -> type[Engine]:
+    _load_built_in(kind)
     try:
         return KIND_ENGINES[kind]
     except KeyError:
         raise UnavailableError(
             f"database kind {kind!r} is not available yet: its engine has not landed "
-            f"(available kinds: {', '.join(KIND_ENGINES)})"
+            f"(available kinds: {', '.join(sorted(set(KIND_ENGINES) | set(_BUILT_IN)))})"
         ) from None

@@ -147,7 +147,7 @@ def test_first_post_is_202_and_build_can_be_followed(client: TestClient, walk_cl
 @pytest.mark.parametrize(
     ("spec", "status", "code", "needle"),
     [
-        ({"kind": "graph", "clips": [{"bvh": "07_01_walk_daz.bvh.gz"}]}, 422, "unavailable", "graph"),
+        ({"kind": "control", "clips": [{"bvh": "07_01_walk_daz.bvh.gz"}]}, 422, "unavailable", "control"),
         ({"kind": "nope", "clips": [{"bvh": "a.bvh"}]}, 422, "invalid_request", "kind"),
         ({"kind": "clips", "clips": []}, 422, "invalid_request", "clips"),
         ({"kind": "clips", "clips": [{"bvh": "a.bvh", "clip": "b"}]}, 422, "invalid_request", "exactly one"),

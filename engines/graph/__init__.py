@@ -1,0 +1,1 @@
+"""The motion-graph engine (Arikan & Forsyth 2002): hierarchical graph + randomized anytime search."""

@@ -1,0 +1,256 @@
+"""Assembly of the final motion from a path's pieces (Arikan & Forsyth 2002, Sec. 4.2.3).
+
+1. **Place.** Each piece's frames (full skeleton, from the library) are moved by the piece's
+   floor transform (:class:`~engines.graph.paths.Placement`: a rotation about +Y and a floor
+   translation), so it continues where the previous piece ended.
+2. **Smooth.** The discontinuities at the cuts are spread over ``+-smoothing_frames`` frames with
+   the paper's displacement blend (:func:`motion.smoothing.smooth_cuts`).
+3. **Meet the body constraints.** The body's remaining error at each body constraint (position
+   and, when given, heading), measured on the smoothed motion, is distributed linearly over the
+   frames since the previous body constraint; before the first one and after the last one the
+   correction is rigid. The heading correction turns the path with the body (each frame's step is
+   rotated by the correction angle of that frame), the position correction is a linear ramp; both
+   are applied as one per-frame floor transform, so the constraints are met to numerical
+   precision.
+
+The body (the "torso" of the paper) is that of :func:`motion.ground.ground_frames` (the hips'
+floor projection, facing from the thighs), as in the root tracks. For skeletons whose joint 0 is a
+fixed reference that never moves (e.g. Bandai-Namco's ``joint_Root`` at the origin, with the
+motion carried by the translated ``Hips``), the floor transforms are applied to joint 0's
+children instead of joint 0, so smoothing never blends two differently placed reference joints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from motion import Motion
+from motion import rotations as rot
+from motion.align import apply_rigid_2d
+from motion.contacts import foot_joints
+from motion.errors import MotionError
+from motion.ground import ground_frames
+from motion.smoothing import smooth_cuts
+
+from ..library import MotionLibrary
+from .model import FloatArray, RootTracks
+from .paths import Pieces, Placement, rotate2, wrap_angle
+from .score import Problem, compile_problem
+
+
+def body_frames(motion: Motion, positions: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+    """Per frame, the body's floor position ``(F, 2)`` metres and heading ``(F,)`` radians
+    (:func:`motion.ground.ground_frames`: the hips' floor projection, facing from the thighs)."""
+    xz, yaw = ground_frames(motion, positions)
+    return xz * motion.metres_per_unit, yaw
+
+
+def _static_root(library: MotionLibrary) -> tuple[FloatArray, FloatArray] | None:
+    """Joint 0's position and rotation when it is the same fixed pose in every frame of every
+    clip and all its children carry animated translations; else ``None``."""
+    first = library.motions[0]
+    sk = first.skeleton
+    children = np.flatnonzero(sk.parents == 0)
+    if children.size == 0 or not np.all(np.isin(children, sk.translated_joints)):
+        return None
+    p0, q0 = first.root_positions[0], rot.standardize(first.rotations[0, 0])
+    for m in library.motions:
+        if np.abs(m.root_positions - p0).max() > 1e-9:
+            return None
+        if np.abs(rot.standardize(m.rotations[:, 0]) - q0).max() > 1e-9:
+            return None
+    return p0, q0
+
+
+def _apply_floor(
+    motion: Motion, theta: FloatArray, shift: FloatArray, static: tuple[FloatArray, FloatArray] | None
+) -> Motion:
+    """The motion with frame ``f`` moved by the floor transform ``(theta[f], shift[f])`` (metres)."""
+    shift_u = shift / motion.metres_per_unit
+    turn = rot.from_yaw(theta)  # (F, 4)
+    if static is None:
+        root = apply_rigid_2d(motion.root_positions[:, None, :], theta, shift_u)[:, 0]
+        q = motion.rotations.copy()
+        q[:, 0] = rot.multiply(turn, q[:, 0])
+        return replace(motion, root_positions=root, rotations=q)
+    # fixed reference root G0 = (q0, p0): move each child's global transform, re-express locally
+    p0, q0 = static
+    sk = motion.skeleton
+    q = motion.rotations.copy()
+    jt = motion.joint_translations.copy()
+    q0i = rot.conjugate(q0)
+    local_turn = rot.multiply(rot.multiply(q0i[None], turn), q0[None])  # q0^-1 R q0
+    tj = list(sk.translated_joints)
+    for c in np.flatnonzero(sk.parents == 0):
+        k = tj.index(int(c))
+        glob = rot.rotate(q0[None], jt[:, k]) + p0
+        moved = apply_rigid_2d(glob[:, None, :], theta, shift_u)[:, 0]
+        jt[:, k] = rot.rotate(q0i[None], moved - p0)
+        q[:, c] = rot.multiply(local_turn, q[:, c])
+    return replace(motion, rotations=q, joint_translations=jt)
+
+
+def _concatenate(library: MotionLibrary, pieces: Pieces) -> Motion:
+    counts = pieces.count
+    main = int(pieces.clip[int(np.argmax(counts))])
+    parts = [
+        library.motions[int(c)].slice(int(a), int(b) + 1)
+        for c, a, b in zip(pieces.clip, pieces.first, pieces.last, strict=True)
+    ]
+    base = library.motions[main]
+    return replace(
+        base,
+        root_positions=np.concatenate([p.root_positions for p in parts]),
+        rotations=np.concatenate([p.rotations for p in parts]),
+        joint_translations=np.concatenate([p.joint_translations for p in parts]),
+        name="graph",
+    )
+
+
+def _correction(
+    body_xz: FloatArray, body_yaw: FloatArray, problem: Problem
+) -> tuple[FloatArray, FloatArray] | None:
+    """Per-frame floor transform ``theta (F,)``, ``shift (F, 2)`` meeting the body constraints."""
+    n = body_xz.shape[0]
+    targets = [b for b in problem.bodies if b.frame < n]
+    if not targets:
+        return None
+    f = np.arange(n)
+    kt = np.array([b.frame for b in targets if b.heading is not None], dtype=np.float64)
+    ka = np.array(
+        [float(wrap_angle(b.heading - body_yaw[b.frame])) for b in targets if b.heading is not None]
+    )
+    alpha = np.interp(f, kt, ka) if kt.size else np.zeros(n)
+    steps = np.zeros((n, 2))
+    steps[1:] = rotate2(alpha[1:], np.diff(body_xz, axis=0))
+    path = np.cumsum(steps, axis=0)
+    t0 = targets[0].frame
+    path += body_xz[t0] - path[t0]
+    rt = np.array([b.frame for b in targets], dtype=np.float64)
+    res = np.stack([b.xz - path[b.frame] for b in targets])
+    ramp = np.stack((np.interp(f, rt, res[:, 0]), np.interp(f, rt, res[:, 1])), axis=-1)
+    goal = path + ramp
+    return alpha, goal - rotate2(alpha, body_xz)
+
+
+def assemble(
+    library: MotionLibrary,
+    tracks: RootTracks,
+    pieces: Pieces,
+    placement: Placement,
+    request: Any,
+    problem: Problem | None = None,
+) -> tuple[Motion, list[tuple[str, int]]]:
+    """The motion a path plays, placed, smoothed and meeting its body constraints.
+
+    Parameters
+    ----------
+    library, tracks:
+        The database (clips in metres at one rate; root tracks of the same frames).
+    pieces, placement:
+        From :func:`engines.graph.score.evaluate` (``(P,)`` pieces and their floor transforms).
+    request:
+        The :class:`schemas.graph.GraphRequest` (smoothing window and body constraints).
+    problem:
+        The request already compiled (:func:`engines.graph.score.compile_problem`), to skip it.
+
+    Returns
+    -------
+    motion:
+        ``pieces.frames`` frames (the requested length unless the path is too short).
+    provenance:
+        Per output frame, ``(clip name, source frame)``.
+    """
+    if problem is None:
+        problem = compile_problem(request, library, tracks)
+    for c, a, b in zip(pieces.clip, pieces.first, pieces.last, strict=True):
+        if not 0 <= a <= b < tracks.frames(int(c)):
+            raise MotionError(f"piece {a}..{b} is outside clip {library.names[int(c)]!r}")
+    static = _static_root(library)
+    motion = _concatenate(library, pieces)
+    theta, shift = placement.per_frame()
+    motion = _apply_floor(motion, theta, shift, static)
+    cuts = [int(s) for s in pieces.start[1:] if 0 < s < motion.num_frames]
+    window = int(getattr(request, "smoothing_frames", 0))
+    if cuts and window >= 1:
+        motion = smooth_cuts(motion, cuts, window)
+    if problem.bodies:
+        xz, yaw = body_frames(motion)
+        corr = _correction(xz, yaw, problem)
+        if corr is not None:
+            motion = _apply_floor(motion, corr[0], corr[1], static)
+    clips, frames = pieces.source()
+    provenance = [(library.names[int(c)], int(f)) for c, f in zip(clips, frames, strict=True)]
+    return motion, provenance
+
+
+def constraint_errors(
+    motion: Motion, provenance: list[tuple[str, int]], problem: Problem, library: MotionLibrary
+) -> dict[str, Any]:
+    """Each constraint's error measured on an assembled motion: ``length`` (frames), ``body[i]``
+    (``position_cm``, ``heading_deg``), ``joint[i]`` (``position_cm``, ``velocity_cm_s``),
+    ``pose[i]`` (``frames`` off in the source clip, ``held``), ``label[i]`` (``frames`` wrong of
+    ``window``), ``obstacle[i]`` (``frames`` with root or a foot inside, deepest ``depth_cm``)."""
+    out: dict[str, Any] = {"length": {"frames": abs(motion.num_frames - problem.length)}}
+    n = motion.num_frames
+    pos = np.ascontiguousarray(motion.global_positions()) * motion.metres_per_unit
+    xz, yaw = body_frames(motion, pos / motion.metres_per_unit)
+    for b in problem.bodies:
+        if b.frame >= n:
+            out[b.name] = {"frame": b.frame, "position_cm": None, "missing": True}
+            continue
+        e: dict[str, Any] = {
+            "frame": b.frame,
+            "position_cm": round(float(np.linalg.norm(xz[b.frame] - b.xz)) * 100, 4),
+        }
+        if b.heading is not None:
+            e["heading_deg"] = round(abs(float(np.degrees(wrap_angle(yaw[b.frame] - b.heading)))), 4)
+        out[b.name] = e
+    for j in problem.joints:
+        if j.frame >= n:
+            out[j.name] = {"frame": j.frame, "position_cm": None, "missing": True}
+            continue
+        e = {
+            "frame": j.frame,
+            "position_cm": round(float(np.linalg.norm(pos[j.frame, j.joint] - j.position)) * 100, 4),
+        }
+        if j.velocity is not None:
+            a, b2 = max(j.frame - 1, 0), min(j.frame + 1, n - 1)
+            v = (pos[b2, j.joint] - pos[a, j.joint]) * motion.fps / max(b2 - a, 1)
+            e["velocity_cm_s"] = round(float(np.linalg.norm(v - j.velocity)) * 100, 4)
+        out[j.name] = e
+    index = {name: i for i, name in enumerate(library.names)}
+    for p in problem.poses:
+        if p.frame >= n:
+            out[p.name] = {"frame": p.frame, "held": False, "frames": None}
+            continue
+        clip, src = provenance[p.frame]
+        same = index[clip] == p.clip
+        out[p.name] = {
+            "frame": p.frame,
+            "held": same and src == p.clip_frame,
+            "frames": abs(src - p.clip_frame) if same else None,
+        }
+    starts = np.concatenate(([0], np.cumsum([m.num_frames for m in library.motions])))
+    rows = np.array([starts[index[c]] + f for c, f in provenance], dtype=np.int64)
+    for lb in problem.labels:
+        t = np.arange(lb.start, min(lb.end, n))
+        ok = lb.good[rows[t] + 1] - lb.good[rows[t]]
+        wrong = int((lb.end - lb.start) - ok.sum())
+        out[lb.name] = {"frames": wrong, "window": lb.end - lb.start}
+    if problem.obstacles:
+        try:
+            feet = list(foot_joints(motion.skeleton))
+        except MotionError:
+            feet = []
+        pts = np.concatenate((xz[:, None, :], pos[:, feet][:, :, [0, 2]]), axis=1)
+        for ob in problem.obstacles:
+            d = ob.depth(pts).max(axis=1)
+            out[ob.name] = {
+                "frames": int(np.count_nonzero(d > 0)),
+                "depth_cm": round(float(d.max(initial=0.0)) * 100, 4),
+            }
+    return out

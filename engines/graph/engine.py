@@ -1,0 +1,38 @@
+"""The motion-graph engine as the runtime sees it: ``build`` makes the graph, ``search`` finds paths.
+
+Database kind ``graph`` (:class:`schemas.databases.GraphDatabaseSpec`), request ``engine: "graph"``
+(:class:`schemas.graph.GraphRequest`). The build (``build.py``, ``hierarchy.py``) stores the edge
+hierarchy and root tracks of :mod:`engines.graph.model` beside the motion library; the search
+(``search.py``) walks them and assembles motions (``assemble.py``), emitting every new best.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ..base import Arrays, Emitter, Engine, ShouldStop
+from ..library import MotionLibrary
+from .build import build_graph
+from .model import EdgeTree, RootTracks
+from .search import GraphSearch
+
+
+class GraphEngine(Engine):
+    """Randomized anytime search of a hierarchical motion graph (Arikan & Forsyth 2002)."""
+
+    name = "graph"
+    kind = "graph"
+
+    def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
+        super().__init__(library, arrays)
+        self.tree = EdgeTree.from_arrays(arrays)
+        self.tracks = RootTracks.from_arrays(arrays)
+
+    @classmethod
+    def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+        return build_graph(spec, library, emit, should_stop)
+
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+        GraphSearch(self.library, self.tree, self.tracks, request.seed).run(
+            request, budget_s, emit, should_stop
+        )

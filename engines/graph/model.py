@@ -1,0 +1,106 @@
+"""The data a graph database holds, shared by the build (``build.py``, ``hierarchy.py``) and the
+search (``search.py``, ``assemble.py``). All arrays; stored in the database npz under ``graph.*``.
+
+Frames are indexed per clip (``0 .. frames[c] - 1``) at the database rate; clips are the motion
+library's clips (``engines.library.MotionLibrary``), in order.
+
+Edges
+    An edge ``e`` means: play clip ``from_clip[e]`` up to and including frame ``from_frame[e]``, then
+    continue with clip ``to_clip[e]`` from frame ``to_frame[e]``. Its ``cost`` is the transition
+    cost of that cut (0 for a seamless one; in units of typical frame-to-frame change, see
+    ``build.py``). Leaves are the edges of the full graph G; internal nodes of the edge hierarchy
+    (tree-structured vector quantization of each clip pair's edges) carry the mean from/to frame
+    (rounded) and the mean cost, and are valid transitions themselves. ``parent == -1`` marks the
+    roots: the edges of the coarsest graph G'. Children are ``left``/``right`` (-1 for leaves).
+
+Root trajectories
+    ``root_xz`` and ``root_yaw`` hold, for every frame of every clip (concatenated, ``offsets[c]``
+    is clip c's first row), the root's floor position ``[x, z]`` in metres and the heading in radians
+    (``motion.ground`` conventions), used to place pieces and score body constraints quickly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class EdgeTree:
+    """Edges of G and their hierarchy, ``(E,)`` arrays (see the module docstring)."""
+
+    from_clip: IntArray
+    from_frame: IntArray
+    to_clip: IntArray
+    to_frame: IntArray
+    cost: FloatArray
+    parent: IntArray
+    left: IntArray
+    right: IntArray
+
+    @property
+    def size(self) -> int:
+        return int(self.from_clip.size)
+
+    @property
+    def roots(self) -> IntArray:
+        return np.flatnonzero(self.parent < 0).astype(np.int64)
+
+    @property
+    def is_leaf(self) -> npt.NDArray[np.bool_]:
+        return self.left < 0
+
+    def to_arrays(self, prefix: str = "graph.edges.") -> dict[str, Any]:
+        return {f"{prefix}{k}": getattr(self, k) for k in _EDGE_FIELDS}
+
+    @classmethod
+    def from_arrays(cls, arrays: Any, prefix: str = "graph.edges.") -> EdgeTree:
+        def ints(name: str) -> IntArray:
+            return np.asarray(arrays[f"{prefix}{name}"], dtype=np.int64)
+
+        return cls(
+            ints("from_clip"),
+            ints("from_frame"),
+            ints("to_clip"),
+            ints("to_frame"),
+            np.asarray(arrays[f"{prefix}cost"], dtype=np.float64),
+            ints("parent"),
+            ints("left"),
+            ints("right"),
+        )
+
+
+_EDGE_FIELDS = ("from_clip", "from_frame", "to_clip", "to_frame", "cost", "parent", "left", "right")
+
+
+@dataclass(frozen=True, slots=True)
+class RootTracks:
+    """Per-frame root floor position and heading of every clip, concatenated."""
+
+    offsets: IntArray  # (C + 1,) row of each clip's first frame; offsets[-1] = total frames
+    root_xz: FloatArray  # (N, 2) metres
+    root_yaw: FloatArray  # (N,) radians, unwrapped within each clip
+
+    def frames(self, clip: int) -> int:
+        return int(self.offsets[clip + 1] - self.offsets[clip])
+
+    def to_arrays(self, prefix: str = "graph.tracks.") -> dict[str, Any]:
+        return {
+            f"{prefix}offsets": self.offsets,
+            f"{prefix}root_xz": self.root_xz,
+            f"{prefix}root_yaw": self.root_yaw,
+        }
+
+    @classmethod
+    def from_arrays(cls, arrays: Any, prefix: str = "graph.tracks.") -> RootTracks:
+        return cls(
+            np.asarray(arrays[f"{prefix}offsets"], dtype=np.int64),
+            np.asarray(arrays[f"{prefix}root_xz"], dtype=np.float64),
+            np.asarray(arrays[f"{prefix}root_yaw"], dtype=np.float64),
+        )

@@ -1,0 +1,563 @@
+"""The score of a path (Arikan & Forsyth 2002, Eq. 1 and Sec. 4.2.1), for whole batches of paths.
+
+``S = w_c sum cost(e) + w_f F + w_b B + w_j J + w_l L + w_o O``, every term dimensionless with the
+paper's units: an error of **10 frames**, of **30 cm** and of **10 degrees** cost the same (1).
+
+* ``continuity`` = sum of the transition costs of the edges whose cut lies inside the output.
+* ``length`` F = ``(missing frames / 10)^2``: a path that plays fewer frames than asked for (paths
+  are truncated to the length, so a long enough path has F = 0 and the output is exact).
+* ``body`` B: the first body constraint (in time) *places* the motion (so it is always met); each
+  other one adds ``weight * ((distance / 0.30 m)^2 + (heading error / 10 deg)^2)`` (no heading
+  term when its heading is free). When the first one leaves the heading free, the motion is turned
+  about it so that it heads for the second body constraint.
+* ``joint`` J: per joint constraint ``weight * ((distance / 0.30 m)^2 + (velocity error /
+  0.30 m/s)^2)`` (velocity term only when given), from the library's joint positions.
+* ``label`` L: per label constraint ``weight * frames / 10``, counting the frames of its window
+  that lack a wanted label (value 1) or carry an unwanted one (value -1), from the clips' labels.
+* ``obstacle`` O: every ``step`` output frames (2 or more, at most 100 samples), the root and the
+  feet are tested against each obstacle (disc or polygon on the floor, grown by a 5 cm margin for
+  the frames between samples); a sample whose deepest point is ``d`` metres inside costs
+  ``weight * (step / 10) * (1 + d / 0.30)^2``: 10 frames inside cost at least 1.
+
+Hard pose constraints ("output frame t is clip c frame k") are not scored: paths that break them
+are invalid (infinite score). The start frame of a path is re-anchored so that the first pose
+constraint falls at its time (:func:`anchor_poses`); the later ones must then hold exactly.
+
+Body positions and headings come from the root tracks (:class:`~engines.graph.model.RootTracks`),
+placed by :mod:`engines.graph.paths`; the final errors are measured again on the assembled
+motion (:mod:`engines.graph.assemble`).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from motion import MotionError
+from motion.contacts import foot_joints
+
+from ..base import EngineError
+from ..library import MotionLibrary
+from .model import FloatArray, IntArray, RootTracks
+from .paths import (
+    BatchPieces,
+    BoolArray,
+    GraphIndex,
+    JointTable,
+    Path,
+    PathBatch,
+    Pieces,
+    Placement,
+    batch_pieces,
+    batch_transforms,
+    batch_valid,
+    compose2,
+    locate,
+    path_pieces,
+    rotate2,
+    wrap_angle,
+)
+
+FRAMES_UNIT = 10.0
+"""Frames that cost 1 (length, labels, time inside obstacles)."""
+METRES_UNIT = 0.30
+"""Metres that cost 1 (body and joint positions, obstacle depth)."""
+RADIANS_UNIT = float(np.radians(10.0))
+"""Heading error that costs 1 (10 degrees)."""
+VELOCITY_UNIT = 0.30
+"""Joint velocity error (m/s) that costs 1."""
+OBSTACLE_SAMPLES = 100
+"""At most this many sampled output frames per path for obstacles (every 2 frames or more)."""
+OBSTACLE_MARGIN = 0.05
+"""Obstacles are grown by this much (metres) while searching, so that the frames between samples
+stay out too (feet move a few centimetres per frame)."""
+
+TERMS = ("continuity", "length", "body", "joint", "label", "obstacle")
+
+
+@dataclass(frozen=True, slots=True)
+class BodyTarget:
+    """A body constraint: root at ``xz`` (metres) facing ``heading`` (radians, or free) at ``frame``."""
+
+    name: str
+    frame: int
+    xz: FloatArray
+    heading: float | None
+    weight: float
+
+
+@dataclass(frozen=True, slots=True)
+class JointTarget:
+    """A joint constraint; ``column`` indexes the problem's :class:`JointTable`."""
+
+    name: str
+    frame: int
+    joint: int
+    column: int
+    position: FloatArray
+    velocity: FloatArray | None
+    weight: float
+
+
+@dataclass(frozen=True, slots=True)
+class PoseTarget:
+    """Hard: output ``frame`` is frame ``clip_frame`` of clip ``clip``."""
+
+    name: str
+    frame: int
+    clip: int
+    clip_frame: int
+
+
+@dataclass(frozen=True, slots=True)
+class LabelTarget:
+    """Frames ``[start, end)`` should carry (``value`` 1) or not carry (-1) ``label``; ``good`` is
+    the ``(N + 1,)`` running count of library frames that satisfy it (concatenated clips)."""
+
+    name: str
+    label: str
+    start: int
+    end: int
+    value: int
+    weight: float
+    good: IntArray
+
+
+@dataclass(frozen=True, slots=True)
+class ObstacleTarget:
+    """A floor region: a disc (``center``, ``radius``) or a polygon ``(V, 2)``, metres."""
+
+    name: str
+    weight: float
+    center: FloatArray | None = None
+    radius: float = 0.0
+    polygon: FloatArray | None = None
+
+    def depth(self, points: FloatArray, margin: float = 0.0) -> FloatArray:
+        """How far (metres) floor points ``(..., 2)`` are inside the region grown by ``margin``
+        metres (0 outside)."""
+        if self.center is not None:
+            d = self.radius + margin - np.linalg.norm(points - self.center, axis=-1)
+            return np.asarray(np.maximum(d, 0.0))
+        assert self.polygon is not None
+        return polygon_depth(points, self.polygon, margin)
+
+
+def polygon_depth(points: FloatArray, polygon: FloatArray, margin: float = 0.0) -> FloatArray:
+    """How far ``(...)`` points ``(..., 2)`` are inside a simple polygon ``(V, 2)`` grown by
+    ``margin`` metres: ``margin`` + the distance to the boundary inside (even-odd rule),
+    ``margin`` - that distance outside, never below 0."""
+    a = polygon
+    b = np.roll(polygon, -1, axis=0)
+    p = points[..., None, :]  # (..., 1, 2)
+    ax, az, bx, bz = a[:, 0], a[:, 1], b[:, 0], b[:, 1]
+    px, pz = p[..., 0], p[..., 1]
+    crosses = (az > pz) != (bz > pz)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x_at = ax + (pz - az) * (bx - ax) / (bz - az)
+    inside = (np.count_nonzero(crosses & (px < x_at), axis=-1) % 2) == 1
+    ab = b - a
+    t = np.clip(((p - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
+    dist = np.linalg.norm(p - (a + t[..., None] * ab), axis=-1).min(axis=-1)
+    return np.asarray(np.maximum(np.where(inside, margin + dist, margin - dist), 0.0))
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A request compiled against a database: every time in output frames, every clip and joint
+    by index, constraints in request order within each kind (their names: ``body[0]``...)."""
+
+    length: int
+    fps: float
+    weights: dict[str, float]
+    bodies: tuple[BodyTarget, ...] = ()
+    joints: tuple[JointTarget, ...] = ()
+    poses: tuple[PoseTarget, ...] = ()
+    labels: tuple[LabelTarget, ...] = ()
+    obstacles: tuple[ObstacleTarget, ...] = ()
+    table: JointTable | None = None
+    foot_columns: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    @property
+    def placed_by(self) -> BodyTarget | None:
+        """The body constraint that places the motion (the earliest)."""
+        return self.bodies[0] if self.bodies else None
+
+
+def _frame_of(c: Any, fps: float) -> int:
+    return int(c.frame) if c.frame is not None else round(float(c.time_s) * fps)
+
+
+def compile_problem(request: Any, library: MotionLibrary, tracks: RootTracks) -> Problem:
+    """Check a :class:`schemas.graph.GraphRequest` against the database and compile it.
+
+    Raises :class:`~engines.base.EngineError` for constraints the database cannot serve: times
+    outside the output, unknown clips, joints or labels, clip frames out of range, or two pose
+    constraints at one time.
+    """
+    fps = library.fps
+    length = int(request.frames) if request.frames is not None else max(round(request.seconds * fps), 2)
+    w = request.weights
+    weights = {
+        "continuity": float(w.continuity),
+        "length": float(w.length),
+        "body": float(w.body),
+        "joint": float(w.joint),
+        "label": float(w.label),
+        "obstacle": float(w.obstacle),
+    }
+    skeleton = library.motions[0].skeleton
+    bodies: list[BodyTarget] = []
+    joints: list[tuple[str, int, int, FloatArray, FloatArray | None, float]] = []
+    poses: list[PoseTarget] = []
+    labels: list[LabelTarget] = []
+    obstacles: list[ObstacleTarget] = []
+    count: dict[str, int] = {}
+    n_frames = int(tracks.offsets[-1])
+
+    def name(kind: str) -> str:
+        i = count.get(kind, 0)
+        count[kind] = i + 1
+        return f"{kind}[{i}]"
+
+    def timed(c: Any, kind: str) -> int:
+        t = _frame_of(c, fps)
+        if not 0 <= t < length:
+            raise EngineError(
+                f"{kind} constraint at output frame {t} is outside the motion (0..{length - 1})"
+            )
+        return t
+
+    for c in request.constraints:
+        if c.type == "body":
+            heading = None if c.heading_deg is None else float(np.radians(c.heading_deg))
+            bodies.append(
+                BodyTarget(name("body"), timed(c, "body"), np.asarray(c.position, float), heading, c.weight)
+            )
+        elif c.type == "joint":
+            try:
+                j = skeleton.index(c.joint)
+            except MotionError:
+                raise EngineError(
+                    f"no joint named {c.joint!r}; joints: {', '.join(skeleton.names)}"
+                ) from None
+            vel = None if c.velocity is None else np.asarray(c.velocity, float)
+            joints.append((name("joint"), timed(c, "joint"), j, np.asarray(c.position, float), vel, c.weight))
+        elif c.type == "pose":
+            try:
+                clip = library.index(c.clip)
+            except MotionError as exc:
+                raise EngineError(str(exc)) from None
+            n = library.motions[clip].num_frames
+            if c.clip_frame >= n:
+                raise EngineError(
+                    f"pose constraint: clip {c.clip!r} has {n} frames, asked for frame {c.clip_frame}"
+                )
+            poses.append(PoseTarget(name("pose"), timed(c, "pose"), clip, int(c.clip_frame)))
+        elif c.type == "label":
+            start, end = min(int(c.start), length), min(int(c.end), length)
+            if end <= start:
+                raise EngineError(
+                    f"label constraint [{c.start}, {c.end}) is outside the motion (0..{length - 1})"
+                )
+            lab = _label_values(library, tracks, c.label)
+            if c.value == 1 and not np.any(lab == 1):
+                raise EngineError(f"no clip of the database carries the label {c.label!r}")
+            good = (lab == 1) if c.value == 1 else (lab != 1)
+            cum = np.zeros(n_frames + 1, dtype=np.int64)
+            np.cumsum(good, out=cum[1:])
+            labels.append(LabelTarget(name("label"), c.label, start, end, int(c.value), c.weight, cum))
+        elif c.type == "obstacle":
+            if c.disc is not None:
+                obstacles.append(
+                    ObstacleTarget(
+                        name("obstacle"), c.weight, np.asarray(c.disc.center, float), float(c.disc.radius)
+                    )
+                )
+            else:
+                obstacles.append(
+                    ObstacleTarget(name("obstacle"), c.weight, polygon=np.asarray(c.polygon, float))
+                )
+        else:  # pragma: no cover - the schema's union is closed
+            raise EngineError(f"unknown constraint type {c.type!r}")
+
+    poses.sort(key=lambda p: p.frame)
+    for a, b in itertools.pairwise(poses):
+        if a.frame == b.frame and (a.clip, a.clip_frame) != (b.clip, b.clip_frame):
+            raise EngineError(f"{a.name} and {b.name} ask for different poses at output frame {a.frame}")
+    bodies.sort(key=lambda b: b.frame)
+
+    table = None
+    feet = np.zeros(0, np.int64)
+    cols: list[int] = sorted({j for _, _, j, _, _, _ in joints})
+    if obstacles:
+        try:
+            foot = [int(f) for f in foot_joints(skeleton)]
+        except MotionError:
+            foot = []
+        cols = sorted(set(cols) | set(foot))
+        feet = np.array([cols.index(f) for f in foot], dtype=np.int64)
+    if cols:
+        table = JointTable(library, tracks, cols)
+    joint_targets = tuple(JointTarget(n, t, j, cols.index(j), p, v, wt) for n, t, j, p, v, wt in joints)
+    return Problem(
+        length,
+        fps,
+        weights,
+        tuple(bodies),
+        joint_targets,
+        tuple(poses),
+        tuple(labels),
+        tuple(obstacles),
+        table,
+        feet,
+    )
+
+
+def _label_values(library: MotionLibrary, tracks: RootTracks, label: str) -> IntArray:
+    """``(N,)`` per library frame: 1 labelled, -1 labelled "not", 0 unknown (clip label ranges
+    are in database frames; later ranges override earlier ones)."""
+    out = np.zeros(int(tracks.offsets[-1]), dtype=np.int64)
+    for c, ranges in enumerate(library.labels):
+        lo, n = int(tracks.offsets[c]), int(tracks.offsets[c + 1] - tracks.offsets[c])
+        for r in ranges:
+            if r.get("label") != label:
+                continue
+            s, e = max(int(r.get("start", 0)), 0), min(int(r.get("end", n)), n)
+            if e > s:
+                out[lo + s : lo + e] = int(r.get("value", 1))
+    return out
+
+
+# -- scoring -----------------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class BatchScore:
+    """Scores of a batch: ``total (B,)`` (inf when invalid), weighted ``terms`` by name, the batch
+    with its start frames re-anchored (pose constraints), its pieces and placements
+    (``theta (B, M + 1)``, ``shift (B, M + 1, 2)``, already anchored by the first body constraint)."""
+
+    total: FloatArray
+    terms: dict[str, FloatArray]
+    valid: BoolArray
+    batch: PathBatch
+    pieces: BatchPieces
+    theta: FloatArray
+    shift: FloatArray
+
+
+def anchor_poses(index: GraphIndex, problem: Problem, batch: PathBatch) -> tuple[PathBatch, BoolArray]:
+    """Move each path's start frame so that the first pose constraint's clip frame plays at its
+    time; ``ok (B,)`` is false where no occurrence of that frame can be so placed."""
+    if not problem.poses:
+        return batch, np.ones(batch.size, dtype=bool)
+    pose = problem.poses[0]
+    pieces = batch_pieces(index, batch, 1 << 40)
+    live = pieces.count > 0
+    holds = (
+        live
+        & (pieces.clip == pose.clip)
+        & (pieces.first <= pose.clip_frame)
+        & (pieces.last >= pose.clip_frame)
+    )
+    len0 = pieces.count[:, 0]
+    last0 = pieces.last[:, 0]
+    # time of the pose frame after piece 0, for pieces j >= 1; piece 0 itself is handled apart
+    rel = pieces.start - len0[:, None] + (pose.clip_frame - pieces.first)
+    new_len0 = pose.frame - rel
+    f0 = last0[:, None] + 1 - new_len0
+    ok_j = holds & (new_len0 >= 1) & (f0 >= 0)
+    ok_j[:, 0] = False
+    # piece 0: any start frame <= the pose frame in the start clip works
+    f00 = pose.clip_frame - pose.frame
+    ok_0 = (batch.start_clip == pose.clip) & (last0 >= pose.clip_frame) & (f00 >= 0)
+    f0[:, 0] = f00
+    ok_j[:, 0] = ok_0
+    ok = ok_j.any(axis=1)
+    pick = np.argmax(ok_j, axis=1)
+    start = np.where(ok, f0[np.arange(batch.size), pick], batch.start_frame)
+    # a path whose start already puts the pose frame at its time keeps it (several occurrences)
+    _, clip, frame = locate(batch_pieces(index, batch, pose.frame + 1), pose.frame)
+    holds_now = (clip == pose.clip) & (frame == pose.clip_frame) & (pieces.total > pose.frame)
+    start = np.where(holds_now, batch.start_frame, start)
+    return PathBatch(batch.start_clip, start.astype(np.int64), batch.edges), ok | holds_now
+
+
+def _anchor_bodies(
+    index: GraphIndex, problem: Problem, pieces: BatchPieces, theta: FloatArray, shift: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Turn and shift every path so the first body constraint is met (see the module docstring)."""
+    b0 = problem.placed_by
+    if b0 is None:
+        return theta, shift
+    yaw0, p0 = body_at(index, pieces, theta, shift, b0.frame)
+    if b0.heading is not None:
+        alpha = b0.heading - yaw0
+    elif len(problem.bodies) > 1:
+        b1 = problem.bodies[1]
+        _, p1 = body_at(index, pieces, theta, shift, b1.frame)
+        v = p1 - p0
+        u = b1.xz - b0.xz
+        alpha = np.where(
+            np.linalg.norm(v, axis=-1) > 1e-6,
+            np.arctan2(u[0], u[1]) - np.arctan2(v[:, 0], v[:, 1]),
+            0.0,
+        )
+    else:
+        alpha = np.zeros(yaw0.shape)
+    t_a = b0.xz - rotate2(alpha, p0)
+    th, sh = compose2(alpha[:, None], t_a[:, None, :], theta, shift)
+    return th, sh
+
+
+def body_at(
+    index: GraphIndex, pieces: BatchPieces, theta: FloatArray, shift: FloatArray, t: int
+) -> tuple[FloatArray, FloatArray]:
+    """Root heading ``(B,)`` radians and floor position ``(B, 2)`` at output frame ``t``."""
+    j, clip, frame = locate(pieces, t)
+    rows = np.arange(j.size)
+    yaw, xz = index.ground(clip, frame)
+    th = theta[rows, j]
+    return th + yaw, rotate2(th, xz) + shift[rows, j]
+
+
+def _neutralise(batch: PathBatch, valid: BoolArray) -> PathBatch:
+    """The batch with invalid rows replaced by a harmless path (clip 0 from frame 0, no edge), so
+    that every index computed from it stays in range."""
+    if valid.all():
+        return batch
+    bad = ~valid
+    return PathBatch(
+        np.where(bad, 0, batch.start_clip),
+        np.where(bad, 0, batch.start_frame),
+        np.where(bad[:, None], -1, batch.edges),
+    )
+
+
+def score_batch(index: GraphIndex, problem: Problem, batch: PathBatch) -> BatchScore:
+    """Score every path of a batch (invalid paths and paths breaking a pose constraint score inf)."""
+    valid = batch_valid(index, batch)
+    batch = _neutralise(batch, valid)
+    if problem.poses:
+        batch, ok = anchor_poses(index, problem, batch)
+        valid &= ok & batch_valid(index, batch)
+        batch = _neutralise(batch, valid)
+    T = problem.length
+    pieces = batch_pieces(index, batch, T)
+    for pose in problem.poses:
+        _, c, f = locate(pieces, pose.frame)
+        valid &= (c == pose.clip) & (f == pose.clip_frame) & (pieces.total > pose.frame)
+    theta, shift = batch_transforms(index, batch)
+    theta, shift = _anchor_bodies(index, problem, pieces, theta, shift)
+    w = problem.weights
+    rows = np.arange(batch.size)
+    # continuity: edges whose next piece starts inside the output
+    e = batch.edges
+    cut = (e >= 0) & (pieces.start[:, 1:] < T)
+    continuity = np.where(cut, index.tree.cost[np.maximum(e, 0)], 0.0).sum(axis=1)
+    length = (np.maximum(T - pieces.total, 0) / FRAMES_UNIT) ** 2
+    body = np.zeros(batch.size)
+    for b in problem.bodies[1:]:
+        yaw, xz = body_at(index, pieces, theta, shift, b.frame)
+        cost = (np.linalg.norm(xz - b.xz, axis=-1) / METRES_UNIT) ** 2
+        if b.heading is not None:
+            cost = cost + (wrap_angle(yaw - b.heading) / RADIANS_UNIT) ** 2
+        body += b.weight * cost
+    joint = np.zeros(batch.size)
+    if problem.joints:
+        assert problem.table is not None
+        for jt in problem.joints:
+            j, clip, frame = locate(pieces, jt.frame)
+            p = problem.table.at(clip, frame)[:, jt.column]
+            th, sh = theta[rows, j], shift[rows, j]
+            xz = rotate2(th, p[:, [0, 2]]) + sh
+            d2 = ((xz - jt.position[[0, 2]]) ** 2).sum(-1) + (p[:, 1] - jt.position[1]) ** 2
+            cost = d2 / METRES_UNIT**2
+            if jt.velocity is not None:
+                v = problem.table.velocity(clip, frame, problem.fps)[:, jt.column]
+                vxz = rotate2(th, v[:, [0, 2]])
+                dv2 = ((vxz - jt.velocity[[0, 2]]) ** 2).sum(-1) + (v[:, 1] - jt.velocity[1]) ** 2
+                cost = cost + dv2 / VELOCITY_UNIT**2
+            joint += jt.weight * cost
+    label = np.zeros(batch.size)
+    for lb in problem.labels:
+        lo = np.maximum(pieces.start, lb.start)
+        hi = np.minimum(pieces.start + pieces.count, lb.end)
+        span = np.maximum(hi - lo, 0)
+        g = index.tracks.offsets[pieces.clip] + pieces.first + (lo - pieces.start)
+        g = np.clip(g, 0, lb.good.size - 1)
+        good = np.where(span > 0, lb.good[np.clip(g + span, 0, lb.good.size - 1)] - lb.good[g], 0).sum(axis=1)
+        label += lb.weight * ((lb.end - lb.start) - good) / FRAMES_UNIT
+    obstacle = _obstacles(index, problem, pieces, theta, shift) if problem.obstacles else np.zeros(batch.size)
+    terms = {
+        "continuity": w["continuity"] * continuity,
+        "length": w["length"] * length,
+        "body": w["body"] * body,
+        "joint": w["joint"] * joint,
+        "label": w["label"] * label,
+        "obstacle": w["obstacle"] * obstacle,
+    }
+    total = sum(terms.values(), np.zeros(batch.size))
+    total = np.where(valid, total, np.inf)
+    return BatchScore(total, terms, valid, batch, pieces, theta, shift)
+
+
+def _obstacles(
+    index: GraphIndex, problem: Problem, pieces: BatchPieces, theta: FloatArray, shift: FloatArray
+) -> FloatArray:
+    """Obstacle term ``(B,)`` (unweighted by ``w_o``), rows processed in chunks."""
+    T = problem.length
+    step = max(2, -(-T // OBSTACLE_SAMPLES))
+    ts = np.arange(0, T, step)
+    out = np.zeros(pieces.clip.shape[0])
+    chunk = max(1, 200_000 // (ts.size * (1 + problem.foot_columns.size)))
+    for lo in range(0, out.size, chunk):
+        sl = slice(lo, lo + chunk)
+        starts, counts = pieces.start[sl], pieces.count[sl]
+        frames_out = counts.sum(axis=1)
+        tt = np.minimum(ts[None, :], np.maximum(frames_out - 1, 0)[:, None])  # (b, S)
+        j = (starts[:, None, :] <= tt[:, :, None]).sum(-1) - 1
+        r = np.arange(starts.shape[0])[:, None]
+        clip = pieces.clip[sl][r, j]
+        frame = pieces.first[sl][r, j] + (tt - starts[r, j])
+        th, sh = theta[sl][r, j], shift[sl][r, j]
+        _, root = index.ground(clip, frame)
+        pts = [root[..., None, :]]
+        if problem.foot_columns.size and problem.table is not None:
+            feet = problem.table.at(clip, frame)[..., problem.foot_columns, :][..., [0, 2]]
+            pts.append(feet)
+        local = np.concatenate(pts, axis=-2)  # (b, S, K, 2)
+        world = rotate2(th[..., None], local) + sh[..., None, :]
+        for ob in problem.obstacles:
+            d = ob.depth(world, OBSTACLE_MARGIN).max(axis=-1)  # (b, S)
+            out[sl] += ob.weight * np.where(
+                d > 0, (step / FRAMES_UNIT) * (1.0 + d / METRES_UNIT) ** 2, 0.0
+            ).sum(axis=1)
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class Evaluation:
+    """One scored path with what assembly needs: its (anchored) path, pieces and placement."""
+
+    path: Path
+    score: float
+    terms: dict[str, float]
+    pieces: Pieces
+    placement: Placement
+
+
+def evaluate(index: GraphIndex, problem: Problem, path: Path) -> Evaluation:
+    """Score one path and place its pieces."""
+    s = score_batch(index, problem, PathBatch.from_paths([path]))
+    anchored = s.batch.path(0)
+    pieces = path_pieces(index, anchored, problem.length)
+    n = pieces.clip.size
+    placement = Placement(s.theta[0, :n].copy(), s.shift[0, :n].copy(), pieces, index.tracks)
+    return Evaluation(
+        anchored, float(s.total[0]), {k: float(v[0]) for k, v in s.terms.items()}, pieces, placement
+    )

@@ -1,0 +1,743 @@
+"""Randomized anytime search of the hierarchical motion graph (Arikan & Forsyth 2002, Sec. 4.2).
+
+The loop (paper Sec. 4.2, steps 1-6):
+
+1. **Seeds.** Random valid paths in the coarsest graph G' (the edge tree's roots). Without pose
+   constraints a seed starts at a random frame (uniform over the frames from which the clip still
+   has a root edge ahead or plays long enough) and walks random root edges (each out-edge ahead,
+   or stopping when the clip plays to the end of the output, equally likely) until it is long
+   enough. With hard pose constraints a seed is built around them: a random backward walk from
+   the first one to a start, exact-length connections between consecutive ones (a reachability
+   table over (frame, time) through every edge of the tree, sampled backwards at random) and a
+   random walk after the last. Each time, ``seed_batch`` seeds are drawn and the best few kept,
+   which acts as a greedy choice among random starts.
+2. **Mutations** of every path of the population, all enumerated and scored at once
+   (:func:`engines.graph.score.score_batch`):
+
+   (a) *replace a sub-path*: for every pair of cut positions ``i <= j``, the edges between them
+       are replaced by 0 edges (play on, same clip), 1 root edge or 2 root edges (one hop through
+       any clip), wherever that gives a valid path; the tail may also be dropped or replaced
+       (open end), and the head may be dropped, the path then starting in the clip of the first
+       kept edge so that this cut keeps its time;
+   (b) *demote edges*: one edge or two edges at once replaced by their children in the edge
+       tree (every combination), which refines the cut frames;
+   (c) *slide the start* by 1, 2, 4, 8 or 16 frames (no pose constraints only: otherwise the start
+       is anchored by the first pose).
+
+   Very large candidate sets (> ``max_candidates``) keep every (a) 0/1-edge, (b) and (c) mutation
+   and a random subset of the 2-edge ones.
+3. **Keep** the ``keep`` best improving mutations of each path (distinct paths); a path with no
+   improving mutation is a **local minimum**: it is recorded (best per clip sequence) and leaves
+   the population.
+4. **Fresh seeds** (``fresh`` per round) join the population, which is capped at ``population``
+   paths (the worst older paths go first).
+
+Anytime: every round whose best path improved emits a solution (the first one right after the
+first seeds); ``should_stop`` and the budget are checked every few milliseconds. At the end, the
+``request.alternatives`` best distinct local minima (different clip sequences; the population
+fills in when there are too few) are emitted after the best one, each with a higher score, so
+the runtime's best (lowest score) stays the best path. All randomness comes from one
+``numpy.random.Generator`` seeded with the request's seed; only the budget cut-off depends on time.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from ..base import Emitter, EngineError, ShouldStop, Solution
+from ..library import MotionLibrary
+from .assemble import assemble, constraint_errors
+from .model import EdgeTree, IntArray, RootTracks
+from .paths import GraphIndex, Path, PathBatch, batch_valid, clip_sequence, trim
+from .score import Evaluation, PoseTarget, Problem, compile_problem, evaluate, score_batch
+
+CHUNK = 1500
+"""Candidates scored per call (keeps each call to a few milliseconds)."""
+START_SHIFTS = tuple(d for d in range(-30, 31) if d)
+"""Start-frame slides tried by mutation (c): every shift up to one second."""
+MAX_TABLE = 50_000_000
+"""Largest (frames x time steps) reachability table built for pose-to-pose connections."""
+MAX_CUTS = 8
+"""Most cuts tried between two consecutive pose constraints."""
+
+
+class _Stop(Exception):
+    """Raised inside the loop when the budget is spent or the job is cancelled."""
+
+    def __init__(self, cancelled: bool) -> None:
+        super().__init__("stop")
+        self.cancelled = cancelled
+
+
+class _Clock:
+    def __init__(self, budget_s: float, should_stop: ShouldStop, t0: float) -> None:
+        self.t0 = t0
+        self.deadline = t0 + budget_s
+        self.should_stop = should_stop
+        self.last_poll = 0.0
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def check(self) -> None:
+        now = time.perf_counter()
+        if now >= self.deadline:
+            raise _Stop(False)
+        if now - self.last_poll >= 0.005:
+            self.last_poll = now
+            if self.should_stop():
+                raise _Stop(True)
+
+
+@dataclass(slots=True)
+class _Member:
+    path: Path
+    score: float
+    born: int
+
+
+class GraphSearch:
+    """Randomized anytime search over a hierarchical motion graph.
+
+    Parameters
+    ----------
+    library:
+        The clips (metres, one rate), in the order the graph indexes them.
+    tree, tracks:
+        The edge hierarchy and root tracks (:mod:`engines.graph.model`).
+    seed:
+        Seed of the search's random generator (same seed, same sequence of solutions).
+    population, fresh, keep, seed_batch, max_candidates:
+        Paths mutated per round, fresh seeds added per round, improving mutations kept per path,
+        random seeds drawn per kept seed batch, and candidates scored per path and round.
+
+    Examples
+    --------
+    >>> GraphSearch(library, tree, tracks, seed=1).run(request, 2.0, emitter, lambda: False)  # doctest: +SKIP
+    """
+
+    def __init__(
+        self,
+        library: MotionLibrary,
+        tree: EdgeTree,
+        tracks: RootTracks,
+        seed: int = 0,
+        *,
+        population: int = 10,
+        fresh: int = 2,
+        keep: int = 2,
+        seed_batch: int = 256,
+        max_candidates: int = 4000,
+        start_shifts: tuple[int, ...] = START_SHIFTS,
+        staged: bool = True,
+    ) -> None:
+        self.library = library
+        self.tree = tree
+        self.tracks = tracks
+        self.seed = seed
+        self.population = population
+        self.fresh = fresh
+        self.keep = keep
+        self.seed_batch = seed_batch
+        self.max_candidates = max_candidates
+        self.start_shifts = start_shifts
+        self.staged = staged
+        self.index_ = GraphIndex.of(tree, tracks)
+        if self.index_.n_clips != len(library.motions):
+            raise EngineError("the graph and the motion library disagree on the clips")
+        if self.index_.roots.size == 0:
+            raise EngineError("the motion graph has no edges: no transitions to search")
+        self._ins: dict[bool, IntArray] = {}
+        self._layer_cache: dict[tuple[int, int, int, bool], list[list[npt.NDArray[np.bool_]]] | None] = {}
+        self._useful: IntArray | None = None
+        self.rounds_ = 0
+
+    # -- public ------------------------------------------------------------------------------
+    def run(
+        self,
+        request: Any,
+        budget_s: float,
+        emit: Emitter,
+        should_stop: ShouldStop,
+        *,
+        max_rounds: int | None = None,
+    ) -> None:
+        """Search until ``budget_s`` seconds have passed, ``should_stop()`` or ``max_rounds``
+        rounds, emitting every new best and then the alternatives (module docstring)."""
+        t0 = time.perf_counter()
+        problem = compile_problem(request, self.library, self.tracks)
+        rng = np.random.default_rng(self.seed)
+        clock = _Clock(budget_s, should_stop, t0)
+        if should_stop():
+            return
+        self._problem = problem
+        self._useful = None
+        self._seen: set[tuple[int, int, tuple[int, ...]]] = set()
+        self._minima: dict[tuple[int, ...], tuple[float, Path]] = {}
+        self._emit_cost = 0.0
+        best: tuple[float, Path] | None = None
+        emitted_best: Path | None = None
+        population: list[_Member] = []
+        cancelled = False
+        reserve = 0.0
+        try:
+            seeds = self._seed_members(problem, rng, self.population, 0, clock)
+            if not seeds:
+                raise EngineError(self._no_seed_message(problem))
+            population = seeds
+            best = (seeds[0].score, seeds[0].path)
+            emitted_best = self._emit(emit, request, best[1], rank=0, local=False)
+            reserve = min(self._emit_cost * (request.alternatives - 1) * 1.2, 0.2 * budget_s)
+            clock.deadline = t0 + budget_s - reserve
+            rnd = 0
+            while max_rounds is None or rnd < max_rounds:
+                rnd += 1
+                self.rounds_ = rnd
+                population = self._round(problem, population, rng, rnd, clock)
+                if not population:
+                    population = self._seed_members(problem, rng, self.population, rnd, clock)
+                for m in population:
+                    if m.score < best[0]:
+                        best = (m.score, m.path)
+                for s, p in self._minima.values():
+                    if s < best[0]:
+                        best = (s, p)
+                if best[1] != emitted_best:
+                    emitted_best = self._emit(emit, request, best[1], rank=0, local=False)
+        except _Stop as stop:
+            cancelled = stop.cancelled
+        if best is None:
+            return
+        for m in population:
+            if m.score < best[0]:
+                best = (m.score, m.path)
+        if best[1] != emitted_best:
+            self._emit(emit, request, best[1], rank=0, local=False)
+        if cancelled or request.alternatives <= 1:
+            return
+        for rank, (path, local) in enumerate(
+            self._alternatives(problem, best[1], population, request.alternatives), 1
+        ):
+            if should_stop():
+                return
+            self._emit(emit, request, path, rank=rank, local=local)
+
+    # -- rounds ------------------------------------------------------------------------------
+    def _round(
+        self, problem: Problem, population: list[_Member], rng: np.random.Generator, rnd: int, clock: _Clock
+    ) -> list[_Member]:
+        out: list[_Member] = []
+        for m in population:
+            clock.check()
+            if self.staged:
+                children = self._best_children(problem, m, self.mutations(m.path, rng, 1), clock)
+                if not children:
+                    children = self._best_children(problem, m, self.mutations(m.path, rng, 2), clock)
+            else:
+                children = self._best_children(problem, m, self.mutations(m.path, rng), clock)
+            if not children:
+                self._record_minimum(problem, m.path, m.score)
+                continue
+            out.extend(_Member(p, s, m.born) for s, p in children)
+        out.extend(self._seed_members(problem, rng, self.fresh, rnd, clock))
+        # distinct paths, best first; over the cap, older paths give way to this round's seeds
+        uniq: dict[tuple[int, int, tuple[int, ...]], _Member] = {}
+        for m in sorted(out, key=lambda m: m.score):
+            uniq.setdefault(m.path.key, m)
+        members = list(uniq.values())
+        if len(members) > self.population:
+            new = [m for m in members if m.born == rnd]
+            old = [m for m in members if m.born != rnd][: max(self.population - len(new), 0)]
+            members = sorted(old + new, key=lambda m: m.score)
+        return members
+
+    def _best_children(
+        self, problem: Problem, member: _Member, cands: PathBatch, clock: _Clock
+    ) -> list[tuple[float, Path]]:
+        """The ``keep`` best improving mutations (distinct paths, best first)."""
+        if cands.size == 0:
+            return []
+        totals = np.empty(cands.size)
+        starts = np.empty(cands.size, dtype=np.int64)
+        for lo in range(0, cands.size, CHUNK):
+            clock.check()
+            part = cands.take(np.arange(lo, min(lo + CHUNK, cands.size)))
+            s = score_batch(self.index_, problem, part)
+            totals[lo : lo + part.size] = s.total
+            starts[lo : lo + part.size] = s.batch.start_frame
+        better = np.flatnonzero(totals < member.score - 1e-9)
+        if better.size == 0:
+            return []
+        order = better[np.argsort(totals[better], kind="stable")]
+        kids: list[tuple[float, Path]] = []
+        keys = set()
+        for i in order:
+            p = cands.path(int(i))
+            p = trim(self.index_, Path(p.start_clip, int(starts[i]), p.edges), problem.length)
+            if p.key in keys:
+                continue
+            keys.add(p.key)
+            kids.append((float(totals[i]), p))
+            if len(kids) >= self.keep:
+                break
+        return kids
+
+    def _record_minimum(self, problem: Problem, path: Path, score: float) -> None:
+        key = clip_sequence(self.index_, path, problem.length)
+        got = self._minima.get(key)
+        if got is None or score < got[0]:
+            self._minima[key] = (score, path)
+
+    def _alternatives(
+        self, problem: Problem, best: Path, population: list[_Member], k: int
+    ) -> list[tuple[Path, bool]]:
+        """Up to ``k - 1`` paths after the best: distinct clip sequences, local minima first."""
+        taken = {clip_sequence(self.index_, best, problem.length)}
+        out: list[tuple[Path, bool]] = []
+        for _score, path in sorted(self._minima.values(), key=lambda sp: sp[0]):
+            key = clip_sequence(self.index_, path, problem.length)
+            if key not in taken and len(out) < k - 1:
+                taken.add(key)
+                out.append((path, True))
+        for m in sorted(population, key=lambda m: m.score):
+            key = clip_sequence(self.index_, m.path, problem.length)
+            if key not in taken and len(out) < k - 1:
+                taken.add(key)
+                out.append((m.path, False))
+        return out
+
+    # -- emission ----------------------------------------------------------------------------
+    def _emit(self, emit: Emitter, request: Any, path: Path, *, rank: int, local: bool) -> Path:
+        t = time.perf_counter()
+        ev = evaluate(self.index_, self._problem, path)
+        emit.solution(self.solution(ev, request, rank=rank, local=local))
+        self._emit_cost = max(self._emit_cost, time.perf_counter() - t)
+        return path
+
+    def solution(self, ev: Evaluation, request: Any, *, rank: int = 0, local: bool = False) -> Solution:
+        """The :class:`~engines.base.Solution` of an evaluated path (assembled motion, report)."""
+        motion, provenance = assemble(
+            self.library, self.tracks, ev.pieces, ev.placement, request, self._problem
+        )
+        errors = constraint_errors(motion, provenance, self._problem, self.library)
+        metrics = {
+            "pieces": float(ev.pieces.clip.size),
+            "alternative": float(rank),
+            "local_minimum": float(local),
+            "search_rounds": float(self.rounds_),
+        }
+        return Solution(
+            motion=motion,
+            score=ev.score,
+            terms=dict(ev.terms),
+            provenance=provenance,
+            constraint_errors=errors,
+            metrics=metrics,
+        )
+
+    # -- mutations ---------------------------------------------------------------------------
+    def mutations(self, path: Path, rng: np.random.Generator, stage: int | None = None) -> PathBatch:
+        """The mutations of a path (module docstring), as one batch: ``stage`` 1 the cheap ones
+        ((a) with 0 or 1 edge, (b), (c)), 2 the (a) 2-edge ones (at most ``max_candidates``),
+        ``None`` all of them (2-edge ones filling up to ``max_candidates``).
+
+        For each kept head ``edges[:i]`` (reaching clip ``A`` at frame ``x``), the replacements
+        leading to every later edge ``edges[j]`` (leaving clip ``B`` at frame ``y``) are found at
+        once: ``(root edge or edge pair) x (j)`` boolean tables of "ends in B no later than y"."""
+        idx = self.index_
+        t = self.tree
+        edges = np.asarray(path.edges, dtype=np.int64)
+        n = edges.size
+        node_clip = np.concatenate(([path.start_clip], t.to_clip[edges])).astype(np.int64)
+        node_frame = np.concatenate(([path.start_frame], t.to_frame[edges])).astype(np.int64)
+        tgt_clip, tgt_frame = t.from_clip[edges], t.from_frame[edges]
+        one: list[tuple[IntArray, IntArray, IntArray]] = []
+        two: list[tuple[IntArray, IntArray, IntArray]] = []
+        none = np.full((1, 2), -1, dtype=np.int64)
+        for i in range(n + 1):
+            a_clip, x = int(node_clip[i]), int(node_frame[i])
+            js = np.arange(i, n)
+            b_clip, y = tgt_clip[i:], tgt_frame[i:]
+            if stage != 2:
+                # 0 edges: play on to a later edge of the same clip, or to the end (drop the tail)
+                j0 = js[(js > i) & (b_clip == a_clip) & (y >= x)]
+                if i < n:
+                    j0 = np.append(j0, n)
+                if j0.size:
+                    one.append((np.full(j0.size, i), j0, np.repeat(none, j0.size, axis=0)))
+                # 1 root edge
+                h = idx.root_out(a_clip, x)
+                if h.size:
+                    ok = (t.to_clip[h][:, None] == b_clip[None, :]) & (t.to_frame[h][:, None] <= y[None, :])
+                    if i + 1 < n:
+                        ok[:, 1] &= h != edges[i]
+                    hk, jk = np.nonzero(ok)
+                    tail = h if i != n - 1 else h[h != edges[n - 1]]
+                    rr = np.full((hk.size + tail.size, 2), -1, dtype=np.int64)
+                    rr[:, 0] = np.concatenate((h[hk], tail))
+                    one.append((np.full(rr.shape[0], i), np.concatenate((js[jk], np.full(tail.size, n))), rr))
+            if stage != 1:
+                # 2 root edges (one hop through any clip)
+                h1, h2 = idx.two_hops(a_clip, -1)
+                keep = t.from_frame[h1] >= x
+                h1, h2 = h1[keep], h2[keep]
+                if h1.size:
+                    ok = (t.to_clip[h2][:, None] == b_clip[None, :]) & (t.to_frame[h2][:, None] <= y[None, :])
+                    if i + 2 < n:
+                        ok[:, 2] &= ~((h1 == edges[i]) & (h2 == edges[i + 1]))
+                    hk, jk = np.nonzero(ok)
+                    rr = np.stack((np.concatenate((h1[hk], h1)), np.concatenate((h2[hk], h2))), axis=1)
+                    two.append((np.full(rr.shape[0], i), np.concatenate((js[jk], np.full(h1.size, n))), rr))
+        batches: list[PathBatch] = []
+        if one:
+            a1, b1, r1 = (np.concatenate(v) for v in zip(*one, strict=True))
+            batches.append(self._splice(path, a1, b1, r1))
+        if stage != 2:
+            batches.append(self._demotions(path))
+            if not self._problem.poses:
+                batches.append(self._start_moves(path))
+        fixed = sum(b.size for b in batches)
+        if two:
+            a2, b2, r2 = (np.concatenate(v) for v in zip(*two, strict=True))
+            room = max(self.max_candidates - fixed, 0)
+            if a2.size > room:
+                pick = np.sort(rng.choice(a2.size, size=room, replace=False))
+                a2, b2, r2 = a2[pick], b2[pick], r2[pick]
+            if a2.size:
+                batches.append(self._splice(path, a2, b2, r2))
+        return PathBatch.concat([b for b in batches if b.size])
+
+    def _splice(self, path: Path, a: IntArray, b: IntArray, r: IntArray) -> PathBatch:
+        """Paths ``edges[:a] + r + edges[b:]`` (``r`` padded with -1), vectorised."""
+        edges = np.asarray(path.edges, dtype=np.int64)
+        n = edges.size
+        nr = (r >= 0).sum(axis=1)
+        new_n = a + nr + (n - b)
+        m = int(new_n.max(initial=0))
+        col = np.arange(m)[None, :]
+        padded = np.concatenate((edges, [-1]))
+        a_, b_, nr_ = a[:, None], b[:, None], nr[:, None]
+        from_prefix = padded[np.minimum(col, n)]
+        from_r = np.take_along_axis(r, np.clip(col - a_, 0, 1), axis=1)
+        from_suffix = padded[np.clip(b_ + col - a_ - nr_, 0, n)]
+        out = np.where(col < a_, from_prefix, np.where(col < a_ + nr_, from_r, from_suffix))
+        out = np.where(col < new_n[:, None], out, -1)
+        k = a.size
+        start_clip = np.full(k, path.start_clip, dtype=np.int64)
+        start_frame = np.full(k, path.start_frame, dtype=np.int64)
+        # a head replaced by nothing (a == 0, no edges in r) keeps the start clip: play on from it
+        return PathBatch(start_clip, start_frame, out.astype(np.int64))
+
+    def _demotions(self, path: Path) -> PathBatch:
+        """Mutation (b): one or two edges replaced by children (every combination)."""
+        t = self.tree
+        edges = np.asarray(path.edges, dtype=np.int64)
+        inner = [i for i in range(edges.size) if t.left[edges[i]] >= 0]
+        rows: list[np.ndarray] = []
+        for ii, i in enumerate(inner):
+            kids_i = (t.left[edges[i]], t.right[edges[i]])
+            for ci in kids_i:
+                row = edges.copy()
+                row[i] = ci
+                rows.append(row)
+            for k in inner[ii + 1 :]:
+                for ci in kids_i:
+                    for ck in (t.left[edges[k]], t.right[edges[k]]):
+                        row = edges.copy()
+                        row[i], row[k] = ci, ck
+                        rows.append(row)
+        if not rows:
+            return PathBatch(
+                np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, edges.size), np.int64)
+            )
+        mat = np.stack(rows)
+        k = mat.shape[0]
+        out = PathBatch(np.full(k, path.start_clip, np.int64), np.full(k, path.start_frame, np.int64), mat)
+        return out.take(np.flatnonzero(batch_valid(self.index_, out)))  # children may break the chain
+
+    def _start_moves(self, path: Path) -> PathBatch:
+        """Mutation (c): the start slid by a few frames; and heads dropped (start re-chosen in the
+        clip of a later edge so that this edge's cut keeps its output time)."""
+        t = self.tree
+        idx = self.index_
+        edges = np.asarray(path.edges, dtype=np.int64)
+        limit = int(t.from_frame[edges[0]]) if edges.size else int(idx.frames[path.start_clip]) - 1
+        shifts = np.array(
+            [path.start_frame + d for d in self.start_shifts if 0 <= path.start_frame + d <= limit]
+        )
+        clips = [np.full(shifts.size, path.start_clip)]
+        frames = [shifts]
+        rows = [np.tile(edges, (shifts.size, 1))]
+        if edges.size > 1:
+            # output time of the cut of each edge
+            pieces_end = np.concatenate(
+                (
+                    [t.from_frame[edges[0]] - path.start_frame + 1],
+                    t.from_frame[edges[1:]] - t.to_frame[edges[:-1]] + 1,
+                )
+            )
+            cut_time = np.cumsum(pieces_end)
+            for j in range(1, edges.size):
+                f0 = int(t.from_frame[edges[j]]) - int(cut_time[j]) + 1
+                if f0 >= 0:
+                    clips.append(np.array([t.from_clip[edges[j]]]))
+                    frames.append(np.array([f0]))
+                    row = np.full(edges.size, -1, dtype=np.int64)
+                    row[: edges.size - j] = edges[j:]
+                    rows.append(row[None, :])
+        return PathBatch(
+            np.concatenate(clips).astype(np.int64),
+            np.concatenate(frames).astype(np.int64),
+            np.concatenate(rows).astype(np.int64),
+        )
+
+    # -- seeds -------------------------------------------------------------------------------
+    def _seed_members(
+        self, problem: Problem, rng: np.random.Generator, count: int, rnd: int, clock: _Clock
+    ) -> list[_Member]:
+        """The ``count`` best of ``seed_batch`` random seeds not seen before, best first."""
+        if count <= 0:
+            return []
+        if problem.poses:
+            paths = [p for p in (self._pose_seed(rng) for _ in range(self.seed_batch)) if p is not None]
+            if not paths:
+                return []
+            batch = PathBatch.from_paths(paths)
+        else:
+            batch = self._random_seeds(rng, self.seed_batch)
+        clock.check()
+        s = score_batch(self.index_, problem, batch)
+        order = np.argsort(s.total, kind="stable")
+        out: list[_Member] = []
+        for i in order:
+            if not np.isfinite(s.total[i]):
+                break
+            p = trim(self.index_, s.batch.path(int(i)), problem.length)
+            if p.key in self._seen:
+                continue
+            self._seen.add(p.key)
+            out.append(_Member(p, float(s.total[i]), rnd))
+            if len(out) >= count:
+                break
+        return out
+
+    def _random_seeds(self, rng: np.random.Generator, count: int) -> PathBatch:
+        """``count`` random walks at once (module docstring), as a batch.
+
+        Root edges are sorted by ``(from clip, from frame)``, so the edges a walker may take next
+        (leaving its clip at or after its frame, with the cut inside the output) are one
+        contiguous range found by binary search; each walker picks one of them or, when its clip
+        plays long enough, stops, all options equally likely."""
+        idx, t = self.index_, self.tree
+        T = self._problem.length
+        if self._useful is None:
+            last_out = np.full(idx.n_clips, -1, dtype=np.int64)
+            np.maximum.at(last_out, t.from_clip[idx.roots], t.from_frame[idx.roots])
+            useful = np.minimum(np.maximum(last_out + 1, idx.frames - T + 1), idx.frames)
+            self._useful = np.cumsum(np.maximum(useful, 0))
+        total = int(self._useful[-1])
+        if total == 0:
+            return PathBatch(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 0), np.int64))
+        g = rng.integers(total, size=count)
+        clip = np.searchsorted(self._useful, g, side="right").astype(np.int64)
+        frame = g - np.where(clip > 0, self._useful[np.maximum(clip - 1, 0)], 0)
+        start_clip, start_frame = clip.copy(), frame.copy()
+        roots = idx.roots
+        span = int(idx.frames.max()) + 2
+        keys = t.from_clip[roots] * span + t.from_frame[roots]
+        now = np.zeros(count, dtype=np.int64)
+        active = np.ones(count, dtype=bool)
+        cols: list[IntArray] = []
+        while active.any() and len(cols) <= T:
+            enough = now + idx.frames[clip] - frame >= T
+            lo = np.searchsorted(keys, clip * span + frame, side="left")
+            # the cut must fall inside the output: from_frame - frame + now < T - 1
+            limit = np.clip(T - 1 - now + frame, 0, span - 1)
+            hi = np.maximum(np.searchsorted(keys, clip * span + limit, side="left"), lo)
+            options = hi - lo + enough
+            k = np.floor(rng.random(count) * np.maximum(options, 1)).astype(np.int64)
+            take = active & (options > 0) & (k < hi - lo)
+            e = np.where(take, roots[np.minimum(lo + k, roots.size - 1)], -1)
+            cols.append(e)
+            te = np.maximum(e, 0)
+            now = np.where(take, now + t.from_frame[te] - frame + 1, now)
+            clip = np.where(take, t.to_clip[te], clip)
+            frame = np.where(take, t.to_frame[te], frame)
+            active = take
+        edges = np.stack(cols, axis=1) if cols else np.zeros((count, 0), np.int64)
+        width = int((edges >= 0).sum(axis=1).max(initial=0))
+        return PathBatch(start_clip, start_frame, np.ascontiguousarray(edges[:, :width]))
+
+    def _walk(self, rng: np.random.Generator, clip: int, frame: int, time_out: int) -> list[int]:
+        """Random root edges from ``(clip, frame)`` playing at output frame ``time_out`` until
+        the output length is reached (or a dead end)."""
+        idx, t = self.index_, self.tree
+        T = self._problem.length
+        out: list[int] = []
+        for _ in range(T + 1):
+            enough = time_out + (int(idx.frames[clip]) - frame) >= T
+            h = idx.root_out(clip, frame)
+            h = h[t.from_frame[h] - frame + time_out < T - 1]
+            options = h.size + int(enough)
+            if options == 0:
+                break
+            k = int(rng.integers(options))
+            if k == h.size:
+                break
+            e = int(h[k])
+            out.append(e)
+            time_out += int(t.from_frame[e]) - frame + 1
+            clip, frame = int(t.to_clip[e]), int(t.to_frame[e])
+        return out
+
+    def _in_edges(self, every: bool) -> IntArray:
+        """Root edges (or every edge of the tree) sorted by (to clip, to frame)."""
+        got = self._ins.get(every)
+        if got is None:
+            r = np.arange(self.tree.size, dtype=np.int64) if every else self.index_.roots
+            got = r[np.lexsort((self.tree.to_frame[r], self.tree.to_clip[r]))]
+            self._ins[every] = got
+        return got
+
+    def _arrivals(self, clip: int, frame: int, now: int, every: bool) -> IntArray:
+        """Edges into ``clip`` at a frame ``<= frame`` that leave at least one output frame before
+        (``frame - to_frame < now``)."""
+        t = self.tree
+        ins = self._in_edges(every)
+        lo = np.searchsorted(t.to_clip[ins], clip, side="left")
+        hi = np.searchsorted(t.to_clip[ins], clip, side="right")
+        cand = ins[lo:hi]
+        return cand[(t.to_frame[cand] <= frame) & (t.to_frame[cand] >= frame - now + 1)]
+
+    def _pose_seed(self, rng: np.random.Generator) -> Path | None:
+        """A random path through every pose constraint at its time (module docstring)."""
+        problem = self._problem
+        t = self.tree
+        poses: list[PoseTarget] = []
+        for p in problem.poses:
+            if not poses or poses[-1].frame != p.frame:
+                poses.append(p)
+        # backwards from the first pose to a start: random root edges (any edge when no root fits)
+        clip, frame, now = poses[0].clip, poses[0].clip_frame, poses[0].frame
+        head: list[int] = []
+        for _ in range(problem.length + 1):
+            can_start = frame >= now
+            if can_start and rng.random() < 0.5:
+                break
+            cand = self._arrivals(clip, frame, now, every=False)
+            if cand.size == 0:
+                cand = self._arrivals(clip, frame, now, every=True)
+            if cand.size == 0:
+                if can_start:
+                    break
+                return None
+            e = int(cand[rng.integers(cand.size)])
+            head.append(e)
+            now -= frame - int(t.to_frame[e]) + 1
+            clip, frame = int(t.from_clip[e]), int(t.from_frame[e])
+        else:
+            return None
+        edges = head[::-1]
+        for a, b in itertools.pairwise(poses):
+            link = self._connect(a.clip, a.clip_frame, b.clip, b.clip_frame, b.frame - a.frame, rng)
+            if link is None:
+                return None
+            edges.extend(link)
+        last = poses[-1]
+        edges.extend(self._walk(rng, last.clip, last.clip_frame, last.frame))
+        return Path(clip, frame - now, tuple(edges))
+
+    def _layers(self, g1: int, g2: int, steps: int, every: bool) -> list[list[npt.NDArray[np.bool_]]] | None:
+        """``layers[k][s][g]``: library frame ``g`` can play ``s`` output frames after frame ``g1``
+        with at most ``k`` cuts (root edges, or every edge of the tree), up to the fewest cuts
+        that reach ``g2`` after ``steps`` frames; ``None`` when :data:`MAX_CUTS` cuts do not."""
+        key = (g1, g2, steps, every)
+        if key in self._layer_cache:
+            return self._layer_cache[key]
+        t = self.tree
+        off = self.tracks.offsets
+        n = int(off[-1])
+        if steps * n > MAX_TABLE:
+            raise EngineError(f"pose constraints {steps} frames apart are too far apart to connect exactly")
+        edges = np.arange(t.size) if every else self.index_.roots
+        g_from = off[t.from_clip[edges]] + t.from_frame[edges]
+        g_to = off[t.to_clip[edges]] + t.to_frame[edges]
+        cont = np.ones(n, dtype=bool)
+        cont[off[:-1]] = False  # frame g - 1 plays on to g (same clip)
+        layers: list[list[npt.NDArray[np.bool_]]] = []
+        found: list[list[npt.NDArray[np.bool_]]] | None = None
+        for k in range(MAX_CUTS + 1):
+            cur = np.zeros(n, dtype=bool)
+            cur[g1] = True
+            level = [cur]
+            for s in range(1, steps + 1):
+                nxt = np.zeros(n, dtype=bool)
+                nxt[1:] = cur[:-1] & cont[1:]
+                if k:
+                    nxt[g_to[layers[k - 1][s - 1][g_from]]] = True
+                level.append(nxt)
+                cur = nxt
+            layers.append(level)
+            if cur[g2]:
+                found = layers
+                break
+        self._layer_cache[key] = found
+        return found
+
+    def _connect(
+        self, c1: int, k1: int, c2: int, k2: int, steps: int, rng: np.random.Generator
+    ) -> list[int] | None:
+        """Random edges taking clip frame ``(c1, k1)`` to ``(c2, k2)`` in exactly ``steps`` output
+        frames with the fewest cuts (root edges when they can, else any edge of the tree); ``None``
+        when impossible. Sampled backwards through the layered reachability table, each step
+        choosing at random among the moves (play on, or an edge) that keep the fewest cuts."""
+        t = self.tree
+        off = self.tracks.offsets
+        g1, g2 = int(off[c1] + k1), int(off[c2] + k2)
+        layers = None
+        for every in (False, True):
+            layers = self._layers(g1, g2, steps, every)
+            if layers is not None:
+                break
+        if layers is None:
+            return None
+        edges = np.arange(t.size) if every else self.index_.roots
+        g_from = off[t.from_clip[edges]] + t.from_frame[edges]
+        g_to = off[t.to_clip[edges]] + t.to_frame[edges]
+        by_to = np.argsort(g_to, kind="stable")
+        sorted_to = g_to[by_to]
+        starts = {int(o) for o in off[:-1]}
+        k = len(layers) - 1
+        g = g2
+        rev: list[int] = []
+        for s in range(steps, 0, -1):
+            play = g not in starts and bool(layers[k][s - 1][g - 1])
+            jumps = np.zeros(0, dtype=np.int64)
+            if k:
+                lo, hi = np.searchsorted(sorted_to, g, "left"), np.searchsorted(sorted_to, g, "right")
+                jumps = by_to[lo:hi]
+                jumps = jumps[layers[k - 1][s - 1][g_from[jumps]]]
+            pick = int(rng.integers(jumps.size + int(play)))
+            if pick == jumps.size:
+                g -= 1
+                continue
+            j = int(jumps[pick])
+            rev.append(int(edges[j]))
+            g = int(g_from[j])
+            k -= 1
+        return rev[::-1]
+
+    def _no_seed_message(self, problem: Problem) -> str:
+        if problem.poses:
+            names = ", ".join(
+                f"{p.name} ({self.library.names[p.clip]} frame {p.clip_frame} at {p.frame})"
+                for p in problem.poses
+            )
+            return f"no path of the graph meets the pose constraints {names}"
+        return "no valid path found in the motion graph"
