@@ -39,7 +39,7 @@ def test_sigkill_mid_job_two_workers_twenty_jobs(redis_url: str, rclient: redis.
     with worker_processes(redis_url, store, ["w1", "w2"]) as procs:
         wait_for(lambda: all(rclient.exists(KEYS.worker(n)) for n in procs), 30, what="both workers to start")
 
-        async def scenario() -> tuple[list[str], str]:
+        async def scenario() -> tuple[list[str], str, bool]:
             backend = RedisBackend(store, redis_url)
             await backend.start()
             try:
@@ -53,24 +53,30 @@ def test_sigkill_mid_job_two_workers_twenty_jobs(redis_url: str, rclient: redis.
                     if sum(bool(rclient.exists(KEYS.terminal(j))) for j in jobs) < 6:
                         return None
                     job_id = job_of(rclient, "w1")
-                    if job_id and any(e.type == EventType.solution for e in stream_events(rclient, job_id)):
+                    # one solution of four so far: at least two 0.1 s steps still to run
+                    if (
+                        job_id
+                        and sum(e.type == EventType.solution for e in stream_events(rclient, job_id)) == 1
+                    ):
                         return job_id
                     return None
 
                 killed = await asyncio.to_thread(wait_for, victim_mid_job, 20, 0.01, "w1 mid-job")
                 procs["w1"].send_signal(signal.SIGKILL)
                 procs["w1"].wait(timeout=10)
+                # on a loaded machine w1 may still have finished the job before the signal landed
+                finished_first = bool(rclient.exists(KEYS.terminal(killed)))
 
                 async def final(job_id: str) -> JobEvent:
                     return [e async for e in backend.events(job_id)][-1]
 
                 finals = await asyncio.wait_for(asyncio.gather(*(final(j) for j in jobs)), 60)
                 assert [e.type for e in finals] == [EventType.done] * 20
-                return jobs, killed
+                return jobs, killed, finished_first
             finally:
                 await backend.close()
 
-        jobs, killed = run(scenario())
+        jobs, killed, finished_first = run(scenario())
         for job_id in jobs:
             events = stream_events(rclient, job_id)
             assert [e.id for e in events] == list(range(1, len(events) + 1)), "event ids must be contiguous"
@@ -79,9 +85,12 @@ def test_sigkill_mid_job_two_workers_twenty_jobs(redis_url: str, rclient: redis.
             assert store.job_info(job_id).status == JobStatus.done
             assert store.result_report(job_id, terminals[0].data["result"]).score == 1.0
         starts = [e for e in stream_events(rclient, killed) if e.type == EventType.started]
-        assert [s.data["worker"] for s in starts] == ["w1", "w2"] and starts[-1].data["attempt"] == 2
         ran_twice = [j for j in jobs if sum(e.type == "started" for e in stream_events(rclient, j)) > 1]
-        assert ran_twice == [killed]
+        if finished_first:
+            assert [s.data["worker"] for s in starts] == ["w1"] and ran_twice == []
+        else:
+            assert [s.data["worker"] for s in starts] == ["w1", "w2"] and starts[-1].data["attempt"] == 2
+            assert ran_twice == [killed]
         wait_for(lambda: rclient.xlen(KEYS.jobs) == 0, 5, what="every entry acked and deleted")
         assert rclient.xpending(KEYS.jobs, KEYS.group)["pending"] == 0 and rclient.xlen(KEYS.dead) == 0
         assert procs["w2"].poll() is None
