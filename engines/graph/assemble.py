@@ -94,18 +94,18 @@ def _apply_floor(
 
 
 def _concatenate(library: MotionLibrary, pieces: Pieces) -> Motion:
+    """The pieces' frames end to end (the skeleton of the clip that gives the most frames)."""
     counts = pieces.count
-    main = int(pieces.clip[int(np.argmax(counts))])
-    parts = [
-        library.motions[int(c)].slice(int(a), int(b) + 1)
+    main = library.motions[int(pieces.clip[int(np.argmax(counts))])]
+    spans = [
+        (library.motions[int(c)], slice(int(a), int(b) + 1))
         for c, a, b in zip(pieces.clip, pieces.first, pieces.last, strict=True)
     ]
-    base = library.motions[main]
     return replace(
-        base,
-        root_positions=np.concatenate([p.root_positions for p in parts]),
-        rotations=np.concatenate([p.rotations for p in parts]),
-        joint_translations=np.concatenate([p.joint_translations for p in parts]),
+        main,
+        root_positions=np.concatenate([m.root_positions[s] for m, s in spans]),
+        rotations=np.concatenate([m.rotations[s] for m, s in spans]),
+        joint_translations=np.concatenate([m.joint_translations[s] for m, s in spans]),
         name="graph",
     )
 

@@ -14,6 +14,7 @@ from ..base import Arrays, Emitter, Engine, ShouldStop
 from ..library import MotionLibrary
 from .build import build_graph
 from .model import EdgeTree, RootTracks
+from .paths import GraphIndex
 from .search import GraphSearch
 
 
@@ -27,6 +28,7 @@ class GraphEngine(Engine):
         super().__init__(library, arrays)
         self.tree = EdgeTree.from_arrays(arrays)
         self.tracks = RootTracks.from_arrays(arrays)
+        GraphIndex.of(self.tree, self.tracks)  # built once per loaded database, not on the first search
 
     @classmethod
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:

@@ -31,9 +31,9 @@ Batches
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -157,6 +157,7 @@ class Placement:
 
 _INDEX_CACHE: OrderedDict[tuple[int, int], tuple[EdgeTree, RootTracks, GraphIndex]] = OrderedDict()
 _INDEX_CACHE_SIZE = 4
+_INDEX_LOCK = threading.Lock()
 
 
 class GraphIndex:
@@ -211,14 +212,16 @@ class GraphIndex:
         """The index of a graph, cached for the last few graphs (by identity: a loaded engine
         keeps its tree and tracks, so its searches share one index)."""
         key = (id(tree), id(tracks))
-        got = _INDEX_CACHE.get(key)
-        if got is not None and got[0] is tree and got[1] is tracks:
-            _INDEX_CACHE.move_to_end(key)
-            return got[2]
+        with _INDEX_LOCK:
+            got = _INDEX_CACHE.get(key)
+            if got is not None and got[0] is tree and got[1] is tracks:
+                _INDEX_CACHE.move_to_end(key)
+                return got[2]
         index = cls(tree, tracks)
-        _INDEX_CACHE[key] = (tree, tracks, index)
-        while len(_INDEX_CACHE) > _INDEX_CACHE_SIZE:
-            _INDEX_CACHE.popitem(last=False)
+        with _INDEX_LOCK:
+            _INDEX_CACHE[key] = (tree, tracks, index)
+            while len(_INDEX_CACHE) > _INDEX_CACHE_SIZE:
+                _INDEX_CACHE.popitem(last=False)
         return index
 
     # ground frames
@@ -538,7 +541,3 @@ class JointTable:
         b = np.minimum(frame + 1, n - 1)
         span = np.maximum(b - a, 1)[..., None, None]
         return np.asarray((self.at(clip, b) - self.at(clip, a)) * fps / span)
-
-
-def as_int_array(values: Any) -> IntArray:
-    return np.asarray(values, dtype=np.int64)

@@ -4,13 +4,14 @@ The loop (paper Sec. 4.2, steps 1-6):
 
 1. **Seeds.** Random valid paths in the coarsest graph G' (the edge tree's roots). Without pose
    constraints a seed starts at a random frame (uniform over the frames from which the clip still
-   has a root edge ahead or plays long enough) and walks random root edges (each out-edge ahead,
-   or stopping when the clip plays to the end of the output, equally likely) until it is long
-   enough. With hard pose constraints a seed is built around them: a random backward walk from
-   the first one to a start, exact-length connections between consecutive ones (a reachability
-   table over (frame, time) through every edge of the tree, sampled backwards at random) and a
-   random walk after the last. Each time, ``seed_batch`` seeds are drawn and the best few kept,
-   which acts as a greedy choice among random starts.
+   has a root edge ahead or plays long enough: "useful" starts) and walks random root edges (each
+   out-edge ahead, or stopping when the clip plays to the end of the output, equally likely)
+   until it is long enough; ``seed_batch`` walkers run at once (vectorised) and the best few are
+   kept, a greedy choice among random starts. With hard pose constraints a seed is built around
+   them: a random backward walk from the first one to a start (root edges, any edge of the tree
+   when no root fits), exact-length connections with the fewest cuts between consecutive ones (a
+   layered reachability table over (frame, time, cuts), root edges first, sampled backwards at
+   random) and a random walk after the last.
 2. **Mutations** of every path of the population, all enumerated and scored at once
    (:func:`engines.graph.score.score_batch`):
 
@@ -20,12 +21,14 @@ The loop (paper Sec. 4.2, steps 1-6):
        (open end), and the head may be dropped, the path then starting in the clip of the first
        kept edge so that this cut keeps its time;
    (b) *demote edges*: one edge or two edges at once replaced by their children in the edge
-       tree (every combination), which refines the cut frames;
-   (c) *slide the start* by 1, 2, 4, 8 or 16 frames (no pose constraints only: otherwise the start
-       is anchored by the first pose).
+       tree (every combination that stays valid), which refines the cut frames;
+   (c) *slide the start* by 1 to 30 frames either way (no pose constraints only: otherwise the
+       start is anchored by the first pose).
 
-   Very large candidate sets (> ``max_candidates``) keep every (a) 0/1-edge, (b) and (c) mutation
-   and a random subset of the 2-edge ones.
+   With ``staged`` (default) the cheap mutations ((a) with 0 or 1 edge, (b), (c)) are tried
+   first and the 2-edge ones only when none of them improves (a variable-neighbourhood descent:
+   each step costs a few hundred candidates instead of thousands); at most ``max_candidates``
+   2-edge mutations are scored per path and step, a random subset when there are more.
 3. **Keep** the ``keep`` best improving mutations of each path (distinct paths); a path with no
    improving mutation is a **local minimum**: it is recorded (best per clip sequence) and leaves
    the population.
@@ -36,7 +39,8 @@ Anytime: every round whose best path improved emits a solution (the first one ri
 first seeds); ``should_stop`` and the budget are checked every few milliseconds. At the end, the
 ``request.alternatives`` best distinct local minima (different clip sequences; the population
 fills in when there are too few) are emitted after the best one, each with a higher score, so
-the runtime's best (lowest score) stays the best path. All randomness comes from one
+the runtime's best (lowest score) stays the best path; the search stops early enough to leave
+time for them (estimated from the first emission). All randomness comes from one
 ``numpy.random.Generator`` seeded with the request's seed; only the budget cut-off depends on time.
 """
 
@@ -63,6 +67,8 @@ START_SHIFTS = tuple(d for d in range(-30, 31) if d)
 """Start-frame slides tried by mutation (c): every shift up to one second."""
 MAX_TABLE = 50_000_000
 """Largest (frames x time steps) reachability table built for pose-to-pose connections."""
+POSE_SEEDS = 32
+"""Seeds drawn per batch when pose constraints shape them (each is built by a Python loop)."""
 MAX_CUTS = 8
 """Most cuts tried between two consecutive pose constraints."""
 
@@ -133,7 +139,7 @@ class GraphSearch:
         fresh: int = 2,
         keep: int = 2,
         seed_batch: int = 256,
-        max_candidates: int = 4000,
+        max_candidates: int = 2000,
         start_shifts: tuple[int, ...] = START_SHIFTS,
         staged: bool = True,
     ) -> None:
@@ -505,7 +511,8 @@ class GraphSearch:
         if count <= 0:
             return []
         if problem.poses:
-            paths = [p for p in (self._pose_seed(rng) for _ in range(self.seed_batch)) if p is not None]
+            tries = min(self.seed_batch, POSE_SEEDS)  # built one by one in Python
+            paths = [p for p in (self._pose_seed(rng) for _ in range(tries)) if p is not None]
             if not paths:
                 return []
             batch = PathBatch.from_paths(paths)
@@ -739,5 +746,18 @@ class GraphSearch:
                 f"{p.name} ({self.library.names[p.clip]} frame {p.clip_frame} at {p.frame})"
                 for p in problem.poses
             )
-            return f"no path of the graph meets the pose constraints {names}"
+            t = self.tree
+            isolated = sorted(
+                {
+                    self.library.names[p.clip]
+                    for p in problem.poses
+                    if not np.any(t.from_clip == p.clip) and not np.any(t.to_clip == p.clip)
+                }
+            )
+            why = (
+                f"; clip(s) {', '.join(isolated)} have no transition in the graph (dropped by the build)"
+                if isolated
+                else ""
+            )
+            return f"no path of the graph meets the pose constraints {names}{why}"
         return "no valid path found in the motion graph"

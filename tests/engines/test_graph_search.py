@@ -524,3 +524,27 @@ def test_bandai_end_to_end() -> None:
         assert np.linalg.norm(pos[f, hip, [0, 2]] - goal) < 0.05
         fwd = np.cross(pos[f, lt] - pos[f, rt], [0.0, 1.0, 0.0])
         assert abs((np.degrees(np.arctan2(fwd[0], fwd[2])) - head + 180) % 360 - 180) < 5.0
+
+
+def test_seconds_times_and_no_body_constraint(graph: Graph) -> None:
+    body = {
+        "engine": "graph",
+        "seconds": 5.0,
+        "seed": 1,
+        "smoothing_frames": 0,
+        "constraints": [{"type": "body", "time_s": 4.9, "position": [1.0, 2.0]}],
+    }
+    out = Collect()
+    searcher(graph, 1).run(GraphRequest.model_validate(body), 0.5, out, lambda: False)
+    best = min(out.solutions, key=lambda s: s.score)
+    assert best.motion.num_frames == 150
+    assert best.constraint_errors["body[0]"]["frame"] == 147
+    assert best.constraint_errors["body[0]"]["position_cm"] < 0.1
+    # nothing to meet: the motion starts at the origin facing +Z
+    out = Collect()
+    searcher(graph, 1).run(
+        request(frames=90, constraints=[], alternatives=1, smoothing_frames=0), 0.3, out, lambda: False
+    )
+    xz, yaw = body_frames(out.solutions[-1].motion)
+    np.testing.assert_allclose(xz[0], [0.0, 0.0], atol=1e-6)
+    assert abs(yaw[0]) < 1e-6
