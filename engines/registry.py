@@ -15,14 +15,31 @@ from .clip import ClipEngine
 ENGINES: dict[str, type[Engine]] = {ClipEngine.name: ClipEngine}
 KIND_ENGINES: dict[str, type[Engine]] = {cls.kind: cls for cls in ENGINES.values()}
 
-_BUILT_IN: dict[str, tuple[str, str]] = {"graph": ("engines.graph.engine", "GraphEngine")}
-"""Engines imported on first use (name and kind are the same): keeps the CLI quick to start."""
+_BUILT_IN: dict[str, tuple[str, str, str]] = {
+    "graph": ("engines.graph.engine", "GraphEngine", "graph"),
+    "control": ("engines.control.engine", "ControlEngine", "control"),
+    "annotations": ("engines.annotations.engine", "AnnotationEngine", "annotated"),
+    "rhythm": ("engines.rhythm.engine", "RhythmEngine", "rhythm"),
+}
+"""Engines imported on first use, by engine name: (module, class, database kind). Keeps the CLI
+quick to start; an engine whose module has not landed is reported as unavailable."""
 
 
 def _load_built_in(name: str) -> None:
     target = _BUILT_IN.get(name)
-    if target is not None and name not in ENGINES:
-        register(getattr(importlib.import_module(target[0]), target[1]))
+    if target is None or name in ENGINES:
+        return
+    try:
+        module = importlib.import_module(target[0])
+    except ModuleNotFoundError as exc:
+        if exc.name is not None and target[0].startswith(exc.name):
+            return  # not in this installation: engine_class / kind_class say so
+        raise
+    register(getattr(module, target[1]))
+
+
+def _engine_of_kind(kind: str) -> str:
+    return next((name for name, t in _BUILT_IN.items() if t[2] == kind), kind)
 
 
 PLUGINS_ENV = "SEGUE_ENGINE_PLUGINS"
@@ -58,16 +75,16 @@ def engine_class(name: str) -> type[Engine]:
     except KeyError:
         raise UnavailableError(
             f"engine {name!r} is not available in this installation "
-            f"(available: {', '.join(sorted(set(ENGINES) | set(_BUILT_IN)))})"
+            f"(available: {', '.join(sorted(ENGINES))})"
         ) from None
 
 
 def kind_class(kind: str) -> type[Engine]:
-    _load_built_in(kind)
+    _load_built_in(_engine_of_kind(kind))
     try:
         return KIND_ENGINES[kind]
     except KeyError:
         raise UnavailableError(
             f"database kind {kind!r} is not available yet: its engine has not landed "
-            f"(available kinds: {', '.join(sorted(set(KIND_ENGINES) | set(_BUILT_IN)))})"
+            f"(available kinds: {', '.join(sorted(KIND_ENGINES))})"
         ) from None

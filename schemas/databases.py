@@ -10,17 +10,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, TypeAdapter
 
-from .clips import ClipSource
+from .bases import DatabaseSpecBase
 from .common import SCHEMA_VERSION, Strict
-
-
-class DatabaseSpecBase(Strict):
-    """Settings every database kind shares."""
-
-    kind: str
-    clips: list[ClipSource] = Field(min_length=1, max_length=2000)
-    fps: float | None = Field(default=None, gt=0, le=1000, description="resample every clip to this rate")
-    name: str | None = Field(default=None, max_length=128)
 
 
 class ClipsDatabaseSpec(DatabaseSpecBase):
@@ -29,12 +20,6 @@ class ClipsDatabaseSpec(DatabaseSpecBase):
     Serves the ``clip`` engine (excerpts) and is the common part of every other kind."""
 
     kind: Literal["clips"] = "clips"
-
-
-class ControlDatabaseSpec(DatabaseSpecBase):
-    """Control-by-example database (Hsu et al. 2004); settings arrive with the control engine."""
-
-    kind: Literal["control"] = "control"
 
 
 class GraphDatabaseSpec(DatabaseSpecBase):
@@ -58,18 +43,10 @@ class GraphDatabaseSpec(DatabaseSpecBase):
     )
 
 
-class AnnotatedDatabaseSpec(DatabaseSpecBase):
-    """Annotated database (Arikan et al. 2003); settings arrive with the annotation engine."""
-
-    kind: Literal["annotated"] = "annotated"
-
-
-class RhythmDatabaseSpec(DatabaseSpecBase):
-    """Rhythmic-motion database (Kim et al. 2003)."""
-
-    kind: Literal["rhythm"] = "rhythm"
-    beats_per_movement: int = Field(default=4, ge=1, le=16)
-
+# Kind-specific specs defined in their engine's schema module (they import DatabaseSpecBase from here).
+from .annotations import AnnotatedDatabaseSpec  # noqa: E402
+from .control import ControlDatabaseSpec  # noqa: E402
+from .rhythm import RhythmDatabaseSpec  # noqa: E402
 
 DatabaseSpec = Annotated[
     ClipsDatabaseSpec | ControlDatabaseSpec | GraphDatabaseSpec | AnnotatedDatabaseSpec | RhythmDatabaseSpec,

@@ -9,17 +9,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, model_validator
 
+from .bases import JobRequestBase
 from .common import Strict
-
-
-class JobRequestBase(Strict):
-    """Settings every synthesis request shares."""
-
-    database: str | None = Field(
-        default=None, description="database id (API); the CLI's --db directory supplies it otherwise"
-    )
-    budget_s: float = Field(default=10.0, gt=0, le=3600, description="anytime search budget, seconds")
-    seed: int = Field(default=0, ge=0, le=2**32 - 1)
 
 
 class ClipRequest(JobRequestBase):
@@ -112,7 +103,15 @@ class JobInfo(Strict):
 
 
 # Engine request models defined in their own modules (they import JobRequestBase from here).
+from .annotations import AnnotationRequest  # noqa: E402
+from .control import ControlRequest  # noqa: E402
 from .graph import GraphRequest  # noqa: E402
+from .rhythm import RhythmRequest  # noqa: E402
 
-JobRequest = Annotated[ClipRequest | GraphRequest, Field(discriminator="engine")]  # type: ignore[misc,assignment]
-REQUEST_MODELS["graph"] = GraphRequest
+JobRequest = Annotated[  # type: ignore[misc]
+    ClipRequest | GraphRequest | ControlRequest | AnnotationRequest | RhythmRequest,
+    Field(discriminator="engine"),
+]
+REQUEST_MODELS.update(
+    graph=GraphRequest, control=ControlRequest, annotations=AnnotationRequest, rhythm=RhythmRequest
+)
