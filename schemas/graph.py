@@ -12,7 +12,7 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from .common import Strict
-from .jobs import JobRequestBase
+from .bases import JobRequestBase
 
 
 class _Timed(Strict):

@@ -102,13 +102,13 @@ class JobInfo(Strict):
     last_event: int = Field(default=0, description="id of the newest event")
 
 
-# Engine request models defined in their own modules (they import JobRequestBase from here).
+# Engine request models defined in their own modules (they import JobRequestBase from schemas.bases).
 from .annotations import AnnotationRequest  # noqa: E402
 from .control import ControlRequest  # noqa: E402
 from .graph import GraphRequest  # noqa: E402
 from .rhythm import RhythmRequest  # noqa: E402
 
-JobRequest = Annotated[  # type: ignore[misc]
+JobRequest = Annotated[  # type: ignore[misc,assignment]
     ClipRequest | GraphRequest | ControlRequest | AnnotationRequest | RhythmRequest,
     Field(discriminator="engine"),
 ]
