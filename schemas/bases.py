@@ -3,7 +3,7 @@ import them without cycles)."""
 
 from __future__ import annotations
 
-from pydantic import Field
+from pydantic import Field, PrivateAttr
 
 from .clips import ClipSource
 from .common import Strict
@@ -26,3 +26,30 @@ class JobRequestBase(Strict):
     )
     budget_s: float = Field(default=10.0, gt=0, le=3600, description="anytime search budget, seconds")
     seed: int = Field(default=0, ge=0, le=2**32 - 1)
+    inputs: dict[str, str] = Field(
+        default_factory=dict,
+        max_length=64,
+        description="input files resolved to uploads: reference as written in the request -> id of the "
+        "uploaded clip or file (the API fills it at submission, so a job always reads the bytes it was "
+        "submitted with)",
+    )
+
+    _inputs: dict[str, bytes] = PrivateAttr(default_factory=dict)
+
+    def input_files(self) -> list[str]:
+        """References to the input files this request reads (control BVH, MIDI...), as written in
+        the request: a path relative to the request file (CLI) or an uploaded file's id or name
+        (API). Engines with file inputs override this; the runtime resolves every reference and
+        attaches the bytes (:meth:`attach_inputs`) before the engine runs."""
+        return []
+
+    def attach_inputs(self, files: dict[str, bytes]) -> None:
+        """Give the request the bytes of its input files, keyed by reference."""
+        self._inputs.update(files)
+
+    def input_bytes(self, ref: str) -> bytes:
+        """The bytes of an input file; ``KeyError`` naming the reference when it was not resolved."""
+        try:
+            return self._inputs[ref]
+        except KeyError:
+            raise KeyError(f"input file {ref!r} was not provided with the request") from None

@@ -11,8 +11,8 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from .common import Strict
 from .bases import JobRequestBase
+from .common import Strict
 
 
 class _Timed(Strict):

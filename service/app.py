@@ -30,8 +30,9 @@ from workers.store import Store
 
 from .errors import install_error_handlers
 from .metrics import HttpMetricsMiddleware, Metrics, observe_terminal_events
-from .routes import clips, databases, events, health, jobs
+from .routes import clips, databases, events, files, health, jobs
 from .settings import Settings, get_settings
+from .web import mount_web
 
 log = logging.getLogger("segue.service")
 
@@ -97,6 +98,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         openapi_tags=[
             {"name": "clips", "description": "uploaded motions"},
             {"name": "databases", "description": "clips + a build spec, built by a job"},
+            {"name": "files", "description": "other input files of requests (e.g. MIDI music)"},
             {"name": "jobs", "description": "synthesis requests, results and reports"},
             {"name": "events", "description": "job events (WebSocket stream, HTTP fallback)"},
             {"name": "health", "description": "liveness and metrics"},
@@ -106,9 +108,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.metrics = Metrics()
     app.state.backend = None
     install_error_handlers(app)
-    for module in (clips, databases, jobs, events, health):
+    for module in (clips, files, databases, jobs, events, health):
         app.include_router(module.router)
     app.add_middleware(HttpMetricsMiddleware, metrics=app.state.metrics)
+    mount_web(app)  # the browser front end at / (after every API route)
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:

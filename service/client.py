@@ -28,6 +28,7 @@ from websockets.exceptions import ConnectionClosedError, InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
 from schemas import ClipInfo, DatabaseInfo, DatabaseStatus, JobEvent, JobInfo, Report
+from schemas.files import FileInfo
 
 
 class SegueError(Exception):
@@ -120,6 +121,14 @@ class SegueClient:
     def delete_clip(self, clip_id: str) -> None:
         """Delete an uploaded clip."""
         self._request("DELETE", f"/v1/clips/{clip_id}")
+
+    # -- other input files ----------------------------------------------------------------------
+    def upload_file(self, path: str | Path, name: str | None = None) -> FileInfo:
+        """Upload an input file of requests (e.g. a MIDI song); requests name it by file name or id."""
+        p = Path(path)
+        with p.open("rb") as fh:
+            files = {"file": (name or p.name, fh, "application/octet-stream")}
+            return FileInfo.model_validate(self._request("POST", "/v1/files", files=files).json())
 
     # -- databases ------------------------------------------------------------------------------
     def build_database(

@@ -25,6 +25,7 @@ from schemas import DatabaseStatus, EventType, JobInfo, JobStatus, ProvenanceEnt
 from schemas.databases import DatabaseSpecBase, parse_database_spec
 from schemas.jobs import JobRequestBase, parse_job_request
 
+from .inputs import InputError, attach_from_store
 from .store import NotFoundError, Store, load_npz, now, npz_bytes
 
 log = logging.getLogger("segue.worker")
@@ -291,6 +292,10 @@ def _synth(
             "invalid_request",
             f"engine {engine_cls.name!r} needs a {engine_cls.kind!r} database, not {info.kind!r}",
         )
+    try:
+        attach_from_store(store, request)
+    except InputError as exc:
+        raise JobFailure("invalid_request", str(exc)) from None
     engine = cache.get(request.database, engine_cls, load)
 
     def save(rid: str, motion: Motion, report: Report) -> None:

@@ -29,6 +29,7 @@ from schemas.databases import DatabaseSpecBase, database_id, parse_database_spec
 from schemas.jobs import parse_job_request
 
 from .execute import JobFailure, build_database_bytes, run_search
+from .inputs import InputError, attach_from_dir
 from .store import load_npz, now
 
 Publish = Callable[[EventType, dict[str, Any]], None]
@@ -112,6 +113,10 @@ def synth_from_dir(
     if budget_s is not None and isinstance(request_data, dict):
         request_data["budget_s"] = budget_s
     request = parse_job_request(request_data)
+    try:
+        attach_from_dir(request, request_path.resolve().parent)
+    except InputError as exc:
+        raise JobFailure("invalid_request", str(exc)) from None
     try:
         info = DatabaseInfo.model_validate_json((db_dir / "info.json").read_bytes())
         arrays = load_npz((db_dir / "data.npz").read_bytes())

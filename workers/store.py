@@ -34,6 +34,7 @@ from motion import Motion, MotionError
 from motion.bvh import BvhLimits, detect_units, parse_bvh
 from motion.serialize import motion_from_arrays, motion_to_arrays
 from schemas import ClipInfo, DatabaseInfo, JobInfo, Report
+from schemas.files import FileInfo
 
 Arrays = dict[str, Any]
 
@@ -69,6 +70,14 @@ def load_npz(data: bytes) -> dict[str, np.ndarray]:
         return {k: z[k] for k in z.files}
 
 
+def _media_type(data: bytes) -> str:
+    if data[:4] == b"MThd":
+        return "audio/midi"
+    if data[:9].upper().startswith(b"HIERARCHY") or data[:2] == b"\x1f\x8b":
+        return "application/x-bvh"
+    return "application/octet-stream"
+
+
 def _safe_id(value: str) -> str:
     if not value or any(c not in "0123456789abcdefghijklmnopqrstuvwxyz-_" for c in value) or len(value) > 80:
         raise NotFoundError(f"no such id {value!r}")
@@ -80,7 +89,7 @@ class Store:
 
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root)
-        for sub in ("clips", "databases", "jobs"):
+        for sub in ("clips", "files", "databases", "jobs"):
             (self.root / sub).mkdir(parents=True, exist_ok=True)
 
     # -- clips --------------------------------------------------------------------------------
@@ -187,6 +196,65 @@ class Store:
         if not d.exists():
             raise NotFoundError(f"no database {db_id!r}")
         shutil.rmtree(d, ignore_errors=True)
+
+    # -- other input files (MIDI...) ------------------------------------------------------------
+    def put_file(self, name: str, data: bytes) -> FileInfo:
+        """Store an uploaded input file once per content hash (no parsing: engines validate it)."""
+        digest = hashlib.sha256(data).hexdigest()
+        meta = self.root / "files" / f"{digest}.json"
+        if meta.exists():
+            return FileInfo.model_validate_json(meta.read_bytes())
+        info = FileInfo(
+            id=digest, name=name, size_bytes=len(data), media_type=_media_type(data), created_at=now()
+        )
+        _atomic_write(self.root / "files" / f"{digest}.bin", data)
+        _atomic_write(meta, info.model_dump_json().encode())
+        return info
+
+    def file_info(self, file_id: str) -> FileInfo:
+        p = self.root / "files" / f"{_safe_id(file_id)}.json"
+        if not p.exists():
+            raise NotFoundError(f"no file {file_id!r}")
+        return FileInfo.model_validate_json(p.read_bytes())
+
+    def file_bytes(self, file_id: str) -> bytes:
+        p = self.root / "files" / f"{_safe_id(file_id)}.bin"
+        if not p.exists():
+            raise NotFoundError(f"no file {file_id!r}")
+        return p.read_bytes()
+
+    def list_files(self) -> list[FileInfo]:
+        infos = [FileInfo.model_validate_json(p.read_bytes()) for p in (self.root / "files").glob("*.json")]
+        return sorted(infos, key=lambda f: f.created_at)
+
+    def input_bytes(self, upload_id: str) -> bytes:
+        """The bytes of an uploaded clip or file by id."""
+        try:
+            return self.clip_bytes(upload_id)
+        except NotFoundError:
+            return self.file_bytes(upload_id)
+
+    def find_input(self, ref: str) -> str:
+        """Resolve a request's input reference to an upload id: a clip or file id, or the name of an
+        uploaded clip or file (the newest upload of that name)."""
+        for lookup in (self.clip_info, self.file_info):
+            try:
+                return lookup(ref).id
+            except NotFoundError:
+                pass
+        base = ref.replace("\\", "/").rsplit("/", 1)[-1]
+        named: list[tuple[datetime, str]] = [
+            (c.created_at, c.id)
+            for c in self.list_clips()
+            if c.name in (ref, base) or c.name.removesuffix(".gz") in (ref, base)
+        ]
+        named += [(f.created_at, f.id) for f in self.list_files() if f.name in (ref, base)]
+        if not named:
+            raise NotFoundError(
+                f"no uploaded clip or file named {ref!r}; upload it first (POST /v1/clips for BVH, "
+                "POST /v1/files for other files)"
+            )
+        return max(named)[1]
 
     # -- jobs and results -----------------------------------------------------------------------
     def job_dir(self, job_id: str) -> Path:

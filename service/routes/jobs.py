@@ -12,6 +12,7 @@ from motion import ExportError
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
 from schemas.jobs import JobKind, JobStatus
 from workers.backend import JobBackend
+from workers.inputs import InputError, resolve_inputs
 
 from ..deps import AuthDep, BackendDep, MetricsDep, SettingsDep, StoreDep
 from ..errors import ApiError, conflict, responses
@@ -66,6 +67,10 @@ async def submit(
             "wrong_database_kind",
             f"engine {engine!r} needs a {engine_cls.kind!r} database; database {db.id} is {db.kind!r}",
         )
+    try:
+        job_request.inputs = await run_in_threadpool(resolve_inputs, store, job_request)
+    except InputError as exc:
+        raise ApiError(422, "input_not_found", str(exc), {"inputs": job_request.input_files()}) from None
     payload = {"request": job_request.model_dump(mode="json")}
     return await submit_job(store, backend, metrics, JobKind.synth, payload, engine=engine, database=db.id)
 

@@ -22,6 +22,10 @@ class ScriptedRequest(JobRequestBase):
     steps: int = Field(default=5, ge=1, le=1000)
     step_s: float = Field(default=0.1, ge=0, le=60)
     fail_at: int | None = Field(default=None, description="raise an engine error at this step")
+    input: str | None = Field(default=None, description="an input file; its size becomes a score term")
+
+    def input_files(self) -> list[str]:
+        return [self.input] if self.input else []
 
 
 @register
@@ -33,6 +37,7 @@ class ScriptedEngine(Engine):
         clip = self.library.motions[0]
         name = self.library.names[0]
         t0 = time.monotonic()
+        extra = {"input_bytes": float(len(request.input_bytes(request.input)))} if request.input else {}
         for i in range(request.steps):
             if should_stop() or time.monotonic() - t0 > budget_s:
                 return
@@ -44,7 +49,7 @@ class ScriptedEngine(Engine):
                 Solution(
                     motion=clip.slice(0, n),
                     score=float(request.steps - i),
-                    terms={"remaining": float(request.steps - i)},
+                    terms={"remaining": float(request.steps - i), **extra},
                     provenance=[(name, f) for f in range(n)],
                 )
             )

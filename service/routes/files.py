@@ -1,0 +1,86 @@
+"""``/v1/files``: upload input files other than clips (e.g. a MIDI song), list and get them.
+
+A synthesis request refers to an input file by the name it was uploaded with or by its id; the
+job records the resolved id at submission (``inputs``), so later uploads do not change a job.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query, Request, Response, status
+from starlette.concurrency import run_in_threadpool
+
+from schemas.files import FileInfo
+from workers.store import NotFoundError
+
+from ..deps import AuthDep, SettingsDep, StoreDep
+from ..errors import responses
+from ..uploads import read_upload
+
+router = APIRouter(prefix="/v1/files", tags=["files"])
+
+_UPLOAD_BODY: dict[str, Any] = {
+    "requestBody": {
+        "required": True,
+        "description": "Any input file (e.g. a standard MIDI file): as multipart field ``file``, or as the "
+        "raw body with ``?name=``.",
+        "content": {
+            "multipart/form-data": {
+                "schema": {
+                    "type": "object",
+                    "required": ["file"],
+                    "properties": {"file": {"type": "string", "format": "binary"}},
+                }
+            },
+            "application/octet-stream": {"schema": {"type": "string", "format": "binary"}},
+        },
+    }
+}
+
+
+@router.post(
+    "",
+    status_code=status.HTTP_201_CREATED,
+    response_model=FileInfo,
+    dependencies=[AuthDep],
+    openapi_extra=_UPLOAD_BODY,
+    responses=responses(
+        400,
+        401,
+        413,
+        422,
+        extra={200: {"model": FileInfo, "description": "the same bytes were already uploaded"}},
+    ),
+)
+async def upload_file(
+    request: Request,
+    response: Response,
+    store: StoreDep,
+    settings: SettingsDep,
+    name: Annotated[str | None, Query(max_length=255, description="file name (raw-body uploads)")] = None,
+) -> FileInfo:
+    """Upload an input file, stored once per content hash (201 new, 200 already there). Its content
+    is checked by the engine that reads it, when a job runs."""
+    file_name, data = await read_upload(request, settings.max_upload_bytes, name)
+    try:
+        existing: FileInfo | None = store.file_info(hashlib.sha256(data).hexdigest())
+    except NotFoundError:
+        existing = None
+    if existing is not None:
+        response.status_code = status.HTTP_200_OK
+        return existing
+    return await run_in_threadpool(store.put_file, file_name, data)
+
+
+@router.get("", response_model=list[FileInfo])
+async def list_files(store: StoreDep) -> list[FileInfo]:
+    """Every uploaded file, oldest first."""
+    return store.list_files()
+
+
+@router.get("/{file_id}", response_model=FileInfo, responses=responses(404, 422))
+async def get_file(file_id: str, store: StoreDep) -> FileInfo:
+    """One file by id."""
+    return store.file_info(file_id)

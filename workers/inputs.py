@@ -1,0 +1,63 @@
+"""Input files of a synthesis request (a control BVH, a MIDI song...): resolved and attached.
+
+A request names its files with :meth:`schemas.bases.JobRequestBase.input_files`. Through the API
+every reference is resolved at submission to the id of an upload (clip or file) and recorded in the
+request's ``inputs``, so the job reads exactly the bytes it was submitted with; the CLI reads them
+from paths relative to the request file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from schemas.bases import JobRequestBase
+
+from .store import NotFoundError, Store
+
+MAX_INPUT_BYTES = 256 * 1024 * 1024
+"""Largest input file the CLI reads (the API's upload limit applies to uploads)."""
+
+
+class InputError(ValueError):
+    """An input file that cannot be found or read; the message names the reference."""
+
+
+def resolve_inputs(store: Store, request: JobRequestBase) -> dict[str, str]:
+    """Reference -> upload id for every input file of ``request`` (ids given in ``inputs`` are
+    checked, the others looked up by id or name). Raises :class:`InputError` naming a missing one."""
+    resolved: dict[str, str] = {}
+    for ref in request.input_files():
+        given = request.inputs.get(ref, ref)
+        try:
+            resolved[ref] = store.find_input(given)
+        except NotFoundError as exc:
+            raise InputError(f"input file {ref!r}: {exc}") from None
+    return resolved
+
+
+def attach_from_store(store: Store, request: JobRequestBase) -> None:
+    """Attach the bytes of every input file from the store (worker side)."""
+    ids = resolve_inputs(store, request)
+    files = {}
+    for ref, upload_id in ids.items():
+        try:
+            files[ref] = store.input_bytes(upload_id)
+        except NotFoundError as exc:
+            raise InputError(f"input file {ref!r}: {exc} (was it deleted after submission?)") from None
+    request.attach_inputs(files)
+
+
+def attach_from_dir(request: JobRequestBase, base: Path) -> None:
+    """Attach the bytes of every input file from paths relative to ``base`` (the request file's
+    folder; absolute paths are used as they are)."""
+    files = {}
+    for ref in request.input_files():
+        path = Path(ref) if Path(ref).is_absolute() else base / ref
+        try:
+            size = path.stat().st_size
+            if size > MAX_INPUT_BYTES:
+                raise InputError(f"input file {ref!r} is {size} bytes (limit {MAX_INPUT_BYTES})")
+            files[ref] = path.read_bytes()
+        except OSError as exc:
+            raise InputError(f"input file {ref!r} ({path}): {exc.strerror or exc}") from None
+    request.attach_inputs(files)
