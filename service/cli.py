@@ -3,6 +3,7 @@
 Commands::
 
     segue inspect FILE [--json] [--units U]       frames, fps, joints, height and units guess
+    segue beats FILE [--json] [--joints A,B] [--positions] [--tempo LO:HI]   motion beats (Kim et al. 2003)
     segue convert IN OUT [--fps N] [--target T]   BVH -> .bvh/.bvh.gz/.glb/.json/.npz
     segue samples                                 list the bundled sample clips
     segue demo [--out DIR]                        inspect + convert a bundled sample
@@ -31,6 +32,7 @@ from engines.base import EngineError
 from engines.registry import UnavailableError, load_plugins
 from motion import Motion, MotionError
 from motion.allocator import tune_allocator
+from motion.beats import detect_beats
 from motion.bvh import BvhLimits, detect_units
 from motion.export.targets import TARGETS
 from motion.ground import add_ground_root
@@ -99,6 +101,47 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     note = "" if guess["plausible"] else " (implausible: declare --units)"
     src = "declared" if args.units else f"guessed from height{note}"
     print(f"  units      {info['units']} ({src})")
+    return 0
+
+
+def _tempo_range(text: str) -> tuple[float, float]:
+    lo, sep, hi = text.partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        return float(lo), float(hi)
+    except ValueError:
+        raise MotionError(f"--tempo {text!r}: expected LOW:HIGH beats per minute, e.g. 40:200") from None
+
+
+def cmd_beats(args: argparse.Namespace) -> int:
+    path = _resolve(args.file)
+    motion = load_motion(path, limits=_limits(args))
+    joints: list[str | int] | None = None
+    if args.joints:
+        joints = [int(j) if j.strip().isdigit() else j.strip() for j in args.joints.split(",") if j.strip()]
+    beats = detect_beats(
+        motion, joints=joints, use_positions=args.positions, tempo_bpm=_tempo_range(args.tempo)
+    )
+    info = {
+        "file": str(path),
+        "fps": motion.fps,
+        "period_s": round(beats.period_s, 6),
+        "bpm": round(beats.bpm, 4),
+        "phase_s": round(beats.phase_s, 6),
+        "beats_s": [round(float(t), 6) for t in beats.times_s],
+        "candidates": int(beats.candidates_s.size),
+    }
+    if args.json:
+        print(json.dumps(info))
+        return 0
+    frames = beats.frames(motion.fps)
+    print(f"{path}")
+    period_frames = beats.period_s * motion.fps
+    print(f"  tempo      {info['bpm']:.1f} bpm (period {beats.period_s:.3f} s = {period_frames:.2f} frames)")
+    print(f"  beats      {len(frames)} from {info['candidates']} candidates")
+    shown = ", ".join(f"{t:.3f}" for t in beats.times_s[:16])
+    print(f"  times (s)  {shown}{', ...' if len(frames) > 16 else ''}")
     return 0
 
 
@@ -272,6 +315,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--units", choices=units, help="declare the file's length unit instead of guessing")
     limits(p)
     p.set_defaults(func=cmd_inspect)
+
+    p = sub.add_parser("beats", help="motion beats of a BVH file: tempo and beat times (Kim et al. 2003)")
+    p.add_argument("file", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
+    p.add_argument(
+        "--json", action="store_true", help='print one JSON object {"period_s", "bpm", "beats_s", ...}'
+    )
+    p.add_argument(
+        "--joints", help="comma-separated joint names or indices to analyse (default: major joints)"
+    )
+    p.add_argument("--positions", action="store_true", help="analyse joint positions instead of orientations")
+    p.add_argument(
+        "--tempo", default="40:200", help="tempo range LOW:HIGH in beats per minute (default 40:200)"
+    )
+    limits(p)
+    p.set_defaults(func=cmd_beats)
 
     p = sub.add_parser("convert", help="convert a BVH file by output extension: " + " ".join(OUTPUT_SUFFIXES))
     p.add_argument("input", help="BVH file (.bvh, .bvh.gz) or sample:NAME")

@@ -1,0 +1,1 @@
+"""Rhythmic-motion synthesis (Kim, Park & Shin 2003): see :mod:`engines.rhythm.engine`."""

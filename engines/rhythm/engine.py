@@ -1,0 +1,428 @@
+"""The rhythmic synthesis engine (Kim, Park & Shin 2003) as the runtime sees it.
+
+Database kind ``rhythm`` (:class:`schemas.rhythm.RhythmDatabaseSpec`): ``build`` analyses the
+motion beats of the examples, cuts them into basic movements, groups them and builds the movement
+transition graph (:mod:`engines.rhythm.build`). Request ``engine: "rhythm"``
+(:class:`schemas.rhythm.RhythmRequest`): the music's beats (:mod:`engines.rhythm.music`), a walk
+of the graph with blended, time-warped movements (:mod:`engines.rhythm.synth`), optional control
+(per-beat direction/speed, a path to follow in formation, crowds steering around each other,
+couples), foot cleanup, and a report with the music beats, the motion beats detected in the
+output and the beat-align scores.
+
+Output: one character is a plain motion on the database skeleton. Several characters (or a
+couple) are one motion on a combined skeleton: a static ``world`` root with each character's
+skeleton under it, joint names prefixed ``c0_``, ``c1_``... (couples: ``c0_lead_``,
+``c0_follow_``), each character's hip carrying position channels. Provenance follows character 0
+(the leader of couple 0).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy.ndimage import gaussian_filter1d
+from scipy.signal import argrelextrema
+
+from motion import Motion, MotionError, Skeleton
+from motion.metrics import foot_slip
+from motion.skeleton import POSITION_CHANNELS
+
+from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
+from ..library import MotionLibrary
+from .build import build_rhythm, tables_from_arrays
+from .music import MusicError, bpm_beats, parse_midi
+from .synth import Control, Dancers, Tables, initial_dancers, synthesize
+
+Array = npt.NDArray[np.float64]
+
+
+def music_beats(request: Any) -> Array:
+    """``(B,)`` beat times in seconds of the request's music (:class:`schemas.rhythm.Music`)."""
+    music = request.music
+    try:
+        if music.bpm is not None:
+            beats = bpm_beats(music.bpm, music.duration_s, music.offset_s)
+        elif music.midi is not None:
+            try:
+                data = request.input_bytes(music.midi)
+            except KeyError as exc:
+                raise EngineError(str(exc.args[0])) from None
+            beats = parse_midi(data).beat_times()
+        else:
+            beats = np.asarray(music.beats_s, dtype=np.float64)
+    except MusicError as exc:
+        raise EngineError(f"music: {exc}") from None
+    if music.bpm is None and music.duration_s is not None:
+        beats = beats[beats <= music.duration_s + 1e-9]
+    if beats.size < 2:
+        raise EngineError(f"the music holds {beats.size} beat(s); at least 2 are needed to dance")
+    if beats[-1] > 3600:
+        raise EngineError("the music is longer than an hour")
+    return beats
+
+
+def beat_align_scores(
+    positions: Array, fps: float, music_s: Array, sigma_s: float = 0.05
+) -> tuple[float, float, Array]:
+    """Beat-align scores of ``positions (F, J, 3)`` (metres) against music beats (seconds).
+
+    Motion beats are local minima of the summed joint speed. AIST++/mint: for every motion beat
+    (minimum within +-1/6 s), ``exp(-d^2 / 2 sigma^2)`` of the distance to the nearest music beat,
+    averaged; Bailando: for every inner music beat, the same of the distance to the nearest minimum
+    of the speed smoothed by a 5-frames-at-60-fps Gaussian. Returns (mint, bailando, motion beats s).
+    """
+    if positions.shape[0] < 5:
+        return 0.0, 0.0, np.zeros(0)
+    speed = np.linalg.norm(np.diff(positions, axis=0), axis=-1).sum(axis=1) * fps
+    mb = argrelextrema(speed, np.less, order=max(1, int(round(10 / 60 * fps))))[0] / fps
+    mint = (
+        float(np.mean([np.exp(-np.min((music_s - b) ** 2) / (2 * sigma_s**2)) for b in mb]))
+        if mb.size
+        else 0.0
+    )
+    mb2 = argrelextrema(gaussian_filter1d(speed, 5 / 60 * fps), np.less)[0] / fps
+    inner = music_s[1:-1]
+    if mb2.size and inner.size:
+        bail = float(np.mean([np.exp(-np.min((mb2 - m) ** 2) / (2 * sigma_s**2)) for m in inner]))
+    else:
+        bail = 0.0
+    return mint, bail, mb
+
+
+def combined_skeleton(skeletons: list[Skeleton], prefixes: list[str]) -> Skeleton:
+    """One skeleton holding several characters under a static ``world`` root (module doc)."""
+    names: list[str] = ["world"]
+    parents: list[int] = [-1]
+    offsets: list[Array] = [np.zeros((1, 3))]
+    channels: list[tuple[str, ...]] = [
+        ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation")
+    ]
+    es_par: list[npt.NDArray[np.intp]] = []
+    es_off: list[Array] = []
+    for sk, pre in zip(skeletons, prefixes, strict=True):
+        base = len(names)
+        names += [pre + n for n in sk.names]
+        parents += [0] + [int(p) + base for p in sk.parents[1:]]
+        offsets.append(sk.offsets)
+        root_ch = tuple(c for c in sk.channels[0] if c.endswith("rotation"))
+        channels += [POSITION_CHANNELS + root_ch, *sk.channels[1:]]
+        es_par.append(sk.end_site_parents + base)
+        es_off.append(sk.end_site_offsets)
+    return Skeleton(
+        tuple(names),
+        np.array(parents),
+        np.concatenate(offsets),
+        tuple(channels),
+        np.concatenate(es_par),
+        np.concatenate(es_off),
+    )
+
+
+def _path_control(
+    path: Array, speed: float, beats: Array, b: int, duration: float, offsets: Array
+) -> Callable[[int, Dancers], Control]:
+    """Follow ``path (P, 2)`` at ``speed`` m/s, each character on the offset curve given by its
+    formation slot ``offsets (C, 2)`` (lateral x, longitudinal z) — marching rows keep their
+    formation through turns because each row follows its own offset curve."""
+    seg = np.diff(path, axis=0)
+    seg_len = np.linalg.norm(seg, axis=1)
+    keep = seg_len > 1e-9
+    if not keep.any():
+        raise EngineError("the path needs two distinct points")
+    valid = np.flatnonzero(keep)
+    cum = np.concatenate(([0.0], np.cumsum(seg_len)))
+    total = float(cum[-1])
+
+    def point(s: Array) -> tuple[Array, Array]:
+        s = np.clip(s, 0.0, total)
+        i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
+        i = valid[np.minimum(np.searchsorted(valid, i), valid.size - 1)]  # skip zero-length segments
+        tangent = seg[i] / seg_len[i, None]
+        return path[i] + tangent * (s - cum[i])[:, None], tangent
+
+    def control(beat: int, d: Dancers) -> Control:
+        t_end = beats[min(beat + b, beats.size - 1)] - beats[0]
+        s = speed * t_end + offsets[:, 1]
+        p, tangent = point(s)
+        side = np.stack((tangent[:, 1], -tangent[:, 0]), axis=-1)  # the path frame's +X (the body's left)
+        goal = p + side * offsets[:, 0:1]
+        delta = goal - d.pos
+        dist = np.linalg.norm(delta, axis=1)
+        head = np.arctan2(delta[:, 0], delta[:, 1])
+        return Control(speed=np.clip(dist / duration, 0.0, 2.5 * max(speed, 0.1)), heading=head)
+
+    return control
+
+
+def _directions_control(keys: list[Any], default_speed: float | None) -> Callable[[int, Dancers], Control]:
+    beats_k = np.array([k.beat for k in keys])
+    heads = np.radians(np.array([k.heading_deg for k in keys]))
+    speeds = []
+    cur = np.nan if default_speed is None else default_speed
+    for k in keys:
+        cur = k.speed if k.speed is not None else cur
+        speeds.append(cur)
+    spd = np.array(speeds, dtype=np.float64)
+
+    def control(beat: int, d: Dancers) -> Control:
+        i = int(np.searchsorted(beats_k, beat, side="right")) - 1
+        if i < 0:
+            return Control(
+                speed=np.full(d.count, np.nan if default_speed is None else default_speed),
+                heading=np.full(d.count, np.nan),
+            )
+        return Control(speed=np.full(d.count, spd[i]), heading=np.full(d.count, heads[i]))
+
+    return control
+
+
+def _with_avoidance(
+    inner: Callable[[int, Dancers], Control] | None, radius: float, default_speed: float
+) -> Callable[[int, Dancers], Control | None]:
+    """Add a separation force (Helbing-style social force, 1/d falloff inside ``radius``) to the
+    desired direction; characters with no other target only steer when someone is near."""
+
+    def control(beat: int, d: Dancers) -> Control | None:
+        base = inner(beat, d) if inner is not None else None
+        diff = d.pos[:, None, :] - d.pos[None, :, :]  # (C, C, 2): C characters, not database frames
+        dist = np.linalg.norm(diff, axis=-1)
+        np.fill_diagonal(dist, np.inf)
+        near = dist < radius
+        if not near.any():
+            return base
+        push = ((radius - np.minimum(dist, radius)) / radius / np.maximum(dist, 1e-6))[..., None] * diff
+        force = push.sum(axis=1)  # (C, 2)
+        mag = np.linalg.norm(force, axis=1)
+        if base is None:
+            base = Control(speed=np.full(d.count, np.nan), heading=np.full(d.count, np.nan))
+        want = np.where(
+            np.isnan(base.heading)[:, None],
+            np.zeros((d.count, 2)),
+            np.stack((np.sin(base.heading), np.cos(base.heading)), axis=-1),
+        )
+        steer = want + force
+        pushed = mag > 1e-6
+        heading = np.where(pushed, np.arctan2(steer[:, 0], steer[:, 1]), base.heading)
+        speed = np.where(pushed & np.isnan(base.speed), np.minimum(mag, 1.0) * default_speed, base.speed)
+        return Control(speed=speed, heading=heading)
+
+    return control
+
+
+class RhythmEngine(Engine):
+    """Music-synchronized rhythmic motion from a movement transition graph (module doc)."""
+
+    name = "rhythm"
+    kind = "rhythm"
+
+    def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
+        super().__init__(library, arrays)
+        self.tables: Tables
+        self.meta: dict[str, Any]
+        self.tables, self.meta = tables_from_arrays(arrays)
+        leaders = self.meta["leaders"]
+        followers = self.meta["followers"]
+        self.leader_skeleton = library.clip(leaders[0]).skeleton
+        self.follower_skeleton = library.clip(followers[0]).skeleton if followers and followers[0] else None
+
+    @classmethod
+    def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+        return build_rhythm(spec, library, emit, should_stop)
+
+    # -- synthesis ----------------------------------------------------------------------------
+    def make_control(
+        self, request: Any, beats: Array, dancers: Dancers
+    ) -> Callable[[int, Dancers], Control | None] | None:
+        """The per-movement control of a request (None: free dancing)."""
+        t = self.tables
+        duration = t.beats_per_movement * float(np.median(np.diff(beats)))
+        inner: Callable[[int, Dancers], Control] | None = None
+        if request.path is not None:
+            path = np.asarray(request.path, dtype=np.float64)
+            start = dancers.pos.copy()
+            # formation slots relative to the first character, in the path's initial frame
+            tan = path[1] - path[0]
+            yaw0 = float(np.arctan2(tan[0], tan[1]))
+            rel = start - start[:1]
+            c, s = np.cos(-yaw0), np.sin(-yaw0)
+            offsets = np.stack((c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]), axis=-1)
+            inner = _path_control(
+                path,
+                0.8 if request.speed is None else request.speed,
+                beats,
+                t.beats_per_movement,
+                duration,
+                offsets,
+            )
+        elif request.directions is not None:
+            inner = _directions_control(request.directions, request.speed)
+        elif request.speed is not None:
+            spd = float(request.speed)
+
+            def inner_speed(beat: int, d: Dancers) -> Control:
+                return Control(speed=np.full(d.count, spd), heading=d.yaw.copy())
+
+            inner = inner_speed
+        if request.avoid and dancers.count > 1:
+            return _with_avoidance(inner, 0.9 * request.spacing_m, 0.5)
+        return inner
+
+    def synthesize(self, request: Any, beats: Array) -> tuple[list[Motion], list[Motion], Any]:
+        """Character motions (leaders), partner motions (couples) and the raw rendering."""
+        t = self.tables
+        if request.couples and not t.couples:
+            raise EngineError("couples need a database built with 'partners'")
+        fps = float(request.fps or t.fps)
+        start = request.start
+        start_xz = np.asarray(start.position if start else (0.0, 0.0), dtype=np.float64)
+        start_yaw = float(np.radians(start.heading_deg)) if start else 0.0
+        dancers = initial_dancers(
+            request.characters, request.formation, request.spacing_m, start_xz, start_yaw
+        )
+        control = self.make_control(request, beats, dancers)
+        rng = np.random.default_rng(request.seed)
+        r = synthesize(t, beats, fps, dancers, rng, control, accent=request.accent)
+        leaders = [
+            Motion(self.leader_skeleton, r.root[c], r.rot[c], fps, r.jt[c], "m", f"rhythm_{c}")
+            for c in range(request.characters)
+        ]
+        partners: list[Motion] = []
+        if (
+            request.couples
+            and r.proot is not None
+            and r.prot is not None
+            and self.follower_skeleton is not None
+        ):
+            partners = [
+                Motion(
+                    self.follower_skeleton,
+                    r.proot[c],
+                    r.prot[c],
+                    fps,
+                    np.zeros((r.proot.shape[1], 0, 3)),
+                    "m",
+                    f"partner_{c}",
+                )
+                for c in range(request.characters)
+            ]
+        return leaders, partners, r
+
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+        beats = music_beats(request)
+        emit.progress(0.1, f"{beats.size} music beats")
+        leaders, partners, r = self.synthesize(request, beats)
+        if request.foot_cleanup:
+            leaders = [_clean(m) for m in leaders]
+            partners = [_clean(m) for m in partners]
+            if should_stop():
+                return
+        first = leaders[0]
+        pos0 = first.global_positions()
+        mint, bail, speed_minima = beat_align_scores(pos0, first.fps, beats)
+        motion_beats = _motion_beats(first)
+        inner = beats[(beats >= 0) & (beats <= first.duration_s)]
+        if motion_beats.size and inner.size:
+            err = np.abs(motion_beats[:, None] - inner[None, :]).min(axis=1)
+            beat_err = float(np.mean(err))
+        else:
+            beat_err = float("nan")
+        motion = _assemble(leaders, partners, request.couples)
+        extra_metrics: dict[str, float] = {}
+        if motion is not first:
+            # the runtime's foot slip sees one skeleton; on a crowd, average it per character
+            slips = [foot_slip(m) for m in leaders + partners]
+            extra_metrics = {
+                "foot_slip_m_s": float(np.mean(slips)),
+                "foot_slip_max_m_s": float(np.max(slips)),
+            }
+        names = self.meta["examples"]
+        src = self.tables.src_frames
+        dom = r.dominant[0]
+        u = r.u
+        i0 = np.minimum(np.floor(u).astype(np.intp), src.shape[1] - 1)
+        frames = np.rint(src[dom, i0]).astype(np.int64)
+        provenance = [(names[int(self.tables.src_clip[m])], int(f)) for m, f in zip(dom, frames, strict=True)]
+        movements = [
+            dict(
+                p,
+                clips=[names[int(self.tables.src_clip[m])] for m in p["members"]],
+                source_start_frames=[int(round(float(src[m, 0]))) for m in p["members"]],
+            )
+            for p in r.plans
+        ]
+        terms = {
+            "beat_error_s": beat_err if np.isfinite(beat_err) else 0.0,
+            "misaligned": 1.0 - 0.5 * (mint + bail),
+        }
+        emit.solution(
+            Solution(
+                motion=motion,
+                score=terms["misaligned"],
+                terms=terms,
+                provenance=provenance,
+                metrics={
+                    "beat_align_mint": mint,
+                    "beat_align_bailando": bail,
+                    "music_bpm": 60.0 / float(np.median(np.diff(beats))),
+                    "characters": float(request.characters),
+                    **extra_metrics,
+                },
+                annotations={
+                    "music_beats_s": [round(float(b), 4) for b in beats],
+                    "motion_beats_s": [round(float(b), 4) for b in motion_beats],
+                    "speed_minima_s": [round(float(b), 4) for b in speed_minima],
+                    "movements": movements,
+                    "characters": request.characters,
+                    "couples": bool(request.couples),
+                },
+            )
+        )
+
+
+def _clean(m: Motion) -> Motion:
+    from motion.footskate import remove_foot_skate
+
+    try:
+        return remove_foot_skate(m)
+    except MotionError:
+        return m  # no feet found by name: nothing to keep planted
+
+
+def _motion_beats(m: Motion) -> Array:
+    from motion.beats import detect_beats
+
+    try:
+        return np.asarray(detect_beats(m).times_s)
+    except MotionError:
+        return np.zeros(0)
+
+
+def _assemble(leaders: list[Motion], partners: list[Motion], couples: bool) -> Motion:
+    if len(leaders) == 1 and not partners:
+        return leaders[0]
+    chars: list[Motion] = []
+    prefixes: list[str] = []
+    for c, m in enumerate(leaders):
+        chars.append(m)
+        prefixes.append(f"c{c}_lead_" if couples else f"c{c}_")
+        if partners:
+            chars.append(partners[c])
+            prefixes.append(f"c{c}_follow_")
+    sk = combined_skeleton([m.skeleton for m in chars], prefixes)
+    f = chars[0].num_frames
+    rot = np.concatenate([np.tile([0.0, 0.0, 0.0, 1.0], (f, 1, 1))] + [m.rotations for m in chars], axis=1)
+    jt = np.stack([m.root_positions for m in chars], axis=1)  # each character's hip translation
+    if any(m.joint_translations.shape[1] for m in chars):
+        raise EngineError("several characters with animated non-root translations are not supported")
+    return replace(
+        chars[0],
+        skeleton=sk,
+        root_positions=np.zeros((f, 3)),
+        rotations=rot,
+        joint_translations=jt,
+        name="rhythm",
+    )

@@ -1,0 +1,405 @@
+"""Synthesis (Kim, Park & Shin 2003, Sec. 5): walk the movement transition graph while the music
+lasts, blend each node's movements, time-warp them onto the music beats and stitch them.
+
+Everything is vectorized over characters ``C`` (a crowd shares one music clock, so the time warp
+is the same for all): per movement, a character draws its next node from ``P``, gets blend
+weights from its target speed/turn, and the movement is rendered at the output frames that fall
+in its beats by gathering precomputed movement frames (linear between frames, quaternions
+blended by normalized weighted sums after sign alignment at build time).
+
+Joins: the next movement is placed where the previous one ended (floor position and heading);
+the remaining difference of posture (root position in the placement frame and every joint's
+rotation, as a rotation vector) is added at the start of the new movement and faded out over
+``join_beats`` beats with a smoothstep, so the motion is continuous at every join.
+
+Time warp: within music beat ``k`` (from ``b_k`` to ``b_k+1``) the movement frame is
+``u = P (k mod B + s(x))`` with ``x`` the fraction of the beat elapsed and
+``s(x) = x - a sin(2 pi x) / (2 pi)`` (``a`` = ``accent``): ``s`` is monotone, ``s(0) = 0``,
+``s(1) = 1``, so every motion beat lands exactly on its music beat; ``a > 0`` slows the motion
+around the beat (rate ``1 - a``) and speeds it between beats (``1 + a``), accentuating the beat
+as the speed minimum the eye (and the beat-align scores) look for. ``a = 0`` is the paper's linear warp.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from motion import rotations as rot
+
+from .blend import GroupBlender, blend_weights, one_hot
+from .movements import _yaw_rotate_xz
+
+Array = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.intp]
+
+
+@dataclass(frozen=True, slots=True)
+class Tables:
+    """What synthesis reads (loaded once per database).
+
+    root ``(M, N, 3)``, rot ``(M, N, J, 4)`` (signs aligned to each group's medoid), jt
+    ``(M, N, K, 3)``, partner_root/partner_rot or None, end_xz ``(M, 2)``, end_yaw ``(M,)``,
+    params ``(M, 2)``, labels ``(M,)``, p ``(K, K)``, start ``(K,)``, blender, frames_per_beat
+    ``P``, beats_per_movement ``B``, fps (database), period_s, src_clip ``(M,)``, src_frames ``(M, N)``.
+    """
+
+    root: Array
+    rot: Array
+    jt: Array
+    partner_root: Array | None
+    partner_rot: Array | None
+    end_xz: Array
+    end_yaw: Array
+    params: Array
+    labels: IntArray
+    p: Array
+    start: Array
+    blender: GroupBlender
+    frames_per_beat: int
+    beats_per_movement: int
+    fps: float
+    period_s: float
+    src_clip: IntArray
+    src_frames: Array
+
+    @property
+    def frames(self) -> int:
+        return int(self.root.shape[1])
+
+    @property
+    def couples(self) -> bool:
+        return self.partner_rot is not None
+
+
+@dataclass(slots=True)
+class Dancers:
+    """State of ``C`` characters between movements (world frame, metres, radians).
+
+    pos ``(C, 2)`` floor position of the body root, yaw ``(C,)`` heading, node ``(C,)`` current
+    group (-1 before the first movement), last_root ``(C, 3)`` / last_rot ``(C, J, 4)`` the pose at
+    the end of the previous movement (root rotation in the world), and the partner's likewise.
+    """
+
+    pos: Array
+    yaw: Array
+    node: IntArray
+    last_root: Array | None = None
+    last_rot: Array | None = None
+    last_proot: Array | None = None
+    last_prot: Array | None = None
+
+    @property
+    def count(self) -> int:
+        return int(self.pos.shape[0])
+
+
+@dataclass(slots=True)
+class MovementPlan:
+    """One movement of every character, ready to render at any movement frames ``u``."""
+
+    members: IntArray  # (C, g)
+    weights: Array  # (C, g)
+    group: IntArray  # (C,)
+    pos: Array  # (C, 2) placement
+    yaw: Array  # (C,)
+    extra_yaw: Array  # (C,) turn added progressively over the movement
+    extra_xz: Array  # (C, 2) displacement added progressively (movement frame)
+    d_root: Array  # (C, 3) join offset of the root (movement frame)
+    d_rot: Array  # (C, J, 3) join offset of the rotations (rotation vectors)
+    fade_frames: float  # movement frames over which the join offsets fade out
+    d_proot: Array | None = None
+    d_prot: Array | None = None
+
+
+@dataclass(slots=True)
+class Control:
+    """Per-movement targets: ``speed (C,)`` m/s and desired ``heading (C,)`` radians, NaN = free."""
+
+    speed: Array
+    heading: Array
+
+
+@dataclass(slots=True)
+class Rendered:
+    """Rendered frames of all characters: root ``(C, F, 3)``, rot ``(C, F, J, 4)``, jt ``(C, F, K, 3)``,
+    partner arrays or None, and for provenance the dominant member ``(C, F)`` and its frame ``u (F,)``."""
+
+    root: Array
+    rot: Array
+    jt: Array
+    proot: Array | None
+    prot: Array | None
+    dominant: IntArray
+    u: Array
+    plans: list[dict[str, Any]] = field(default_factory=list)
+
+
+def warp(
+    beats_s: Array, times_s: Array, beats_per_movement: int, frames_per_beat: int, accent: float
+) -> tuple[IntArray, Array]:
+    """Movement index ``(F,)`` and movement frame ``u (F,)`` of every output time (module doc).
+
+    Times before the first beat hold the first frame; the final beat closes the last movement."""
+    b = np.asarray(beats_s, dtype=np.float64)
+    k = np.clip(np.searchsorted(b, times_s, side="right") - 1, 0, b.size - 2)
+    x = np.clip((times_s - b[k]) / (b[k + 1] - b[k]), 0.0, 1.0)
+    s = x - accent * np.sin(2.0 * np.pi * x) / (2.0 * np.pi)
+    return (k // beats_per_movement).astype(np.intp), frames_per_beat * (k % beats_per_movement + s)
+
+
+def _smooth_fade(u: Array, length: float) -> Array:
+    """1 at ``u = 0`` falling to 0 at ``u = length`` (smoothstep), 0 after."""
+    x = np.clip(u / max(length, 1e-9), 0.0, 1.0)
+    return np.asarray(1.0 - x * x * (3.0 - 2.0 * x))
+
+
+def _blend_at(table: Array, members: IntArray, weights: Array, u: Array, normalize_quat: bool) -> Array:
+    """Blend ``table (M, N, ...)`` over members ``(C, g)`` with ``weights`` at frames ``u (F,)``:
+    ``(C, F, ...)`` (linear between neighbouring frames; normalized when quaternions)."""
+    n = table.shape[1]
+    i0 = np.minimum(np.floor(u).astype(np.intp), n - 2)
+    a = (u - i0).reshape((1, -1) + (1,) * (table.ndim - 2))
+    out = np.zeros((members.shape[0], u.size) + table.shape[2:])
+    for g in range(members.shape[1]):
+        m = members[:, g][:, None]
+        v = table[m, i0[None, :]] * (1.0 - a) + table[m, i0[None, :] + 1] * a  # (C, F, ...)
+        out += v * weights[:, g].reshape((-1,) + (1,) * (v.ndim - 1))
+    if normalize_quat:
+        out = out / np.linalg.norm(out, axis=-1, keepdims=True)
+    return np.asarray(out)
+
+
+def initial_dancers(count: int, formation: str, spacing: float, start_xz: Array, start_yaw: float) -> Dancers:
+    """Characters placed in a formation around ``start_xz`` facing ``start_yaw``: ``grid`` (rows
+    behind each other), ``line`` (side by side), ``column`` (one behind the other), ``circle``."""
+    i = np.arange(count, dtype=np.float64)
+    if formation == "line":
+        local = np.stack((i - (count - 1) / 2, np.zeros(count)), axis=-1) * spacing
+    elif formation == "column":
+        local = np.stack((np.zeros(count), -i), axis=-1) * spacing
+    elif formation == "circle":
+        radius = max(spacing * count / (2 * np.pi), spacing if count > 1 else 0.0)
+        ang = 2 * np.pi * i / max(count, 1)
+        local = np.stack((radius * np.sin(ang), radius * np.cos(ang)), axis=-1)
+    else:
+        cols = int(np.ceil(np.sqrt(count)))
+        local = np.stack((i % cols - (cols - 1) / 2, -(i // cols)), axis=-1) * spacing
+    pos = start_xz[None, :] + _yaw_rotate_xz(local, np.full(count, start_yaw))
+    return Dancers(pos=pos, yaw=np.full(count, start_yaw), node=np.full(count, -1, dtype=np.intp))
+
+
+def _sample_rows(cum: Array, rng: np.random.Generator) -> IntArray:
+    """One draw from each row of cumulative probabilities ``cum (C, K)``."""
+    draws = np.asarray(rng.random(cum.shape[0]), dtype=np.float64)
+    r = draws[:, None] * cum[:, -1:]
+    return np.asarray(np.minimum((r > cum).sum(axis=1), cum.shape[1] - 1), dtype=np.intp)
+
+
+def plan_movement(
+    t: Tables,
+    d: Dancers,
+    control: Control | None,
+    rng: np.random.Generator,
+    join_beats: float = 0.5,
+    max_extra_turn: float = np.radians(45.0),
+    max_extra_speed: float = 0.3,
+) -> MovementPlan:
+    """Choose each character's next node and blend, place it, and measure the join offsets.
+
+    ``control``: target speed and heading per character (NaN entries leave that parameter free).
+    Without control a random member of the node is used as is (weight 1). With it, the blend
+    weights come from the target ``(speed, turn)``; the turn the blend cannot reach and the
+    difference between the blend's net displacement and the requested travel (speed along the
+    desired heading) are added progressively over the movement (at most ``max_extra_turn``
+    radians and ``max_extra_speed`` m/s; foot cleanup removes the sliding this causes).
+    """
+    c = d.count
+    cum = (
+        np.cumsum(t.start)[None, :].repeat(c, 0)
+        if (d.node < 0).all()
+        else np.cumsum(t.p[np.maximum(d.node, 0)], axis=1)
+    )
+    group = _sample_rows(cum, rng)
+    duration = t.beats_per_movement * t.period_s
+    extra_yaw = np.zeros(c)
+    extra_xz = np.zeros((c, 2))
+    if control is None:
+        members, weights = one_hot(t.blender, group, rng)
+    else:
+        free_m, _ = one_hot(t.blender, group, rng)
+        free = t.params[free_m[:, 0]]
+        turn_goal = np.angle(np.exp(1j * (control.heading - d.yaw)))
+        target = np.stack(
+            (
+                np.where(np.isnan(control.speed), free[:, 0], control.speed),
+                np.where(np.isnan(control.heading), free[:, 1], turn_goal),
+            ),
+            axis=-1,
+        )
+        members, weights = blend_weights(t.blender, group, target)
+        got = (t.params[members] * weights[..., None]).sum(axis=1)
+        steer = ~np.isnan(control.heading)
+        extra_yaw = np.where(steer, np.clip(target[:, 1] - got[:, 1], -max_extra_turn, max_extra_turn), 0.0)
+        # travel: the net displacement of the blend vs the one asked for (speed along the desired
+        # heading), in the movement frame; the difference, capped, is added progressively
+        rel = np.where(steer, turn_goal, 0.0)
+        want = (
+            np.stack((np.sin(rel), np.cos(rel)), axis=-1) * (np.nan_to_num(control.speed) * duration)[:, None]
+        )
+        got_xz = (t.end_xz[members] * weights[..., None]).sum(axis=1)
+        miss = want - got_xz
+        norm = np.linalg.norm(miss, axis=1, keepdims=True)
+        miss = miss * np.minimum(1.0, max_extra_speed * duration / np.maximum(norm, 1e-12))
+        extra_xz = np.where(np.isnan(control.speed)[:, None], 0.0, miss)
+    plan = MovementPlan(
+        members=members,
+        weights=weights,
+        group=group,
+        pos=d.pos.copy(),
+        yaw=d.yaw.copy(),
+        extra_yaw=extra_yaw,
+        extra_xz=extra_xz,
+        d_root=np.zeros((c, 3)),
+        d_rot=np.zeros((c, t.rot.shape[2], 3)),
+        fade_frames=join_beats * t.frames_per_beat,
+    )
+    u0 = np.zeros(1)
+    if d.last_root is not None and d.last_rot is not None:
+        root0 = _blend_at(t.root, members, weights, u0, False)[:, 0]
+        rot0 = _blend_at(t.rot, members, weights, u0, True)[:, 0]
+        plan.d_root, plan.d_rot = _join_offsets(plan, d.last_root, d.last_rot, root0, rot0)
+        if (
+            t.partner_root is not None
+            and t.partner_rot is not None
+            and d.last_proot is not None
+            and d.last_prot is not None
+        ):
+            proot0 = _blend_at(t.partner_root, members, weights, u0, False)[:, 0]
+            prot0 = _blend_at(t.partner_rot, members, weights, u0, True)[:, 0]
+            plan.d_proot, plan.d_prot = _join_offsets(plan, d.last_proot, d.last_prot, proot0, prot0)
+    # advance the dancers to the end of the movement
+    end_xz = (t.end_xz[members] * weights[..., None]).sum(axis=1) + extra_xz
+    end_yaw = (t.end_yaw[members] * weights).sum(axis=1) + extra_yaw
+    d.pos = d.pos + _yaw_rotate_xz(_yaw_rotate_xz(end_xz, extra_yaw), d.yaw)
+    d.yaw = d.yaw + end_yaw
+    d.node = group
+    last = render(t, plan, np.array([t.frames - 1.0]))
+    d.last_root, d.last_rot = last.root[:, 0], last.rot[:, 0]
+    if last.proot is not None and last.prot is not None:
+        d.last_proot, d.last_prot = last.proot[:, 0], last.prot[:, 0]
+    return plan
+
+
+def _join_offsets(
+    plan: MovementPlan, last_root: Array, last_rot: Array, root0: Array, rot0: Array
+) -> tuple[Array, Array]:
+    """Root offset ``(C, 3)`` and rotation offsets ``(C, J, 3)`` taking the new movement's first
+    pose to the previous movement's last pose, in the new movement's placement frame."""
+    rel = last_root.copy()
+    rel[:, [0, 2]] = _yaw_rotate_xz(last_root[:, [0, 2]] - plan.pos, -plan.yaw)
+    prev = last_rot.copy()
+    prev[:, 0] = rot.multiply(rot.from_yaw(-plan.yaw), last_rot[:, 0])
+    d_rot = rot.log(rot.multiply(prev, rot.conjugate(rot0)))
+    return rel - root0, d_rot
+
+
+def render(t: Tables, plan: MovementPlan, u: Array) -> Rendered:
+    """The planned movement of every character at movement frames ``u (F,)`` in ``[0, N-1]``."""
+    fade = _smooth_fade(u, plan.fade_frames)  # (F,)
+    prog = u / (t.frames - 1)  # progress through the movement, for the extra turn/travel
+
+    def place(
+        root_tab: Array, rot_tab: Array, d_root: Array | None, d_rot: Array | None
+    ) -> tuple[Array, Array]:
+        root = _blend_at(root_tab, plan.members, plan.weights, u, False)  # (C, F, 3)
+        q = _blend_at(rot_tab, plan.members, plan.weights, u, True)  # (C, F, J, 4)
+        if d_root is not None and d_rot is not None and fade[0] > 0:
+            active = fade > 0
+            root[:, active] += fade[active][None, :, None] * d_root[:, None, :]
+            q[:, active] = rot.multiply(
+                rot.exp(fade[active][None, :, None, None] * d_rot[:, None]), q[:, active]
+            )
+        turn = plan.yaw[:, None] + plan.extra_yaw[:, None] * prog[None, :]  # (C, F)
+        xz = _yaw_rotate_xz(root[..., [0, 2]], plan.extra_yaw[:, None] * prog[None, :])
+        xz = xz + plan.extra_xz[:, None, :] * prog[None, :, None]
+        world = root.copy()
+        world[..., [0, 2]] = _yaw_rotate_xz(xz, turn) + plan.pos[:, None, :]
+        q[:, :, 0] = rot.multiply(rot.from_yaw(turn), q[:, :, 0])
+        return world, q
+
+    root, q = place(t.root, t.rot, plan.d_root, plan.d_rot)
+    proot = prot = None
+    if t.partner_root is not None and t.partner_rot is not None:
+        proot, prot = place(t.partner_root, t.partner_rot, plan.d_proot, plan.d_prot)
+    jt = (
+        _blend_at(t.jt, plan.members, plan.weights, u, False)
+        if t.jt.shape[2]
+        else np.zeros((plan.group.size, u.size, 0, 3))
+    )
+    dominant = np.broadcast_to(
+        plan.members[np.arange(plan.group.size), np.argmax(plan.weights, axis=1)][:, None],
+        (plan.group.size, u.size),
+    )
+    return Rendered(root, q, jt, proot, prot, np.asarray(dominant), u)
+
+
+ControlFn = Any  # Callable[[int, Dancers], Control | None]: targets at a movement's first beat
+
+
+def synthesize(
+    t: Tables,
+    beats_s: Array,
+    fps: float,
+    dancers: Dancers,
+    rng: np.random.Generator,
+    control: ControlFn | None = None,
+    accent: float = 0.5,
+) -> Rendered:
+    """Frames ``0 .. floor(beats[-1] * fps)`` of every character, movements time-warped onto the beats.
+
+    ``control(beat_index, dancers)`` returns the targets for the movement starting at that beat
+    (or None for free dancing)."""
+    b = np.asarray(beats_s, dtype=np.float64)
+    n_frames = int(np.floor(b[-1] * fps + 1e-9)) + 1
+    times = np.arange(n_frames) / fps
+    mv_index, u = warp(b, times, t.beats_per_movement, t.frames_per_beat, accent)
+    n_moves = int(mv_index.max()) + 1
+    c = dancers.count
+    j = t.rot.shape[2]
+    out_root = np.empty((c, n_frames, 3))
+    out_rot = np.empty((c, n_frames, j, 4))
+    out_jt = np.empty((c, n_frames, t.jt.shape[2], 3))
+    out_proot = np.empty((c, n_frames, 3)) if t.couples else None
+    out_prot = (
+        np.empty((c, n_frames, j if t.partner_rot is None else t.partner_rot.shape[2], 4))
+        if t.couples
+        else None
+    )
+    dominant = np.empty((c, n_frames), dtype=np.intp)
+    plans: list[dict[str, Any]] = []
+    bounds = np.searchsorted(mv_index, np.arange(n_moves + 1))
+    for m in range(n_moves):
+        ctl = control(m * t.beats_per_movement, dancers) if control is not None else None
+        plan = plan_movement(t, dancers, ctl, rng)
+        s, e = int(bounds[m]), int(bounds[m + 1])
+        if e <= s:
+            continue
+        r = render(t, plan, u[s:e])
+        out_root[:, s:e], out_rot[:, s:e], out_jt[:, s:e] = r.root, r.rot, r.jt
+        if out_proot is not None and out_prot is not None and r.proot is not None and r.prot is not None:
+            out_proot[:, s:e], out_prot[:, s:e] = r.proot, r.prot
+        dominant[:, s:e] = r.dominant
+        plans.append(
+            {
+                "start_frame": s,
+                "start_beat": m * t.beats_per_movement,
+                "group": int(plan.group[0]),
+                "members": [int(x) for x in plan.members[0]],
+                "weights": [round(float(x), 4) for x in plan.weights[0]],
+            }
+        )
+    return Rendered(out_root, out_rot, out_jt, out_proot, out_prot, dominant, u, plans)

@@ -1,0 +1,168 @@
+"""Live sessions: ``WebSocket /v1/sessions/rhythm?database=<id>`` — a character dancing to beats
+sent as they happen (the game-engine integration path of the rhythm engine).
+
+Protocol (JSON text messages):
+
+* client -> server: ``{"type": "beat"}`` (a music beat, now), ``{"type": "bpm", "bpm": 120}`` (the
+  server generates beats from now on; a later ``beat`` re-phases them), ``{"type": "direction",
+  "heading_deg": 90, "speed": 0.5}`` (steer from the next movement; omit both to dance freely),
+  ``{"type": "stop"}``.
+* server -> client: first ``{"type": "skeleton", "names", "parents", "offsets", "fps",
+  "beats_per_movement", ...}``; then at every beat ``{"type": "frames", "start": i, "fps": f,
+  "beat": k, "root": [[x, y, z], ...], "rotations": [[[x, y, z, w], ...], ...]}`` — the frames of
+  the beat that just started (frame indices ``start ..``; the motion beat is the batch's first
+  frame), so latency is at most one beat; ``{"type": "error", "message"}`` for a bad message (the
+  session goes on); ``{"type": "end", "frames", "beats"}`` after ``stop``, then close 1000.
+
+Close codes: 4401 bad token, 4404 unknown database, 4400 not a ready rhythm database. Synthesis
+runs in a worker thread, never in the event loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import threading
+from collections import OrderedDict
+from typing import Annotated, Any
+
+import anyio
+from fastapi import APIRouter, Query, WebSocket
+from fastapi.websockets import WebSocketDisconnect
+from pydantic import TypeAdapter, ValidationError
+
+from engines.library import library_from_arrays
+from engines.rhythm.engine import RhythmEngine
+from engines.rhythm.session import LiveDancer
+from schemas.rhythm import SessionBeat, SessionBpm, SessionDirection, SessionMessage, SessionStop
+from workers.store import NotFoundError, Store, load_npz
+
+from ..deps import SettingsDep, StoreDep, bearer_token, token_problem
+from .events import _refuse
+
+router = APIRouter(prefix="/v1/sessions", tags=["sessions"])
+
+_MESSAGES: TypeAdapter[Any] = TypeAdapter(SessionMessage)
+_CACHE: OrderedDict[tuple[str, str], RhythmEngine] = OrderedDict()
+_CACHE_LOCK = threading.Lock()
+_CACHE_SIZE = 4
+
+
+def _load_engine(store: Store, db_id: str) -> RhythmEngine:
+    """The loaded engine of a rhythm database (a few kept per process)."""
+    key = (str(store.root), db_id)
+    with _CACHE_LOCK:
+        engine = _CACHE.get(key)
+        if engine is not None:
+            _CACHE.move_to_end(key)
+            return engine
+    arrays = load_npz(store.database_arrays_bytes(db_id))
+    engine = RhythmEngine(library_from_arrays(arrays), arrays)
+    with _CACHE_LOCK:
+        _CACHE[key] = engine
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    return engine
+
+
+async def _reader(websocket: WebSocket, inbox: asyncio.Queue[str | None]) -> None:
+    with contextlib.suppress(WebSocketDisconnect, RuntimeError):
+        while True:
+            await inbox.put(await websocket.receive_text())
+    await inbox.put(None)
+
+
+@router.websocket("/rhythm")
+async def rhythm_session(
+    websocket: WebSocket,
+    store: StoreDep,
+    settings: SettingsDep,
+    database: Annotated[str, Query(description="id of a ready rhythm database")],
+    seed: Annotated[int, Query(ge=0, le=2**32 - 1)] = 0,
+    fps: Annotated[float | None, Query(gt=0, le=240)] = None,
+    accent: Annotated[float, Query(ge=0, le=0.9)] = 0.6,
+    token: Annotated[str | None, Query(description="bearer token (or the Authorization header)")] = None,
+) -> None:
+    """Dance to beats sent live (see the module doc for the message format)."""
+    problem = token_problem(settings, bearer_token(websocket, token))
+    if problem is not None:
+        await _refuse(websocket, 401, problem.code, problem.message, 4401)
+        return
+    try:
+        info = store.database_info(database)
+    except NotFoundError as exc:
+        await websocket.accept()
+        await websocket.close(code=4404, reason=str(exc)[:120])
+        return
+    await websocket.accept()
+    if info.kind != "rhythm" or info.status.value != "ready":
+        await websocket.close(code=4400, reason=f"database {database} is not a ready rhythm database"[:120])
+        return
+    engine = await anyio.to_thread.run_sync(_load_engine, store, database)
+    dancer = LiveDancer(engine, seed=seed, fps=fps, accent=accent)
+    await websocket.send_json(dancer.skeleton_message())
+    await _Session(websocket, dancer).run()
+
+
+class _Session:
+    """The beat clock and message loop of one socket."""
+
+    def __init__(self, websocket: WebSocket, dancer: LiveDancer) -> None:
+        self.websocket, self.dancer = websocket, dancer
+        self.period = dancer.tables.period_s
+        self.auto_next: float | None = None  # loop time of the next generated beat (bpm mode)
+        self.last_beat: float | None = None
+
+    async def beat(self, now: float) -> None:
+        period = self.period
+        if self.auto_next is None and self.last_beat is not None and 0.2 <= now - self.last_beat <= 3.0:
+            period = now - self.last_beat  # manual beats: the last interval predicts the next
+        self.last_beat = now
+        msg = await anyio.to_thread.run_sync(self.dancer.beat, period)
+        await self.websocket.send_text(json.dumps(msg, separators=(",", ":")))
+
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+        inbox: asyncio.Queue[str | None] = asyncio.Queue()
+        reader = asyncio.create_task(_reader(self.websocket, inbox))
+        try:
+            while True:
+                timeout = None if self.auto_next is None else max(0.0, self.auto_next - loop.time())
+                try:
+                    text = await asyncio.wait_for(inbox.get(), timeout)
+                except TimeoutError:
+                    self.auto_next = (self.auto_next or loop.time()) + self.period
+                    await self.beat(loop.time())
+                    continue
+                if text is None:
+                    return  # the client went away
+                try:
+                    message = _MESSAGES.validate_json(text)
+                except ValidationError as exc:
+                    errors = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+                    await self.websocket.send_json({"type": "error", "message": errors or "invalid message"})
+                    continue
+                now = loop.time()
+                if isinstance(message, SessionBeat):
+                    if self.auto_next is not None:
+                        self.auto_next = now + self.period  # re-phase the generated beats
+                    await self.beat(now)
+                elif isinstance(message, SessionBpm):
+                    self.period = 60.0 / message.bpm
+                    self.auto_next = now + self.period
+                    await self.beat(now)
+                elif isinstance(message, SessionDirection):
+                    self.dancer.steer(message.heading_deg, message.speed)
+                elif isinstance(message, SessionStop):
+                    await self.websocket.send_json(
+                        {"type": "end", "frames": self.dancer.frame, "beats": self.dancer.beats}
+                    )
+                    await self.websocket.close(code=1000)
+                    return
+        except (WebSocketDisconnect, RuntimeError, OSError):
+            return
+        finally:
+            reader.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await reader

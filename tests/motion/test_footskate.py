@@ -1,0 +1,185 @@
+"""Foot-skate cleanup (motion.footskate): synthetic sliding feet get pinned, real walks slip less."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from motion import Motion, MotionError, Skeleton
+from motion import rotations as rot
+from motion.contacts import detect_contacts
+from motion.footskate import leg_chains, pin_corrections, remove_foot_skate, solve_foot_skate
+from motion.io import load_motion
+from motion.metrics import foot_slip
+from motion.skeleton import default_channels
+
+DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+
+# hips -> (thigh, shin, foot, toe) x 2 + spine; metres, Y up, facing +Z
+NAMES = ("hips", "lThigh", "lShin", "lFoot", "lToe", "rThigh", "rShin", "rFoot", "rToe", "spine")
+PARENTS = np.array([-1, 0, 1, 2, 3, 0, 5, 6, 7, 0])
+OFFSETS = np.array(
+    [
+        [0.0, 0.9, 0.0],
+        [0.1, -0.05, 0.0], [0.0, -0.42, 0.0], [0.0, -0.4, 0.0], [0.0, -0.05, 0.14],
+        [-0.1, -0.05, 0.0], [0.0, -0.42, 0.0], [0.0, -0.4, 0.0], [0.0, -0.05, 0.14],
+        [0.0, 0.3, 0.0],
+    ]
+)  # fmt: skip
+FPS = 30.0
+
+
+def sliding_biped(frames: int = 60, speed: float = 0.4) -> Motion:
+    """Knees bent, hips 0.82 m high, gliding forward at ``speed`` m/s: planted feet slide."""
+    sk = Skeleton(NAMES, PARENTS, OFFSETS, default_channels(len(NAMES)))
+    t = np.arange(frames) / FPS
+    root = np.zeros((frames, 3))
+    root[:, 1] = 0.82
+    root[:, 2] = speed * t
+    q = rot.identity((frames, len(NAMES)))
+    x = np.array([1.0, 0.0, 0.0])
+    for hip, knee, ankle, phase in ((1, 2, 3, 0.0), (5, 6, 7, 1.0)):
+        wobble = 0.05 * np.sin(2 * np.pi * t + phase)
+        q[:, hip] = rot.from_axis_angle(x, -0.35 + wobble)
+        q[:, knee] = rot.from_axis_angle(x, 0.7 - wobble)
+        q[:, ankle] = rot.from_axis_angle(x, -0.35)
+    q[:, 0] = rot.from_yaw(np.full(frames, 0.1))
+    return Motion(sk, root, q, FPS, units="m", name="sliding")
+
+
+def bone_lengths(m: Motion) -> np.ndarray:
+    pos = m.global_positions()
+    return np.asarray(np.linalg.norm(pos[:, 1:] - pos[:, PARENTS[1:]], axis=-1))
+
+
+def test_sliding_ankle_is_pinned_and_lengths_kept() -> None:
+    m = sliding_biped()
+    joints = np.array([3])
+    flags = np.zeros((m.num_frames, 1), dtype=bool)
+    flags[20:40, 0] = True
+    before = foot_slip(m, contacts=flags, joints=joints)
+    res = solve_foot_skate(m, (joints, flags), blend_s=0.1)
+    out = res.motion
+    after = foot_slip(out, contacts=flags, joints=joints)
+    assert before > 0.25
+    assert after < 1e-6
+    assert res.residual.max() < 1e-9
+    pos = out.global_positions()
+    planted = pos[20:40, 3]
+    assert np.ptp(planted, axis=0).max() < 1e-9  # one target, height included
+    assert np.allclose(bone_lengths(out), bone_lengths(m), atol=1e-12)
+    np.testing.assert_array_equal(out.root_positions, m.root_positions)
+    # blend window is 3 frames: frames outside [17, 43) are bit-for-bit the input
+    untouched = np.r_[0:17, 43:60]
+    np.testing.assert_array_equal(out.rotations[untouched], m.rotations[untouched])
+    changed = np.flatnonzero(np.abs(out.rotations - m.rotations).max(axis=(1, 2)) > 0)
+    assert changed.min() >= 17 and changed.max() <= 42
+    # only the left leg's hip, knee and ankle rotations move
+    moved = np.flatnonzero(np.abs(out.rotations - m.rotations).max(axis=(0, 2)) > 0)
+    assert set(moved) == {1, 2, 3}
+    # the knee keeps bending forward (its original side of the hip-ankle line)
+    assert np.all(pos[20:40, 2, 2] > pos[20:40, 1, 2] - 0.05)
+
+
+def test_fade_is_smooth_and_short_gaps_are_bridged() -> None:
+    positions = np.zeros((40, 3))
+    positions[:, 0] = np.arange(40) * 0.01
+    flags = np.zeros(40, dtype=bool)
+    flags[5:15] = True
+    flags[18:30] = True  # gap of 3 frames < 2 x blend: interpolated
+    corr, weight = pin_corrections(positions, flags, blend=4)
+    assert np.all(weight[5:30] == 1.0)
+    assert weight[0] == 0.0 and weight[35] == 0.0 and weight[34] == 0.0
+    assert 0.0 < weight[31] < 1.0 and weight[30] > weight[31] > weight[32] > weight[33]
+    targets = positions + corr
+    np.testing.assert_allclose(targets[5:15, 0], positions[5:15, 0].mean())
+    np.testing.assert_allclose(targets[18:30, 0], positions[18:30, 0].mean())
+    # across the short gap the target slides monotonically from one run's target to the next
+    assert np.all(np.diff(targets[14:19, 0]) > 0)
+    # after the last run the correction fades monotonically to exactly zero
+    fade = np.abs(corr[29:36, 0])
+    assert np.all(np.diff(fade) <= 0) and fade[-1] == 0.0 and fade[1] > 0.0
+    np.testing.assert_array_equal(corr[:1], 0.0)
+
+
+def test_toe_contacts_move_or_turn_the_foot() -> None:
+    m = sliding_biped(speed=0.3)
+    joints = np.array([3, 4, 7, 8])
+    flags = np.zeros((m.num_frames, 4), dtype=bool)
+    flags[10:30, 0] = True  # left foot flat: heel and toe planted
+    flags[10:30, 1] = True
+    flags[25:50, 3] = True  # right toe only (heel off): the whole foot follows the toe
+    legs = leg_chains(m, joints)
+    assert [(leg.hip, leg.knee, leg.ankle, leg.toe) for leg in legs] == [(1, 2, 3, 4), (5, 6, 7, 8)]
+    res = solve_foot_skate(m, (joints, flags), blend_s=0.1)
+    pos = res.motion.global_positions()
+    assert res.residual.max() < 1e-3
+    for j, run in ((3, slice(10, 30)), (4, slice(10, 30)), (8, slice(25, 50))):
+        assert np.ptp(pos[run, j], axis=0).max() < 2e-3, j
+    assert np.allclose(bone_lengths(res.motion), bone_lengths(m), atol=1e-12)
+
+
+def test_out_of_reach_targets_report_residual_and_root_adjust_helps() -> None:
+    m = sliding_biped(speed=1.5)  # 30 frames at 1.5 m/s: the foot cannot stay put
+    joints = np.array([3])
+    flags = np.zeros((m.num_frames, 1), dtype=bool)
+    flags[10:50, 0] = True
+    plain = solve_foot_skate(m, (joints, flags))
+    assert plain.residual.max() > 0.05
+    assert np.all(plain.root_shift == 0)
+    adjusted = solve_foot_skate(m, (joints, flags), root_adjust=True, max_root_shift_m=0.05)
+    shift = np.linalg.norm(adjusted.root_shift, axis=-1)
+    assert 0 < shift.max() <= 0.05 + 1e-12
+    assert adjusted.residual.max() < plain.residual.max()
+    assert np.allclose(bone_lengths(adjusted.motion), bone_lengths(m), atol=1e-12)
+
+
+def test_errors() -> None:
+    m = sliding_biped(frames=10)
+    with pytest.raises(MotionError, match="flags"):
+        remove_foot_skate(m, (np.array([3]), np.zeros((9, 1), dtype=bool)))
+    with pytest.raises(MotionError, match="blend_s"):
+        remove_foot_skate(m, blend_s=-1.0)
+    # a foot hanging straight off the root has no hip-knee-ankle chain
+    offsets = np.array([[0.0, 1.0, 0.0], [0.0, -0.5, 0.0], [0.0, -0.4, 0.0]])
+    sk = Skeleton(("root", "shin", "foot"), np.array([-1, 0, 1]), offsets, default_channels(3))
+    tiny = Motion(sk, np.zeros((5, 3)), rot.identity((5, 3)), FPS, units="m")
+    with pytest.raises(MotionError, match="no leg chain"):
+        remove_foot_skate(tiny, (np.array([2]), np.ones((5, 1), dtype=bool)))
+    # no contact: the input comes back unchanged
+    same = remove_foot_skate(m, (np.array([3]), np.zeros((10, 1), dtype=bool)))
+    np.testing.assert_array_equal(same.rotations, m.rotations)
+
+
+REAL = [
+    ("bandai-namco/dataset-2/dataset-2_walk_normal_001.bvh", 0),
+    ("cmu-walks/007_02.bvh", 1),  # frame 0 is a stray T-pose
+    ("cmu-daz/walks/07_09.bvh", 1),
+]
+
+
+@pytest.mark.parametrize(("rel", "first"), REAL, ids=[r for r, _ in REAL])
+def test_real_walk_slips_less(rel: str, first: int) -> None:
+    path = DATA / rel
+    if not path.is_file():
+        pytest.skip(f"shared data not found: {path}")
+    m = load_motion(path).slice(first, first + 240)
+    contacts = detect_contacts(m)
+    out = remove_foot_skate(m, contacts)
+    p0, p1 = m.global_positions(), out.global_positions()
+    before = foot_slip(m, p0, contacts[1], contacts[0])
+    after = foot_slip(out, p1, contacts[1], contacts[0])
+    disp = float(np.abs(p1 - p0).max() * m.metres_per_unit)
+    print(f"{rel}: slip {before:.4f} -> {after:.4f} m/s, max joint displacement {disp:.3f} m")
+    assert after < 0.5 * before
+    assert after < 0.04  # what remains is where a planted foot is out of the leg's reach
+    adjusted = solve_foot_skate(m, contacts, root_adjust=True)
+    assert foot_slip(adjusted.motion, None, contacts[1], contacts[0]) < min(after, 0.02) + 1e-9
+    assert np.linalg.norm(adjusted.root_shift, axis=-1).max() * m.metres_per_unit <= 0.05 + 1e-9
+    assert disp < 0.15  # metres: a cleanup, not a new motion
+    np.testing.assert_array_equal(out.root_positions, m.root_positions)
+    lengths = np.linalg.norm(p1[:, 1:] - p1[:, m.skeleton.parents[1:]], axis=-1)
+    ref = np.linalg.norm(p0[:, 1:] - p0[:, m.skeleton.parents[1:]], axis=-1)
+    np.testing.assert_allclose(lengths, ref, atol=1e-9 * max(float(ref.max()), 1.0))
