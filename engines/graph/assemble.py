@@ -12,6 +12,14 @@
    rotated by the correction angle of that frame), the position correction is a linear ramp; both
    are applied as one per-frame floor transform, so the constraints are met to numerical
    precision.
+4. **Clean the feet.** Smoothing and the body correction make planted feet slide; the source
+   clips' foot contacts at the provenance frames (:func:`motion.contacts.detect_contacts` on each
+   clip, cached) are propagated to the output, and :func:`motion.footskate.remove_foot_skate`
+   pins each contact run with leg IK (contacts stored by the build, see
+   :class:`~engines.graph.model.FootContacts`). Only leg joint rotations change: the root and the hips
+   (thighs), hence the body constraints, are untouched. Around each joint constraint on a leg
+   joint, that leg's contacts are dropped (``blend`` frames either side) so the constrained joint
+   keeps its assembled position exactly.
 
 The body (the "torso" of the paper) is that of :func:`motion.ground.ground_frames` (the hips'
 floor projection, facing from the thighs), as in the root tracks. For skeletons whose joint 0 is a
@@ -22,6 +30,7 @@ children instead of joint 0, so smoothing never blends two differently placed re
 
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 from typing import Any
 
@@ -32,13 +41,15 @@ from motion import rotations as rot
 from motion.align import apply_rigid_2d
 from motion.contacts import foot_joints
 from motion.errors import MotionError
+from motion.footskate import leg_chains, remove_foot_skate
 from motion.ground import ground_frames
 from motion.smoothing import smooth_cuts
 
 from ..library import MotionLibrary
-from .model import FloatArray, RootTracks
-from .paths import Pieces, Placement, rotate2, wrap_angle
+from .model import FloatArray, FootContacts, IntArray, RootTracks
+from .paths import BoolArray, Pieces, Placement, rotate2, wrap_angle
 from .score import Problem, compile_problem
+from .tracks import foot_contacts
 
 
 def body_frames(motion: Motion, positions: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
@@ -136,6 +147,67 @@ def _correction(
     return alpha, goal - rotate2(alpha, body_xz)
 
 
+FOOT_BLEND_S = 0.1
+"""Seconds over which foot pins fade in and out (:func:`motion.footskate.remove_foot_skate`)."""
+
+_CONTACTS: dict[int, tuple[MotionLibrary, FootContacts]] = {}
+_CONTACTS_LOCK = threading.Lock()
+
+
+def library_contacts(library: MotionLibrary) -> FootContacts:
+    """:func:`engines.graph.tracks.foot_contacts` of a library, cached for the last few libraries
+    (by identity), for callers that do not hold the database's stored contacts."""
+    key = id(library)
+    with _CONTACTS_LOCK:
+        got = _CONTACTS.get(key)
+        if got is not None and got[0] is library:
+            return got[1]
+    contacts = foot_contacts(library)
+    with _CONTACTS_LOCK:
+        _CONTACTS[key] = (library, contacts)
+        while len(_CONTACTS) > 4:
+            _CONTACTS.pop(next(iter(_CONTACTS)))
+    return contacts
+
+
+def propagated_contacts(
+    contacts: FootContacts, tracks: RootTracks, clips: IntArray, frames: IntArray
+) -> tuple[IntArray, BoolArray]:
+    """Foot joints ``(K,)`` and contact flags ``(F, K)`` of output frames played from source
+    ``clips``/``frames`` ``(F,)``: each source frame's own contacts."""
+    return contacts.joints, contacts.flags[tracks.offsets[clips] + frames]
+
+
+def clean_feet(
+    motion: Motion, contacts: tuple[IntArray, BoolArray], problem: Problem, blend_s: float = FOOT_BLEND_S
+) -> Motion:
+    """:func:`motion.footskate.remove_foot_skate` with the given contacts, except around joint
+    constraints on leg joints (see the module docstring); the motion unchanged when its legs
+    cannot be found."""
+    joints, flags = contacts
+    if not flags.any():
+        return motion
+    blend = int(round(blend_s * motion.fps))
+    try:
+        if problem.joints:
+            flags = flags.copy()
+            parents = motion.skeleton.parents
+            legs = leg_chains(motion, joints)
+            for jt in problem.joints:
+                chain = set()
+                j = int(parents[jt.joint])
+                while j >= 0:
+                    chain.add(j)
+                    j = int(parents[j])
+                for leg in legs:
+                    if leg.hip in chain:
+                        cols = [s for s in (leg.ankle_slot, leg.toe_slot) if s >= 0]
+                        flags[max(jt.frame - blend, 0) : jt.frame + blend + 1, cols] = False
+        return remove_foot_skate(motion, (joints, flags), blend_s=blend_s)
+    except MotionError:  # no hip-knee-ankle chains above the feet: nothing to pin
+        return motion
+
+
 def assemble(
     library: MotionLibrary,
     tracks: RootTracks,
@@ -143,6 +215,9 @@ def assemble(
     placement: Placement,
     request: Any,
     problem: Problem | None = None,
+    *,
+    feet: bool = True,
+    contacts: FootContacts | None = None,
 ) -> tuple[Motion, list[tuple[str, int]]]:
     """The motion a path plays, placed, smoothed and meeting its body constraints.
 
@@ -156,6 +231,11 @@ def assemble(
         The :class:`schemas.graph.GraphRequest` (smoothing window and body constraints).
     problem:
         The request already compiled (:func:`engines.graph.score.compile_problem`), to skip it.
+    feet:
+        Clean foot skate with the source clips' contacts (step 4 of the module docstring).
+    contacts:
+        The database's foot contacts (:class:`~engines.graph.model.FootContacts`); computed from
+        the library (and cached) when not given.
 
     Returns
     -------
@@ -183,6 +263,11 @@ def assemble(
         if corr is not None:
             motion = _apply_floor(motion, corr[0], corr[1], static)
     clips, frames = pieces.source()
+    if feet and motion.num_frames > 1:
+        if contacts is None:
+            contacts = library_contacts(library)
+        if contacts.joints.size:
+            motion = clean_feet(motion, propagated_contacts(contacts, tracks, clips, frames), problem)
     provenance = [(library.names[int(c)], int(f)) for c, f in zip(clips, frames, strict=True)]
     return motion, provenance
 

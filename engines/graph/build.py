@@ -49,7 +49,7 @@ from ..base import Arrays, Emitter, EngineError, ShouldStop
 from ..library import MotionLibrary
 from .features import TransitionFeatures, exact_costs, reduce_features, transition_features
 from .hierarchy import LeafEdges, build_hierarchy
-from .tracks import root_tracks
+from .tracks import foot_contacts, root_tracks
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -361,8 +361,9 @@ def build_graph(
     workers: int | None = None,
 ) -> Arrays:
     """The graph arrays of a database: :meth:`EdgeTree.to_arrays` + :meth:`RootTracks.to_arrays` +
-    ``graph.report`` (0-d unicode JSON: frames, clips, leaf/root edges, tree nodes, dropped clips and
-    why, timings).
+    :meth:`FootContacts.to_arrays` (per-frame foot contacts, for foot-skate cleanup) +
+    ``graph.report`` (0-d unicode JSON: frames, clips, leaf/root edges, tree nodes, dropped clips
+    and why, timings).
 
     ``emit.progress(fraction, message)`` reports progress (per tile row of the cost matrix);
     ``should_stop()`` is polled per tile and raises :class:`InterruptedError` ("build cancelled").
@@ -380,6 +381,7 @@ def build_graph(
     positions = [m.global_positions() for m in library.motions]
     features = transition_features(library, spec.joint_weights, spec.velocity_weight, positions)
     tracks = root_tracks(library, positions)
+    contacts = foot_contacts(library, positions)
     del positions
     t_features = time.perf_counter() - t0
     if should_stop():
@@ -436,5 +438,6 @@ def build_graph(
     arrays: Arrays = {}
     arrays.update(tree.to_arrays())
     arrays.update(tracks.to_arrays())
+    arrays.update(contacts.to_arrays())
     arrays["graph.report"] = np.array(json.dumps(report))
     return arrays

@@ -13,9 +13,10 @@ from typing import Any
 from ..base import Arrays, Emitter, Engine, ShouldStop
 from ..library import MotionLibrary
 from .build import build_graph
-from .model import EdgeTree, RootTracks
+from .model import EdgeTree, FootContacts, RootTracks
 from .paths import GraphIndex
 from .search import GraphSearch
+from .tracks import foot_contacts
 
 
 class GraphEngine(Engine):
@@ -29,12 +30,14 @@ class GraphEngine(Engine):
         self.tree = EdgeTree.from_arrays(arrays)
         self.tracks = RootTracks.from_arrays(arrays)
         GraphIndex.of(self.tree, self.tracks)  # built once per loaded database, not on the first search
+        # foot contacts for foot-skate cleanup: stored by the build (older databases: computed here)
+        self.contacts = FootContacts.from_arrays(arrays) or foot_contacts(library)
 
     @classmethod
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         return build_graph(spec, library, emit, should_stop)
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
-        GraphSearch(self.library, self.tree, self.tracks, request.seed).run(
+        GraphSearch(self.library, self.tree, self.tracks, request.seed, contacts=self.contacts).run(
             request, budget_s, emit, should_stop
         )

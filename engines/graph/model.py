@@ -104,3 +104,27 @@ class RootTracks:
             np.asarray(arrays[f"{prefix}root_xz"], dtype=np.float64),
             np.asarray(arrays[f"{prefix}root_yaw"], dtype=np.float64),
         )
+
+
+@dataclass(frozen=True, slots=True)
+class FootContacts:
+    """Foot contacts of every library frame (concatenated like :class:`RootTracks`): ``joints (K,)``
+    the foot joints (:func:`motion.contacts.foot_joints`), ``flags (N, K)`` booleans from
+    :func:`motion.contacts.detect_contacts` on each clip. ``K = 0`` when the skeleton has no
+    foot joints."""
+
+    joints: IntArray
+    flags: npt.NDArray[np.bool_]
+
+    def to_arrays(self, prefix: str = "graph.contacts.") -> dict[str, Any]:
+        return {f"{prefix}joints": self.joints, f"{prefix}flags": self.flags}
+
+    @classmethod
+    def from_arrays(cls, arrays: Any, prefix: str = "graph.contacts.") -> FootContacts | None:
+        """The stored contacts, or ``None`` for databases built without them."""
+        if f"{prefix}joints" not in arrays or f"{prefix}flags" not in arrays:
+            return None
+        return cls(
+            np.asarray(arrays[f"{prefix}joints"], dtype=np.int64),
+            np.asarray(arrays[f"{prefix}flags"], dtype=bool),
+        )

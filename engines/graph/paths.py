@@ -359,6 +359,9 @@ class PathBatch:
 
     @staticmethod
     def concat(batches: list[PathBatch]) -> PathBatch:
+        if not batches:  # e.g. a path with no mutation at all: an empty batch
+            empty = np.zeros(0, dtype=np.int64)
+            return PathBatch(empty, empty.copy(), np.zeros((0, 0), dtype=np.int64))
         m = max((b.edges.shape[1] for b in batches), default=0)
         padded = [np.pad(b.edges, ((0, 0), (0, m - b.edges.shape[1])), constant_values=-1) for b in batches]
         return PathBatch(
