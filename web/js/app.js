@@ -1,0 +1,898 @@
+// Segue's browser front end: library (clips, databases), the viewer, and five authoring tools, all
+// on the public API. window.__segue mirrors the page's state for tests (assert on state, not pixels).
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+import { api, ApiError, followJob, getToken, setToken } from './api.js';
+import { bvhText, METRES_PER_UNIT, parseBvh, parseBvhText } from './bvh.js';
+import { Viewer } from './viewer.js';
+import { FloorPad, headingDeg } from './pad.js';
+import { setupMusic } from './music.js';
+
+const $ = (id) => document.getElementById(id);
+
+export const state = {
+  ready: false,
+  health: null,
+  samples: {},
+  clips: [],
+  databases: [],
+  loaded: [], // names of motions parsed in the page (uploaded clips)
+  viewer: { playing: false, time: 0, duration: 0, characters: [], frames: {} },
+  tool: 'path',
+  job: null, // {id, tool, status, submitted_ms}
+  solutions: [], // {job, result, score, elapsed_ms, terms, at_ms}
+  current: null, // {tool, job, result, score, frames, fps, drawn_ms}
+  timings: {}, // tool -> ms from pressing the button to the first solution drawn
+  firstDraw: {}, // tool -> where that time went (event arrival, download, parse, draw; ms)
+  builds: [], // {database, kind, status, fraction, message}
+  errors: [], // {where, code, message}
+  downloads: [], // {format, bytes, animations, duration_s}
+  beats: 0,
+  path: { points: [], fps: 30 },
+  constraints: [],
+  timeline: { tracks: [] },
+  music: { running: false, beats: 0, directions: [], mode: null },
+};
+window.__segue = state;
+// test hook: drop the current job's event socket as a network failure would (the page resumes)
+state.dropEvents = () => {
+  const socket = active && active.handle.socket;
+  if (socket) socket.close(4000, 'dropped by the test hook');
+  return Boolean(socket);
+};
+
+const viewer = new Viewer($('viewer'));
+let music = null; // the Music tool (set up below)
+let timeline = null; // the Timeline tool (set up below)
+const clipMotions = new Map(); // clip name -> parsed motion (metres)
+const dbSpecs = JSON.parse(localStorage.getItem('segue.specs') || '{}'); // database id -> spec (labels)
+
+// ---------------------------------------------------------------- errors
+export function showError(where, exc) {
+  const el = $(`err-${where}`);
+  const message = exc instanceof ApiError ? `${exc.message} [${exc.code}]` : String(exc.message || exc);
+  if (el) el.textContent = message;
+  state.errors.push({ where, code: exc.code || 'error', message: exc.message || String(exc), status: exc.status || 0 });
+  if (!(exc instanceof ApiError)) console.error(exc);
+}
+
+export function clearError(where) {
+  const el = $(`err-${where}`);
+  if (el) el.textContent = '';
+}
+
+async function guarded(where, fn) {
+  clearError(where);
+  try {
+    return await fn();
+  } catch (exc) {
+    showError(where, exc);
+    return undefined;
+  }
+}
+
+// ---------------------------------------------------------------- viewer transport
+let scrubbing = false;
+function fmt(t) {
+  return t.toFixed(2);
+}
+viewer.onChange((v) => {
+  const d = v.duration;
+  state.viewer = { playing: v.playing, time: v.time, duration: d, characters: [...v.characters.keys()], frames: { ...(v.frames || {}) } };
+  $('play').textContent = v.playing ? 'Pause' : 'Play';
+  if (!scrubbing) $('scrub').value = d > 0 ? String(v.time / d) : '0';
+  $('time').textContent = `${fmt(v.time)} / ${fmt(d)} s`;
+  if (music) music.onTime(v.time, v.playing);
+  if (timeline) timeline.showTime(v.time);
+});
+$('play').onclick = () => (viewer.playing ? viewer.pause() : viewer.play());
+$('scrub').addEventListener('pointerdown', () => { scrubbing = true; viewer.pause(); });
+$('scrub').addEventListener('pointerup', () => { scrubbing = false; });
+$('scrub').addEventListener('input', () => viewer.seek(Number($('scrub').value) * viewer.duration));
+$('speed').onchange = () => { viewer.speed = Number($('speed').value); };
+document.addEventListener('keydown', (ev) => {
+  // space plays / pauses, unless typing in a field
+  if (ev.code !== 'Space' || ['INPUT', 'TEXTAREA', 'SELECT', 'BUTTON'].includes(document.activeElement.tagName)) return;
+  ev.preventDefault();
+  if (viewer.playing) viewer.pause(); else viewer.play();
+});
+$('trail').onchange = () => viewer.setTrails($('trail').checked);
+
+// ---------------------------------------------------------------- library
+function sampleLabel(file) {
+  return state.samples[file] || file;
+}
+
+async function loadSamples() {
+  state.samples = await api.samples();
+  const box = $('sample-buttons');
+  box.textContent = '';
+  for (const file of Object.keys(state.samples)) {
+    const b = document.createElement('button');
+    b.textContent = sampleLabel(file);
+    b.dataset.sample = file;
+    b.title = `upload the bundled CMU clip ${file}`;
+    b.onclick = () => guarded('upload', async () => uploadClip(file, await api.sampleBytes(file)));
+    box.appendChild(b);
+  }
+}
+
+async function uploadClip(name, bytes) {
+  const info = await api.uploadClip(name, bytes);
+  const motion = await parseBvh(bytes, info.name, info.units);
+  clipMotions.set(clipName(info), motion);
+  await refreshClips();
+  viewClip(clipName(info));
+  if (!state.loaded.includes(clipName(info))) state.loaded.push(clipName(info));
+  return info;
+}
+
+// how databases name a clip by default: the file name without .bvh/.gz
+function clipName(info) {
+  return info.name.replace(/\.gz$/, '').replace(/\.bvh$/, '');
+}
+
+function viewClip(name) {
+  const motion = clipMotions.get(name);
+  if (!motion) return false;
+  viewer.clear();
+  viewer.set('clip', motion);
+  state.current = { tool: 'library', clip: name, frames: motion.frames, fps: motion.fps };
+  $('sol-info').textContent = `clip ${name} · ${motion.frames} frames at ${motion.fps.toFixed(0)} fps`;
+  for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = true;
+  viewer.seek(0);
+  viewer.play();
+  return true;
+}
+
+$('clip-file').onchange = async (ev) => {
+  for (const file of ev.target.files) {
+    await guarded('upload', async () => uploadClip(file.name, await file.arrayBuffer()));
+  }
+  ev.target.value = '';
+};
+
+async function refreshClips() {
+  state.clips = await api.clips();
+  const list = $('clip-list');
+  list.textContent = '';
+  for (const c of state.clips) {
+    const li = document.createElement('li');
+    li.dataset.clip = clipName(c);
+    li.innerHTML = `<span class="grow" title="${c.id}"></span><span class="muted mono"></span>`;
+    li.firstChild.textContent = c.name;
+    li.children[1].textContent = `${c.frames}f ${c.fps.toFixed(0)}fps ${c.height_m.toFixed(2)}m`;
+    if (clipMotions.has(clipName(c))) {
+      const b = document.createElement('button');
+      b.textContent = 'view';
+      b.onclick = () => viewClip(clipName(c));
+      li.appendChild(b);
+    }
+    list.appendChild(li);
+  }
+  const checks = $('db-clips');
+  const checked = new Set([...checks.querySelectorAll('input:checked')].map((i) => i.value));
+  checks.textContent = '';
+  for (const c of state.clips) {
+    const label = document.createElement('label');
+    label.innerHTML = '<input type="checkbox"> <span></span>';
+    label.firstChild.value = clipName(c);
+    label.firstChild.checked = checked.has(clipName(c));
+    label.lastChild.textContent = clipName(c);
+    checks.appendChild(label);
+  }
+  for (const sel of document.querySelectorAll('.clip-select')) {
+    const keep = sel.value;
+    sel.textContent = '';
+    for (const c of state.clips) sel.add(new Option(clipName(c), clipName(c)));
+    if (keep) sel.value = keep;
+  }
+}
+
+let dbListSeq = 0;
+let dbListSignature = '';
+async function refreshDatabases() {
+  const seq = ++dbListSeq;
+  const databases = await api.databases();
+  if (seq !== dbListSeq) return; // a newer refresh is on its way
+  const signature = JSON.stringify(databases.map((d) => [d.id, d.status, d.frames]));
+  state.databases = databases;
+  if (signature === dbListSignature) return; // nothing changed: leave the lists (and open menus) alone
+  dbListSignature = signature;
+  const list = $('db-list');
+  list.textContent = '';
+  for (const d of state.databases) {
+    const li = document.createElement('li');
+    li.dataset.db = d.id;
+    li.innerHTML = '<span class="grow"></span><span></span><span class="muted mono"></span>';
+    li.children[0].textContent = `${d.name || d.id.slice(0, 8)} · ${d.kind}`;
+    li.children[0].title = `${d.id}\nclips: ${d.clips.join(', ')}${d.error ? `\n${d.error}` : ''}`;
+    li.children[1].textContent = d.status;
+    li.children[1].className = `status-${d.status}`;
+    li.children[2].textContent = d.frames ? `${d.frames}f` : '';
+    list.appendChild(li);
+  }
+  for (const sel of document.querySelectorAll('.db-select')) {
+    const keep = sel.value;
+    sel.textContent = '';
+    const ready = state.databases.filter((d) => d.kind === sel.dataset.kind && d.status === 'ready');
+    if (!ready.length) sel.add(new Option(`(build a ${sel.dataset.kind} database)`, ''));
+    for (const d of ready.slice().reverse()) sel.add(new Option(`${d.name || d.id.slice(0, 8)} (${d.clips.length} clips)`, d.id));
+    if (keep && ready.some((d) => d.id === keep)) sel.value = keep;
+  }
+  timeline.refreshTracks();
+}
+
+const SPEC_TEMPLATES = {
+  clips: { fps: 30 },
+  graph: { fps: 30, tau: 1.0 },
+  control: { fps: 30, segmentation: { method: 'beats', beats_per_segment: 2 } },
+  annotated: { fps: 30 },
+  rhythm: { beats_per_movement: 4 },
+};
+function fillSpecTemplate() {
+  $('db-spec').value = JSON.stringify(SPEC_TEMPLATES[$('db-kind').value], null, 1);
+}
+$('db-kind').onchange = fillSpecTemplate;
+fillSpecTemplate();
+
+// a ticked clip in a spec: the uploaded clip's id, named as the clip list shows it
+function clipRef(name) {
+  const info = state.clips.find((c) => clipName(c) === name);
+  return info ? { clip: info.id, name } : { bvh: name };
+}
+
+const LEADER = /leader|^60_/i;
+const FOLLOWER = /follower|^61_/i;
+
+// the spec to post: the JSON of the text box, with the ticked clips as `clips` (or as control
+// `pairs`: a leader with a follower becomes one pair, any other clip a walk pair without a control)
+export function composeSpec(kind, name, selected, text) {
+  let extra;
+  try {
+    extra = text.trim() ? JSON.parse(text) : {};
+  } catch (exc) {
+    throw new ApiError(0, 'invalid_json', `the spec is not valid JSON: ${exc.message}`);
+  }
+  const spec = { ...extra, kind };
+  if (name) spec.name = name;
+  if (kind === 'control' && !spec.pairs) {
+    const leaders = selected.filter((c) => LEADER.test(c));
+    const followers = selected.filter((c) => FOLLOWER.test(c));
+    const pairs = [];
+    leaders.forEach((l, i) => { if (followers[i]) pairs.push({ control: l, target: followers[i] }); });
+    for (const c of selected) if (!leaders.includes(c) && !followers.includes(c)) pairs.push({ control: null, target: c });
+    if (!pairs.length && selected.length) throw new ApiError(0, 'invalid_request', 'tick a leader and a follower clip, or walk clips');
+    spec.pairs = pairs.map((p) => ({ control: p.control && clipRef(p.control), target: clipRef(p.target) }));
+    spec.clips = spec.clips || [];
+  } else if (!spec.clips) {
+    spec.clips = selected.map(clipRef);
+  }
+  if (kind === 'rhythm' && !spec.partners) {
+    const leaders = selected.filter((c) => LEADER.test(c));
+    const followers = selected.filter((c) => FOLLOWER.test(c));
+    if (leaders.length && followers.length) spec.partners = [{ leader: leaders[0], follower: followers[0] }];
+  }
+  return spec;
+}
+
+export async function buildDatabase(spec) {
+  const t0 = performance.now();
+  const build = { kind: spec.kind, status: 'submitting', fraction: 0, message: '' };
+  state.builds.push(build);
+  let info;
+  try {
+    info = await api.buildDatabase(spec);
+  } catch (exc) {
+    build.status = 'refused';
+    throw exc;
+  }
+  build.database = info.id;
+  build.status = info.status === 'ready' ? 'found' : info.status;
+  dbSpecs[info.id] = spec;
+  localStorage.setItem('segue.specs', JSON.stringify(dbSpecs));
+  $('db-status').textContent = `${info.status}`;
+  if (info.status === 'ready') {
+    await refreshDatabases();
+    build.status = 'ready';
+    $('db-progress').value = 1;
+    build.ms = performance.now() - t0;
+    return info;
+  }
+  refreshDatabases();
+  const follow = followJob(info.build_job, (ev) => {
+    if (ev.type === 'progress') {
+      build.fraction = ev.data.fraction;
+      build.message = ev.data.message || '';
+      $('db-progress').value = ev.data.fraction;
+      $('db-status').textContent = `${Math.round(ev.data.fraction * 100)}% ${build.message}`;
+    } else if (ev.type === 'started') {
+      build.status = 'building';
+      $('db-status').textContent = 'building';
+    }
+  });
+  const last = await follow.done;
+  const final = await api.database(info.id);
+  await refreshDatabases();
+  build.status = final.status;
+  build.ms = performance.now() - t0;
+  $('db-progress').value = final.status === 'ready' ? 1 : 0;
+  $('db-status').textContent = final.status;
+  if (last.type === 'failed' || final.status !== 'ready') {
+    const msg = (last.data && last.data.error && last.data.error.message) || final.error || `build ${final.status}`;
+    throw new ApiError(422, 'build_failed', msg);
+  }
+  return final;
+}
+
+$('db-build').onclick = () =>
+  guarded('build', async () => {
+    const selected = [...$('db-clips').querySelectorAll('input:checked')].map((i) => i.value);
+    const spec = composeSpec($('db-kind').value, $('db-name').value.trim(), selected, $('db-spec').value);
+    await buildDatabase(spec);
+  });
+
+// ---------------------------------------------------------------- jobs and solutions
+let active = null; // the running tool's job: {tool, t0, jobId, handle}
+let drawing = null; // the draw in flight
+let pending = null; // the newest solution waiting for it: {run, sol}
+
+// Draw solutions one at a time, newest wins: a better solution arriving while one downloads is
+// drawn right after it (the first one is never abandoned, so it shows as early as possible).
+function requestDraw(run, sol) {
+  if (drawing) {
+    pending = { run, sol };
+    return drawing;
+  }
+  drawing = drawSolution(run, sol)
+    .catch((exc) => showError(run.tool, exc))
+    .finally(() => {
+      drawing = null;
+      if (pending) {
+        const next = pending;
+        pending = null;
+        requestDraw(next.run, next.sol);
+      }
+    });
+  return drawing;
+}
+
+function dbOf(selectId) {
+  const id = $(selectId).value;
+  if (!id) throw new ApiError(0, 'no_database', `choose a ready ${$(selectId).dataset.kind} database first (build one in the library)`);
+  return id;
+}
+
+// Submit a job for a tool; draw every better solution as it streams in (other characters, e.g.
+// the leader, stay in the viewer). Resolves with the terminal event.
+export async function runJob(tool, request) {
+  if (active) {
+    active.handle.stop();
+    // a new request replaces the running one: free its worker
+    if (state.job && !['done', 'failed', 'cancelled'].includes(state.job.status)) api.cancel(state.job.id).catch(() => {});
+  }
+  const t0 = performance.now();
+  state.solutions = [];
+  state.current = null;
+  $('alternatives').textContent = '';
+  for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = true;
+  $('sol-info').textContent = 'submitting…';
+  const info = await api.submit(request);
+  state.job = { id: info.id, tool, status: info.status, submitted_ms: performance.now() - t0, events: [], reconnects: 0 };
+  $('cancel-job').disabled = false;
+  let best = Infinity;
+  const run = { tool, t0, jobId: info.id };
+  run.handle = followJob(info.id, (ev) => {
+    state.job.events.push(ev.id);
+    state.job.reconnects = run.handle ? run.handle.reconnects : 0;
+    if (ev.type === 'progress') {
+      $('sol-info').textContent = `${Math.round(ev.data.fraction * 100)}% ${ev.data.message || ''}`;
+    } else if (ev.type === 'started') {
+      state.job.status = 'running';
+    } else if (ev.type === 'solution') {
+      const sol = { job: info.id, result: ev.data.result, score: ev.data.score, elapsed_ms: ev.data.elapsed_ms, terms: ev.data.terms, at_ms: performance.now() - t0 };
+      state.solutions.push(sol);
+      const opt = new Option(`${sol.result} · score ${sol.score.toFixed(3)}`, sol.result);
+      $('alternatives').add(opt);
+      if (sol.score < best) {
+        best = sol.score;
+        $('alternatives').value = sol.result;
+        requestDraw(run, sol);
+      }
+    } else if (['done', 'failed', 'cancelled'].includes(ev.type)) {
+      state.job.status = ev.type;
+      $('cancel-job').disabled = true;
+      if (ev.type === 'failed') showError(tool, new ApiError(422, ev.data.error.code, ev.data.error.message));
+      if (!state.solutions.length && ev.type !== 'failed') $('sol-info').textContent = `${ev.type} without a result`;
+    }
+  });
+  active = run;
+  const last = await run.handle.done;
+  return last;
+}
+
+async function drawSolution(run, sol) {
+  const tFetch = performance.now();
+  // BVH is the quickest format to export and to load (a 2,000-frame result: ~0.2 s vs ~1 s for JSON
+  // frames); result motions are in metres (target gltf)
+  const bytes = await (await api.resultBlob(sol.job, sol.result, 'bvh')).arrayBuffer();
+  if (active !== run) return; // another job started meanwhile
+  const tParse = performance.now();
+  const motion = parseBvhText(await bvhText(bytes), `${run.tool} ${sol.result}`);
+  const tDraw = performance.now();
+  const first = !state.current;
+  viewer.set('result', motion); // framed: each better solution may go elsewhere
+  const drawn = performance.now() - run.t0;
+  state.current = { tool: run.tool, job: sol.job, result: sol.result, score: sol.score, frames: motion.frames, fps: motion.fps, joints: motion.joints.length, drawn_ms: drawn, root: rootPath(motion),
+    // where the time went: the event's arrival, the download, parsing, drawing (ms)
+    event_ms: sol.at_ms, download_ms: tParse - tFetch, parse_ms: tDraw - tParse, draw_ms: performance.now() - tDraw };
+  if (state.timings[run.tool] === undefined || first) {
+    state.timings[run.tool] = drawn;
+    const { event_ms, download_ms, parse_ms, draw_ms } = state.current;
+    state.firstDraw[run.tool] = { drawn_ms: drawn, event_ms, download_ms, parse_ms, draw_ms, result: sol.result };
+  }
+  $('sol-info').textContent = `${sol.result} · score ${sol.score.toFixed(3)} · found at ${(sol.elapsed_ms / 1000).toFixed(2)} s · ${motion.frames} frames`;
+  for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = false;
+  if (first) { viewer.seek(0); viewer.play(); }
+  tools[run.tool]?.onResult?.(motion);
+}
+
+function rootPath(motion) {
+  const J = motion.joints.length;
+  const out = [];
+  for (let f = 0; f < motion.frames; f++) out.push([motion.positions[f * J * 3], motion.positions[f * J * 3 + 2]]);
+  return out;
+}
+
+$('alternatives').onchange = () =>
+  guarded('download', async () => {
+    const sol = state.solutions.find((s) => s.result === $('alternatives').value);
+    if (sol && active) await requestDraw(active, sol);
+  });
+
+$('cancel-job').onclick = () => guarded('download', async () => { if (state.job) await api.cancel(state.job.id); });
+
+async function download(format) {
+  if (!state.current || !state.current.job) throw new ApiError(0, 'no_result', 'no result to download yet');
+  const { job, result } = state.current;
+  const blob = await api.resultBlob(job, result, format);
+  const record = { format, job, result, bytes: blob.size };
+  if (format === 'glb') {
+    // check the file the service made: it must load in three.js with its animation
+    const gltf = await new GLTFLoader().parseAsync(await blob.arrayBuffer(), '');
+    record.animations = gltf.animations.length;
+    record.duration_s = gltf.animations.length ? gltf.animations[0].duration : 0;
+  } else {
+    const text = await blob.text();
+    record.frames = Number((text.match(/Frames:\s*(\d+)/) || [])[1] || 0);
+  }
+  state.downloads.push(record);
+  const a = document.createElement('a');
+  a.href = URL.createObjectURL(blob);
+  a.download = `segue-${job.slice(0, 8)}-${result}.${format}`;
+  document.body.appendChild(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+}
+$('dl-bvh').onclick = () => guarded('download', () => download('bvh'));
+$('dl-glb').onclick = () => guarded('download', () => download('glb'));
+
+// ---------------------------------------------------------------- tools
+const tools = {};
+
+for (const b of document.querySelectorAll('#tabs button')) {
+  b.onclick = () => selectTool(b.dataset.tool);
+}
+export function selectTool(name) {
+  state.tool = name;
+  for (const b of document.querySelectorAll('#tabs button')) b.classList.toggle('active', b.dataset.tool === name);
+  for (const t of document.querySelectorAll('.tool')) t.classList.toggle('active', t.id === `tool-${name}`);
+  tools[name]?.redraw?.();
+}
+
+function numberOf(id, where, lo, hi) {
+  const v = Number($(id).value);
+  if (!Number.isFinite(v) || v < lo || v > hi) throw new ApiError(0, 'invalid_input', `${where}: give a number from ${lo} to ${hi}`);
+  return v;
+}
+
+// -- Path: a performed mouse path, sampled at 30 Hz with its timing -> control engine walk
+tools.path = (() => {
+  const pad = new FloorPad($('path-pad'), 5);
+  const canvas = $('path-pad');
+  let result = [];
+  const redraw = () => {
+    const ctx = pad.clear();
+    const pts = state.path.points;
+    if (result.length) pad.polyline(ctx, result, '#f0a030', 2);
+    pad.polyline(ctx, pts, '#4aa3ff', 2);
+    // the user's position every second, and where a walker at the reference speed would be
+    const ref = Number($('path-ref').value) || 1.3;
+    let acc = 0;
+    let next = ref;
+    for (let i = 1; i < pts.length; i++) {
+      const seg = Math.hypot(pts[i][0] - pts[i - 1][0], pts[i][1] - pts[i - 1][1]);
+      while (acc + seg >= next && seg > 0) {
+        const u = (next - acc) / seg;
+        pad.dot(ctx, [pts[i - 1][0] + u * (pts[i][0] - pts[i - 1][0]), pts[i - 1][1] + u * (pts[i][1] - pts[i - 1][1])], '#7ccf7c', 3);
+        next += ref;
+      }
+      acc += seg;
+      if (i % 30 === 0) pad.dot(ctx, pts[i], '#ffffff', 2.5);
+    }
+    if (pts.length) pad.dot(ctx, pts[0], '#4aa3ff', 5);
+    const secs = pts.length > 1 ? (pts.length - 1) / 30 : 0;
+    $('path-info').textContent = pts.length > 1
+      ? `${pts.length} samples · ${secs.toFixed(2)} s · ${acc.toFixed(2)} m · ${(acc / secs).toFixed(2)} m/s (ref ${ref} m/s)`
+      : 'no path';
+  };
+  // The pointer's positions with their times (ms), resampled at exactly 30 Hz by linear
+  // interpolation: the path keeps the performance's timing whatever the event and timer jitter.
+  let raw = null;
+  let timer = null;
+  const resample = (until) => {
+    const t0 = raw[0][0];
+    const n = Math.floor(((until - t0) / 1000) * 30) + 1;
+    const out = [];
+    let k = 0;
+    for (let i = 0; i < n; i++) {
+      const t = t0 + (i * 1000) / 30;
+      while (k + 1 < raw.length && raw[k + 1][0] <= t) k++;
+      const a = raw[k];
+      const b = raw[Math.min(k + 1, raw.length - 1)];
+      const u = b[0] > a[0] ? Math.min(Math.max((t - a[0]) / (b[0] - a[0]), 0), 1) : 0;
+      out.push([a[1] + u * (b[1] - a[1]), a[2] + u * (b[2] - a[2])]);
+    }
+    return out;
+  };
+  const record = (ev) => {
+    const [x, z] = pad.toFloor(ev.clientX, ev.clientY);
+    raw.push([performance.now(), x, z]);
+  };
+  canvas.addEventListener('pointerdown', (ev) => {
+    canvas.setPointerCapture(ev.pointerId);
+    raw = [];
+    record(ev);
+    result = [];
+    clearInterval(timer);
+    timer = setInterval(() => {
+      state.path.points = resample(performance.now());
+      redraw();
+    }, 1000 / 30);
+  });
+  canvas.addEventListener('pointermove', (ev) => {
+    if (!timer) return;
+    // the pointer rested since its last event (held when events are sparse)
+    const last = raw[raw.length - 1];
+    if (performance.now() - last[0] > 50) raw.push([performance.now() - 1e-3, last[1], last[2]]);
+    record(ev);
+  });
+  const stop = () => {
+    if (!timer) return;
+    clearInterval(timer);
+    timer = null;
+    state.path.points = resample(performance.now());
+    redraw();
+  };
+  canvas.addEventListener('pointerup', stop);
+  canvas.addEventListener('pointercancel', stop);
+  $('path-clear').onclick = () => { state.path.points = []; result = []; redraw(); };
+  $('path-ref').oninput = redraw;
+  $('path-go').onclick = () =>
+    guarded('path', async () => {
+      const db = dbOf('path-db');
+      const pts = state.path.points;
+      if (pts.length < 2) throw new ApiError(0, 'no_path', 'draw a path first (hold the mouse button and move)');
+      const smoothing = Number($('path-smooth').value);
+      viewer.clear();
+      await runJob('path', {
+        engine: 'control',
+        database: db,
+        budget_s: numberOf('path-budget', 'budget', 0.1, 600),
+        control: { trajectory: { fps: 30, points: pts.map(([x, z]) => [+x.toFixed(4), +z.toFixed(4)]), smoothing: { temporal_s: smoothing } } },
+      });
+    });
+  redraw();
+  return { redraw, onResult: (motion) => { result = rootPath(motion); redraw(); } };
+})();
+
+// -- Partner: a leader clip -> the follower (control engine with the leader as the control motion)
+tools.partner = (() => {
+  $('partner-go').onclick = () =>
+    guarded('partner', async () => {
+      const db = dbOf('partner-db');
+      const leader = $('partner-clip').value;
+      if (!leader) throw new ApiError(0, 'no_clip', 'upload a leader clip first');
+      viewer.clear();
+      const info = state.clips.find((c) => clipName(c) === leader);
+      const job = runJob('partner', { engine: 'control', database: db, budget_s: numberOf('partner-budget', 'budget', 0.1, 600), control: { bvh: info ? info.name : leader } });
+      // the leader is drawn beside the follower: parsed in this page when it was uploaded here, or a
+      // bundled sample fetched again (the API does not serve clip files back)
+      let motion = clipMotions.get(leader);
+      const file = Object.keys(state.samples).find((f) => f.startsWith(leader));
+      if (!motion && file) {
+        const scale = METRES_PER_UNIT[info && info.units] || 1;
+        motion = parseBvhText(await bvhText(await api.sampleBytes(file)), leader, scale);
+      }
+      if (motion) {
+        clipMotions.set(leader, motion);
+        viewer.set('leader', motion, undefined, { frame: !viewer.has('result') });
+      } else {
+        $('err-partner').textContent = `(the leader ${leader} is not drawn: upload it from this page to see it)`;
+      }
+      await job;
+    });
+  return {};
+})();
+
+// -- Constraints: body arrows (position + heading) and a length -> graph search with alternatives
+tools.constraints = (() => {
+  const pad = new FloorPad($('cons-pad'), 5);
+  const canvas = $('cons-pad');
+  let dragging = null;
+  let result = [];
+  const frameCount = () => {
+    const db = state.databases.find((d) => d.id === $('cons-db').value);
+    const fps = (db && db.fps) || 30;
+    return Math.max(2, Math.round(numberOf('cons-length', 'length', 0.2, 3600) * fps));
+  };
+  const fps = () => {
+    const db = state.databases.find((d) => d.id === $('cons-db').value);
+    return (db && db.fps) || 30;
+  };
+  // each arrow's output frame: its own time when given, else evenly spaced from first to last frame
+  const frames = (n, F) =>
+    state.constraints.slice(0, n).map((c, i) => {
+      if (c.time_s !== undefined && c.time_s !== null) return Math.min(F - 1, Math.max(0, Math.round(c.time_s * fps())));
+      return n === 1 ? 0 : Math.round((i * (F - 1)) / (n - 1));
+    });
+  const redraw = () => {
+    const ctx = pad.clear();
+    if (result.length) pad.polyline(ctx, result, '#f0a030', 2);
+    let F = 180;
+    try { F = frameCount(); } catch { /* shown on submit */ }
+    const at = frames(state.constraints.length, F);
+    state.constraints.forEach((c, i) => pad.arrow(ctx, c.position, c.heading_deg, i === 0 ? '#7ccf7c' : '#4aa3ff', `${i + 1}: f${at[i]}`));
+    const list = $('cons-list');
+    list.textContent = '';
+    state.constraints.forEach((c, i) => {
+      const li = document.createElement('li');
+      li.innerHTML = '<span class="grow"></span><label>at <input type="number" step="0.1" min="0"> s</label>';
+      li.firstChild.textContent = `frame ${at[i]} · [${c.position.map((v) => v.toFixed(2)).join(', ')}] m · ${c.heading_deg.toFixed(0)}°`;
+      const input = li.querySelector('input');
+      input.value = (at[i] / fps()).toFixed(2);
+      input.title = 'time of this arrow (seconds); empty: evenly spaced';
+      input.onchange = () => {
+        c.time_s = input.value === '' ? null : Math.max(0, Number(input.value));
+        redraw();
+      };
+      list.appendChild(li);
+    });
+  };
+  canvas.addEventListener('contextmenu', (ev) => {
+    // right click: remove the nearest arrow (within 0.5 m)
+    ev.preventDefault();
+    const [x, z] = pad.toFloor(ev.clientX, ev.clientY);
+    let best = -1;
+    let bestD = 0.5;
+    state.constraints.forEach((c, i) => {
+      const d = Math.hypot(c.position[0] - x, c.position[1] - z);
+      if (d < bestD) { best = i; bestD = d; }
+    });
+    if (best >= 0) state.constraints.splice(best, 1);
+    redraw();
+  });
+  canvas.addEventListener('pointerdown', (ev) => {
+    if (ev.button !== 0) return;
+    canvas.setPointerCapture(ev.pointerId);
+    dragging = { position: pad.toFloor(ev.clientX, ev.clientY), heading_deg: 0 };
+    state.constraints.push(dragging);
+    redraw();
+  });
+  canvas.addEventListener('pointermove', (ev) => {
+    if (!dragging) return;
+    const [x, z] = pad.toFloor(ev.clientX, ev.clientY);
+    const dx = x - dragging.position[0];
+    const dz = z - dragging.position[1];
+    if (Math.hypot(dx, dz) > 0.1) dragging.heading_deg = headingDeg(dx, dz);
+    redraw();
+  });
+  canvas.addEventListener('pointerup', () => { dragging = null; redraw(); });
+  $('cons-clear').onclick = () => { state.constraints = []; result = []; redraw(); };
+  $('cons-length').oninput = redraw;
+  $('cons-go').onclick = () =>
+    guarded('constraints', async () => {
+      const db = dbOf('cons-db');
+      const F = frameCount();
+      const at = frames(state.constraints.length, F);
+      viewer.clear();
+      await runJob('constraints', {
+        engine: 'graph',
+        database: db,
+        frames: F,
+        alternatives: Math.round(numberOf('cons-alts', 'alternatives', 1, 20)),
+        budget_s: numberOf('cons-budget', 'budget', 0.1, 600),
+        constraints: state.constraints.map((c, i) => ({ type: 'body', frame: at[i], position: c.position.map((v) => +v.toFixed(3)), heading_deg: +c.heading_deg.toFixed(1) })),
+      });
+    });
+  redraw();
+  return { redraw, onResult: (motion) => { result = rootPath(motion); redraw(); } };
+})();
+
+// -- Timeline: paint do / don't per label track -> annotation synthesis; label corrections
+timeline = tools.timeline = (() => {
+  const canvas = $('tl-canvas');
+  const tl = state.timeline;
+  let painting = null;
+  const nFrames = () => Math.max(2, Math.round(Number($('tl-frames').value) || 300));
+  const ensure = () => {
+    const F = nFrames();
+    for (const t of tl.tracks) if (t.values.length !== F) {
+      const v = new Int8Array(F);
+      v.set(t.values.subarray(0, F));
+      t.values = v;
+    }
+  };
+  const rowH = 24;
+  const labelW = 70;
+  const redraw = () => {
+    ensure();
+    canvas.height = Math.max(1, tl.tracks.length) * rowH + 16;
+    const ctx = canvas.getContext('2d');
+    const w = canvas.width - labelW;
+    ctx.fillStyle = '#1d2127';
+    ctx.fillRect(0, 0, canvas.width, canvas.height);
+    const F = nFrames();
+    tl.tracks.forEach((t, r) => {
+      const y = r * rowH;
+      ctx.fillStyle = '#dfe4ea';
+      ctx.font = '12px sans-serif';
+      ctx.fillText(t.label.slice(0, 10), 4, y + 16);
+      for (let f = 0; f < F; f++) {
+        if (!t.values[f]) continue;
+        ctx.fillStyle = t.values[f] > 0 ? '#3fa34d' : '#c0392b';
+        ctx.fillRect(labelW + (f / F) * w, y + 3, Math.ceil(w / F) + 0.5, rowH - 6);
+      }
+      ctx.strokeStyle = '#343a43';
+      ctx.strokeRect(labelW, y + 2, w, rowH - 4);
+    });
+    ctx.fillStyle = '#8a939e';
+    ctx.font = '10px sans-serif';
+    const fps = dbFps();
+    for (let s = 0; s <= F / fps; s += Math.max(1, Math.round(F / fps / 6))) ctx.fillText(`${s}s`, labelW + ((s * fps) / F) * w, canvas.height - 3);
+    if (!tl.tracks.length) ctx.fillText('add a label track to paint', labelW, 16);
+    if (playhead !== null) {
+      const x = labelW + Math.min((playhead * fps) / F, 1) * w;
+      ctx.strokeStyle = '#f0a030';
+      ctx.beginPath(); ctx.moveTo(x, 0); ctx.lineTo(x, canvas.height - 14); ctx.stroke();
+    }
+  };
+  let playhead = null; // seconds, while a timeline result plays
+  const dbFps = () => {
+    const db = state.databases.find((d) => d.id === $('tl-db').value);
+    return (db && db.fps) || 30;
+  };
+  const paintAt = (ev) => {
+    const r = canvas.getBoundingClientRect();
+    const x = ((ev.clientX - r.left) / r.width) * canvas.width - labelW;
+    const y = ((ev.clientY - r.top) / r.height) * canvas.height;
+    const row = Math.floor(y / rowH);
+    const t = tl.tracks[painting.row ?? row];
+    if (!t) return;
+    painting.row = painting.row ?? row;
+    const F = nFrames();
+    const f = Math.floor((x / (canvas.width - labelW)) * F);
+    const lo = Math.max(0, Math.min(f, painting.last ?? f));
+    const hi = Math.min(F - 1, Math.max(f, painting.last ?? f));
+    for (let i = lo; i <= hi; i++) t.values[i] = painting.value;
+    painting.last = Math.max(0, Math.min(F - 1, f));
+    redraw();
+  };
+  canvas.addEventListener('contextmenu', (ev) => ev.preventDefault());
+  canvas.addEventListener('pointerdown', (ev) => {
+    canvas.setPointerCapture(ev.pointerId);
+    painting = { value: ev.altKey ? 0 : ev.button === 2 || ev.shiftKey ? -1 : 1 };
+    paintAt(ev);
+  });
+  canvas.addEventListener('pointermove', (ev) => { if (painting) paintAt(ev); });
+  canvas.addEventListener('pointerup', () => { painting = null; });
+  const addTrack = (label) => {
+    if (!label || tl.tracks.some((t) => t.label === label)) return;
+    tl.tracks.push({ label, values: new Int8Array(nFrames()) });
+    redraw();
+  };
+  $('tl-add').onclick = () => { addTrack($('tl-new').value.trim()); $('tl-new').value = ''; };
+  $('tl-frames').oninput = redraw;
+  $('tl-clear').onclick = () => { for (const t of tl.tracks) t.values.fill(0); redraw(); };
+  // tracks: the labels of the chosen database's spec (when it was built from this browser)
+  const refreshTracks = () => {
+    const spec = dbSpecs[$('tl-db').value];
+    const labels = new Set();
+    for (const c of (spec && spec.clips) || []) for (const l of c.labels || []) labels.add(l.label);
+    for (const l of labels) addTrack(l);
+    redraw();
+  };
+  $('tl-db').onchange = refreshTracks;
+  // the timeline entries: runs of equal non-zero values per track
+  const entries = () => {
+    const out = [];
+    for (const t of tl.tracks) {
+      let start = 0;
+      for (let f = 1; f <= t.values.length; f++) {
+        if (f === t.values.length || t.values[f] !== t.values[start]) {
+          if (t.values[start]) out.push({ label: t.label, start, end: f, value: t.values[start] });
+          start = f;
+        }
+      }
+    }
+    return out;
+  };
+  tl.entries = entries;
+  $('tl-go').onclick = () =>
+    guarded('timeline', async () => {
+      const db = dbOf('tl-db');
+      const timelineEntries = entries();
+      if (!timelineEntries.length) throw new ApiError(0, 'empty_timeline', 'paint at least one do / don\'t range');
+      viewer.clear();
+      await runJob('timeline', { engine: 'annotations', database: db, frames: nFrames(), budget_s: numberOf('tl-budget', 'budget', 0.1, 600), timeline: timelineEntries });
+    });
+  // the correction loop: set a label on a clip range in the spec and rebuild
+  $('corr-go').onclick = () =>
+    guarded('correct', async () => {
+      const id = $('tl-db').value;
+      const spec = dbSpecs[id];
+      if (!spec) throw new ApiError(0, 'unknown_spec', 'this database was not built from this browser: rebuild it here to correct its labels');
+      const clip = $('corr-clip').value;
+      const label = $('corr-label').value.trim();
+      const start = Math.round(Number($('corr-start').value));
+      const end = Math.round(Number($('corr-end').value));
+      if (!label) throw new ApiError(0, 'invalid_input', 'name the label to correct');
+      const next = JSON.parse(JSON.stringify(spec));
+      const entry = next.clips.find((c) => (c.name || (c.bvh || '').replace(/\.gz$/, '').replace(/\.bvh$/, '')) === clip);
+      if (!entry) throw new ApiError(0, 'invalid_input', `clip ${clip} is not in this database`);
+      // as engines/annotations/corrections.py's "set": the label's ranges are cut out of
+      // [start, end) and the new range added
+      const labels = [];
+      for (const l of entry.labels || []) {
+        if (l.label !== label || l.end <= start || l.start >= end) { labels.push(l); continue; }
+        if (l.start < start) labels.push({ ...l, end: start });
+        if (l.end > end) labels.push({ ...l, start: end });
+      }
+      labels.push({ label, start, end, value: Number($('corr-value').value) });
+      entry.labels = labels.sort((a, b) => a.start - b.start || a.label.localeCompare(b.label));
+      const info = await buildDatabase(next);
+      $('tl-db').value = info.id;
+      refreshTracks();
+    });
+  const showTime = (t) => {
+    const next = state.current && state.current.tool === 'timeline' ? t : null;
+    if (next !== playhead && state.tool === 'timeline') {
+      playhead = next;
+      redraw();
+    }
+  };
+  return { redraw, refreshTracks, addTrack, showTime };
+})();
+
+// -- Music: BPM or MIDI, steer with the mouse -> rhythmic synthesis; beat flashes
+music = setupMusic({ state, $, api, runJob, guarded, dbOf, numberOf, viewer, ApiError, FloorPad, headingDeg, showError });
+tools.music = music;
+
+// ---------------------------------------------------------------- start
+$('token').value = getToken();
+$('token').onchange = () => { setToken($('token').value.trim()); boot(); };
+
+async function boot() {
+  try {
+    state.health = await api.health();
+    $('health').textContent = state.health.ok ? `service ok · ${state.health.backend?.backend || state.health.backend?.kind || 'backend'}` : 'service degraded';
+  } catch {
+    $('health').textContent = 'service unreachable';
+  }
+  await guarded('upload', loadSamples);
+  await guarded('upload', refreshClips);
+  await guarded('build', refreshDatabases);
+  state.ready = true;
+}
+boot();
+setInterval(() => { if (state.ready) refreshDatabases().catch(() => {}); }, 5000);
