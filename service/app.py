@@ -30,7 +30,7 @@ from workers.store import Store
 
 from .errors import install_error_handlers
 from .metrics import HttpMetricsMiddleware, Metrics, observe_terminal_events
-from .routes import clips, databases, events, files, health, jobs, sessions
+from .routes import annotations, clips, databases, events, files, health, jobs, sessions
 from .settings import Settings, get_settings
 from .web import mount_web
 
@@ -108,7 +108,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.metrics = Metrics()
     app.state.backend = None
     install_error_handlers(app)
-    for module in (clips, files, databases, jobs, events, health, sessions):
+    for module in (clips, files, databases, annotations, jobs, events, health, sessions):
         app.include_router(module.router)
     app.add_middleware(HttpMetricsMiddleware, metrics=app.state.metrics)
     mount_web(app)  # the browser front end: web/ at / for every path no API route matches

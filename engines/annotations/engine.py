@@ -1,0 +1,159 @@
+"""The annotation engine as the runtime sees it (Arikan, Forsyth & O'Brien 2003).
+
+Database kind ``annotated`` (:class:`schemas.annotations.AnnotatedDatabaseSpec`): ``build``
+propagates the clips' labels by SVM and stores the continuity features and block clusterings
+(:mod:`engines.annotations.build`). Request ``engine: "annotations"``
+(:class:`schemas.annotations.AnnotationRequest`): ``search`` runs coarse-to-fine DP passes with new
+random active sets until the budget is spent, emitting every better motion
+(:mod:`engines.annotations.search`).
+
+Example
+-------
+>>> from schemas.annotations import AnnotationRequest
+>>> req = AnnotationRequest(frames=450, timeline=[{"label": "walk", "start": 0, "end": 200},
+...     {"label": "run", "start": 200, "end": 450}], seed=3)
+>>> engine = AnnotationEngine(library, arrays)  # doctest: +SKIP
+>>> engine.search(req, 2.0, emit, lambda: False)  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
+from ..library import MotionLibrary
+from .assemble import Frames, assemble, constraint_report, discontinuity, label_report
+from .build import BLAS_THREADS, build_annotated
+from .search import (
+    Candidate,
+    Database,
+    Problem,
+    blocks_to_sigma,
+    child_active,
+    force_constraints,
+    refine_boundaries,
+    solve_level,
+    spliced,
+    top_active,
+)
+
+
+class AnnotationSearch:
+    """One request's anytime search state (pools, random generator)."""
+
+    def __init__(self, db: Database, request: Any) -> None:
+        self.db = db
+        self.request = request
+        self.pb = Problem.compile(request, db)
+        for level in db.levels:
+            if level.clusters == 0:
+                raise EngineError(
+                    f"no clip is {level.size} frames long: rebuild the database with smaller block_sizes"
+                )
+        self.rng = np.random.default_rng(int(request.seed))
+        self.pools: list[list[Candidate]] = [[] for _ in db.levels]
+
+    def _level_result(self, level: int, starts: Any, size: int) -> tuple[Candidate, Any]:
+        """The level's solution as a candidate; with an end constraint, the best single cut to or
+        from the level's pool replaces it when better (Sec. 3.4), and the pool is updated."""
+        db, pb = self.db, self.pb
+        cand = Candidate.of(db, pb, blocks_to_sigma(starts, size, pb.n))
+        if not pb.has_end:
+            return cand, starts
+        pool = self.pools[level]
+        best: tuple[float, Any] = (cand.score, None)
+        for y in pool:
+            for first, second in ((cand, y), (y, cand)):
+                score, k = spliced(db, pb, first, second, size)
+                if score < best[0] - 1e-9:
+                    best = (score, (first, second, k))
+        current = cand
+        if best[1] is not None:
+            first, second, k = best[1]
+            current = Candidate.of(db, pb, np.concatenate((first.sigma[:k], second.sigma[k:])))
+        for c in {id(cand): cand, id(current): current}.values():
+            if not any(np.array_equal(c.sigma, p.sigma) for p in pool):
+                pool.append(c)
+        pool.sort(key=lambda c: c.score)
+        del pool[int(self.request.pool_size) :]
+        return current, current.sigma[::size][: -(-pb.n // size)]
+
+    def one_pass(self) -> Candidate:
+        """One 32/16/8 pass from a fresh random active set, refined at the boundaries."""
+        db, pb, req = self.db, self.pb, self.request
+        top = db.levels[0]
+        starts, _ = solve_level(db, pb, top_active(db, pb, self.rng), top.size)
+        cand, starts = self._level_result(0, starts, top.size)
+        size = top.size
+        for i, level in enumerate(db.levels[1:], start=1):
+            active = child_active(db, pb, starts, size, level, int(req.active_per_cluster), self.rng)
+            starts, _ = solve_level(db, pb, active, level.size)
+            size = level.size
+            cand, starts = self._level_result(i, starts, size)
+        sigma = force_constraints(db, pb, refine_boundaries(db, pb, cand.sigma, int(req.refine_frames)))
+        return Candidate.of(db, pb, sigma)
+
+
+class AnnotationEngine(Engine):
+    """Motion synthesis from annotations: SVM label propagation and coarse-to-fine DP."""
+
+    name = "annotations"
+    kind = "annotated"
+
+    def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
+        super().__init__(library, arrays)
+        self.db = Database.from_arrays(library, arrays)
+        self.frames = Frames(library, arrays)
+
+    @classmethod
+    def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+        return build_annotated(spec, library, emit, should_stop)
+
+    def solution(self, cand: Candidate, pb: Problem, request: Any, passes: int, elapsed: float) -> Solution:
+        """The assembled motion and report of a candidate."""
+        motion, cuts = assemble(
+            self.db, self.frames, pb, cand, int(request.smoothing_frames), bool(request.footskate)
+        )
+        annotations, metrics = label_report(self.db, pb, cand.sigma)
+        metrics.update(discontinuity(motion, cuts))
+        metrics.update({"passes": float(passes), "elapsed_s": float(elapsed)})
+        end = float(pb.end_cost(cand.end_xz, np.float64(cand.end_yaw)))
+        provenance = [
+            (self.db.refs[int(self.db.clip_of[g])], int(g - self.db.clip_start[self.db.clip_of[g]]))
+            for g in cand.sigma
+        ]
+        return Solution(
+            motion=motion,
+            score=cand.score,
+            terms={
+                "annotation": float(cand.d.sum()),
+                "continuity": float(cand.c.sum()),
+                "end": end,
+            },
+            provenance=provenance,
+            constraint_errors=constraint_report(self.db, pb, cand, motion),
+            metrics=metrics,
+            annotations=annotations,
+        )
+
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+        with threadpool_limits(limits=BLAS_THREADS):
+            self._search(request, budget_s, emit, should_stop)
+
+    def _search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+        t0 = time.perf_counter()
+        state = AnnotationSearch(self.db, request)
+        best = float("inf")
+        passes = 0
+        while True:
+            cand = state.one_pass()
+            passes += 1
+            if cand.score < best - 1e-9:
+                best = cand.score
+                emit.solution(self.solution(cand, state.pb, request, passes, time.perf_counter() - t0))
+            if should_stop() or time.perf_counter() - t0 >= budget_s:
+                break
