@@ -11,9 +11,9 @@ from __future__ import annotations
 import asyncio
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Response, status
+from fastapi import APIRouter, Body, Query, Response, status
 
-from engines.annotations.corrections import apply_corrections
+from engines.annotations.corrections import apply_corrections, propagated_ranges
 from engines.annotations.search import Database
 from engines.base import EngineError
 from engines.library import library_from_arrays
@@ -70,3 +70,31 @@ async def correct_labels(
     except EngineError as exc:
         raise ApiError(422, "invalid_request", str(exc)) from None
     return await create_database(corrected, response, store, backend, metrics)
+
+
+@router.get("/{db_id}/labels", responses=responses(404, 409, 422))
+async def clip_labels(
+    db_id: str,
+    store: StoreDep,
+    clip: Annotated[str, Query(min_length=1, description="clip as named in the database")],
+    start: Annotated[int, Query(ge=0)] = 0,
+    end: Annotated[int | None, Query(gt=0)] = None,
+) -> dict[str, object]:
+    """The labels of a clip of a ready ``annotated`` database as ranges (database frames): the user's
+    where given, the SVMs' propagated labels elsewhere; what a client shows before it accepts or
+    corrects them (``POST /v1/databases/{id}/corrections``)."""
+    info = store.database_info(db_id)
+    if info.kind != "annotated":
+        raise ApiError(422, "invalid_request", f"database {db_id} is {info.kind!r}, not 'annotated'")
+    if info.status != DatabaseStatus.ready:
+        raise conflict("database_not_ready", f"database {db_id} is {info.status.value}")
+    db = await asyncio.to_thread(_load, store, db_id)
+    try:
+        g0 = db.frame_of(clip, 0)
+    except EngineError as exc:
+        raise ApiError(404, "not_found", str(exc)) from None
+    try:
+        ranges = propagated_ranges(db, clip, start, end)
+    except EngineError as exc:
+        raise ApiError(422, "invalid_request", str(exc)) from None
+    return {"clip": clip, "frames": int(db.counts[int(db.clip_of[g0])]), "labels": ranges}

@@ -9,6 +9,7 @@ from starlette.concurrency import run_in_threadpool
 
 from engines.registry import engine_class
 from motion import ExportError
+from motion.resample import resample
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
 from schemas.jobs import JobKind, JobStatus
 from workers.backend import JobBackend
@@ -141,11 +142,16 @@ async def download_result(
     target: Annotated[
         ExportTarget, Query(description="axis/unit convention (not for glb)")
     ] = ExportTarget.gltf,
+    fps: Annotated[
+        float | None, Query(gt=0, le=1000, description="resample to this frame rate (default: as computed)")
+    ] = None,
 ) -> Response:
-    """Download a result motion (default: the job's best result so far)."""
+    """Download a result motion (default: the job's best result so far), optionally resampled."""
     rid = await _result_id(backend, job_id, result)
     motion = store.result_motion(job_id, rid)
     try:
+        if fps is not None and abs(fps - motion.fps) > 1e-9:
+            motion = await run_in_threadpool(resample, motion, fps)
         data = await run_in_threadpool(export_bytes, motion, format, target)
     except ExportError as exc:
         raise ApiError(422, "export_failed", f"cannot export result {rid} as {format.value}: {exc}") from None

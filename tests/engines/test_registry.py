@@ -1,0 +1,31 @@
+"""The engine registry: built-in engines load on first use; a missing one is a clear error."""
+
+from __future__ import annotations
+
+import pytest
+
+from engines import registry
+from engines.registry import UnavailableError, engine_class, kind_class
+
+
+@pytest.mark.parametrize(
+    ("engine", "kind"),
+    [("graph", "graph"), ("control", "control"), ("annotations", "annotated"), ("rhythm", "rhythm")],
+)
+def test_built_in_engines_load_by_name_and_kind(engine: str, kind: str) -> None:
+    cls = engine_class(engine)
+    assert cls.name == engine and cls.kind == kind
+    assert kind_class(kind) is cls
+
+
+def test_an_engine_whose_module_is_missing_is_unavailable(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(registry._BUILT_IN, "ghost", ("engines.ghost_engine", "GhostEngine", "haunted"))
+    with pytest.raises(UnavailableError, match="engine 'ghost' is not available"):
+        engine_class("ghost")
+    with pytest.raises(UnavailableError, match="kind 'haunted' is not available"):
+        kind_class("haunted")
+
+
+def test_unknown_names_list_what_is_available() -> None:
+    with pytest.raises(UnavailableError, match="available: .*clip"):
+        engine_class("nope")

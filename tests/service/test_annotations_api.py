@@ -1,0 +1,87 @@
+"""The annotation engine's correction loop over HTTP: read a clip's labels, correct them, rebuild."""
+
+from __future__ import annotations
+
+import itertools
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+
+from motion.samples import sample_path
+
+from .conftest import wait_events
+
+
+def _ready(client: TestClient, response: Any) -> dict[str, Any]:
+    assert response.status_code in (200, 202), response.text
+    db = response.json()
+    if db["status"] != "ready":
+        events = wait_events(client, db["build_job"])
+        assert events[-1]["type"] == "done", events[-1]
+    db = client.get(f"/v1/databases/{db['id']}").json()
+    assert db["status"] == "ready", db
+    return dict(db)
+
+
+@pytest.fixture(scope="module")
+def annotated_db(client: TestClient) -> dict[str, Any]:
+    names = []
+    for sample in ("salsa-leader", "salsa-follower"):
+        path = sample_path(sample)
+        r = client.post("/v1/clips", files={"file": (path.name, path.read_bytes())})
+        assert r.status_code in (200, 201), r.text
+        names.append(r.json()["name"])
+    spec = {
+        "kind": "annotated",
+        "gammas": [1.0],
+        "clips": [
+            {"bvh": names[0], "name": "lead", "labels": [{"label": "walk", "start": 0, "end": 60}]},
+            {"bvh": names[1], "name": "follower"},
+        ],
+    }
+    return _ready(client, client.post("/v1/databases", json=spec))
+
+
+def test_labels_of_a_clip_are_ranges_covering_it(client: TestClient, annotated_db: dict[str, Any]) -> None:
+    r = client.get(f"/v1/databases/{annotated_db['id']}/labels", params={"clip": "follower"})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["clip"] == "follower" and body["frames"] > 0
+    walk = sorted((x["start"], x["end"]) for x in body["labels"] if x["label"] == "walk")
+    assert walk[0][0] == 0 and walk[-1][1] == body["frames"]
+    assert all(a[1] == b[0] for a, b in itertools.pairwise(walk))  # contiguous, no gaps
+    assert {x["value"] for x in body["labels"]} <= {1, -1}
+
+
+def test_label_errors(client: TestClient, annotated_db: dict[str, Any]) -> None:
+    db = annotated_db["id"]
+    missing = client.get(f"/v1/databases/{db}/labels", params={"clip": "nope"})
+    assert missing.status_code == 404 and "nope" in missing.json()["error"]["message"]
+    bad = client.get(f"/v1/databases/{db}/labels", params={"clip": "follower", "start": 10_000})
+    assert bad.status_code == 422
+    empty = client.post(f"/v1/databases/{db}/corrections", json=[])
+    assert empty.status_code == 422
+    wrong = client.post(
+        f"/v1/databases/{db}/corrections", json=[{"clip": "ghost", "start": 0, "end": 5, "label": "x"}]
+    )
+    assert wrong.status_code == 422 and "ghost" in wrong.json()["error"]["message"]
+
+
+def test_a_correction_builds_a_new_database_with_the_label(
+    client: TestClient, annotated_db: dict[str, Any]
+) -> None:
+    db = annotated_db["id"]
+    fixes = [
+        {"clip": "follower", "start": 0, "end": 20, "action": "accept"},
+        {"clip": "follower", "start": 20, "end": 50, "label": "walk", "value": -1},
+    ]
+    new = _ready(client, client.post(f"/v1/databases/{db}/corrections", json=fixes))
+    assert new["id"] != db and new["kind"] == "annotated"
+    labels = client.get(
+        f"/v1/databases/{new['id']}/labels", params={"clip": "follower", "start": 20, "end": 50}
+    ).json()
+    walk = [x for x in labels["labels"] if x["label"] == "walk"]
+    assert walk == [{"label": "walk", "start": 20, "end": 50, "value": -1}]
+    again = client.post(f"/v1/databases/{db}/corrections", json=fixes)
+    assert again.status_code == 200 and again.json()["id"] == new["id"]  # same content address
