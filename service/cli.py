@@ -191,8 +191,38 @@ def cmd_demo(args: argparse.Namespace) -> int:
         save_motion(motion, out / name, **kwargs)
         size_mb = (out / name).stat().st_size / 1e6
         print(f"  wrote {out / name} ({size_mb:.1f} MB, {time.perf_counter() - t0:.2f} s)")
-    print("open the .glb in any glTF viewer (Blender, the three.js editor, ...) to watch it dance")
+    if not args.no_synth:
+        _demo_dance(out)
+    print("open the .glb files in any glTF viewer (Blender, the three.js editor, ...) or run `segue serve`")
     return 0
+
+
+def _demo_dance(out: Path) -> None:
+    """The rhythm engine end to end on the bundled leader: a database, then a dance to 120 BPM."""
+    from workers.local import EventWriter, build_to_dir, synth_from_dir, write_result
+
+    spec = {"kind": "rhythm", "clips": [{"bvh": str(sample_path("salsa-leader"))}], "beats_per_movement": 4}
+    request = {"engine": "rhythm", "music": {"bpm": 120, "duration_s": 12}, "seed": 1, "budget_s": 30}
+    (out / "dance-db.json").write_text(json.dumps(spec, indent=2), encoding="utf-8")
+    (out / "dance-request.json").write_text(json.dumps(request, indent=2), encoding="utf-8")
+    t0 = time.perf_counter()
+    db = build_to_dir(out / "dance-db.json", out / "dance-db", EventWriter("build"))
+    print(
+        f"  built a rhythm database from the leader ({db.frames} frames) in {time.perf_counter() - t0:.1f} s"
+    )
+    t0 = time.perf_counter()
+    result = synth_from_dir(out / "dance-request.json", out / "dance-db", EventWriter("synth"))
+    if result is None:
+        raise MotionError("the demo dance failed")
+    dance, report = result
+    write_result(dance, report, out / "salsa-dance.glb", out / "salsa-dance-report.json")
+    write_result(dance, report, out / "salsa-dance.bvh", None)
+    beats = report.annotations.get("music_beats_s", [])
+    align = report.metrics.get("beat_align_mint", float("nan"))
+    print(
+        f"  synthesized a {dance.num_frames / dance.fps:.0f} s dance to {len(beats)} beats at 120 BPM in "
+        f"{time.perf_counter() - t0:.1f} s (beat alignment {align:.2f}): {out / 'salsa-dance.glb'}, .bvh"
+    )
 
 
 def _validation_message(exc: ValidationError) -> str:
@@ -353,8 +383,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("samples", help="list the bundled sample clips")
     p.set_defaults(func=cmd_samples)
 
-    p = sub.add_parser("demo", help="inspect a bundled salsa clip and convert it to GLB, JSON and NPZ")
+    p = sub.add_parser(
+        "demo",
+        help="convert a bundled salsa clip to GLB, JSON and NPZ, and dance it to 120 BPM (rhythm engine)",
+    )
     p.add_argument("--out", default="segue-demo", help="output directory (default ./segue-demo)")
+    p.add_argument("--no-synth", action="store_true", help="only convert the clip (no database, no dance)")
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("build", help="build a database from a spec file (clip paths relative to it)")
