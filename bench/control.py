@@ -1,0 +1,210 @@
+"""Speed of the control-by-example engine: seconds of input per second of compute, with beam and exact.
+
+Usage: ``python bench/control.py [--repeat N] [--held 07]`` from the project root (needs ../shared/data).
+
+Two databases, as in Hsu et al. 2004 Sec. 6: the CMU salsa couples (13 pairs, the held-out dance's
+leader drives the follower; beats segmentation) and Bandai-Namco dataset-2 walks (30 clips, derived
+hip controls, footplant segmentation; a held-out walk's hip path drives it). For each, the figures:
+
+* ``dp_*``: the paper's timing — the downsampled DP (interpretation distances for every cell and
+  time + the forward pass), input seconds per compute second: ``quick`` (the first anytime stage, a
+  narrow beam), ``beam`` (quick + the engine's default beam stage, width ``BEAM_WIDTH`` mean costs
+  per segment of the quick solution), ``exact_exhaustive`` (no pruning at all, the paper's
+  "without beam search") and ``exact_bnb`` (the optimum with pruning that cannot change it, given
+  the beam's score);
+* ``search_*``: the whole request (input parsing, DP, full-rate re-timing, assembly on the skeleton,
+  smoothing, foot-skate cleanup) with ``exact: false`` (the beam schedule) and with the exact stage;
+* ``beam_vs_exact``: relative excess of the beam's score over the exact optimum (goal <= 1%).
+
+Prints one JSON object. Timings are best-of ``--repeat`` (the machine is shared).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from engines.base import Solution  # noqa: E402
+from engines.control.dp import (  # noqa: E402
+    cost_to_go,
+    interpretation,
+    legal_cells,
+    solve,
+    typical_segment_cost,
+)
+from engines.control.engine import (  # noqa: E402
+    BEAM_CELLS,
+    BEAM_WIDTH,
+    QUICK_CELLS,
+    QUICK_WIDTH,
+    ControlEngine,
+)
+from engines.control.points import resample_cloud  # noqa: E402
+from engines.library import ClipInput, build_library, library_to_arrays  # noqa: E402
+from motion.bvh import parse_bvh  # noqa: E402
+from motion.ground import ground_frames  # noqa: E402
+from schemas.databases import parse_database_spec  # noqa: E402
+from schemas.jobs import parse_job_request  # noqa: E402
+
+DATA = ROOT.parent / "shared" / "data"
+
+
+class Quiet:
+    def __init__(self) -> None:
+        self.solutions: list[Solution] = []
+
+    def solution(self, solution: Solution) -> str:
+        self.solutions.append(solution)
+        return str(len(self.solutions))
+
+    def progress(self, fraction: float, message: str = "") -> None:
+        pass
+
+
+def engine_for(spec_data: dict[str, Any]) -> ControlEngine:
+    spec = parse_database_spec(spec_data)
+    clips = [ClipInput(c.display_name(), Path(str(c.bvh)).read_bytes(), c.units) for c in spec.clips]
+    library = build_library(clips, spec.fps)
+    arrays = ControlEngine.build(spec, library, Quiet(), lambda: False)
+    arrays.update(library_to_arrays(library))
+    return ControlEngine(library, arrays)
+
+
+def best_of(repeat: int, fn: Any) -> tuple[float, Any]:
+    best, out = np.inf, None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def measure(engine: ControlEngine, request: Any, input_s: float, repeat: int) -> dict[str, Any]:
+    rate = float(request.solve_fps)
+    inst = engine.solver_instances_
+    ci, cd = legal_cells(inst.length / inst.fps, rate, request.stretch_s, request.stretch_ratio)
+    ctl = engine.control_cloud(request)
+
+    def prep() -> Any:
+        x = resample_cloud(ctl.cloud, ctl.fps, rate)
+        interp = interpretation(x, inst, ci, cd, rate)
+        return interp, cost_to_go(interp.D, cd)
+
+    out: dict[str, Any] = {"input_s": round(input_s, 2), "instances": int(inst.count), "cells": int(ci.size)}
+    with threadpool_limits(limits=1):
+        t_prep, (interp, to_go) = best_of(repeat, prep)
+        d_unit = typical_segment_cost(interp.D)
+        t_quick, quick = best_of(
+            repeat,
+            lambda: solve(
+                interp, inst, ci, cd, request.k, beam=QUICK_WIDTH * d_unit, max_cells=QUICK_CELLS, to_go=to_go
+            ),
+        )
+        unit = quick.score / len(quick.cells)
+        t_beam1, beam = best_of(
+            repeat,
+            lambda: solve(
+                interp, inst, ci, cd, request.k, beam=BEAM_WIDTH * unit, max_cells=BEAM_CELLS, to_go=to_go
+            ),
+        )
+        t_beam = t_quick + t_beam1
+        t_exh, exh = best_of(1, lambda: solve(interp, inst, ci, cd, request.k))
+        t_bnb, bnb = best_of(
+            repeat, lambda: solve(interp, inst, ci, cd, request.k, upper_bound=beam.score, to_go=to_go)
+        )
+    out.update(
+        dp_beam_x_realtime=round(input_s / (t_prep + t_beam), 1),
+        dp_exact_exhaustive_x_realtime=round(input_s / (t_prep + t_exh), 1),
+        dp_exact_bnb_x_realtime=round(input_s / (t_prep + t_beam + t_bnb), 1),
+        dp_quick_x_realtime=round(input_s / (t_prep + t_quick), 1),
+        dp_seconds={
+            "interpretation": round(t_prep, 4),
+            "quick": round(t_quick, 4),
+            "beam": round(t_beam1, 4),
+            "exhaustive": round(t_exh, 4),
+            "bnb_after_beam": round(t_bnb, 4),
+        },
+        beam_vs_exact=round((beam.score - exh.score) / exh.score, 5),
+        quick_vs_exact=round((quick.score - exh.score) / exh.score, 5),
+        bnb_equals_exhaustive=bool(abs(bnb.score - exh.score) <= 1e-9 * abs(exh.score)),
+    )
+    fast = request.model_copy(update={"exact": False})
+    fast.attach_inputs(dict(request._inputs))
+    t_search, _ = best_of(repeat, lambda: engine.search(fast, 60.0, Quiet(), lambda: False))
+    t_full, _ = best_of(repeat, lambda: engine.search(request, 60.0, Quiet(), lambda: False))
+    out.update(
+        search_beam_x_realtime=round(input_s / t_search, 1),
+        search_exact_x_realtime=round(input_s / t_full, 1),
+    )
+    return out
+
+
+def salsa(held: str, repeat: int) -> dict[str, Any]:
+    s = DATA / "cmu-salsa"
+    trials = sorted({f.name[3:5] for f in s.glob("60_*_scaled.bvh")})
+    engine = engine_for(
+        {
+            "kind": "control",
+            "pairs": [
+                {"control": str(s / f"60_{t}_scaled.bvh"), "target": str(s / f"61_{t}_scaled.bvh")}
+                for t in trials
+                if t != held
+            ],
+            "segmentation": {"method": "beats", "beats_per_segment": 2},
+        }
+    )
+    lead = s / f"60_{held}_scaled.bvh"
+    request = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}})
+    request.attach_inputs({"lead.bvh": lead.read_bytes()})
+    motion = parse_bvh(lead.read_bytes())
+    return {"database": f"cmu-salsa minus {held}", **measure(engine, request, motion.duration_s, repeat)}
+
+
+def walks(repeat: int) -> dict[str, Any]:
+    b = DATA / "bandai-namco" / "dataset-2"
+    train = [
+        b / f"dataset-2_{kind}_normal_{i:03d}.bvh"
+        for kind in ("walk", "walk-turn-left", "walk-turn-right")
+        for i in range(1, 11)
+    ]
+    engine = engine_for(
+        {
+            "kind": "control",
+            "pairs": [{"target": str(p)} for p in train],
+            "segmentation": {"method": "footplants"},
+        }
+    )
+    held = parse_bvh((b / "dataset-2_walk_normal_012.bvh").read_bytes()).to_units("m")
+    path, _ = ground_frames(held)
+    request = parse_job_request(
+        {"engine": "control", "control": {"trajectory": {"fps": held.fps, "points": path.tolist()}}}
+    )
+    return {
+        "database": "bandai dataset-2 walks (30 clips)",
+        **measure(engine, request, held.duration_s, repeat),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--held", default="07", help="held-out salsa trial")
+    args = parser.parse_args()
+    if not DATA.exists():
+        print(json.dumps({"skipped": f"no shared data at {DATA}"}))
+        return
+    print(json.dumps({"salsa": salsa(args.held, args.repeat), "walk": walks(args.repeat)}))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,563 @@
+"""The segment dynamic programme of Hsu, Gentry & Popović 2004 (Sec. 4), vectorized.
+
+Notation (the paper's): the input control ``x`` has ``T`` frames at the solve rate ``r``; a *cell* is a
+legal (instance ``s``, duration ``d``) pair, ``d`` frames being ``s``'s control segment uniformly
+stretched within the stretch bound. A cell *ending at* ``t`` covers input frames ``[t - d, t)``.
+
+* **Interpretation distance** (Eq. 1-2) ``D[c, t] = ||x_{d,t} - M a_s^d||^2`` for every cell and
+  every end time at once: the closed-form rotation about +Y and floor translation comes from window
+  sums (cumulative sums) and cross-correlations (one matrix product per duration). Units: mean over
+  points, integrated over time (m²·s), so scores do not depend on the rate.
+* **Continuity** (Eq. 4) between the aligned tail of the previous target segment and the aligned head
+  of the next: ``C = mean_points ||M_r w(b_r) - M_s a(b_s)||^2`` (m²); heads and tails are the target
+  points at the same source instant (a segment's end point is the next source frame), so a seamless
+  source continuation scores 0. For all predecessor/successor pairs at a boundary it is one matrix
+  product ``|y|^2 + |h|^2 - 2 Y H^T``.
+* **DP** (Eq. 6-8): forward over boundaries ``t``; at each, all predecessors ending at ``t`` and all
+  successors starting at ``t`` at once; back pointers; best cell at ``T``. **Beam** (Sec. 4.4): keep
+  predecessors within ``w`` of the best at ``t``. **Exact** search with pruning that cannot change the
+  optimum (branch and bound): a cell is dropped when its score plus an admissible bound of the cost
+  still to come (the best tiling by ``D`` alone, continuity >= 0) exceeds a known solution's score.
+* **Hard constraints**: "instance ``s`` at time ``t``" makes every cell of another instance covering
+  ``t`` illegal (infinite ``D``).
+* **Re-timing** (Sec. 4.4 "Downsampling"): the coarse solution's instances are kept and only the
+  boundaries move, within a window around the upsampled coarse ones, by a constrained DP at the full
+  rate over (segment, duration, end) states.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from .points import sample_cloud
+
+Array = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.intp]
+
+
+class Infeasible(ValueError):
+    """No tiling of the input satisfies the durations and constraints."""
+
+
+# ------------------------------------------------------------------------------ alignment helpers
+
+
+def align_points(points: Array, cos: Array, sin: Array, tx: Array, tz: Array) -> Array:
+    """Rotate ``points (N, ..., 3)`` about +Y by per-row ``(cos, sin)`` then translate by ``[tx, tz]``."""
+    extra = (1,) * (points.ndim - 2)
+    c, s = cos.reshape(-1, *extra), sin.reshape(-1, *extra)
+    out = points.copy()
+    x, z = points[..., 0], points[..., 2]
+    out[..., 0] = c * x + s * z + tx.reshape(-1, *extra)
+    out[..., 2] = -s * x + c * z + tz.reshape(-1, *extra)
+    return out
+
+
+def paired_alignment(windows: Array, templates: Array) -> tuple[Array, Array, Array, Array, Array]:
+    """Closed-form alignment of templates ``(M, N, 3)`` onto windows ``(M, N, 3)`` (row by row).
+
+    Returns the residual sum of squares ``(M,)`` and ``cos, sin, tx, tz`` ``(M,)`` of the transform
+    taking the template onto the window."""
+    n = windows.shape[1]
+    wx, wz, wy = windows[..., 0], windows[..., 2], windows[..., 1]
+    ax, az, ay = templates[..., 0], templates[..., 2], templates[..., 1]
+    mwx, mwz, max_, maz = wx.mean(1), wz.mean(1), ax.mean(1), az.mean(1)
+    cwx, cwz, cax, caz = wx - mwx[:, None], wz - mwz[:, None], ax - max_[:, None], az - maz[:, None]
+    c = (cax * cwx + caz * cwz).sum(1)
+    s = (caz * cwx - cax * cwz).sum(1)
+    r = np.hypot(c, s)
+    safe = np.where(r > 0, r, 1.0)
+    cos, sin = np.where(r > 0, c / safe, 1.0), np.where(r > 0, s / safe, 0.0)
+    res = (cwx**2 + cwz**2).sum(1) + (cax**2 + caz**2).sum(1) - 2 * r + ((wy - ay) ** 2).sum(1)
+    tx = mwx - (cos * max_ + sin * maz)
+    tz = mwz - (-sin * max_ + cos * maz)
+    del n
+    return np.maximum(res, 0.0), cos, sin, tx, tz
+
+
+# ------------------------------------------------------------------------------------- the problem
+
+
+@dataclass(slots=True)
+class Instances:
+    """The kept instances as the solver sees them (database rate ``fps``).
+
+    ``start``: ``(N,)`` first frame of each control/target segment in the database's concatenated
+    arrays; ``length``: ``(N,)`` frames; ``control``: ``(F, Pc, 3)``; ``tails``/``heads``: ``(N, Q, 3)``
+    target points at each segment's end point and start (the same source instant for consecutive
+    source segments)."""
+
+    fps: float
+    start: IntArray
+    length: IntArray
+    control: Array
+    tails: Array
+    heads: Array
+    pair_bounds: IntArray | None = None  # (N, 2) first and last frame of each instance's pair
+
+    @property
+    def count(self) -> int:
+        return int(self.start.shape[0])
+
+
+def legal_cells(
+    lengths_s: Array, rate: float, stretch_s: float | None, stretch_ratio: float | None
+) -> tuple[IntArray, IntArray]:
+    """All legal (instance, duration) cells: durations ``d`` (frames at ``rate``) with
+    ``|d / rate - L| <= stretch_s`` (or ``|d - L rate| <= stretch_ratio L rate``); the nearest
+    duration to the unstretched length is always legal. Returns ``(instance (C,), duration (C,))``
+    sorted by duration."""
+    nominal = lengths_s * rate
+    if stretch_ratio is not None:
+        lo, hi = nominal * (1 - stretch_ratio), nominal * (1 + stretch_ratio)
+    else:
+        s = 0.15 if stretch_s is None else stretch_s
+        lo, hi = nominal - s * rate, nominal + s * rate
+    lo_i = np.maximum(1, np.ceil(lo - 1e-9)).astype(np.intp)
+    hi_i = np.floor(hi + 1e-9).astype(np.intp)
+    near = np.maximum(1, np.round(nominal)).astype(np.intp)
+    lo_i, hi_i = np.minimum(lo_i, near), np.maximum(hi_i, near)
+    counts = hi_i - lo_i + 1
+    inst = np.repeat(np.arange(lengths_s.shape[0]), counts)
+    dur = lo_i[inst] + (np.arange(inst.size) - np.repeat(np.cumsum(counts) - counts, counts))
+    order = np.argsort(dur, kind="stable")
+    return inst[order].astype(np.intp), dur[order].astype(np.intp)
+
+
+def stretched_templates(inst: Instances, which: IntArray, d: int, rate: float, context: int = 0) -> Array:
+    """``(n, d + 2 context, Pc, 3)``: control segments ``which`` uniformly stretched to ``d`` frames at
+    ``rate`` (sample ``i`` at source frame ``start + (i - context) length / d``), with ``context``
+    frames of the surrounding source control on either side (clamped to the pair)."""
+    i = (np.arange(d + 2 * context) - context) / d
+    pos = inst.start[which, None] + inst.length[which, None] * i[None, :]
+    if context and inst.pair_bounds is not None:
+        b = inst.pair_bounds[which]
+        pos = np.clip(pos, b[:, :1], b[:, 1:])
+    return sample_cloud(inst.control, pos)
+
+
+def pad_edges(x: Array, context: int) -> Array:
+    """``x (T, ...)`` with ``context`` copies of its first and last frames added."""
+    if context <= 0:
+        return x
+    return np.concatenate((np.repeat(x[:1], context, 0), x, np.repeat(x[-1:], context, 0)))
+
+
+@dataclass(slots=True)
+class Interpretation:
+    """Per cell and end time ``t`` (``(C, T + 1)``; infinite where illegal): the distance ``D``
+    (m²·s) and the alignment (``cos``, ``sin``, ``tx``, ``tz``) of the stretched control segment onto
+    the input window ``[t - d, t)``."""
+
+    D: Array
+    M: Array  # (4, C, T + 1): cos, sin, tx, tz
+
+    @property
+    def cos(self) -> Array:
+        return np.asarray(self.M[0])
+
+    @property
+    def sin(self) -> Array:
+        return np.asarray(self.M[1])
+
+    @property
+    def tx(self) -> Array:
+        return np.asarray(self.M[2])
+
+    @property
+    def tz(self) -> Array:
+        return np.asarray(self.M[3])
+
+
+def interpretation(
+    x: Array, inst: Instances, cell_inst: IntArray, cell_dur: IntArray, rate: float, context: int = 0
+) -> Interpretation:
+    """Eq. 1-2 for every cell and every end time: one matrix product per duration.
+
+    ``x``: ``(T, P, 3)`` the input cloud at ``rate``. ``context`` (frames) extends each comparison by
+    the input and the source control around the segment on both sides (the input's ends repeated),
+    so a segment is also judged by the motion leading into and out of it (0 = the paper's D)."""
+    t_len, p, _ = x.shape
+    c2 = 2 * context
+    x = pad_edges(x, context)
+    cells = cell_inst.shape[0]
+    D = np.full((cells, t_len + 1), np.inf)
+    M = np.zeros((4, cells, t_len + 1))
+    M[0] = 1.0
+    cos, sin, tx, tz = M
+    xx, xz, xy = x[..., 0], x[..., 2], x[..., 1]
+    zero = np.zeros(1)
+    cs_x = np.concatenate((zero, np.cumsum(xx.sum(1))))
+    cs_z = np.concatenate((zero, np.cumsum(xz.sum(1))))
+    cs_sq = np.concatenate((zero, np.cumsum((xx**2 + xz**2).sum(1))))
+    cs_y2 = np.concatenate((zero, np.cumsum((xy**2).sum(1))))
+    for d in np.unique(cell_dur):
+        d = int(d)
+        if d > t_len:
+            continue
+        rows = np.flatnonzero(cell_dur == d)
+        a = stretched_templates(inst, cell_inst[rows], d, rate, context)  # (n, d + 2c, P, 3)
+        n_pts = (d + c2) * p
+        ax, az, ay = (
+            a[..., 0].reshape(len(rows), -1),
+            a[..., 2].reshape(len(rows), -1),
+            a[..., 1].reshape(len(rows), -1),
+        )
+        wx = np.lib.stride_tricks.sliding_window_view(xx, d + c2, axis=0)  # (T-d+1, P, d+2c)
+        wz = np.lib.stride_tricks.sliding_window_view(xz, d + c2, axis=0)
+        wy = np.lib.stride_tricks.sliding_window_view(xy, d + c2, axis=0)
+        wx = wx.transpose(0, 2, 1).reshape(wx.shape[0], -1)
+        wz = wz.transpose(0, 2, 1).reshape(wz.shape[0], -1)
+        wy = wy.transpose(0, 2, 1).reshape(wy.shape[0], -1)
+        ends = np.arange(d, t_len + 1)
+        e2 = ends + c2
+        sx, sz = cs_x[e2] - cs_x[ends - d], cs_z[e2] - cs_z[ends - d]
+        ssq, sy2 = cs_sq[e2] - cs_sq[ends - d], cs_y2[e2] - cs_y2[ends - d]
+        sax, saz = ax.sum(1), az.sum(1)
+        saa = (ax**2 + az**2).sum(1)
+        say2 = (ay**2).sum(1)
+        cxx = wx @ ax.T + wz @ az.T  # (nw, n)
+        cxz = wx @ az.T - wz @ ax.T
+        cyy = wy @ ay.T
+        c = cxx - (sx[:, None] * sax[None] + sz[:, None] * saz[None]) / n_pts
+        s = cxz - (sx[:, None] * saz[None] - sz[:, None] * sax[None]) / n_pts
+        r = np.hypot(c, s)
+        planar = (ssq - (sx**2 + sz**2) / n_pts)[:, None] + (saa - (sax**2 + saz**2) / n_pts)[None] - 2 * r
+        vert = sy2[:, None] + say2[None] - 2 * cyy
+        res = np.maximum(planar + vert, 0.0) / (p * rate)
+        safe = np.where(r > 0, r, 1.0)
+        cth, sth = np.where(r > 0, c / safe, 1.0), np.where(r > 0, s / safe, 0.0)
+        mwx, mwz = (sx / n_pts)[:, None], (sz / n_pts)[:, None]
+        max_, maz = (sax / n_pts)[None], (saz / n_pts)[None]
+        # cells sorted by duration: the rows of one duration are a contiguous block (basic slices)
+        blk = slice(int(rows[0]), int(rows[-1]) + 1) if rows[-1] - rows[0] + 1 == rows.size else rows
+        D[blk, d:] = res.T
+        cos[blk, d:] = cth.T
+        sin[blk, d:] = sth.T
+        tx[blk, d:] = (mwx - (cth * max_ + sth * maz)).T
+        tz[blk, d:] = (mwz - (-sth * max_ + cth * maz)).T
+    return Interpretation(D, M)
+
+
+def apply_constraints(
+    D: Array, cell_inst: IntArray, cell_dur: IntArray, constraints: list[tuple[int, int]]
+) -> None:
+    """Make illegal (in place) every cell of another instance covering a constrained frame:
+    for ``(s, t)``, cells ``(r, d)`` with ``r != s`` ending at ``u`` with ``u - d <= t < u``."""
+    t_len = D.shape[1] - 1
+    for s, t in constraints:
+        other = np.flatnonzero(cell_inst != s)
+        for d in np.unique(cell_dur[other]):
+            rows = other[cell_dur[other] == d]
+            lo, hi = t + 1, min(t + int(d), t_len)
+            if lo <= hi:
+                D[rows, lo : hi + 1] = np.inf
+
+
+def cost_to_go(D: Array, cell_dur: IntArray) -> Array:
+    """``(T + 1,)`` an admissible bound of the cost from frame ``t`` to the end: the best tiling of
+    ``[t, T)`` by interpretation distance alone (continuity is never negative)."""
+    t_len = D.shape[1] - 1
+    durs = np.unique(cell_dur)
+    best_d = np.stack([D[cell_dur == d].min(axis=0) for d in durs])  # (nd, T+1) by end time
+    F = np.full(t_len + 1, np.inf)
+    F[t_len] = 0.0
+    for t in range(t_len - 1, -1, -1):
+        ends = t + durs
+        ok = ends <= t_len
+        if ok.any():
+            F[t] = np.min(best_d[ok, ends[ok]] + F[ends[ok]])
+    return F
+
+
+@dataclass(slots=True)
+class DPResult:
+    """A solution of the DP: the cells in order, their end frames and the score terms."""
+
+    score: float
+    cells: IntArray
+    ends: IntArray
+    expanded: int
+    interpretation: float
+    continuity: float
+
+
+def solve(
+    interp: Interpretation,
+    inst: Instances,
+    cell_inst: IntArray,
+    cell_dur: IntArray,
+    k: float,
+    *,
+    beam: float | None = None,
+    max_cells: tuple[int, int] | None = None,
+    upper_bound: float | None = None,
+    to_go: Array | None = None,
+    should_stop: Callable[[], bool] | None = None,
+) -> DPResult:
+    """The forward DP (Eq. 6-8) with optional beam (width ``beam``, score units) and exact
+    branch-and-bound pruning against ``upper_bound`` with the admissible ``to_go`` bound.
+
+    ``max_cells = (predecessors, successors)`` caps the cells processed at each boundary (a beam by
+    count as well as by width): the best predecessors by score, the best successors by their
+    interpretation distance plus the bound of the cost still to come.
+
+    Raises :class:`Infeasible` when no legal tiling exists and :class:`InterruptedError` when
+    ``should_stop()`` turns true."""
+    D = interp.D
+    cells, t1 = D.shape
+    t_len = t1 - 1
+    Q = np.full((cells, t1), np.inf)
+    back = np.full((cells, t1), -1, dtype=np.int32)
+    q_pts = inst.tails.shape[1]
+    tails = inst.tails.reshape(inst.count, -1, 3)
+    heads = inst.heads.reshape(inst.count, -1, 3)
+    ub = np.inf if upper_bound is None else upper_bound * (1 + 1e-9) + 1e-12
+    F = np.zeros(t1) if to_go is None else to_go
+    if np.any(np.diff(cell_dur) < 0):
+        raise ValueError("cells must be sorted by duration (see legal_cells)")
+    # t = 0 (Eq. 7)
+    first = np.arange(cells)[cell_dur <= t_len]
+    Q[first, cell_dur[first]] = D[first, cell_dur[first]]
+    colmin = Q.min(axis=0)
+    expanded = 0
+    kq = k / q_pts
+    # Boundaries closer than the shortest duration do not depend on each other (a cell ending at
+    # t < t0 + dmin started before t0): select cells boundary by boundary, then align, score and
+    # store a whole block of boundaries at once.
+    dmin = max(1, int(cell_dur.min()))
+    cells_idx = np.arange(cells)
+    for t0 in range(1, t_len, dmin):
+        if should_stop is not None and should_stop():
+            raise InterruptedError
+        ts = np.arange(t0, min(t0 + dmin, t_len))
+        # predecessors of every boundary of the block: (boundary, cell) with a finite, kept score
+        qb = Q[:, ts].T  # (B, C)
+        qmin_t = qb.min(axis=1)
+        keep = np.isfinite(qb) & (qb + F[ts][:, None] <= ub)
+        if beam is not None:
+            keep &= qb <= qmin_t[:, None] + beam
+        if max_cells is not None and cells > max_cells[0]:
+            kth = max_cells[0] - 1
+            masked = np.where(keep, qb, np.inf)
+            cut = np.partition(masked, kth, axis=1)[:, kth]
+            keep &= masked <= cut[:, None]
+        # successors: cells starting at the boundary, with a finite distance and a chance
+        ends_b = ts[:, None] + cell_dur[None, :]  # (B, C)
+        inside = ends_b <= t_len
+        ends_c = np.minimum(ends_b, t_len)
+        dsucc_b = D[cells_idx[None, :], ends_c]
+        qkept = np.where(keep, qb, np.inf).min(axis=1)
+        lower = qkept[:, None] + dsucc_b
+        f_end = F[ends_c]
+        ok = inside & np.isfinite(lower) & (lower + f_end <= ub)
+        if beam is not None:
+            # a cell already worse than the best score written at its end time by more than the
+            # width would be pruned there anyway (the beam of Sec. 4.4, applied early)
+            ok &= lower <= colmin[ends_c] + beam
+        if max_cells is not None and cells > max_cells[1]:
+            kth = max_cells[1] - 1
+            est = np.where(ok, dsucc_b + f_end, np.inf)
+            cut = np.partition(est, kth, axis=1)[:, kth]
+            ok &= est <= cut[:, None]
+        parts: list[tuple[IntArray, Array, int, IntArray, IntArray, Array]] = []
+        for b, t in enumerate(ts):
+            preds = np.flatnonzero(keep[b])
+            succ = np.flatnonzero(ok[b])
+            if preds.size and succ.size:
+                parts.append((preds, qb[b, preds], int(t), succ, ends_b[b, succ], dsucc_b[b, succ]))
+        if not parts:
+            continue
+        P = np.concatenate([pt[0] for pt in parts])
+        qa = np.concatenate([pt[1] for pt in parts])
+        tp = np.repeat([pt[2] for pt in parts], [pt[0].size for pt in parts])
+        S = np.concatenate([pt[3] for pt in parts])
+        E = np.concatenate([pt[4] for pt in parts])
+        DS = np.concatenate([pt[5] for pt in parts])
+        mp = interp.M[:, P, tp]
+        y2 = align_points(tails[cell_inst[P]], mp[0], mp[1], mp[2], mp[3]).reshape(P.size, -1)
+        ms = interp.M[:, S, E]
+        h2 = align_points(heads[cell_inst[S]], ms[0], ms[1], ms[2], ms[3]).reshape(S.size, -1)
+        # q_j + k' |y_j - h_i|^2 = [q_j + k'|y_j|^2, -2k' y_j] . [1, h_i] + k'|h_i|^2: one matrix product
+        ya = np.empty((P.size, y2.shape[1] + 1))
+        ya[:, 0] = qa + kq * (y2**2).sum(1)
+        ya[:, 1:] = (-2.0 * kq) * y2
+        ha = np.empty((S.size, h2.shape[1] + 1))
+        ha[:, 0] = 1.0
+        ha[:, 1:] = h2
+        best = np.empty(S.size)
+        arg = np.empty(S.size, dtype=np.intp)
+        pa = sa = 0
+        for preds, _, _, succ, _, _ in parts:
+            pb, sb = pa + preds.size, sa + succ.size
+            tot = ya[pa:pb] @ ha[sa:sb].T
+            j = np.argmin(tot, axis=0)
+            best[sa:sb] = tot[j, np.arange(succ.size)]
+            arg[sa:sb] = pa + j
+            expanded += preds.size * succ.size
+            pa, sa = pb, sb
+        # rounding can make |y - h|^2 slightly negative for identical points
+        best = np.maximum(best + kq * (h2**2).sum(1), qa[arg])
+        Q[S, E] = DS + best
+        back[S, E] = P[arg]
+        if beam is not None:
+            np.minimum.at(colmin, E, DS + best)
+    final = Q[:, t_len]
+    if not np.isfinite(final).any():
+        raise Infeasible("no sequence of segments within the stretch bounds and constraints tiles the input")
+    c = int(np.argmin(final))
+    score = float(final[c])
+    path_cells, path_ends = [], []
+    t = t_len
+    while c >= 0:
+        path_cells.append(c)
+        path_ends.append(t)
+        prev = int(back[c, t])
+        t -= int(cell_dur[c])
+        c = prev
+    cells_arr = np.array(path_cells[::-1], dtype=np.intp)
+    ends_arr = np.array(path_ends[::-1], dtype=np.intp)
+    interp_term = float(D[cells_arr, ends_arr].sum())
+    return DPResult(score, cells_arr, ends_arr, expanded, interp_term, score - interp_term)
+
+
+def typical_segment_cost(D: Array) -> float:
+    """The median over cells of their best interpretation distance anywhere in the input (beam unit)."""
+    best = D.min(axis=1)
+    best = best[np.isfinite(best)]
+    return float(np.median(best)) if best.size else 1.0
+
+
+# ----------------------------------------------------------------------------------- re-timing
+
+
+@dataclass(slots=True)
+class Timed:
+    """A re-timed solution at the full rate: per segment its instance, boundaries and alignment."""
+
+    score: float
+    interpretation: float
+    continuity: float
+    instances: IntArray
+    bounds: IntArray  # (L + 1,) frames at the full rate, 0 ... T
+    cos: Array
+    sin: Array
+    tx: Array
+    tz: Array
+    D: Array
+    C: Array
+
+
+def retime(
+    x: Array,
+    inst: Instances,
+    seq: IntArray,
+    coarse_bounds: Array,
+    k: float,
+    rate: float,
+    stretch_s: float | None,
+    stretch_ratio: float | None,
+    window: int,
+    constraints: list[tuple[int, float]] | None = None,
+    context: int = 0,
+) -> Timed:
+    """The constrained DP at the full rate: the instances ``seq`` are fixed, each boundary moves
+    within ``+-window`` frames of ``coarse_bounds`` (full-rate frames; first 0 and last ``T`` fixed)
+    and durations stay within the stretch bounds.
+
+    ``x``: ``(T, P, 3)`` the input at ``rate``; ``constraints``: ``(segment index, frame)`` pairs the
+    segment must keep covering."""
+    t_len = x.shape[0]
+    n_seg = seq.shape[0]
+    cb = np.round(np.asarray(coarse_bounds, dtype=np.float64)).astype(np.intp)
+    cb[0], cb[-1] = 0, t_len
+    options = [np.array([0])]
+    for i in range(1, n_seg):
+        lo, hi = max(1, cb[i] - window), min(t_len - 1, cb[i] + window)
+        options.append(np.arange(lo, hi + 1))
+    options.append(np.array([t_len]))
+    lengths_s = inst.length[seq] / inst.fps
+    # per segment: states (start, end) with a legal duration
+    states: list[tuple[IntArray, IntArray]] = []
+    for i in range(n_seg):
+        a, b = np.meshgrid(options[i], options[i + 1], indexing="ij")
+        a, b = a.ravel(), b.ravel()
+        d = b - a
+        ci, cd = legal_cells(lengths_s[i : i + 1], rate, stretch_s, stretch_ratio)
+        ok = (d >= cd.min()) & (d <= cd.max())
+        if not ok.any():  # the coarse solution's own duration stays possible
+            ok = d == d[np.argmin(np.abs(d - (cb[i + 1] - cb[i])))]
+        for seg_i, frame in constraints or []:
+            if seg_i == i:
+                ok &= (a <= frame) & (frame < b)
+        states.append((a[ok], b[ok]))
+    # interpretation of every state, grouped by duration
+    flat_seg = np.concatenate([np.full(s[0].size, i) for i, s in enumerate(states)])
+    flat_a = np.concatenate([s[0] for s in states])
+    flat_b = np.concatenate([s[1] for s in states])
+    m = flat_a.size
+    Dv, cosv, sinv = np.full(m, np.inf), np.ones(m), np.zeros(m)
+    xp = pad_edges(x, context)
+    txv, tzv = np.zeros(m), np.zeros(m)
+    durs = flat_b - flat_a
+    for d in np.unique(durs):
+        rows = np.flatnonzero(durs == d)
+        tmpl = stretched_templates(inst, seq[flat_seg[rows]], int(d), rate, context)
+        win = xp[flat_a[rows, None] + np.arange(d + 2 * context)[None, :]]
+        p = x.shape[1]
+        res, c, s, tx_, tz_ = paired_alignment(win.reshape(rows.size, -1, 3), tmpl.reshape(rows.size, -1, 3))
+        Dv[rows], cosv[rows], sinv[rows], txv[rows], tzv[rows] = res / (p * rate), c, s, tx_, tz_
+    q_pts = inst.tails.shape[1]
+    offs = np.concatenate(([0], np.cumsum([s[0].size for s in states])))
+    Q = Dv[offs[0] : offs[1]].copy()
+    backs: list[IntArray] = []
+    for i in range(1, n_seg):
+        prev = np.arange(offs[i - 1], offs[i])
+        cur = np.arange(offs[i], offs[i + 1])
+        if prev.size == 0 or cur.size == 0:
+            raise Infeasible("re-timing found no legal boundaries")
+        y = align_points(
+            inst.tails[seq[i - 1]][None].repeat(prev.size, 0), cosv[prev], sinv[prev], txv[prev], tzv[prev]
+        )
+        h = align_points(
+            inst.heads[seq[i]][None].repeat(cur.size, 0), cosv[cur], sinv[cur], txv[cur], tzv[cur]
+        )
+        y2, h2 = y.reshape(prev.size, -1), h.reshape(cur.size, -1)
+        cont = (y2**2).sum(1)[:, None] + (h2**2).sum(1)[None] - 2 * y2 @ h2.T
+        total = Q[:, None] + (k / q_pts) * np.maximum(cont, 0.0)
+        total[flat_b[prev][:, None] != flat_a[cur][None, :]] = np.inf
+        j = np.argmin(total, axis=0)
+        Q = total[j, np.arange(cur.size)] + Dv[cur]
+        backs.append(j)
+    if not np.isfinite(Q).any():
+        raise Infeasible("re-timing found no legal boundaries")
+    last = int(np.argmin(Q))
+    score = float(Q[last])
+    chosen = [offs[n_seg - 1] + last]
+    for i in range(n_seg - 1, 0, -1):
+        last = int(backs[i - 1][last])
+        chosen.append(offs[i - 1] + last)
+    idx = np.array(chosen[::-1], dtype=np.intp)
+    bounds = np.concatenate((flat_a[idx], flat_b[idx[-1:]]))
+    # per-boundary continuity of the chosen states
+    y = align_points(inst.tails[seq[:-1]], cosv[idx[:-1]], sinv[idx[:-1]], txv[idx[:-1]], tzv[idx[:-1]])
+    h = align_points(inst.heads[seq[1:]], cosv[idx[1:]], sinv[idx[1:]], txv[idx[1:]], tzv[idx[1:]])
+    C = ((y - h) ** 2).sum(axis=(1, 2)) / q_pts if n_seg > 1 else np.zeros(0)
+    Dsel = Dv[idx]
+    return Timed(
+        score,
+        float(Dsel.sum()),
+        float(k * C.sum()),
+        seq.copy(),
+        bounds,
+        cosv[idx],
+        sinv[idx],
+        txv[idx],
+        tzv[idx],
+        Dsel,
+        C,
+    )

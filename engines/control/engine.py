@@ -1,0 +1,421 @@
+"""The control-by-example engine as the runtime sees it (Hsu, Gentry & Popović 2004).
+
+Database kind ``control`` (:class:`schemas.control.ControlDatabaseSpec`): synchronized
+control/target pairs cut into instances (:mod:`.build`). Request ``engine: "control"``
+(:class:`schemas.control.ControlRequest`): a control motion (BVH) or a performed path; the answer
+is a target motion of the control's length and frame rate, in the control's world frame.
+
+The search is anytime: a narrow-beam solve first, then a wider beam, then the exact optimum (branch
+and bound against the best score so far; no optimal sequence is ever pruned), each downsampled to
+``solve_fps`` then re-timed at the database rate (:mod:`.dp`), assembled on the full skeleton
+(:mod:`.assemble`) and emitted as a solution when it improves the score.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+from motion import Motion, MotionError
+from motion.bvh import parse_bvh
+
+from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
+from ..library import MotionLibrary
+from .assemble import Assembled, assemble, body_rooted
+from .build import ControlDatabase, build_control_database
+from .dp import (
+    DPResult,
+    Infeasible,
+    Instances,
+    Timed,
+    apply_constraints,
+    cost_to_go,
+    interpretation,
+    legal_cells,
+    retime,
+    solve,
+    typical_segment_cost,
+)
+from .points import derived_control, joint_cloud, resample_cloud, trajectory_control
+
+Array = npt.NDArray[np.float64]
+
+# the anytime schedule: a quick narrow beam (width in typical single-segment interpretation costs, at
+# most 16 predecessors x 128 successors per boundary), a wider beam (width in the quick solution's mean
+# cost per segment, 64 x 512 cells), then the exact optimum (branch and bound)
+QUICK_WIDTH = 3.0
+QUICK_CELLS = (16, 128)
+BEAM_WIDTH = 10.0
+BEAM_CELLS = (64, 512)
+
+
+@dataclass(slots=True)
+class ControlInputCloud:
+    """The control as a point cloud at its own rate: ``cloud (F, P, 3)`` metres, ``fps``."""
+
+    cloud: Array
+    fps: float
+    source: str
+
+
+class ControlEngine(Engine):
+    """Example-based control: segment DP from a control motion to a target motion."""
+
+    name = "control"
+    kind = "control"
+
+    def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
+        super().__init__(library, arrays)
+        self.db = ControlDatabase.from_arrays(arrays)
+        kept = self.db.kept
+        self.kept_ = kept
+        self.local_of_ = np.full(self.db.instances.shape[0], -1, dtype=np.intp)
+        self.local_of_[kept] = np.arange(kept.size)
+        self._targets: dict[str, tuple[Motion, int]] = {}
+        self.solver_instances_ = self.instances_for(0.0)
+
+    def instances_for(self, continuity_s: float) -> Instances:
+        """The kept instances for the solver; heads and tails hold the target points at the segment
+        boundary and, with ``continuity_s > 0``, also ``continuity_s / 2`` and ``continuity_s`` seconds
+        before it (the same instants for head and tail), so continuity covers velocity too."""
+        rows = self.db.instances[self.kept_]
+        start = self.db.offsets[rows[:, 0]] + rows[:, 1]
+        end = start + rows[:, 2]
+        lo = self.db.offsets[rows[:, 0]]
+        span = int(round(continuity_s * self.db.fps))
+        back = np.unique(np.array([span, span // 2, 0])) if span > 0 else np.array([0])
+
+        def at(frames: npt.NDArray[np.intp]) -> Array:
+            idx = np.maximum(frames[:, None] - back[None, :], lo[:, None])  # (N, m)
+            return np.asarray(self.db.target[idx].reshape(len(frames), -1, 3))
+
+        return Instances(
+            fps=self.db.fps,
+            start=start,
+            length=rows[:, 2].copy(),
+            control=self.db.control,
+            tails=at(end),
+            heads=at(start),
+            pair_bounds=np.stack((lo, self.db.offsets[rows[:, 0] + 1] - 1), axis=-1),
+        )
+
+    def target_motion(self, name: str) -> tuple[Motion, int]:
+        """A target clip ready for assembly and its body joint (:func:`.assemble.body_rooted`), cached."""
+        entry = self._targets.get(name)
+        if entry is None:
+            entry = self._targets[name] = body_rooted(self.library.clip(name))
+        return entry
+
+    @classmethod
+    def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+        try:
+            with threadpool_limits(limits=1):
+                db = build_control_database(spec, library, should_stop)
+        except MotionError as exc:
+            raise EngineError(str(exc)) from None
+        emit.progress(0.9, f"{db.instances.shape[0]} instances, {db.kept.size} kept after clustering")
+        return db.to_arrays()
+
+    # ------------------------------------------------------------------------------------ input
+
+    def control_cloud(self, request: Any) -> ControlInputCloud:
+        """The request's control as a cloud of the database's control kind (joints or floor pair)."""
+        ctl = request.control
+        sep = float(self.db.meta.get("hip_separation_m", 0.2))
+        if ctl.trajectory is not None:
+            if not self.db.derived:
+                raise EngineError(
+                    "a trajectory drives a walk database (pairs without control clips); "
+                    "this database's controls are motions: send a control BVH"
+                )
+            tr = ctl.trajectory
+            cloud, _ = trajectory_control(
+                np.asarray(tr.points, dtype=np.float64),
+                tr.fps,
+                sep,
+                spatial_m=tr.smoothing.spatial_m,
+                temporal_s=tr.smoothing.temporal_s,
+                max_speed_m_s=tr.max_speed_m_s,
+                speed_window_s=tr.speed_window_s,
+            )
+            return ControlInputCloud(cloud, float(tr.fps), "trajectory")
+        try:
+            data = request.input_bytes(ctl.bvh)
+        except KeyError as exc:
+            raise EngineError(str(exc.args[0])) from None
+        try:
+            motion = parse_bvh(data, units=ctl.units, source=ctl.bvh, name="control")
+        except MotionError as exc:
+            raise EngineError(f"control {ctl.bvh!r}: {exc}") from None
+        motion = motion.to_units("m") if motion.units != "unknown" else motion.with_units("m")
+        if motion.num_frames < 2:
+            raise EngineError("the control motion needs at least 2 frames")
+        pos = motion.global_positions()
+        if self.db.derived:
+            cloud = derived_control(motion, sep, pos)
+        else:
+            cloud = joint_cloud(motion, list(self.db.meta["control_joints"]), f"control {ctl.bvh!r}", pos)
+        return ControlInputCloud(cloud, motion.fps, ctl.bvh)
+
+    def _constraints(self, request: Any, t_solve: int, rate: float) -> list[tuple[int, float]]:
+        """``(kept instance index, time s)`` of the request's hard constraints."""
+        out: list[tuple[int, float]] = []
+        inst = self.db.instances
+        for i, c in enumerate(request.constraints):
+            if c.instance is not None:
+                if c.instance >= inst.shape[0]:
+                    raise EngineError(
+                        f"constraints[{i}]: no instance {c.instance} (the database has {inst.shape[0]})"
+                    )
+                g = int(c.instance)
+            else:
+                pair_ids = [k for k, (ctl, tgt) in enumerate(self.db.pairs) if c.clip in (ctl, tgt)]
+                if not pair_ids:
+                    raise EngineError(f"constraints[{i}]: no pair uses a clip named {c.clip!r}")
+                hit = np.flatnonzero(
+                    np.isin(inst[:, 0], pair_ids)
+                    & (inst[:, 1] <= c.clip_frame)
+                    & (c.clip_frame < inst[:, 1] + inst[:, 2])
+                )
+                if hit.size == 0:
+                    raise EngineError(
+                        f"constraints[{i}]: frame {c.clip_frame} of {c.clip!r} is in no instance"
+                    )
+                g = int(hit[0])
+            local = int(self.local_of_[self.db.representative[g]])
+            if c.time_s * rate >= t_solve:
+                raise EngineError(f"constraints[{i}]: time {c.time_s} s is after the end of the control")
+            out.append((local, float(c.time_s)))
+        return out
+
+    # ----------------------------------------------------------------------------------- search
+
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+        # the solver's matrices are small: BLAS threads only contend (10-50x slower on a busy machine)
+        with threadpool_limits(limits=1):
+            self._search(request, budget_s, emit, should_stop)
+
+    def _search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+        t_start = time.perf_counter()
+        ctl = self.control_cloud(request)
+        rate_full = self.db.fps
+        rate = min(float(request.solve_fps), rate_full)
+        x_full = resample_cloud(ctl.cloud, ctl.fps, rate_full)
+        x = resample_cloud(ctl.cloud, ctl.fps, rate)
+        n_out = ctl.cloud.shape[0]
+        inst = (
+            self.solver_instances_ if request.continuity_s <= 0 else self.instances_for(request.continuity_s)
+        )
+        lengths_s = inst.length / inst.fps
+        cell_inst, cell_dur = legal_cells(lengths_s, rate, request.stretch_s, request.stretch_ratio)
+        constraints = self._constraints(request, x.shape[0], rate)
+        interp = interpretation(x, inst, cell_inst, cell_dur, rate, int(round(request.context_s * rate)))
+        apply_constraints(
+            interp.D, cell_inst, cell_dur, [(s, int(np.floor(t * rate))) for s, t in constraints]
+        )
+        to_go = cost_to_go(interp.D, cell_dur)
+        if not np.isfinite(to_go[0]):
+            shortest = float(lengths_s.min())
+            raise EngineError(
+                f"the control ({(n_out - 1) / ctl.fps:.2f} s) cannot be tiled by the database's segments "
+                f"(shortest {shortest:.2f} s) within the stretch bounds and constraints"
+            )
+        d_unit = typical_segment_cost(interp.D)
+        prep_s = time.perf_counter() - t_start
+        stages = ["quick", "beam"] + (["exact"] if request.exact else [])
+        best_coarse: float | None = None
+        seg_unit = d_unit
+        best_score = np.inf
+        window = int(np.ceil(rate_full / rate))
+        for stage_i, stage in enumerate(stages):
+            if stage_i > 0 and (should_stop() or time.perf_counter() - t_start > budget_s):
+                break
+            if stage == "quick":
+                width: float | None = QUICK_WIDTH * d_unit
+            elif stage == "beam":
+                width = (BEAM_WIDTH if request.beam is None else float(request.beam)) * seg_unit
+            else:
+                width = None
+            t0 = time.perf_counter()
+            try:
+                res = solve(
+                    interp,
+                    inst,
+                    cell_inst,
+                    cell_dur,
+                    request.k,
+                    beam=width,
+                    max_cells=QUICK_CELLS if stage == "quick" else BEAM_CELLS if stage == "beam" else None,
+                    upper_bound=best_coarse if stage == "exact" else None,
+                    to_go=to_go,
+                    should_stop=should_stop if stage_i > 0 else None,
+                )
+            except InterruptedError:
+                break
+            except Infeasible as exc:
+                if stage != "exact":
+                    continue  # the beam pruned every path; a wider stage may find one
+                if best_coarse is not None:
+                    break
+                raise EngineError(str(exc)) from None
+            if stage == "quick":
+                seg_unit = res.score / max(1, res.cells.size)
+            solve_s = time.perf_counter() - t0
+            if best_coarse is not None and res.score >= best_coarse - 1e-12:
+                continue
+            best_coarse = res.score
+            t1 = time.perf_counter()
+            timed = self._retime(res, x_full, cell_inst, cell_dur, rate, request, constraints, window, inst)
+            retime_s = time.perf_counter() - t1
+            if timed.score >= best_score:
+                continue
+            best_score = timed.score
+            t2 = time.perf_counter()
+            out = assemble(
+                self.db,
+                self.target_motion,
+                self.db.instances[self.kept_],
+                timed,
+                n_out,
+                ctl.fps,
+                request.smoothing_s,
+            )
+            motion = self._cleanup(out, request)
+            post_s = time.perf_counter() - t2
+            emit.solution(
+                self._solution(
+                    out,
+                    motion,
+                    timed,
+                    res,
+                    stage,
+                    ctl,
+                    {"prep_s": prep_s, "solve_s": solve_s, "retime_s": retime_s, "post_s": post_s},
+                    cell_inst.size,
+                )
+            )
+
+    def _retime(
+        self,
+        res: DPResult,
+        x_full: Array,
+        cell_inst: npt.NDArray[np.intp],
+        cell_dur: npt.NDArray[np.intp],
+        rate: float,
+        request: Any,
+        constraints: list[tuple[int, float]],
+        window: int,
+        inst: Instances,
+    ) -> Timed:
+        rate_full = self.db.fps
+        seq = cell_inst[res.cells]
+        coarse = np.concatenate(([0], res.ends)) * (rate_full / rate)
+        coarse[-1] = x_full.shape[0]
+        seg_constraints: list[tuple[int, float]] = []
+        starts = np.concatenate(([0], res.ends[:-1]))
+        for _, t in constraints:
+            f = int(np.floor(t * rate))
+            i = int(np.flatnonzero((starts <= f) & (f < res.ends))[0])
+            seg_constraints.append((i, int(np.floor(t * rate_full))))
+        try:
+            return retime(
+                x_full,
+                inst,
+                seq,
+                coarse,
+                request.k,
+                rate_full,
+                request.stretch_s,
+                request.stretch_ratio,
+                window,
+                seg_constraints,
+                int(round(request.context_s * rate_full)),
+            )
+        except Infeasible as exc:
+            raise EngineError(str(exc)) from None
+
+    def _cleanup(self, out: Assembled, request: Any) -> Motion:
+        motion = out.motion
+        if not request.footskate or not self.db.contact_joints:
+            return motion
+        try:
+            from motion.footskate import remove_foot_skate
+        except ImportError:  # the cleanup is optional
+            return motion
+        joints = np.array([motion.skeleton.names.index(n) for n in self.db.contact_joints], dtype=np.intp)
+        flags = self.db.contacts[out.global_frames]
+        try:
+            return remove_foot_skate(motion, (joints, flags))
+        except MotionError:
+            return motion
+
+    def _solution(
+        self,
+        out: Assembled,
+        motion: Motion,
+        timed: Timed,
+        res: DPResult,
+        stage: str,
+        ctl: ControlInputCloud,
+        timings: dict[str, float],
+        n_cells: int,
+    ) -> Solution:
+        db = self.db
+        kept = self.kept_
+        rate = db.fps
+        segments = []
+        first_out = np.concatenate(([0], np.array(out.cuts, dtype=np.intp)))
+        for i, local in enumerate(timed.instances):
+            g = int(kept[local])
+            pair, start, length = (int(v) for v in db.instances[g])
+            d = int(timed.bounds[i + 1] - timed.bounds[i])
+            segments.append(
+                {
+                    "instance": g,
+                    "control_clip": db.pairs[pair][0],
+                    "target_clip": db.pairs[pair][1],
+                    "source_start": start,
+                    "source_frames": length,
+                    "start_s": float(timed.bounds[i] / rate),
+                    "duration_s": float(d / rate),
+                    "stretch": float(d / length),
+                    "heading_deg": float(np.degrees(np.arctan2(timed.sin[i], timed.cos[i]))),
+                    "translation": [float(timed.tx[i]), float(timed.tz[i])],
+                    "interpretation": float(timed.D[i]),
+                    "continuity": float(timed.C[i - 1]) if i > 0 else 0.0,
+                    "first_output_frame": int(first_out[i]) if i < first_out.size else None,
+                }
+            )
+        provenance = [(c, int(round(f))) for c, f in zip(out.clips, out.source_frames, strict=True)]
+        contacts = db.contacts[out.global_frames]
+        annotations: dict[str, Any] = {
+            "stage": stage,
+            "segments": segments,
+            "foot_contacts": {
+                "joints": list(db.contact_joints),
+                "flags": contacts.T.astype(int).tolist(),
+            },
+        }
+        hold = db.handhold[out.global_frames]
+        if (hold >= 0).all():
+            annotations["handhold"] = hold.astype(int).tolist()
+        metrics = {
+            "segments": float(len(segments)),
+            "cells": float(n_cells),
+            "expanded": float(res.expanded),
+            "coarse_score": float(res.score),
+            **timings,
+        }
+        return Solution(
+            motion=motion,
+            score=timed.score,
+            terms={"interpretation": timed.interpretation, "continuity": timed.continuity},
+            provenance=provenance,
+            metrics=metrics,
+            annotations=annotations,
+        )

@@ -1,0 +1,353 @@
+"""The control-by-example engine (Hsu, Gentry & Popović 2004): DP, beam, constraints, schemas, paths."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from engines.base import EngineError, Solution
+from engines.control.build import cluster_instances, instances_from_boundaries
+from engines.control.dp import (
+    Infeasible,
+    Instances,
+    align_points,
+    apply_constraints,
+    cost_to_go,
+    interpretation,
+    legal_cells,
+    retime,
+    solve,
+)
+from engines.control.engine import ControlEngine
+from engines.control.points import trajectory_control
+from engines.library import ClipInput, build_library, library_to_arrays
+from motion.bvh import bvh_text
+from motion.ground import ground_frames
+from schemas.databases import parse_database_spec
+from schemas.jobs import parse_job_request
+from tests.motion.synthetic import walking_biped
+
+RATE = 10.0
+
+
+class Collect:
+    def __init__(self) -> None:
+        self.solutions: list[Solution] = []
+
+    def solution(self, solution: Solution) -> str:
+        self.solutions.append(solution)
+        return f"r{len(self.solutions)}"
+
+    def progress(self, fraction: float, message: str = "") -> None:
+        pass
+
+
+def random_database(frames: int = 120, points: int = 3, seed: int = 0) -> np.ndarray:
+    """A smooth random control cloud ``(F, P, 3)`` (a random walk, smoothed)."""
+    rng = np.random.default_rng(seed)
+    steps = rng.normal(scale=0.2, size=(frames, points, 3))
+    walk = np.cumsum(steps, axis=0)
+    kernel = np.ones(3) / 3
+    return np.apply_along_axis(lambda v: np.convolve(v, kernel, mode="same"), 0, walk)
+
+
+def instances_of(cloud: np.ndarray, lengths: list[int], target: np.ndarray | None = None) -> Instances:
+    starts = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.intp)
+    length = np.asarray(lengths, dtype=np.intp)
+    tgt = cloud if target is None else target
+    return Instances(
+        fps=RATE,
+        start=starts,
+        length=length,
+        control=cloud,
+        tails=tgt[starts + length],
+        heads=tgt[starts],
+    )
+
+
+def rigid(cloud: np.ndarray, theta: float, tx: float, tz: float) -> np.ndarray:
+    n = cloud.shape[0]
+    return align_points(
+        cloud, np.full(n, np.cos(theta)), np.full(n, np.sin(theta)), np.full(n, tx), np.full(n, tz)
+    )
+
+
+def dp_setup(inst: Instances, x: np.ndarray, stretch: float = 0.0):  # type: ignore[no-untyped-def]
+    ci, cd = legal_cells(inst.length / inst.fps, RATE, stretch, None)
+    return ci, cd, interpretation(x, inst, ci, cd, RATE)
+
+
+def test_dp_recovers_a_copied_sequence_under_a_rigid_move() -> None:
+    cloud = random_database(130)
+    lengths = [6, 8, 7, 5, 9, 6, 8, 7, 6, 8, 7, 6, 8, 7, 6]
+    inst = instances_of(cloud, lengths)
+    order = [3, 11, 0, 7, 5]
+    x = np.concatenate([cloud[inst.start[s] : inst.start[s] + inst.length[s]] for s in order])
+    x = rigid(x, 0.6, 2.0, -1.0)
+    ci, cd, interp = dp_setup(inst, x, stretch=0.1)
+    res = solve(interp, inst, ci, cd, k=0.0)
+    assert list(ci[res.cells]) == order
+    assert res.score == pytest.approx(0.0, abs=1e-9)
+    # the alignment found is the move applied
+    last = res.cells[-1], res.ends[-1]
+    assert np.degrees(np.arctan2(interp.sin[last], interp.cos[last])) == pytest.approx(np.degrees(0.6))
+
+
+def test_contiguous_source_costs_nothing_with_continuity() -> None:
+    cloud = random_database(100, seed=3)
+    inst = instances_of(cloud, [7] * 14)
+    x = rigid(cloud[14:56].copy(), -1.1, 0.5, 0.3)  # instances 2..7, played on
+    ci, cd, interp = dp_setup(inst, x, stretch=0.1)
+    res = solve(interp, inst, ci, cd, k=5.0)
+    assert list(ci[res.cells]) == [2, 3, 4, 5, 6, 7]
+    assert res.score == pytest.approx(0.0, abs=1e-9) and res.continuity == pytest.approx(0.0, abs=1e-9)
+
+
+def brute_force(interp, inst, ci, cd, k: float) -> float:  # type: ignore[no-untyped-def]
+    """The optimum of Eq. 5 by enumerating every sequence of cells tiling the input."""
+    t_len = interp.D.shape[1] - 1
+    q = inst.tails.shape[1]
+    best = np.inf
+
+    cells, t1 = interp.D.shape
+    cc = np.repeat(np.arange(cells), t1)
+    tt = np.tile(np.arange(t1), cells)
+
+    def aligned(points: np.ndarray) -> np.ndarray:
+        out = align_points(
+            points[ci[cc]], interp.cos[cc, tt], interp.sin[cc, tt], interp.tx[cc, tt], interp.tz[cc, tt]
+        )
+        return out.reshape(cells, t1, -1)
+
+    tails, heads = aligned(inst.tails), aligned(inst.heads)
+
+    def rec(t: int, prev: tuple[int, int] | None, acc: float) -> None:
+        nonlocal best
+        if t == t_len:
+            best = min(best, acc)
+            return
+        for c in range(ci.size):
+            end = t + int(cd[c])
+            if end > t_len or not np.isfinite(interp.D[c, end]):
+                continue
+            cost = acc + interp.D[c, end]
+            if prev is not None:
+                gap = tails[prev[0], prev[1]] - heads[c, end]
+                cost += k * float((gap**2).sum()) / q
+            rec(end, (c, end), cost)
+
+    rec(0, None, 0.0)
+    return best
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_dp_is_optimal_and_beam_and_exact_agree(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    cloud = random_database(60, seed=seed)
+    inst = instances_of(cloud, [2, 3, 2, 3])
+    x = random_database(9, seed=seed + 10) + rng.normal(size=3)
+    ci, cd, interp = dp_setup(inst, x, stretch=0.1)  # durations 1-4
+    k = 0.7
+    exhaustive = solve(interp, inst, ci, cd, k)
+    assert exhaustive.score == pytest.approx(brute_force(interp, inst, ci, cd, k), rel=1e-9)
+    wide = solve(interp, inst, ci, cd, k, beam=1e9)
+    assert wide.score == pytest.approx(exhaustive.score, rel=1e-12)
+    narrow = solve(interp, inst, ci, cd, k, beam=1e-3)
+    assert narrow.score >= exhaustive.score - 1e-12
+    bnb = solve(interp, inst, ci, cd, k, upper_bound=narrow.score, to_go=cost_to_go(interp.D, cd))
+    assert bnb.score == pytest.approx(exhaustive.score, rel=1e-12)
+    assert bnb.expanded <= exhaustive.expanded
+
+
+def test_stretch_bounds() -> None:
+    lengths_s = np.array([0.6, 1.0, 0.25])
+    ci, cd = legal_cells(lengths_s, 10.0, 0.15, None)
+    for s, d in zip(ci, cd, strict=True):
+        assert abs(d / 10.0 - lengths_s[s]) <= 0.15 + 1e-9
+    assert set(cd[ci == 0]) == {5, 6, 7} and set(cd[ci == 2]) == {1, 2, 3, 4}
+    assert np.all(np.diff(cd) >= 0)
+    ci, cd = legal_cells(lengths_s, 10.0, None, 0.2)
+    assert set(cd[ci == 1]) == {8, 9, 10, 11, 12}
+    ci, cd = legal_cells(np.array([0.62]), 10.0, 0.0, None)  # no stretch: the nearest duration only
+    assert cd.tolist() == [6]
+
+
+def test_hard_constraint_is_honoured() -> None:
+    cloud = random_database(100, seed=5)
+    inst = instances_of(cloud, [6] * 16)
+    x = cloud[12:48].copy()  # instances 2..7 fit exactly
+    ci, cd, interp = dp_setup(inst, x, stretch=0.1)
+    apply_constraints(interp.D, ci, cd, [(10, 20)])  # instance 10 must cover frame 20
+    res = solve(interp, inst, ci, cd, k=1.0)
+    starts = res.ends - cd[res.cells]
+    covering = (starts <= 20) & (res.ends > 20)
+    assert ci[res.cells][covering].tolist() == [10]
+    assert res.score > 0  # the constraint costs something
+    apply_constraints(interp.D, ci, cd, [(11, 20)])  # two instances at one frame: impossible
+    with pytest.raises(Infeasible):
+        solve(interp, inst, ci, cd, k=1.0)
+
+
+def test_retime_recovers_full_rate_boundaries() -> None:
+    cloud = random_database(200, seed=7)
+    lengths = [16, 19, 17, 21, 18, 16, 20, 17, 19, 18]
+    inst = instances_of(cloud, lengths)
+    inst.fps = 30.0
+    order = np.array([4, 1, 8, 2])
+    x = np.concatenate([cloud[inst.start[s] : inst.start[s] + inst.length[s]] for s in order])
+    truth = np.concatenate(([0], np.cumsum(inst.length[order])))
+    coarse = truth + np.array([0, 2, -3, 1, 0])  # a coarse solution's boundaries, off by a few frames
+    timed = retime(x, inst, order, coarse, 0.5, 30.0, 0.2, None, window=3)
+    assert timed.bounds.tolist() == truth.tolist()
+    assert timed.interpretation == pytest.approx(0.0, abs=1e-9)
+    assert timed.score == pytest.approx(timed.interpretation + timed.continuity)
+
+
+def test_clustering_keeps_one_of_near_duplicates() -> None:
+    cloud = random_database(40, seed=2)
+    segs = np.stack([cloud[0:8], cloud[0:8] + 0.001, cloud[20:28]])
+    segs[1] = rigid(segs[1], 1.0, 3.0, 1.0)  # a moved copy is the same instance (Eq. 1 aligns)
+    rep = cluster_instances(segs, 0.05, seed=0)
+    assert rep[0] == rep[1] and rep[2] == 2 and rep[0] in (0, 1)
+    assert cluster_instances(segs, 0.0, seed=0).tolist() == [0, 1, 2]
+
+
+def test_segments_from_boundaries() -> None:
+    b = np.array([0, 10, 20, 31, 40, 50])
+    rows = instances_from_boundaries(b, 2, 60, 30.0, 0.2, 4.0, overlap=False)
+    assert rows.tolist() == [[0, 20], [20, 20]]
+    rows = instances_from_boundaries(b, 2, 60, 30.0, 0.2, 4.0, overlap=True)
+    assert rows[:, 0].tolist() == [0, 10, 20, 31]
+
+
+def test_impossible_speed_names_the_segment() -> None:
+    t = np.arange(60) / 30.0
+    pts = np.stack((np.where(t < 1.0, 1.2 * t, 1.2 + 12.0 * (t - 1.0)), np.zeros_like(t)), axis=-1)
+    with pytest.raises(EngineError, match=r"too fast between t = 1\.\d+ s .* m/s"):
+        trajectory_control(pts, 30.0, 0.2)
+    cloud, path = trajectory_control(pts[:30], 30.0, 0.2, temporal_s=0.1)
+    assert cloud.shape == (30, 2, 3)
+    sep = np.linalg.norm(cloud[:, 0] - cloud[:, 1], axis=-1)
+    assert np.allclose(sep, 0.2)
+    # walking along +X: the left point is on the -Z side (facing +X, the left is -Z)
+    assert np.all(cloud[5:25, 0, 2] < cloud[5:25, 1, 2])
+
+
+def test_schema_pairs_become_clips_and_errors_are_clear() -> None:
+    spec = parse_database_spec(
+        {
+            "kind": "control",
+            "pairs": [
+                {"control": "d/60_01.bvh", "target": "61_01.bvh"},
+                {"target": {"bvh": "w.bvh", "units": "cm"}},
+            ],
+            "segmentation": {"method": "beats", "beats_per_segment": 2},
+        }
+    )
+    assert [c.display_name() for c in spec.clips] == ["61_01", "60_01", "w"]
+    assert spec.pairs[0].control == "60_01" and spec.pairs[1].control is None
+    again = parse_database_spec(spec.model_dump(mode="json"))  # stored specs re-validate unchanged
+    assert again == spec
+    bad = [
+        ({"kind": "control", "pairs": [{"control": "a.bvh"}]}, "target"),
+        ({"kind": "control", "pairs": [{"control": "a.bvh", "target": "a.bvh"}]}, "same clip"),
+        (
+            {"kind": "control", "pairs": [{"target": "a.bvh"}], "segmentation": {"method": "markers"}},
+            "markers",
+        ),
+        ({"kind": "control", "pairs": [{"target": "a.bvh", "markers_s": [1.0, 0.5]}]}, "increasing"),
+        ({"kind": "control", "pairs": []}, "at least 1"),
+        ({"kind": "control", "pairs": [{"target": "a.bvh"}], "segmentation": {"method": "x"}}, "method"),
+    ]
+    for data, words in bad:
+        with pytest.raises(ValidationError, match=words):
+            parse_database_spec(data)
+    req = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}})
+    assert req.input_files() == ["lead.bvh"]
+    traj = parse_job_request(
+        {"engine": "control", "control": {"trajectory": {"fps": 30, "points": [[0, 0], [0, 1]]}}}
+    )
+    assert traj.input_files() == []
+    for data, words in [
+        ({"control": {}}, "exactly one"),
+        ({"control": {"bvh": "a", "trajectory": {"fps": 30, "points": [[0, 0], [1, 1]]}}}, "exactly one"),
+        ({"control": {"bvh": "a"}, "stretch_s": 0.1, "stretch_ratio": 0.1}, "at most one"),
+        ({"control": {"bvh": "a"}, "constraints": [{"time_s": 1.0}]}, "instance"),
+    ]:
+        with pytest.raises(ValidationError, match=words):
+            parse_job_request({"engine": "control", **data})
+
+
+# ------------------------------------------------------------------------- end to end (synthetic)
+
+
+def walk_engine() -> ControlEngine:
+    clips = [
+        ClipInput(
+            f"walk{i}",
+            bvh_text(walking_biped(240, speed=1.0 + 0.2 * i, heading_deg=40.0 * i, seed=i)).encode(),
+        )
+        for i in range(3)
+    ]
+    spec = parse_database_spec(
+        {
+            "kind": "control",
+            "pairs": [{"target": c.name} for c in clips],
+            "clips": [{"bvh": f"{c.name}.bvh", "name": c.name} for c in clips],
+            "segmentation": {"method": "fixed", "seconds": 0.5},
+        }
+    )
+    library = build_library(clips, spec.fps)
+    arrays = ControlEngine.build(spec, library, Collect(), lambda: False)
+    arrays.update(library_to_arrays(library))
+    return ControlEngine(library, arrays)
+
+
+def test_walk_from_a_path_follows_it() -> None:
+    engine = walk_engine()
+    held = walking_biped(150, speed=1.1, heading_deg=-30.0, seed=9)
+    path, _ = ground_frames(held)
+    req = parse_job_request(
+        {"engine": "control", "control": {"trajectory": {"fps": 30, "points": path.tolist()}}, "budget_s": 5}
+    )
+    out = Collect()
+    engine.search(req, 5.0, out, lambda: False)
+    assert out.solutions and all(b.score < a.score for a, b in itertools.pairwise(out.solutions))
+    sol = out.solutions[-1]
+    assert sol.motion.num_frames == 150 and sol.motion.fps == 30.0
+    got, _ = ground_frames(sol.motion)
+    rms = float(np.sqrt(((got - path) ** 2).sum(-1).mean()))
+    assert rms < 0.05 * 1.7
+    assert len(sol.provenance) == 150 and sol.annotations["segments"]
+    assert len(sol.annotations["foot_contacts"]["flags"][0]) == 150
+    # a trajectory cannot drive a dance database, a BVH is needed: clear error the other way round
+    fast = parse_job_request(
+        {"engine": "control", "control": {"trajectory": {"fps": 30, "points": (path * 8).tolist()}}}
+    )
+    with pytest.raises(EngineError, match="too fast"):
+        engine.search(fast, 5.0, Collect(), lambda: False)
+    # a control shorter than any segment cannot be interpreted
+    short = parse_job_request(
+        {"engine": "control", "control": {"trajectory": {"fps": 30, "points": path[:5].tolist()}}}
+    )
+    with pytest.raises(EngineError, match="cannot be tiled"):
+        engine.search(short, 5.0, Collect(), lambda: False)
+
+
+def test_context_and_velocity_continuity_options() -> None:
+    cloud = random_database(100, seed=3)
+    inst = instances_of(cloud, [7] * 14)
+    x = rigid(cloud[14:56].copy(), -1.1, 0.5, 0.3)
+    ci, cd = legal_cells(inst.length / inst.fps, RATE, 0.1, None)
+    interp = interpretation(x, inst, ci, cd, RATE, context=2)  # the motion around each segment counts
+    res = solve(interp, inst, ci, cd, k=5.0)
+    assert list(ci[res.cells]) == [2, 3, 4, 5, 6, 7]
+    engine = walk_engine()
+    three = engine.instances_for(0.2)
+    assert three.tails.shape[1] == 3 * engine.solver_instances_.tails.shape[1]
+    assert np.allclose(
+        three.tails[:, : engine.solver_instances_.tails.shape[1]], engine.solver_instances_.tails
+    )
