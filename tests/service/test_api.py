@@ -147,7 +147,7 @@ def test_first_post_is_202_and_build_can_be_followed(client: TestClient, walk_cl
 @pytest.mark.parametrize(
     ("spec", "status", "code", "needle"),
     [
-        ({"kind": "control", "clips": [{"bvh": "07_01_walk_daz.bvh.gz"}]}, 422, "unavailable", "control"),
+        ({"kind": "control", "clips": [{"bvh": "07_01_walk_daz.bvh.gz"}]}, 422, "invalid_request", "pairs"),
         ({"kind": "nope", "clips": [{"bvh": "a.bvh"}]}, 422, "invalid_request", "kind"),
         ({"kind": "clips", "clips": []}, 422, "invalid_request", "clips"),
         ({"kind": "clips", "clips": [{"bvh": "a.bvh", "clip": "b"}]}, 422, "invalid_request", "exactly one"),
@@ -239,6 +239,10 @@ def test_clip_job_streams_to_done_and_results_download(client: TestClient, walk_
     assert f'filename="segue-{job["id"]}-{rid}.bvh"' in bvh.headers["content-disposition"]
     motion = parse_bvh(bvh.content, source="result.bvh")
     assert motion.num_frames == 60 and motion.fps == 30.0
+    slow = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "bvh", "fps": 15})
+    half = parse_bvh(slow.content, source="result15.bvh")
+    assert half.fps == 15.0 and half.num_frames == 30
+    assert np.allclose(half.root_positions, motion.root_positions[::2][:30], atol=1e-4)
     glb = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "glb"})
     assert glb.headers["content-type"] == "model/gltf-binary" and glb.content[:4] == b"glTF"
     frames = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "json", "result": rid}).json()
@@ -271,6 +275,7 @@ def test_result_errors(client: TestClient, walk_db: dict[str, Any]) -> None:
     assert "without a result" in err["message"]
     error_of(client.get(f"/v1/jobs/{job_id}/result", params={"result": "r9"}), 404, "not_found")
     error_of(client.get(f"/v1/jobs/{job_id}/result", params={"format": "fbx"}), 422, "invalid_request")
+    error_of(client.get(f"/v1/jobs/{job_id}/result", params={"fps": -5}), 422, "invalid_request")
     error_of(client.get(f"/v1/jobs/{job_id}/report", params={"result": "../x"}), 404, "not_found")
     error_of(client.get("/v1/jobs/nope/result"), 404, "not_found")
     error_of(client.get("/v1/jobs/nope"), 404, "not_found")
