@@ -50,7 +50,7 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """Base URL of ``uvicorn --factory service.app:create_app`` (2 embedded workers, fresh data dir)."""
     data = tmp_path_factory.mktemp("web-data")
@@ -96,14 +96,14 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         log.close()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def segue(server: str) -> Iterator[SegueClient]:
     """An API client on the same server (to prepare databases the tools need)."""
     with SegueClient(server) as client:
         yield client
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def browser() -> Iterator[Any]:
     """Headless Debian Chromium (skips, or fails in CI, when it or playwright is missing)."""
     if not Path(CHROMIUM).exists() or shutil.which(CHROMIUM) is None:
