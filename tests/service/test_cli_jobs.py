@@ -81,7 +81,7 @@ def test_build_then_synth_every_format(spec_dir: Path, capsys: pytest.CaptureFix
     ("spec", "message"),
     [
         ({"kind": "clips", "clips": [{"bvh": "missing.bvh"}]}, "missing.bvh"),
-        ({"kind": "control", "clips": [{"bvh": "walk.bvh.gz"}]}, "not available yet"),
+        ({"kind": "control", "clips": [{"bvh": "walk.bvh.gz"}]}, "pairs"),
         ({"kind": "clips", "clips": [{"bvh": "walk.bvh.gz"}], "fps": 0}, "fps"),
     ],
 )
