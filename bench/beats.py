@@ -32,7 +32,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from motion.allocator import tune_allocator  # noqa: E402
+from motion.allocator import tune_process  # noqa: E402
 from motion.beats import detect_beats, detect_couple_beats  # noqa: E402
 from motion.io import load_motion  # noqa: E402
 
@@ -136,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="2,5", help="make-up warp seeds for accuracy")
     ap.add_argument("--no-accuracy", action="store_true", help="skip the make-up accuracy protocol")
     args = ap.parse_args(argv)
-    tune_allocator()
+    tune_process()
     if not (DATA / "cmu-salsa").is_dir():
         print(json.dumps({"error": f"shared data not found under {DATA}"}))
         return 1

@@ -18,7 +18,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from motion import read_bvh
-from motion.allocator import tune_allocator
+from motion.allocator import tune_process
 from motion.samples import sample_path
 
 
@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--file", help="BVH file (.bvh or .bvh.gz); default: bundled salsa leader")
     ap.add_argument("--runs", type=int, default=31, help="timed runs (median reported)")
     args = ap.parse_args(argv)
-    tune_allocator()  # as in every Segue process (see motion/allocator.py)
+    tune_process()  # as in every Segue process (see motion/allocator.py)
     path = Path(args.file) if args.file else sample_path("salsa-leader")
     read_bvh(path).global_positions()  # warm caches (imports, page cache)
     parse_t, fk_t = [], []

@@ -33,7 +33,7 @@ from engines.base import Solution  # noqa: E402
 from engines.graph.build import build_graph  # noqa: E402
 from engines.graph.engine import GraphEngine  # noqa: E402
 from engines.library import ClipInput, build_library  # noqa: E402
-from motion.allocator import tune_allocator  # noqa: E402
+from motion.allocator import tune_process  # noqa: E402
 from motion.ground import body_root, heading  # noqa: E402
 from motion.metrics import foot_slip  # noqa: E402
 from schemas.databases import parse_database_spec  # noqa: E402
@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--budget", type=float, default=10.0)
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args(argv)
-    tune_allocator()
+    tune_process()
     if not DATA.exists():
         print(json.dumps({"error": f"{DATA} not found"}))
         return 1

@@ -73,9 +73,9 @@ class Quiet:
 def run_one(name: str, tau: float) -> dict[str, Any]:
     from engines.graph.build import build_graph
     from engines.library import ClipInput, build_library
-    from motion.allocator import tune_allocator
+    from motion.allocator import tune_process
 
-    tune_allocator()  # as every Segue process does
+    tune_process()  # as every Segue process does
     load_avg = os.getloadavg()[0]
     files = files_of(name)
     t0 = time.perf_counter()

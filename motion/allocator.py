@@ -6,9 +6,9 @@ that costs ~1 ms per MB, often more than the arithmetic (BVH parse + FK of a 3 M
 Keeping freed memory in the heap for reuse removes that cost, at the price of a process holding
 on to up to ``trim_threshold`` bytes of free memory.
 
-Segue's CLI, server and workers call :func:`tune_allocator` once at start-up, and so does the
-benchmark (it measures the configuration the processes run with). Library users may call it too;
-importing :mod:`motion` never changes the allocator.
+Segue's CLI, server and workers call :func:`tune_process` (this and one BLAS thread) once at
+start-up, and so do the benchmarks (they measure the configuration the processes run with).
+Library users may call it too; importing :mod:`motion` never changes the allocator.
 """
 
 from __future__ import annotations
@@ -59,3 +59,27 @@ def tune_allocator(
         )
     )
     return ok
+
+
+def limit_blas_threads(threads: int = 1) -> bool:
+    """Run BLAS (numpy's matrix products) on ``threads`` threads; returns whether it applied.
+
+    Segue's parallelism is processes (worker pools), and its matrix products are small (FK's
+    ancestor matrices, per-segment alignments): with one BLAS thread per core already busy,
+    OpenBLAS's spinning threads made them 10-50x slower on the 2-core machines measured (parse + FK
+    of a salsa clip: 5.8 M joint-frames/s with one thread, 1.2 M with the default while another
+    process ran). Needs ``threadpoolctl`` (installed with scikit-learn); a no-op without it.
+    """
+    try:
+        from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+    except ImportError:
+        return False
+    threadpool_limits(limits=threads, user_api="blas")
+    return True
+
+
+def tune_process() -> None:
+    """What Segue's entry points apply once at start-up: :func:`tune_allocator` and
+    :func:`limit_blas_threads` (one BLAS thread per process)."""
+    tune_allocator()
+    limit_blas_threads(1)

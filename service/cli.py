@@ -31,7 +31,7 @@ from pydantic import ValidationError
 from engines.base import EngineError
 from engines.registry import UnavailableError, load_plugins
 from motion import Motion, MotionError
-from motion.allocator import tune_allocator
+from motion.allocator import tune_process
 from motion.beats import detect_beats
 from motion.bvh import BvhLimits, detect_units
 from motion.export.targets import TARGETS
@@ -426,7 +426,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    tune_allocator()
+    tune_process()
     parser = build_parser()
     args = parser.parse_args(argv)
     load_plugins()

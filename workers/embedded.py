@@ -38,9 +38,9 @@ _CACHE = EngineCache()
 def _init_worker(root: str, queue: Any) -> None:
     global _STORE, _QUEUE
     from engines.registry import load_plugins
-    from motion.allocator import tune_allocator
+    from motion.allocator import tune_process
 
-    tune_allocator()
+    tune_process()
     load_plugins()
     _STORE, _QUEUE = Store(root), queue
 

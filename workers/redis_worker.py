@@ -578,9 +578,9 @@ def run_worker(
     Returns the number of jobs processed.
     """
     from engines.registry import load_plugins
-    from motion.allocator import tune_allocator
+    from motion.allocator import tune_process
 
-    tune_allocator()
+    tune_process()
     load_plugins()
     settings = WorkerSettings(
         redis_url=redis_url,
