@@ -24,8 +24,6 @@ def test_tune_process_leaves_one_blas_thread() -> None:
     out = subprocess.run(
         [sys.executable, "-c", SCRIPT], capture_output=True, text=True, timeout=120, check=True
     )
-    import json
-
     threads = json.loads(out.stdout.strip().splitlines()[-1])
     if not threads["before"]:
         pytest.skip("numpy reports no BLAS thread pool here")
