@@ -145,11 +145,16 @@ async def download_result(
     fps: Annotated[
         float | None, Query(gt=0, le=1000, description="resample to this frame rate (default: as computed)")
     ] = None,
+    max_fps: Annotated[
+        float | None, Query(gt=0, le=1000, description="resample down to this rate only if faster (previews)")
+    ] = None,
 ) -> Response:
     """Download a result motion (default: the job's best result so far), optionally resampled."""
     rid = await _result_id(backend, job_id, result)
     motion = store.result_motion(job_id, rid)
     try:
+        if fps is None and max_fps is not None and motion.fps > max_fps:
+            fps = max_fps
         if fps is not None and abs(fps - motion.fps) > 1e-9:
             motion = await run_in_threadpool(resample, motion, fps)
         data = await run_in_threadpool(export_bytes, motion, format, target)

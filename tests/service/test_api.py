@@ -244,6 +244,10 @@ def test_clip_job_streams_to_done_and_results_download(client: TestClient, walk_
     half = parse_bvh(slow.content, source="result15.bvh")
     assert half.fps == 15.0 and half.num_frames == 30
     assert np.allclose(half.root_positions, motion.root_positions[::2][:30], atol=1e-4)
+    capped = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "bvh", "max_fps": 60})
+    assert parse_bvh(capped.content, source="capped.bvh").fps == 30.0  # already slower: unchanged
+    capped = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "bvh", "max_fps": 10})
+    assert parse_bvh(capped.content, source="capped.bvh").num_frames == 20
     glb = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "glb"})
     assert glb.headers["content-type"] == "model/gltf-binary" and glb.content[:4] == b"glTF"
     frames = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "json", "result": rid}).json()

@@ -106,8 +106,10 @@ export const api = {
   eventsAfter: async (id, after, wait = 0) =>
     (await request('GET', `/v1/jobs/${id}/events`, { query: { after, wait } })).json(),
   report: async (job, result) => (await request('GET', `/v1/jobs/${job}/report`, { query: { result } })).json(),
-  resultBlob: async (job, result, format) =>
-    (await request('GET', `/v1/jobs/${job}/result`, { query: { format, result } })).blob(),
+  // maxFps: the server resamples faster results down to it (the viewer's previews; downloads keep
+  // the full rate)
+  resultBlob: async (job, result, format, maxFps) =>
+    (await request('GET', `/v1/jobs/${job}/result`, { query: { format, result, max_fps: maxFps } })).blob(),
 };
 
 export function wsUrl(path, query = {}) {

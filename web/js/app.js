@@ -8,6 +8,7 @@ import { FloorPad, headingDeg } from './pad.js';
 import { setupMusic } from './music.js';
 
 const $ = (id) => document.getElementById(id);
+const VIEW_FPS = 30; // results are drawn at most at this rate (the server resamples; downloads are full rate)
 
 export const state = {
   ready: false,
@@ -413,8 +414,9 @@ export async function runJob(tool, request) {
 async function drawSolution(run, sol) {
   const tFetch = performance.now();
   // BVH is the quickest format to export and to load (a 2,000-frame result: ~0.2 s vs ~1 s for JSON
-  // frames); result motions are in metres (target gltf)
-  const bytes = await (await api.resultBlob(sol.job, sol.result, 'bvh')).arrayBuffer();
+  // frames); result motions are in metres (target gltf). The viewer draws at most 30 fps, so a
+  // 120 fps dance downloads a quarter of the frames (downloads keep the full rate)
+  const bytes = await (await api.resultBlob(sol.job, sol.result, 'bvh', VIEW_FPS)).arrayBuffer();
   if (active !== run) return; // another job started meanwhile
   const tParse = performance.now();
   const motion = parseBvhText(await bvhText(bytes), `${run.tool} ${sol.result}`);
