@@ -111,6 +111,9 @@ class GraphRequest(JobRequestBase):
     alternatives: int = Field(default=1, ge=1, le=20, description="distinct local minima to return")
     weights: GraphWeights = Field(default_factory=GraphWeights)
     smoothing_frames: int = Field(default=15, ge=0, le=300, description="displacement smoothing half-width")
+    footskate: bool = Field(
+        default=True, description="pin planted feet with the source clips' contacts (motion.footskate)"
+    )
 
     @model_validator(mode="after")
     def _length(self) -> GraphRequest:

@@ -186,7 +186,7 @@ class RhythmRequest(JobRequestBase):
         description="beat accent: slow the time warp at each music beat by this fraction (0 = linear warp)",
     )
     fps: float | None = Field(default=None, gt=0, le=240, description="output rate (default: the database's)")
-    foot_cleanup: bool = Field(default=True, description="keep planted feet still (motion.footskate)")
+    footskate: bool = Field(default=True, description="keep planted feet still (motion.footskate)")
 
     @model_validator(mode="after")
     def _control(self) -> RhythmRequest:

@@ -563,7 +563,14 @@ class GraphSearch:
     def solution(self, ev: Evaluation, request: Any, *, rank: int = 0, local: bool = False) -> Solution:
         """The :class:`~engines.base.Solution` of an evaluated path (assembled motion, report)."""
         motion, provenance = assemble(
-            self.library, self.tracks, ev.pieces, ev.placement, request, self._problem, contacts=self.contacts
+            self.library,
+            self.tracks,
+            ev.pieces,
+            ev.placement,
+            request,
+            self._problem,
+            contacts=self.contacts,
+            feet=request.footskate,
         )
         errors = constraint_errors(motion, provenance, self._problem, self.library)
         metrics = {

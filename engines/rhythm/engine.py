@@ -315,7 +315,7 @@ class RhythmEngine(Engine):
         beats = music_beats(request)
         emit.progress(0.1, f"{beats.size} music beats")
         leaders, partners, r = self.synthesize(request, beats)
-        if request.foot_cleanup:
+        if request.footskate:
             leaders = [_clean(m) for m in leaders]
             partners = [_clean(m) for m in partners]
             if should_stop():

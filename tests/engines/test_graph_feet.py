@@ -135,3 +135,23 @@ def test_search_solutions_are_cleaned_with_the_given_contacts(graph: Graph) -> N
     cleaned = foot_slip(runs["gait"].motion, contacts=flags, joints=joints)
     raw = foot_slip(runs["none"].motion, contacts=flags, joints=joints)
     assert cleaned < 0.3 * raw
+
+
+def test_request_can_turn_the_cleanup_off(graph: Graph) -> None:  # noqa: F811
+    """``footskate: false`` assembles the same path without pinning (as with no contacts)."""
+    library, _, tracks = graph
+    gait = gait_contacts(library)
+    runs = {}
+    for off in (False, True):
+        out = Collect()
+        searcher(graph, 3, contacts=gait).run(
+            request(alternatives=1, footskate=not off), 60.0, out, lambda: False, max_rounds=3
+        )
+        runs[off] = out.solutions[-1]
+    assert runs[False].provenance == runs[True].provenance
+    prov = runs[True].provenance
+    clips = np.array([library.index(c) for c, _ in prov])
+    joints, flags = propagated_contacts(gait, tracks, clips, np.array([f for _, f in prov]))
+    assert foot_slip(runs[False].motion, contacts=flags, joints=joints) < 0.3 * foot_slip(
+        runs[True].motion, contacts=flags, joints=joints
+    )

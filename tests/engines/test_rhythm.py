@@ -225,7 +225,7 @@ def test_synthetic_end_to_end_lands_beats_on_music(synthetic: Any) -> None:
     lib, _, engine = synthetic
     music = [0.3 + 0.45 * k for k in range(13)]
     req = RhythmRequest.model_validate(
-        {"music": {"beats_s": music}, "seed": 3, "accent": 0.0, "foot_cleanup": False}
+        {"music": {"beats_s": music}, "seed": 3, "accent": 0.0, "footskate": False}
     )
     rec = Recorder()
     engine.search(req, 5.0, rec, lambda: False)
@@ -258,7 +258,7 @@ def test_directions_steer_and_crowd_avoids(synthetic: Any) -> None:
             "characters": 4,
             "spacing_m": 0.5,
             "directions": [{"beat": 0, "heading_deg": 90, "speed": 0.4}],
-            "foot_cleanup": False,
+            "footskate": False,
         }
     )
     leaders, partners, _ = engine.synthesize(req, music_beats(req))
@@ -299,7 +299,7 @@ def test_couples_move_together() -> None:
     )
     engine = RhythmEngine(lib, RhythmEngine.build(spec, lib, Recorder(), lambda: False))
     req = RhythmRequest.model_validate(
-        {"music": {"bpm": 100, "duration_s": 6}, "couples": True, "characters": 2, "foot_cleanup": False}
+        {"music": {"bpm": 100, "duration_s": 6}, "couples": True, "characters": 2, "footskate": False}
     )
     leaders, partners, _ = engine.synthesize(req, music_beats(req))
     assert len(partners) == 2
@@ -372,7 +372,7 @@ def test_path_in_formation_keeps_rows(synthetic: Any) -> None:
             "spacing_m": 1.0,
             "path": [[0, 0], [0, 3], [0, 3], [3, 6], [3, 6]],  # repeated points are skipped
             "speed": 0.4,
-            "foot_cleanup": False,
+            "footskate": False,
         }
     )
     leaders, _, _ = engine.synthesize(req, music_beats(req))
