@@ -8,12 +8,14 @@ a rotation about +Y, 0 = facing +Z, +pi/2 = facing +X (the body's left is +X whe
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
 
 from . import rotations as rot
+from .align import apply_rigid_2d
 from .errors import MotionError
 from .mirror import mirror_map
 from .motion import Motion
@@ -193,3 +195,65 @@ def add_ground_root(motion: Motion, *, name: str = GROUND_ROOT_NAME, smooth_s: f
     return replace(
         motion, skeleton=new_sk, root_positions=ground_pos, rotations=rotations, joint_translations=jt
     )
+
+
+StaticRoot = tuple[Array, Array]
+"""Joint 0's fixed position ``(3,)`` (file units) and rotation ``(4,)`` (x, y, z, w)."""
+
+
+def static_reference_root(motions: Sequence[Motion]) -> StaticRoot | None:
+    """Joint 0's position and rotation when it is one fixed pose in every frame of every motion and
+    all its children carry animated translations (Bandai-Namco's ``joint_Root`` at the origin, the
+    body carried by the translated ``Hips``); else ``None``.
+
+    Moving such a reference joint (placing or smoothing pieces of motion) would swing the whole
+    body about the origin; :func:`apply_floor_transform` moves its children instead.
+    """
+    if not motions:
+        return None
+    first = motions[0]
+    sk = first.skeleton
+    children = np.flatnonzero(sk.parents == 0)
+    if children.size == 0 or not np.all(np.isin(children, sk.translated_joints)):
+        return None
+    p0, q0 = first.root_positions[0], rot.standardize(first.rotations[0, 0])
+    for m in motions:
+        if np.abs(m.root_positions - p0).max() > 1e-9:
+            return None
+        if np.abs(rot.standardize(m.rotations[:, 0]) - q0).max() > 1e-9:
+            return None
+    return p0, q0
+
+
+def apply_floor_transform(
+    motion: Motion, theta: Array, shift_m: Array, static: StaticRoot | None = None
+) -> Motion:
+    """The motion with frame ``f`` rotated by ``theta[f]`` (radians about +Y, about the world origin)
+    then moved by ``shift_m[f]`` (``[x, z]`` metres), ``theta: (F,)``, ``shift_m: (F, 2)``.
+
+    With a static reference root (:func:`static_reference_root`), joint 0 stays put and the global
+    transforms of its children move instead (re-expressed in joint 0's frame), so the result's
+    global joint positions are the same as if joint 0 had moved.
+    """
+    shift_u = np.asarray(shift_m, dtype=np.float64) / motion.metres_per_unit
+    theta = np.asarray(theta, dtype=np.float64)
+    turn = rot.from_yaw(theta)  # (F, 4)
+    if static is None:
+        root = apply_rigid_2d(motion.root_positions[:, None, :], theta, shift_u)[:, 0]
+        q = motion.rotations.copy()
+        q[:, 0] = rot.multiply(turn, q[:, 0])
+        return replace(motion, root_positions=root, rotations=q)
+    p0, q0 = static
+    sk = motion.skeleton
+    q = motion.rotations.copy()
+    jt = motion.joint_translations.copy()
+    q0i = rot.conjugate(q0)
+    local_turn = rot.multiply(rot.multiply(q0i[None], turn), q0[None])  # q0^-1 R q0
+    tj = list(sk.translated_joints)
+    for c in np.flatnonzero(sk.parents == 0):
+        k = tj.index(int(c))
+        glob = rot.rotate(q0[None], jt[:, k]) + p0
+        moved = apply_rigid_2d(glob[:, None, :], theta, shift_u)[:, 0]
+        jt[:, k] = rot.rotate(q0i[None], moved - p0)
+        q[:, c] = rot.multiply(local_turn, q[:, c])
+    return replace(motion, rotations=q, joint_translations=jt)

@@ -10,7 +10,6 @@ that module is installed.
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import replace
 from typing import Any
 
@@ -18,8 +17,8 @@ import numpy as np
 import numpy.typing as npt
 
 from motion import Motion
-from motion import rotations as rot
-from motion.align import apply_rigid_2d
+from motion.footskate import remove_foot_skate
+from motion.ground import apply_floor_transform, static_reference_root
 from motion.metrics import cut_discontinuity
 from motion.smoothing import smooth_cuts
 
@@ -33,51 +32,6 @@ IntArray = npt.NDArray[np.intp]
 FloatArray = npt.NDArray[np.float64]
 
 
-def static_root(library: MotionLibrary) -> tuple[FloatArray, FloatArray] | None:
-    """Joint 0's position and rotation when it is one fixed pose in every frame of every clip and
-    all its children carry animated translations (Bandai-Namco's ``joint_Root``); else ``None``."""
-    first = library.motions[0]
-    sk = first.skeleton
-    children = np.flatnonzero(sk.parents == 0)
-    if children.size == 0 or not np.all(np.isin(children, sk.translated_joints)):
-        return None
-    p0, q0 = first.root_positions[0], rot.standardize(first.rotations[0, 0])
-    for m in library.motions:
-        if np.abs(m.root_positions - p0).max() > 1e-9:
-            return None
-        if np.abs(rot.standardize(m.rotations[:, 0]) - q0).max() > 1e-9:
-            return None
-    return p0, q0
-
-
-def apply_floor(
-    motion: Motion, theta: FloatArray, shift: FloatArray, static: tuple[FloatArray, FloatArray] | None
-) -> Motion:
-    """The motion with frame ``f`` rotated by ``theta[f]`` (rad about +Y) then moved by
-    ``shift[f]`` (``[x, z]`` metres); with a static reference root, its children move instead."""
-    shift_u = shift / motion.metres_per_unit
-    turn = rot.from_yaw(theta)
-    if static is None:
-        root = apply_rigid_2d(motion.root_positions[:, None, :], theta, shift_u)[:, 0]
-        q = motion.rotations.copy()
-        q[:, 0] = rot.multiply(turn, q[:, 0])
-        return replace(motion, root_positions=root, rotations=q)
-    p0, q0 = static
-    sk = motion.skeleton
-    q = motion.rotations.copy()
-    jt = motion.joint_translations.copy()
-    q0i = rot.conjugate(q0)
-    local_turn = rot.multiply(rot.multiply(q0i[None], turn), q0[None])
-    tj = list(sk.translated_joints)
-    for c in np.flatnonzero(sk.parents == 0):
-        k = tj.index(int(c))
-        glob = rot.rotate(q0[None], jt[:, k]) + p0
-        moved = apply_rigid_2d(glob[:, None, :], theta, shift_u)[:, 0]
-        jt[:, k] = rot.rotate(q0i[None], moved - p0)
-        q[:, c] = rot.multiply(local_turn, q[:, c])
-    return replace(motion, rotations=q, joint_translations=jt)
-
-
 class Frames:
     """The library's frames end to end (from the stored arrays), for quick concatenation."""
 
@@ -86,16 +40,7 @@ class Frames:
         self.root = np.asarray(arrays["library.root_positions"], dtype=np.float64)
         self.rotations = np.asarray(arrays["library.rotations"], dtype=np.float64)
         self.translations = np.asarray(arrays["library.joint_translations"], dtype=np.float64)
-        self.static = static_root(library)
-
-
-def _remove_foot_skate(motion: Motion) -> Motion:
-    try:
-        module = importlib.import_module("motion.footskate")
-    except ModuleNotFoundError:
-        return motion
-    result: Motion = module.remove_foot_skate(motion)
-    return result
+        self.static = static_reference_root(library.motions)
 
 
 def assemble(
@@ -112,12 +57,12 @@ def assemble(
         joint_translations=frames.translations[sigma],
         name="annotations",
     )
-    motion = apply_floor(motion, cand.theta, cand.shift, frames.static)
+    motion = apply_floor_transform(motion, cand.theta, cand.shift, frames.static)
     cuts = cuts_of(db, sigma)
     if cuts.size and smoothing >= 1:
         motion = smooth_cuts(motion, cuts, smoothing)
     if footskate:
-        motion = _remove_foot_skate(motion)
+        motion = remove_foot_skate(motion)
     return motion, cuts
 
 

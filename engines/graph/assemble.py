@@ -37,12 +37,10 @@ from typing import Any
 import numpy as np
 
 from motion import Motion
-from motion import rotations as rot
-from motion.align import apply_rigid_2d
 from motion.contacts import foot_joints
 from motion.errors import MotionError
 from motion.footskate import leg_chains, remove_foot_skate
-from motion.ground import ground_frames
+from motion.ground import apply_floor_transform, ground_frames, static_reference_root
 from motion.smoothing import smooth_cuts
 
 from ..library import MotionLibrary
@@ -57,51 +55,6 @@ def body_frames(motion: Motion, positions: FloatArray | None = None) -> tuple[Fl
     (:func:`motion.ground.ground_frames`: the hips' floor projection, facing from the thighs)."""
     xz, yaw = ground_frames(motion, positions)
     return xz * motion.metres_per_unit, yaw
-
-
-def _static_root(library: MotionLibrary) -> tuple[FloatArray, FloatArray] | None:
-    """Joint 0's position and rotation when it is the same fixed pose in every frame of every
-    clip and all its children carry animated translations; else ``None``."""
-    first = library.motions[0]
-    sk = first.skeleton
-    children = np.flatnonzero(sk.parents == 0)
-    if children.size == 0 or not np.all(np.isin(children, sk.translated_joints)):
-        return None
-    p0, q0 = first.root_positions[0], rot.standardize(first.rotations[0, 0])
-    for m in library.motions:
-        if np.abs(m.root_positions - p0).max() > 1e-9:
-            return None
-        if np.abs(rot.standardize(m.rotations[:, 0]) - q0).max() > 1e-9:
-            return None
-    return p0, q0
-
-
-def _apply_floor(
-    motion: Motion, theta: FloatArray, shift: FloatArray, static: tuple[FloatArray, FloatArray] | None
-) -> Motion:
-    """The motion with frame ``f`` moved by the floor transform ``(theta[f], shift[f])`` (metres)."""
-    shift_u = shift / motion.metres_per_unit
-    turn = rot.from_yaw(theta)  # (F, 4)
-    if static is None:
-        root = apply_rigid_2d(motion.root_positions[:, None, :], theta, shift_u)[:, 0]
-        q = motion.rotations.copy()
-        q[:, 0] = rot.multiply(turn, q[:, 0])
-        return replace(motion, root_positions=root, rotations=q)
-    # fixed reference root G0 = (q0, p0): move each child's global transform, re-express locally
-    p0, q0 = static
-    sk = motion.skeleton
-    q = motion.rotations.copy()
-    jt = motion.joint_translations.copy()
-    q0i = rot.conjugate(q0)
-    local_turn = rot.multiply(rot.multiply(q0i[None], turn), q0[None])  # q0^-1 R q0
-    tj = list(sk.translated_joints)
-    for c in np.flatnonzero(sk.parents == 0):
-        k = tj.index(int(c))
-        glob = rot.rotate(q0[None], jt[:, k]) + p0
-        moved = apply_rigid_2d(glob[:, None, :], theta, shift_u)[:, 0]
-        jt[:, k] = rot.rotate(q0i[None], moved - p0)
-        q[:, c] = rot.multiply(local_turn, q[:, c])
-    return replace(motion, rotations=q, joint_translations=jt)
 
 
 def _concatenate(library: MotionLibrary, pieces: Pieces) -> Motion:
@@ -249,10 +202,10 @@ def assemble(
     for c, a, b in zip(pieces.clip, pieces.first, pieces.last, strict=True):
         if not 0 <= a <= b < tracks.frames(int(c)):
             raise MotionError(f"piece {a}..{b} is outside clip {library.names[int(c)]!r}")
-    static = _static_root(library)
+    static = static_reference_root(library.motions)
     motion = _concatenate(library, pieces)
     theta, shift = placement.per_frame()
-    motion = _apply_floor(motion, theta, shift, static)
+    motion = apply_floor_transform(motion, theta, shift, static)
     cuts = [int(s) for s in pieces.start[1:] if 0 < s < motion.num_frames]
     window = int(getattr(request, "smoothing_frames", 0))
     if cuts and window >= 1:
@@ -261,7 +214,7 @@ def assemble(
         xz, yaw = body_frames(motion)
         corr = _correction(xz, yaw, problem)
         if corr is not None:
-            motion = _apply_floor(motion, corr[0], corr[1], static)
+            motion = apply_floor_transform(motion, corr[0], corr[1], static)
     clips, frames = pieces.source()
     if feet and motion.num_frames > 1:
         if contacts is None:
