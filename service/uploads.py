@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import AsyncGenerator
 from pathlib import PurePosixPath
+from typing import Any
 
 from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
@@ -77,3 +78,24 @@ async def read_upload(request: Request, limit: int, name: str | None) -> tuple[s
             "name the clip: POST the file as multipart field 'file', or the raw bytes with ?name=FILE.bvh",
         )
     return clean_name(name), await read_body(request, limit)
+
+
+def upload_body(description: str) -> dict[str, Any]:
+    """OpenAPI ``requestBody`` of an upload route (:func:`read_upload`): a multipart field ``file``
+    or the raw body with ``?name=``."""
+    return {
+        "requestBody": {
+            "required": True,
+            "description": description,
+            "content": {
+                "multipart/form-data": {
+                    "schema": {
+                        "type": "object",
+                        "required": ["file"],
+                        "properties": {"file": {"type": "string", "format": "binary"}},
+                    }
+                },
+                "application/octet-stream": {"schema": {"type": "string", "format": "binary"}},
+            },
+        }
+    }

@@ -7,7 +7,7 @@ job records the resolved id at submission (``inputs``), so later uploads do not 
 from __future__ import annotations
 
 import hashlib
-from typing import Annotated, Any
+from typing import Annotated
 
 from fastapi import APIRouter, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
@@ -17,27 +17,14 @@ from workers.store import NotFoundError
 
 from ..deps import AuthDep, SettingsDep, StoreDep
 from ..errors import responses
-from ..uploads import read_upload
+from ..uploads import read_upload, upload_body
 
 router = APIRouter(prefix="/v1/files", tags=["files"])
 
-_UPLOAD_BODY: dict[str, Any] = {
-    "requestBody": {
-        "required": True,
-        "description": "Any input file (e.g. a standard MIDI file): as multipart field ``file``, or as the "
-        "raw body with ``?name=``.",
-        "content": {
-            "multipart/form-data": {
-                "schema": {
-                    "type": "object",
-                    "required": ["file"],
-                    "properties": {"file": {"type": "string", "format": "binary"}},
-                }
-            },
-            "application/octet-stream": {"schema": {"type": "string", "format": "binary"}},
-        },
-    }
-}
+_UPLOAD_BODY = upload_body(
+    "Any input file (e.g. a standard MIDI file): as multipart field ``file``, or as the "
+    "raw body with ``?name=``."
+)
 
 
 @router.post(
