@@ -23,26 +23,14 @@ from engines.annotations.search import (
     solve_level,
     spliced,
 )
-from engines.base import EngineError, Solution
+from engines.base import EngineError
 from engines.library import MotionLibrary, library_to_arrays
 from schemas.annotations import AnnotatedDatabaseSpec, AnnotationRequest, FrameConstraint, LabelCorrection
+from tests.engines.emitters import Collect
 from tests.engines.graph_synthetic import arc_biped
 
 FRAMES = 90
 KINDS = {"slow": (0.6, 0.65, 0.7), "fast": (1.6, 1.7, 1.8)}
-
-
-class Recorder:
-    def __init__(self) -> None:
-        self.solutions: list[Solution] = []
-        self.messages: list[str] = []
-
-    def solution(self, solution: Solution) -> str:
-        self.solutions.append(solution)
-        return f"r{len(self.solutions)}"
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        self.messages.append(message)
 
 
 def _library() -> MotionLibrary:
@@ -68,7 +56,7 @@ SPEC = AnnotatedDatabaseSpec(
 @pytest.fixture(scope="module")
 def engine() -> AnnotationEngine:
     lib = _library()
-    rec = Recorder()
+    rec = Collect()
     arrays = AnnotationEngine.build(SPEC, lib, rec, lambda: False)
     assert any("label 'slow'" in m for m in rec.messages)
     arrays.update(library_to_arrays(lib))
@@ -106,7 +94,7 @@ def test_search_follows_timeline(engine: AnnotationEngine) -> None:
         timeline=[{"label": "slow", "start": 0, "end": 60}, {"label": "fast", "start": 60, "end": 120}],
         footskate=False,
     )
-    rec = Recorder()
+    rec = Collect()
     engine.search(req, 0.3, rec, lambda: False)
     assert rec.solutions, "no solution emitted"
     scores = [s.score for s in rec.solutions]
@@ -123,7 +111,7 @@ def test_search_follows_timeline(engine: AnnotationEngine) -> None:
 def test_unknown_label_is_a_client_error(engine: AnnotationEngine) -> None:
     req = AnnotationRequest(frames=40, timeline=[{"label": "jump", "start": 0, "end": 40}])
     with pytest.raises(EngineError, match="jump"):
-        engine.search(req, 0.1, Recorder(), lambda: False)
+        engine.search(req, 0.1, Collect(), lambda: False)
 
 
 def test_dp_matches_brute_force() -> None:
@@ -177,7 +165,7 @@ def test_frame_constraint_is_honoured(engine: AnnotationEngine) -> None:
         frame_constraints=[{"frame": 37, "clip": "slow2", "clip_frame": 50}],
         footskate=False,
     )
-    rec = Recorder()
+    rec = Collect()
     engine.search(req, 0.2, rec, lambda: False)
     best = rec.solutions[-1]
     assert best.provenance[37] == ("slow2.bvh", 50)
@@ -188,7 +176,7 @@ def test_frame_constraint_is_honoured(engine: AnnotationEngine) -> None:
         {"frame": 12, "clip": "slow0", "clip_frame": 80},
         {"frame": 79, "clip": "slow1", "clip_frame": 89},
     ]
-    rec = Recorder()
+    rec = Collect()
     engine.search(
         req.model_copy(update={"frame_constraints": [FrameConstraint(**c) for c in close]}),
         0.2,

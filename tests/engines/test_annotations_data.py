@@ -10,27 +10,15 @@ import numpy as np
 import pytest
 
 from engines.annotations.engine import AnnotationEngine
-from engines.base import Solution
 from engines.library import ClipInput, build_library, library_to_arrays
 from motion.metrics import foot_slip
 from schemas.annotations import AnnotatedDatabaseSpec, AnnotationRequest
+from tests.engines.emitters import Collect
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 D2 = DATA / "bandai-namco" / "dataset-2"
 
 pytestmark = pytest.mark.skipif(not D2.is_dir(), reason=f"shared data not found at {D2}")
-
-
-class Recorder:
-    def __init__(self) -> None:
-        self.solutions: list[Solution] = []
-
-    def solution(self, solution: Solution) -> str:
-        self.solutions.append(solution)
-        return "r"
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        pass
 
 
 def test_walk_then_run_on_real_data() -> None:
@@ -49,7 +37,7 @@ def test_walk_then_run_on_real_data() -> None:
         blocks_per_cluster=30,
         gammas=[1.0],
     )
-    arrays = AnnotationEngine.build(spec, lib, Recorder(), lambda: False)
+    arrays = AnnotationEngine.build(spec, lib, Collect(), lambda: False)
     arrays.update(library_to_arrays(lib))
     engine = AnnotationEngine(lib, arrays)
     truth = {f"{n}.bvh": k for n, _, k in raw}
@@ -64,7 +52,7 @@ def test_walk_then_run_on_real_data() -> None:
         timeline=[{"label": "walk", "start": 0, "end": 75}, {"label": "run", "start": 75, "end": 150}],
         footskate=False,
     )
-    rec = Recorder()
+    rec = Collect()
     engine.search(req, 0.5, rec, lambda: False)
     best = rec.solutions[-1]
     steady = [i for i in range(150) if abs(i - 75) >= 15]

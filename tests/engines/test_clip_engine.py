@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engines.base import EngineError, Solution
+from engines.base import EngineError
 from engines.clip import ClipEngine
 from engines.library import ClipInput, build_library, library_from_arrays, library_to_arrays
 from motion import MotionError
@@ -13,18 +13,7 @@ from motion.ground import heading
 from motion.mirror import mirror_map
 from motion.samples import sample_path
 from schemas.jobs import parse_job_request
-
-
-class Collect:
-    def __init__(self) -> None:
-        self.solutions: list[Solution] = []
-
-    def solution(self, solution: Solution) -> str:
-        self.solutions.append(solution)
-        return f"r{len(self.solutions)}"
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        pass
+from tests.engines.emitters import Collect
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from engines.base import EngineError, Solution
+from engines.base import EngineError
 from engines.control.engine import ControlEngine
 from engines.library import ClipInput, build_library, library_to_arrays
 from motion import Motion
@@ -17,21 +17,10 @@ from motion.bvh import bvh_text, parse_bvh
 from motion.samples import sample_path
 from schemas.databases import parse_database_spec
 from schemas.jobs import parse_job_request
+from tests.engines.emitters import Collect
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 POINTS = ["hip", "head", "rHand", "lHand", "rFoot", "lFoot"]
-
-
-class Collect:
-    def __init__(self) -> None:
-        self.solutions: list[Solution] = []
-
-    def solution(self, solution: Solution) -> str:
-        self.solutions.append(solution)
-        return f"r{len(self.solutions)}"
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        pass
 
 
 def moved(motion: Motion, yaw_deg: float, tx: float, tz: float) -> Motion:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from engines.base import EngineError, Solution
+from engines.base import EngineError
 from engines.rhythm.build import dip_agreement, snap_to_speed_minima, speed_dips
 from engines.rhythm.engine import RhythmEngine, beat_align_scores, music_beats
 from engines.rhythm.graph import k_medoids, subtractive_clustering, transition_graph
@@ -18,20 +18,9 @@ from engines.rhythm.movements import warp_frames
 from engines.rhythm.music import MusicError, bpm_beats, parse_midi, write_midi
 from engines.rhythm.synth import warp
 from schemas.rhythm import RhythmDatabaseSpec, RhythmRequest
+from tests.engines.emitters import Collect
 
 from .rhythm_synthetic import library
-
-
-class Recorder:
-    def __init__(self) -> None:
-        self.solutions: list[Solution] = []
-
-    def solution(self, solution: Solution) -> str:
-        self.solutions.append(solution)
-        return f"r{len(self.solutions)}"
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        pass
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +34,7 @@ def synthetic() -> tuple[Any, dict[str, list[float]], RhythmEngine]:
             "clip_beats": beats,
         }
     )
-    arrays = RhythmEngine.build(spec, lib, Recorder(), lambda: False)
+    arrays = RhythmEngine.build(spec, lib, Collect(), lambda: False)
     return lib, beats, RhythmEngine(lib, arrays)
 
 
@@ -227,7 +216,7 @@ def test_synthetic_end_to_end_lands_beats_on_music(synthetic: Any) -> None:
     req = RhythmRequest.model_validate(
         {"music": {"beats_s": music}, "seed": 3, "accent": 0.0, "footskate": False}
     )
-    rec = Recorder()
+    rec = Collect()
     engine.search(req, 5.0, rec, lambda: False)
     sol = rec.solutions[-1]
     m = sol.motion
@@ -269,7 +258,7 @@ def test_directions_steer_and_crowd_avoids(synthetic: Any) -> None:
     assert np.all(travel[:, 0] > 0.5)  # moved towards +X
     gaps = np.linalg.norm(end[:, None] - end[None], axis=-1)[np.triu_indices(4, 1)]
     assert gaps.min() > 0.2
-    rec = Recorder()
+    rec = Collect()
     engine.search(req, 5.0, rec, lambda: False)
     combined = rec.solutions[-1].motion
     assert combined.num_joints == 1 + 4 * leaders[0].num_joints
@@ -280,7 +269,7 @@ def test_couples_need_partners(synthetic: Any) -> None:
     _, _, engine = synthetic
     req = RhythmRequest.model_validate({"music": {"bpm": 120, "duration_s": 4}, "couples": True})
     with pytest.raises(EngineError, match="partners"):
-        engine.search(req, 1.0, Recorder(), lambda: False)
+        engine.search(req, 1.0, Collect(), lambda: False)
 
 
 def test_couples_move_together() -> None:
@@ -297,7 +286,7 @@ def test_couples_move_together() -> None:
             ],
         }
     )
-    engine = RhythmEngine(lib, RhythmEngine.build(spec, lib, Recorder(), lambda: False))
+    engine = RhythmEngine(lib, RhythmEngine.build(spec, lib, Collect(), lambda: False))
     req = RhythmRequest.model_validate(
         {"music": {"bpm": 100, "duration_s": 6}, "couples": True, "characters": 2, "footskate": False}
     )
@@ -331,7 +320,7 @@ def test_mirror_doubles_the_examples(synthetic: Any) -> None:
             "mirror": True,
         }
     )
-    arrays = RhythmEngine.build(spec, lib, Recorder(), lambda: False)
+    arrays = RhythmEngine.build(spec, lib, Collect(), lambda: False)
     assert arrays["rhythm.root"].shape[0] == 2 * engine.tables.root.shape[0]
 
 
@@ -359,7 +348,7 @@ def test_build_errors(synthetic: Any) -> None:
         }
     )
     with pytest.raises(EngineError, match="16"):
-        RhythmEngine.build(spec, lib, Recorder(), lambda: False)
+        RhythmEngine.build(spec, lib, Collect(), lambda: False)
 
 
 def test_path_in_formation_keeps_rows(synthetic: Any) -> None:
