@@ -4,77 +4,26 @@ the WebSocket, download the GLB, and the submit -> first worker event latency on
 from __future__ import annotations
 
 import json
-import os
-import signal
-import socket
 import statistics
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import httpx
 import pytest
 from websockets.sync.client import connect
 
 from service.client import SegueClient, SegueError
+from tests.live_server import live_server
 
-from .conftest import PLUGINS, REPO, WALK, WALK_CLIP
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+from .conftest import PLUGINS, WALK, WALK_CLIP
 
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """Base URL of ``uvicorn --factory service.app:create_app`` in a subprocess (2 embedded workers)."""
-    data = tmp_path_factory.mktemp("uvicorn-data")
-    port = _free_port()
-    env = os.environ | {
-        "SEGUE_DATA_DIR": str(data),
-        "SEGUE_WORKERS": "2",
-        "SEGUE_ENGINE_PLUGINS": PLUGINS,
-        "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
-    }
-    env.pop("SEGUE_API_TOKENS", None)
-    env.pop("SEGUE_REDIS_URL", None)
-    log = (data / "uvicorn.log").open("wb")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "uvicorn", "--factory", "service.app:create_app",
-         "--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"],
-        cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT,
-    )  # fmt: skip
-    url = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + 30
-    while True:
-        if proc.poll() is not None:
-            pytest.fail(
-                f"uvicorn exited with {proc.returncode}: {(data / 'uvicorn.log').read_text()[-2000:]}"
-            )
-        try:
-            if httpx.get(f"{url}/healthz", timeout=1).status_code == 200:
-                break
-        except httpx.TransportError:
-            pass
-        if time.monotonic() > deadline:
-            proc.kill()
-            pytest.fail("uvicorn did not answer /healthz within 30 s")
-        time.sleep(0.05)
-    try:
+    with live_server(tmp_path_factory.mktemp("uvicorn-data"), plugins=PLUGINS) as url:
         yield url
-    finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        log.close()
 
 
 @pytest.fixture(scope="module")

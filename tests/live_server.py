@@ -1,0 +1,72 @@
+"""A real ``uvicorn`` process running the Segue app on a free 127.0.0.1 port (embedded workers),
+for tests that need real sockets: the uvicorn WebSocket tests and the browser tests."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import httpx
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@contextmanager
+def live_server(data: Path, plugins: str | None = None, workers: int = 2) -> Iterator[str]:
+    """Start ``uvicorn --factory service.app:create_app`` with a fresh data directory ``data`` (no
+    tokens, no Redis; ``plugins`` = ``SEGUE_ENGINE_PLUGINS``), yield its base URL once ``/healthz``
+    answers, stop it with SIGINT afterwards. Fails the test if it exits or does not answer in 30 s."""
+    env = os.environ | {
+        "SEGUE_DATA_DIR": str(data),
+        "SEGUE_WORKERS": str(workers),
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
+    }
+    for var in ("SEGUE_API_TOKENS", "SEGUE_REDIS_URL", "SEGUE_ENGINE_PLUGINS"):
+        env.pop(var, None)
+    if plugins:
+        env["SEGUE_ENGINE_PLUGINS"] = plugins
+    port = free_port()
+    log_path = data / "uvicorn.log"
+    with log_path.open("wb") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "uvicorn", "--factory", "service.app:create_app",
+             "--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"],
+            cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        url = f"http://127.0.0.1:{port}"
+        deadline = time.monotonic() + 30
+        while True:
+            if proc.poll() is not None:
+                pytest.fail(f"uvicorn exited with {proc.returncode}: {log_path.read_text()[-2000:]}")
+            try:
+                if httpx.get(f"{url}/healthz", timeout=1).status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            if time.monotonic() > deadline:
+                proc.kill()
+                pytest.fail("uvicorn did not answer /healthz within 30 s")
+            time.sleep(0.05)
+        try:
+            yield url
+        finally:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
