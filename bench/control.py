@@ -94,6 +94,7 @@ def measure(engine: ControlEngine, request: Any, input_s: float, repeat: int) ->
     inst = engine.solver_instances_
     ci, cd = legal_cells(inst.length / inst.fps, rate, request.stretch_s, request.stretch_ratio)
     ctl = engine.control_cloud(request)
+    k = engine.continuity_weight(request)
 
     def prep() -> Any:
         x = resample_cloud(ctl.cloud, ctl.fps, rate)
@@ -107,20 +108,18 @@ def measure(engine: ControlEngine, request: Any, input_s: float, repeat: int) ->
         t_quick, quick = best_of(
             repeat,
             lambda: solve(
-                interp, inst, ci, cd, request.k, beam=QUICK_WIDTH * d_unit, max_cells=QUICK_CELLS, to_go=to_go
+                interp, inst, ci, cd, k, beam=QUICK_WIDTH * d_unit, max_cells=QUICK_CELLS, to_go=to_go
             ),
         )
         unit = quick.score / len(quick.cells)
         t_beam1, beam = best_of(
             repeat,
-            lambda: solve(
-                interp, inst, ci, cd, request.k, beam=BEAM_WIDTH * unit, max_cells=BEAM_CELLS, to_go=to_go
-            ),
+            lambda: solve(interp, inst, ci, cd, k, beam=BEAM_WIDTH * unit, max_cells=BEAM_CELLS, to_go=to_go),
         )
         t_beam = t_quick + t_beam1
-        t_exh, exh = best_of(1, lambda: solve(interp, inst, ci, cd, request.k))
+        t_exh, exh = best_of(1, lambda: solve(interp, inst, ci, cd, k))
         t_bnb, bnb = best_of(
-            repeat, lambda: solve(interp, inst, ci, cd, request.k, upper_bound=beam.score, to_go=to_go)
+            repeat, lambda: solve(interp, inst, ci, cd, k, upper_bound=beam.score, to_go=to_go)
         )
     out.update(
         dp_beam_x_realtime=round(input_s / (t_prep + t_beam), 1),

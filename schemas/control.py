@@ -252,7 +252,14 @@ class ControlRequest(JobRequestBase):
 
     engine: Literal["control"] = "control"
     control: ControlInput
-    k: float = Field(default=0.2, ge=0, le=1e6, description="continuity weight (seconds)")
+    k: float | None = Field(
+        default=None,
+        ge=0,
+        le=1e6,
+        description="continuity weight (seconds); default 0.1 for databases of control motions "
+        "(dance: lowest leave-one-out follower error on the CMU salsa couples), 0.2 for walks driven "
+        "by a path",
+    )
     stretch_s: float | None = Field(
         default=None,
         ge=0,

@@ -150,27 +150,70 @@ def pad_edges(x: Array, context: int) -> Array:
 @dataclass(slots=True)
 class Interpretation:
     """Per cell and end time ``t`` (``(C, T + 1)``; infinite where illegal): the distance ``D``
-    (m²·s) and the alignment (``cos``, ``sin``, ``tx``, ``tz``) of the stretched control segment onto
-    the input window ``[t - d, t)``."""
+    (m²·s) of the stretched control segment to the input window ``[t - d, t)``, and what its optimal
+    alignment (rotation about +Y, floor translation) is made of, evaluated on demand by
+    :meth:`alignment` (the solver only needs the alignments of the cells it expands).
+
+    ``c``, ``s``: ``(C, T + 1)`` the centred planar cross-correlations (the rotation is
+    ``atan2(s, c)``); ``sum_a``: ``(C, 2)`` the stretched template's summed ``x``, ``z``; ``n_pts``:
+    ``(C,)`` points per comparison; ``dur``: ``(C,)`` durations; ``context``: frames of context on
+    each side; ``cs``: ``(T + 2 context + 1, 2)`` cumulative sums of the padded input's ``x``, ``z``
+    (summed over points)."""
 
     D: Array
-    M: Array  # (4, C, T + 1): cos, sin, tx, tz
+    c: Array
+    s: Array
+    sum_a: Array
+    n_pts: Array
+    dur: IntArray
+    context: int
+    cs: Array
+
+    def alignment(self, cells: IntArray, ends: IntArray) -> Array:
+        """``(4, n)``: ``cos, sin, tx, tz`` of the transform taking the stretched control segment of
+        ``cells (n,)`` onto the input window ending at ``ends (n,)`` (``ends >= `` the durations)."""
+        c, s = self.c[cells, ends], self.s[cells, ends]
+        r = np.hypot(c, s)
+        pos = r > 0
+        inv = np.divide(1.0, r, out=np.zeros_like(r), where=pos)
+        out = np.empty((4, cells.shape[0]))
+        cth, sth = out[0], out[1]
+        np.multiply(c, inv, out=cth)
+        cth[~pos] = 1.0
+        np.multiply(s, inv, out=sth)
+        lo = np.maximum(ends - self.dur[cells], 0)
+        inv_n = 1.0 / self.n_pts[cells]
+        mw = (self.cs[ends + 2 * self.context] - self.cs[lo]) * inv_n[:, None]
+        ma = self.sum_a[cells] * inv_n[:, None]
+        out[2] = mw[:, 0] - (cth * ma[:, 0] + sth * ma[:, 1])
+        out[3] = mw[:, 1] - (cth * ma[:, 1] - sth * ma[:, 0])
+        return out
+
+    @property
+    def alignments(self) -> Array:
+        """``(4, C, T + 1)``: the alignment of every cell at every end time (see :meth:`alignment`)."""
+        cells, t1 = self.D.shape
+        ci = np.repeat(np.arange(cells), t1)
+        ti = np.tile(np.arange(t1), cells)
+        out = self.alignment(ci, ti)
+        out[:, ti < self.dur[ci]] = np.array([1.0, 0.0, 0.0, 0.0])[:, None]  # no window: identity
+        return out.reshape(4, cells, t1)
 
     @property
     def cos(self) -> Array:
-        return np.asarray(self.M[0])
+        return np.asarray(self.alignments[0])
 
     @property
     def sin(self) -> Array:
-        return np.asarray(self.M[1])
+        return np.asarray(self.alignments[1])
 
     @property
     def tx(self) -> Array:
-        return np.asarray(self.M[2])
+        return np.asarray(self.alignments[2])
 
     @property
     def tz(self) -> Array:
-        return np.asarray(self.M[3])
+        return np.asarray(self.alignments[3])
 
 
 def interpretation(
@@ -186,9 +229,10 @@ def interpretation(
     x = pad_edges(x, context)
     cells = cell_inst.shape[0]
     D = np.full((cells, t_len + 1), np.inf)
-    M = np.zeros((4, cells, t_len + 1))
-    M[0] = 1.0
-    cos, sin, tx, tz = M
+    Cc = np.zeros((cells, t_len + 1))
+    Ss = np.zeros((cells, t_len + 1))
+    sum_a = np.zeros((cells, 2))
+    n_pts_c = ((cell_dur + c2) * p).astype(np.float64)
     xx, xz, xy = x[..., 0], x[..., 2], x[..., 1]
     zero = np.zeros(1)
     cs_x = np.concatenate((zero, np.cumsum(xx.sum(1))))
@@ -220,27 +264,26 @@ def interpretation(
         sax, saz = ax.sum(1), az.sum(1)
         saa = (ax**2 + az**2).sum(1)
         say2 = (ay**2).sum(1)
-        cxx = wx @ ax.T + wz @ az.T  # (nw, n)
-        cxz = wx @ az.T - wz @ ax.T
-        cyy = wy @ ay.T
-        c = cxx - (sx[:, None] * sax[None] + sz[:, None] * saz[None]) / n_pts
-        s = cxz - (sx[:, None] * saz[None] - sz[:, None] * sax[None]) / n_pts
-        r = np.hypot(c, s)
-        planar = (ssq - (sx**2 + sz**2) / n_pts)[:, None] + (saa - (sax**2 + saz**2) / n_pts)[None] - 2 * r
-        vert = sy2[:, None] + say2[None] - 2 * cyy
-        res = np.maximum(planar + vert, 0.0) / (p * rate)
-        safe = np.where(r > 0, r, 1.0)
-        cth, sth = np.where(r > 0, c / safe, 1.0), np.where(r > 0, s / safe, 0.0)
-        mwx, mwz = (sx / n_pts)[:, None], (sz / n_pts)[:, None]
-        max_, maz = (sax / n_pts)[None], (saz / n_pts)[None]
+        # (n, nw) products, already in the (cell, time) layout of D
+        c = ax @ wx.T + az @ wz.T
+        c -= (sax[:, None] * sx[None] + saz[:, None] * sz[None]) / n_pts
+        s = az @ wx.T - ax @ wz.T
+        s -= (saz[:, None] * sx[None] - sax[:, None] * sz[None]) / n_pts
+        res = (ay @ wy.T) * -2.0
+        res += (saa - (sax**2 + saz**2) / n_pts + say2)[:, None]
+        res += (ssq - (sx**2 + sz**2) / n_pts + sy2)[None]
+        res -= 2 * np.hypot(c, s)
+        np.maximum(res, 0.0, out=res)
+        res *= 1.0 / (p * rate)
         # cells sorted by duration: the rows of one duration are a contiguous block (basic slices)
         blk = slice(int(rows[0]), int(rows[-1]) + 1) if rows[-1] - rows[0] + 1 == rows.size else rows
-        D[blk, d:] = res.T
-        cos[blk, d:] = cth.T
-        sin[blk, d:] = sth.T
-        tx[blk, d:] = (mwx - (cth * max_ + sth * maz)).T
-        tz[blk, d:] = (mwz - (-sth * max_ + cth * maz)).T
-    return Interpretation(D, M)
+        D[blk, d:] = res
+        Cc[blk, d:] = c
+        Ss[blk, d:] = s
+        sum_a[blk, 0], sum_a[blk, 1] = sax, saz
+    return Interpretation(
+        D, Cc, Ss, sum_a, n_pts_c, cell_dur.astype(np.intp), context, np.stack((cs_x, cs_z), -1)
+    )
 
 
 def apply_constraints(
@@ -272,6 +315,60 @@ def cost_to_go(D: Array, cell_dur: IntArray) -> Array:
         if ok.any():
             F[t] = np.min(best_d[ok, ends[ok]] + F[ends[ok]])
     return F
+
+
+def min_plus(
+    ya: Array,
+    q: Array,
+    ha: Array,
+    hh: Array,
+    head: int = 16,
+    chunk: int = 64,
+    max_chunks: int = 16,
+    direct: int = 16384,
+) -> tuple[Array, IntArray, int]:
+    """For every successor ``i``: ``min_j ya_j . ha_i`` and its argmin, exactly, without forming the
+    whole predecessor x successor matrix.
+
+    ``ya (P, m)`` rows ``[q_j + k'|y_j|^2, -2k' y_j]``, ``q (P,)`` the predecessors' scores,
+    ``ha (S, m)`` rows ``[1, h_i]``, ``hh (S,)`` ``k'|h_i|^2`` (so that ``ya_j . ha_i + hh_i =
+    q_j + k'|y_j - h_i|^2 >= q_j``). The ``head`` best predecessors by score give every successor an
+    upper bound ``u_i`` of its optimum; a predecessor with ``q_j > u_i`` cannot beat it (continuity is
+    never negative), so each successor only scans the prefix of the predecessors sorted by score
+    below its bound (successors sorted by prefix length and cut into at most ``max_chunks`` groups
+    of at least ``chunk``: one matrix product each); small problems (at most ``4 head`` predecessors
+    or ``direct`` pairs) take the whole product.
+
+    Returns ``(best (S,), argmin (S,) into the predecessors, pairs evaluated)``."""
+    n_pred, n_succ = ya.shape[0], ha.shape[0]
+    if n_pred <= 4 * head or n_pred * n_succ <= direct:  # small: the whole product is cheaper
+        tot = ya @ ha.T
+        j = np.argmin(tot, axis=0)
+        return tot[j, np.arange(n_succ)], j, n_pred * n_succ
+    order = np.argsort(q, kind="stable")
+    ys, qs = ya[order], q[order]
+    tot = ys[:head] @ ha.T
+    j = np.argmin(tot, axis=0)
+    best = tot[j, np.arange(n_succ)]
+    arg = j.copy()
+    n_exp = head * n_succ
+    # predecessors with q_j <= best_i + hh_i may still win (ties kept: the same value either way)
+    reach = np.searchsorted(qs, best + hh, side="right")
+    todo = np.flatnonzero(reach > head)
+    if todo.size:
+        todo = todo[np.argsort(reach[todo], kind="stable")]
+        step = max(chunk, -(-todo.size // max_chunks))
+        for a in range(0, todo.size, step):
+            rows = todo[a : a + step]
+            stop = int(reach[rows[-1]])
+            part = ys[head:stop] @ ha[rows].T
+            jj = np.argmin(part, axis=0)
+            val = part[jj, np.arange(rows.size)]
+            better = val < best[rows]
+            best[rows] = np.where(better, val, best[rows])
+            arg[rows] = np.where(better, head + jj, arg[rows])
+            n_exp += (stop - head) * rows.size
+    return best, order[arg], n_exp
 
 
 @dataclass(slots=True)
@@ -311,8 +408,9 @@ def solve(
     D = interp.D
     cells, t1 = D.shape
     t_len = t1 - 1
-    Q = np.full((cells, t1), np.inf)
-    back = np.full((cells, t1), -1, dtype=np.int32)
+    # time-major (T + 1, C): a boundary's cells are one contiguous row
+    Q = np.full((t1, cells), np.inf)
+    back = np.empty((t1, cells), dtype=np.int32)  # read only where a score was written
     q_pts = inst.tails.shape[1]
     tails = inst.tails.reshape(inst.count, -1, 3)
     heads = inst.heads.reshape(inst.count, -1, 3)
@@ -322,21 +420,33 @@ def solve(
         raise ValueError("cells must be sorted by duration (see legal_cells)")
     # t = 0 (Eq. 7)
     first = np.arange(cells)[cell_dur <= t_len]
-    Q[first, cell_dur[first]] = D[first, cell_dur[first]]
-    colmin = Q.min(axis=0)
+    Q[cell_dur[first], first] = D[first, cell_dur[first]]
+    back[cell_dur[first], first] = -1
+    colmin = Q.min(axis=1)
     expanded = 0
     kq = k / q_pts
     # Boundaries closer than the shortest duration do not depend on each other (a cell ending at
     # t < t0 + dmin started before t0): select cells boundary by boundary, then align, score and
     # store a whole block of boundaries at once.
     dmin = max(1, int(cell_dur.min()))
-    cells_idx = np.arange(cells)
+    # per cell and start time: the distance and the bound at the end of a cell starting there
+    # (inf past the end), one slice per duration (cells are sorted by duration)
+    d_start = np.empty((t1, cells))
+    f_start = np.empty((t1, cells))
+    bounds = np.flatnonzero(np.diff(cell_dur)) + 1
+    for lo_c, hi_c in zip(np.concatenate(([0], bounds)), np.concatenate((bounds, [cells])), strict=True):
+        d = int(cell_dur[lo_c])
+        keep_n = max(t1 - d, 0)
+        d_start[:keep_n, lo_c:hi_c] = D[lo_c:hi_c, d:].T
+        f_start[:keep_n, lo_c:hi_c] = F[d:, None]
+        d_start[keep_n:, lo_c:hi_c] = np.inf
+        f_start[keep_n:, lo_c:hi_c] = np.inf
     for t0 in range(1, t_len, dmin):
         if should_stop is not None and should_stop():
             raise InterruptedError
         ts = np.arange(t0, min(t0 + dmin, t_len))
         # predecessors of every boundary of the block: (boundary, cell) with a finite, kept score
-        qb = Q[:, ts].T  # (B, C)
+        qb = Q[t0 : t0 + ts.size]  # (B, C)
         qmin_t = qb.min(axis=1)
         keep = np.isfinite(qb) & (qb + F[ts][:, None] <= ub)
         if beam is not None:
@@ -348,13 +458,13 @@ def solve(
             keep &= masked <= cut[:, None]
         # successors: cells starting at the boundary, with a finite distance and a chance
         ends_b = ts[:, None] + cell_dur[None, :]  # (B, C)
-        inside = ends_b <= t_len
         ends_c = np.minimum(ends_b, t_len)
-        dsucc_b = D[cells_idx[None, :], ends_c]
+        dsucc_b = d_start[t0 : t0 + ts.size]
         qkept = np.where(keep, qb, np.inf).min(axis=1)
         lower = qkept[:, None] + dsucc_b
-        f_end = F[ends_c]
-        ok = inside & np.isfinite(lower) & (lower + f_end <= ub)
+        f_end = f_start[t0 : t0 + ts.size]
+        est_b = lower + f_end  # infinite for illegal cells and cells ending after T
+        ok = np.isfinite(est_b) & (est_b <= ub)
         if beam is not None:
             # a cell already worse than the best score written at its end time by more than the
             # width would be pruned there anyway (the beam of Sec. 4.4, applied early)
@@ -378,10 +488,10 @@ def solve(
         S = np.concatenate([pt[3] for pt in parts])
         E = np.concatenate([pt[4] for pt in parts])
         DS = np.concatenate([pt[5] for pt in parts])
-        mp = interp.M[:, P, tp]
-        y2 = align_points(tails[cell_inst[P]], mp[0], mp[1], mp[2], mp[3]).reshape(P.size, -1)
-        ms = interp.M[:, S, E]
-        h2 = align_points(heads[cell_inst[S]], ms[0], ms[1], ms[2], ms[3]).reshape(S.size, -1)
+        m_all = interp.alignment(np.concatenate((P, S)), np.concatenate((tp, E)))
+        pts = np.concatenate((tails[cell_inst[P]], heads[cell_inst[S]]))
+        placed = align_points(pts, m_all[0], m_all[1], m_all[2], m_all[3]).reshape(P.size + S.size, -1)
+        y2, h2 = placed[: P.size], placed[P.size :]
         # q_j + k' |y_j - h_i|^2 = [q_j + k'|y_j|^2, -2k' y_j] . [1, h_i] + k'|h_i|^2: one matrix product
         ya = np.empty((P.size, y2.shape[1] + 1))
         ya[:, 0] = qa + kq * (y2**2).sum(1)
@@ -391,22 +501,22 @@ def solve(
         ha[:, 1:] = h2
         best = np.empty(S.size)
         arg = np.empty(S.size, dtype=np.intp)
+        hh = kq * (h2**2).sum(1)
         pa = sa = 0
         for preds, _, _, succ, _, _ in parts:
             pb, sb = pa + preds.size, sa + succ.size
-            tot = ya[pa:pb] @ ha[sa:sb].T
-            j = np.argmin(tot, axis=0)
-            best[sa:sb] = tot[j, np.arange(succ.size)]
-            arg[sa:sb] = pa + j
-            expanded += preds.size * succ.size
+            b_best, b_arg, n_exp = min_plus(ya[pa:pb], qa[pa:pb], ha[sa:sb], hh[sa:sb])
+            best[sa:sb] = b_best
+            arg[sa:sb] = pa + b_arg
+            expanded += n_exp
             pa, sa = pb, sb
         # rounding can make |y - h|^2 slightly negative for identical points
-        best = np.maximum(best + kq * (h2**2).sum(1), qa[arg])
-        Q[S, E] = DS + best
-        back[S, E] = P[arg]
+        best = np.maximum(best + hh, qa[arg])
+        Q[E, S] = DS + best
+        back[E, S] = P[arg]
         if beam is not None:
             np.minimum.at(colmin, E, DS + best)
-    final = Q[:, t_len]
+    final = Q[t_len]
     if not np.isfinite(final).any():
         raise Infeasible("no sequence of segments within the stretch bounds and constraints tiles the input")
     c = int(np.argmin(final))
@@ -416,7 +526,7 @@ def solve(
     while c >= 0:
         path_cells.append(c)
         path_ends.append(t)
-        prev = int(back[c, t])
+        prev = int(back[t, c])
         t -= int(cell_dur[c])
         c = prev
     cells_arr = np.array(path_cells[::-1], dtype=np.intp)

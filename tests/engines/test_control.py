@@ -164,11 +164,13 @@ def test_pruned_min_plus_equals_the_full_product(seed: int) -> None:
     ya = np.column_stack((q + kq * (y**2).sum(1), -2 * kq * y))
     ha = np.column_stack((np.ones(n_succ), h))
     hh = kq * (h**2).sum(1)
-    best, arg, n_exp = min_plus(ya, q, ha, hh, head=8, chunk=16)
+    best, arg, n_exp = min_plus(ya, q, ha, hh, head=8, chunk=16, direct=0)
     full = q[:, None] + kq * ((y[:, None] - h[None]) ** 2).sum(-1)
     assert np.allclose(best + hh, full.min(axis=0), rtol=0, atol=1e-12)
     assert np.allclose(full[arg, np.arange(n_succ)], full.min(axis=0), rtol=0, atol=1e-12)
-    assert 8 * n_succ <= n_exp <= n_pred * n_succ
+    assert 8 * n_succ <= n_exp < n_pred * n_succ
+    small = min_plus(ya[:30], q[:30], ha, hh, head=8)
+    assert np.allclose(small[0] + hh, full[:30].min(axis=0), rtol=0, atol=1e-12)
 
 
 def test_stretch_bounds() -> None:
