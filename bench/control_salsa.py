@@ -1,0 +1,267 @@
+"""Accuracy of the control-by-example engine: leave-one-dance-out on the CMU salsa couples.
+
+Usage: ``python bench/control_salsa.py [--held 07,12] [--jobs 2] [--yaw 25] [--move 0.8,-1.1]
+[--budget 10] [--cache DIR]`` from the project root (needs ../shared/data/cmu-salsa).
+
+The protocol of ``../shared/acceptance/control.py``, run in process: for each held-out dance ``NN``
+of the 14 couples (``60_NN`` leader, ``61_NN`` follower), a ``control`` database is built from the
+other 13 pairs (beats segmentation, 2 beats per segment); the held-out leader and follower are moved
+rigidly on the floor (rotated about +Y by ``--yaw`` degrees, then translated by ``--move X,Z`` in the
+BVH file's units, as the check's ``yaw_transform``); the follower is generated from the moved
+leader (the engine's best solution within ``--budget`` seconds; default the requests' 10 s, as the
+check's ``segue synth``), and compared with the moved real follower, output frame ``i`` against the
+follower frame nearest in time.
+
+Prints one JSON object on stdout (progress lines go to stderr)::
+
+    {"dances": {"07": {"error_x_height", "placement_x_height", "pose_x_height",
+                       "build_s", "synth_s", "frames"}, ...},
+     "mean_error_x_height", "dances_over_0_17", "load_avg"}
+
+* ``error_x_height``: the check's figure — mean distance between the generated and the real
+  follower's hip, head, rHand, lHand, rFoot and lFoot (all frames, all six points), divided by the
+  leader's standing height (its maximum head height above the floor);
+* ``placement_x_height``: where the follower stands — mean horizontal (X, Z) distance between the
+  generated and the real hip, same unit;
+* ``pose_x_height``: the pose with the placement taken out — mean distance between the other five
+  points expressed relative to the hip (world axes, so the heading still counts), same unit;
+* ``build_s``: seconds to build the database (library + control arrays), ``null`` when it was loaded
+  from ``--cache``; ``synth_s``: seconds of the whole search request; ``frames``: output frames;
+* ``mean_error_x_height``: mean of ``error_x_height`` over the dances run;
+* ``dances_over_0_17``: the dances whose error exceeds the acceptance bar (0.17);
+* ``load_avg``: the machine's 1, 5 and 15 minute load averages at the end (timings are noisy on a
+  shared machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import sys
+import time
+from dataclasses import replace
+from multiprocessing import Pool
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from engines.base import Solution  # noqa: E402
+from engines.control.engine import ControlEngine  # noqa: E402
+from engines.library import (  # noqa: E402
+    ClipInput,
+    build_library,
+    library_from_arrays,
+    library_to_arrays,
+)
+from motion import Motion  # noqa: E402
+from motion import rotations as rot  # noqa: E402
+from motion.allocator import tune_process  # noqa: E402
+from motion.bvh import bvh_text, parse_bvh  # noqa: E402
+from schemas.databases import parse_database_spec  # noqa: E402
+from schemas.jobs import parse_job_request  # noqa: E402
+from workers.store import load_npz, npz_bytes  # noqa: E402
+
+SALSA = ROOT.parent / "shared" / "data" / "cmu-salsa"
+POINTS = ("hip", "head", "rHand", "lHand", "rFoot", "lFoot")
+BAR = 0.17
+# sources whose change invalidates a cached database (the key also holds the spec itself)
+CACHE_SOURCES = (
+    *sorted((ROOT / "engines" / "control").glob("*.py")),
+    ROOT / "engines" / "library.py",
+    *sorted((ROOT / "motion").glob("*.py")),
+)
+
+
+class Quiet:
+    """An emitter that keeps every solution and ignores progress."""
+
+    def __init__(self) -> None:
+        self.solutions: list[Solution] = []
+
+    def solution(self, solution: Solution) -> str:
+        self.solutions.append(solution)
+        return str(len(self.solutions))
+
+    def progress(self, fraction: float, message: str = "") -> None:
+        pass
+
+
+def log(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def trials() -> list[str]:
+    """The salsa trial numbers (``"01"`` ...) that have a leader file."""
+    return sorted({f.name[3:5] for f in SALSA.glob("60_*_scaled.bvh")})
+
+
+def database_spec(held: str) -> dict[str, Any]:
+    """The check's database: every couple but ``held``, beats segmentation (2 beats per segment)."""
+    return {
+        "kind": "control",
+        "pairs": [
+            {"control": str(SALSA / f"60_{t}_scaled.bvh"), "target": str(SALSA / f"61_{t}_scaled.bvh")}
+            for t in trials()
+            if t != held
+        ],
+        "segmentation": {"method": "beats", "beats_per_segment": 2},
+    }
+
+
+def cache_key(spec_data: dict[str, Any]) -> str:
+    """A digest of the spec, the input files' sizes and times, and the engine and motion sources."""
+    h = hashlib.sha256(json.dumps(spec_data, sort_keys=True).encode())
+    for pair in spec_data["pairs"]:
+        for path in pair.values():
+            st = Path(path).stat()
+            h.update(f"{path}:{st.st_size}:{st.st_mtime_ns}".encode())
+    for source in CACHE_SOURCES:
+        h.update(source.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def engine_for(held: str, cache: Path | None) -> tuple[ControlEngine, float | None]:
+    """The engine on the database without ``held`` and the seconds its build took (``None`` when
+    it was loaded from ``cache``, where it is saved as ``db_<held>_<key>.npz`` after a build)."""
+    spec_data = database_spec(held)
+    path = None if cache is None else cache / f"db_{held}_{cache_key(spec_data)}.npz"
+    if path is not None and path.exists():
+        arrays = load_npz(path.read_bytes())
+        return ControlEngine(library_from_arrays(arrays), arrays), None
+    t0 = time.perf_counter()
+    spec = parse_database_spec(spec_data)
+    clips = [ClipInput(c.display_name(), Path(str(c.bvh)).read_bytes(), c.units) for c in spec.clips]
+    library = build_library(clips, spec.fps)
+    arrays = ControlEngine.build(spec, library, Quiet(), lambda: False)
+    arrays.update(library_to_arrays(library))
+    build_s = time.perf_counter() - t0
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp")
+        tmp.write_bytes(npz_bytes(arrays))
+        tmp.replace(path)
+    return ControlEngine(library, arrays), build_s
+
+
+def moved(motion: Motion, yaw_deg: float, tx: float, tz: float) -> Motion:
+    """``motion`` rotated about +Y (through the world origin) by ``yaw_deg`` degrees, then translated
+    by ``(tx, 0, tz)`` in the motion's own units — the check's ``yaw_transform`` on the root channels."""
+    turn = rot.from_yaw(np.radians(yaw_deg))
+    root = rot.rotate(turn, motion.root_positions) + np.array([tx, 0.0, tz])
+    rotations = motion.rotations.copy()
+    rotations[:, 0] = rot.multiply(turn, rotations[:, 0])
+    return replace(motion, root_positions=root, rotations=rotations)
+
+
+def follower_errors(out: Motion, follower: Motion, leader: Motion) -> dict[str, float]:
+    """Errors of ``out`` against ``follower`` (frame ``i`` of ``out`` vs the follower's nearest frame
+    in time) over :data:`POINTS`, divided by the leader's maximum head height (all in metres)."""
+    op = out.global_positions() * out.metres_per_unit  # (F, J, 3) metres
+    gp = follower.global_positions() * follower.metres_per_unit
+    lp = leader.global_positions() * leader.metres_per_unit
+    height = float(lp[:, leader.skeleton.names.index("head"), 1].max())
+    gi = np.clip(
+        np.round(np.arange(out.num_frames) * follower.fps / out.fps).astype(int), 0, follower.num_frames - 1
+    )
+    o = op[:, [out.skeleton.names.index(n) for n in POINTS]]  # (F, 6, 3), hip first
+    g = gp[gi][:, [follower.skeleton.names.index(n) for n in POINTS]]
+    error = np.linalg.norm(o - g, axis=-1).mean() / height
+    placement = np.linalg.norm((o[:, 0] - g[:, 0])[:, [0, 2]], axis=-1).mean() / height
+    pose = np.linalg.norm((o - o[:, :1]) - (g - g[:, :1]), axis=-1)[:, 1:].mean() / height
+    return {
+        "error_x_height": round(float(error), 4),
+        "placement_x_height": round(float(placement), 4),
+        "pose_x_height": round(float(pose), 4),
+    }
+
+
+def run_dance(job: tuple[str, float, float, float, float | None, str | None]) -> tuple[str, dict[str, Any]]:
+    """One held-out dance: build (or load), move, synthesize, measure."""
+    held, yaw, tx, tz, budget, cache = job
+    engine, build_s = engine_for(held, None if cache is None else Path(cache))
+    leader = moved(parse_bvh((SALSA / f"60_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
+    follower = moved(parse_bvh((SALSA / f"61_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
+    request_data: dict[str, Any] = {"engine": "control", "control": {"bvh": "lead.bvh"}}
+    if budget is not None:
+        request_data["budget_s"] = budget
+    request = parse_job_request(request_data)
+    request.attach_inputs({"lead.bvh": bvh_text(leader).encode()})
+    quiet = Quiet()
+    t0 = time.perf_counter()
+    engine.search(request, request.budget_s, quiet, lambda: False)
+    synth_s = time.perf_counter() - t0
+    if not quiet.solutions:
+        raise RuntimeError(f"dance {held}: the engine found no solution within {request.budget_s} s")
+    out = min(quiet.solutions, key=lambda s: s.score).motion  # the runtime's best result
+    ratio = (out.num_frames / out.fps) / (follower.num_frames / follower.fps)  # as the check
+    if abs(ratio - 1.0) > 0.02:
+        log(f"warning: dance {held}: output lasts {ratio:.3f}x the control motion (the check fails > 2%)")
+    result: dict[str, Any] = {
+        **follower_errors(out, follower, leader),
+        "build_s": None if build_s is None else round(build_s, 1),
+        "synth_s": round(synth_s, 1),
+        "frames": out.num_frames,
+    }
+    log(f"dance {held}: {json.dumps(result)}")
+    return held, result
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--held", default=None, help="held-out dances, comma separated (default: all 14)")
+    ap.add_argument("--jobs", type=int, default=1, help="dances run in parallel processes")
+    ap.add_argument("--yaw", type=float, default=25.0, help="rotation of the held-out couple, degrees")
+    ap.add_argument("--move", default="0.8,-1.1", help="floor translation X,Z of the held-out couple")
+    ap.add_argument("--budget", type=float, default=None, help="search budget, s (default: the request's)")
+    ap.add_argument("--cache", type=Path, default=None, help="directory to keep built databases in")
+    args = ap.parse_args(argv)
+    tune_process()
+    if not SALSA.exists():
+        print(json.dumps({"error": f"{SALSA} not found"}))
+        return 1
+    available = trials()
+    held = available if args.held is None else [h.strip().zfill(2) for h in args.held.split(",") if h.strip()]
+    unknown = [h for h in held if h not in available]
+    if unknown or not held:
+        ap.error(
+            f"--held: unknown dance(s) {', '.join(unknown) or '(none given)'}; have {','.join(available)}"
+        )
+    try:
+        tx, tz = (float(v) for v in args.move.split(","))
+    except ValueError:
+        ap.error(f"--move takes X,Z (two numbers), got {args.move!r}")
+    if args.jobs < 1:
+        ap.error("--jobs must be at least 1")
+    if args.budget is not None and args.budget <= 0:
+        ap.error("--budget must be positive")
+    cache = None if args.cache is None else str(args.cache.resolve())
+    jobs = [(h, args.yaw, tx, tz, args.budget, cache) for h in held]
+    log(f"{len(jobs)} held-out dance(s): {','.join(held)}; {args.jobs} process(es)")
+    if args.jobs == 1:
+        results = [run_dance(job) for job in jobs]
+    else:
+        with Pool(min(args.jobs, len(jobs)), initializer=tune_process) as pool:
+            results = pool.map(run_dance, jobs, chunksize=1)
+    dances = dict(sorted(results))
+    errors = [d["error_x_height"] for d in dances.values()]
+    print(
+        json.dumps(
+            {
+                "dances": dances,
+                "mean_error_x_height": round(float(np.mean(errors)), 4),
+                "dances_over_0_17": [h for h, d in dances.items() if d["error_x_height"] > BAR],
+                "load_avg": [round(x, 2) for x in os.getloadavg()],
+            }
+        )
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
