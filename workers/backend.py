@@ -47,12 +47,15 @@ class JobBackend(Protocol):
 class JobLog:
     """The events of one job in arrival order, with waiters for new ones."""
 
-    __slots__ = ("cond", "events", "followers", "terminal")
+    __slots__ = ("cond", "events", "exhausted", "followers", "terminal")
 
     def __init__(self) -> None:
         self.events: list[JobEvent] = []
         self.cond = asyncio.Condition()
         self.terminal = False
+        self.exhausted = False
+        """The source of the events ended without a terminal event (the job's events are lost):
+        followers get what there is instead of waiting for ever."""
         self.followers = 0
 
     @property
@@ -118,6 +121,14 @@ class EventHub:
             id=self.log(job_id).last_id + 1, job=job_id, type=type_, time=when or time.time(), data=data
         )
 
+    async def set_exhausted(self, job_id: str, exhausted: bool = True) -> None:
+        """Say that no more events of a job will arrive (or, ``False``, that a new source started);
+        followers waiting for new events return once they have what there is."""
+        log = self.log(job_id)
+        async with log.cond:
+            log.exhausted = exhausted
+            log.cond.notify_all()
+
     async def follow(self, job_id: str, after: int = 0) -> AsyncIterator[JobEvent]:
         """Events with id > ``after``, waiting for new ones, until the terminal event."""
         log = self.log(job_id)
@@ -132,7 +143,7 @@ class EventHub:
         cursor = after
         while True:
             async with log.cond:
-                while log.last_id <= cursor and not log.terminal:
+                while log.last_id <= cursor and not log.terminal and not log.exhausted:
                     await log.cond.wait()
                 pending = log.events[max(cursor - log.events[0].id + 1, 0) :] if log.last_id > cursor else []
             for event in pending:
@@ -140,5 +151,5 @@ class EventHub:
                 yield event
                 if event.type.terminal:
                     return
-            if log.terminal and cursor >= log.last_id:
+            if (log.terminal or log.exhausted) and cursor >= log.last_id:
                 return

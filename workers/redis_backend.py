@@ -180,6 +180,7 @@ class RedisBackend:
         if task is not None and not task.done():
             return self._ready[job_id]
         ready = self._ready[job_id] = asyncio.Event()
+        self.hub.log(job_id).exhausted = False  # a new source: followers wait for it again
         task = asyncio.create_task(self._read_job(job_id, ready), name=f"segue-events-{job_id}")
         self._readers[job_id] = task
         task.add_done_callback(functools.partial(self._reader_done, job_id))
@@ -246,6 +247,8 @@ class RedisBackend:
             if self._pump_ is not None:
                 self._pump_.remove(job_id)
             ready.set()
+            if not job_log.terminal:  # ended without the terminal event: release the followers
+                await self.hub.set_exhausted(job_id)
 
     # -- health ------------------------------------------------------------------------------------
     async def health(self) -> dict[str, Any]:
