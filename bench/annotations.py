@@ -33,25 +33,12 @@ sys.path.insert(0, str(ROOT))
 from engines.annotations.build import SVM_DIMS, build_annotated, embed_library, standardize  # noqa: E402
 from engines.annotations.engine import AnnotationEngine, AnnotationSearch  # noqa: E402
 from engines.annotations.propagate import propagate  # noqa: E402
-from engines.base import Solution  # noqa: E402
+from engines.base import CollectingEmitter  # noqa: E402
 from engines.library import ClipInput, MotionLibrary, build_library, library_to_arrays  # noqa: E402
 from schemas.annotations import AnnotatedDatabaseSpec, AnnotationRequest  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data" / "bandai-namco"
 NAME = re.compile(r"dataset-\d_(?P<label>[a-z-]+?)_(?P<style>[a-z-]+)_\d+\.bvh$")
-
-
-class Quiet:
-    def __init__(self) -> None:
-        self.count = 0
-        self.messages: list[str] = []
-
-    def solution(self, solution: Solution) -> str:
-        self.count += 1
-        return f"r{self.count}"
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        self.messages.append(message)
 
 
 def files(datasets: list[str]) -> list[tuple[str, str]]:
@@ -119,7 +106,7 @@ def bench_build(args: argparse.Namespace) -> tuple[dict[str, Any], AnnotationEng
     lib, _ = load(items, labelled)
     t_parse = time.perf_counter() - t0
     spec = AnnotatedDatabaseSpec(clips=[{"bvh": Path(f).name} for f, _ in items])
-    rec = Quiet()
+    rec = CollectingEmitter()
     t0 = time.perf_counter()
     arrays = build_annotated(spec, lib, rec, lambda: False)
     t_build = time.perf_counter() - t0
@@ -170,7 +157,7 @@ def bench_search(engine: AnnotationEngine, args: argparse.Namespace) -> dict[str
         t0 = time.perf_counter()
         state.one_pass()
         times.append(time.perf_counter() - t0)
-    rec = Quiet()
+    rec = CollectingEmitter()
     t0 = time.perf_counter()
     engine.search(req, args.budget, rec, lambda: False)
     wall = time.perf_counter() - t0
@@ -185,8 +172,8 @@ def bench_search(engine: AnnotationEngine, args: argparse.Namespace) -> dict[str
         "pass_ms_median": round(1e3 * float(np.median(times)), 1),
         "pass_ms_min": round(1e3 * float(np.min(times)), 1),
         "anytime_budget_s": args.budget,
-        "anytime_solutions": rec.count,
-        "anytime_solutions_per_s": round(rec.count / wall, 2),
+        "anytime_solutions": len(rec.solutions),
+        "anytime_solutions_per_s": round(len(rec.solutions) / wall, 2),
         "passes_per_s": round(passes / (time.perf_counter() - t0), 2),
     }
 

@@ -34,7 +34,7 @@ from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import Solution  # noqa: E402
+from engines.base import CollectingEmitter  # noqa: E402
 from engines.control.dp import (  # noqa: E402
     cost_to_go,
     interpretation,
@@ -59,23 +59,11 @@ from schemas.jobs import parse_job_request  # noqa: E402
 DATA = ROOT.parent / "shared" / "data"
 
 
-class Quiet:
-    def __init__(self) -> None:
-        self.solutions: list[Solution] = []
-
-    def solution(self, solution: Solution) -> str:
-        self.solutions.append(solution)
-        return str(len(self.solutions))
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        pass
-
-
 def engine_for(spec_data: dict[str, Any]) -> ControlEngine:
     spec = parse_database_spec(spec_data)
     clips = [ClipInput(c.display_name(), Path(str(c.bvh)).read_bytes(), c.units) for c in spec.clips]
     library = build_library(clips, spec.fps)
-    arrays = ControlEngine.build(spec, library, Quiet(), lambda: False)
+    arrays = ControlEngine.build(spec, library, CollectingEmitter(), lambda: False)
     arrays.update(library_to_arrays(library))
     return ControlEngine(library, arrays)
 
@@ -139,8 +127,8 @@ def measure(engine: ControlEngine, request: Any, input_s: float, repeat: int) ->
     )
     fast = request.model_copy(update={"exact": False})
     fast.attach_inputs(dict(request._inputs))
-    t_search, _ = best_of(repeat, lambda: engine.search(fast, 60.0, Quiet(), lambda: False))
-    t_full, _ = best_of(repeat, lambda: engine.search(request, 60.0, Quiet(), lambda: False))
+    t_search, _ = best_of(repeat, lambda: engine.search(fast, 60.0, CollectingEmitter(), lambda: False))
+    t_full, _ = best_of(repeat, lambda: engine.search(request, 60.0, CollectingEmitter(), lambda: False))
     out.update(
         search_beam_x_realtime=round(input_s / t_search, 1),
         search_exact_x_realtime=round(input_s / t_full, 1),

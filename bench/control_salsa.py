@@ -51,7 +51,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import Solution  # noqa: E402
+from engines.base import CollectingEmitter  # noqa: E402
 from engines.control.engine import ControlEngine  # noqa: E402
 from engines.library import (  # noqa: E402
     ClipInput,
@@ -76,20 +76,6 @@ CACHE_SOURCES = (
     ROOT / "engines" / "library.py",
     *sorted((ROOT / "motion").glob("*.py")),
 )
-
-
-class Quiet:
-    """An emitter that keeps every solution and ignores progress."""
-
-    def __init__(self) -> None:
-        self.solutions: list[Solution] = []
-
-    def solution(self, solution: Solution) -> str:
-        self.solutions.append(solution)
-        return str(len(self.solutions))
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        pass
 
 
 def log(message: str) -> None:
@@ -138,7 +124,7 @@ def engine_for(held: str, cache: Path | None) -> tuple[ControlEngine, float | No
     spec = parse_database_spec(spec_data)
     clips = [ClipInput(c.display_name(), Path(str(c.bvh)).read_bytes(), c.units) for c in spec.clips]
     library = build_library(clips, spec.fps)
-    arrays = ControlEngine.build(spec, library, Quiet(), lambda: False)
+    arrays = ControlEngine.build(spec, library, CollectingEmitter(), lambda: False)
     arrays.update(library_to_arrays(library))
     build_s = time.perf_counter() - t0
     if path is not None:
@@ -192,7 +178,7 @@ def run_dance(job: tuple[str, float, float, float, float | None, str | None]) ->
         request_data["budget_s"] = budget
     request = parse_job_request(request_data)
     request.attach_inputs({"lead.bvh": bvh_text(leader).encode()})
-    quiet = Quiet()
+    quiet = CollectingEmitter()
     t0 = time.perf_counter()
     engine.search(request, request.budget_s, quiet, lambda: False)
     synth_s = time.perf_counter() - t0

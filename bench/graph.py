@@ -29,7 +29,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import Solution  # noqa: E402
+from engines.base import CollectingEmitter  # noqa: E402
 from engines.graph.build import build_graph  # noqa: E402
 from engines.graph.engine import GraphEngine  # noqa: E402
 from engines.library import ClipInput, build_library  # noqa: E402
@@ -40,19 +40,6 @@ from schemas.databases import parse_database_spec  # noqa: E402
 from schemas.jobs import parse_job_request  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data" / "bandai-namco" / "dataset-2"
-
-
-class Recorder:
-    def __init__(self) -> None:
-        self.t0 = time.perf_counter()
-        self.events: list[tuple[float, float, Solution]] = []
-
-    def solution(self, solution: Solution) -> str:
-        self.events.append((time.perf_counter() - self.t0, float(solution.score), solution))
-        return f"r{len(self.events)}"
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        pass
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     spec = parse_database_spec({"kind": "graph", "clips": [{"bvh": f} for f in files]})
     t0 = time.perf_counter()
     library = build_library([ClipInput(Path(f).stem, Path(f).read_bytes()) for f in files], spec.fps)
-    arrays = build_graph(spec, library, Recorder(), lambda: False)
+    arrays = build_graph(spec, library, CollectingEmitter(), lambda: False)
     build_s = time.perf_counter() - t0
     report: dict[str, Any] = json.loads(str(arrays["graph.report"]))
     engine = GraphEngine(library, arrays)
@@ -95,14 +82,15 @@ def main(argv: list[str] | None = None) -> int:
             ],
         }
     )
-    rec = Recorder()
+    rec = CollectingEmitter()
     engine.search(request, args.budget, rec, lambda: False)
-    if not rec.events:
+    events = [(t, float(sol.score), sol) for t, sol in zip(rec.times, rec.solutions, strict=True)]
+    if not events:
         print(json.dumps({"error": "no solution"}))
         return 1
-    best_t, best_score, best = min(rec.events, key=lambda e: e[1])
-    within = next(t for t, s, _ in rec.events if s <= best_score * 1.05 + 1e-12)
-    at_1s = min((s for t, s, _ in rec.events if t <= 1.0), default=float("nan"))
+    best_t, best_score, best = min(events, key=lambda e: e[1])
+    within = next(t for t, s, _ in events if s <= best_score * 1.05 + 1e-12)
+    at_1s = min((s for t, s, _ in events if t <= 1.0), default=float("nan"))
     frames = np.array([m.num_frames for m in library.motions], dtype=np.float64)
     sources = float(np.average([foot_slip(m) for m in library.motions], weights=frames))
     motion = best.motion
@@ -115,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         "leaf_edges": report.get("leaf_edges"),
         "root_edges": report.get("root_edges"),
         "build_s": round(build_s, 3),
-        "first_solution_ms": round(rec.events[0][0] * 1e3, 1),
+        "first_solution_ms": round(events[0][0] * 1e3, 1),
         "within_5pct_s": round(within, 3),
         "score_at_1s": round(at_1s, 4),
         "final_score": round(best_score, 4),
@@ -124,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         "length_frames": motion.num_frames,
         "foot_slip_m_s": round(foot_slip(motion, pos), 4),
         "foot_slip_sources_m_s": round(sources, 4),
-        "solutions": len(rec.events),
+        "solutions": len(events),
     }
     print(json.dumps(out))
     return 0

@@ -62,15 +62,8 @@ def rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-class Quiet:
-    def progress(self, fraction: float, message: str = "") -> None:
-        pass
-
-    def solution(self, solution: Any) -> str:
-        return ""
-
-
 def run_one(name: str, tau: float) -> dict[str, Any]:
+    from engines.base import CollectingEmitter
     from engines.graph.build import build_graph
     from engines.library import ClipInput, build_library
     from motion.allocator import tune_process
@@ -84,7 +77,7 @@ def run_one(name: str, tau: float) -> dict[str, Any]:
     before = rss_mb()
     spec = SimpleNamespace(tau=tau, joint_weights={}, velocity_weight=1.0, min_jump_frames=10)
     t0 = time.perf_counter()
-    arrays = build_graph(spec, lib, Quiet(), lambda: False)
+    arrays = build_graph(spec, lib, CollectingEmitter(), lambda: False)
     build_s = time.perf_counter() - t0
     report = json.loads(str(arrays["graph.report"]))
     return {

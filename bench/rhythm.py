@@ -28,7 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import Solution  # noqa: E402
+from engines.base import CollectingEmitter  # noqa: E402
 from engines.library import ClipInput, MotionLibrary, build_library, library_to_arrays  # noqa: E402
 from engines.rhythm.engine import RhythmEngine, music_beats  # noqa: E402
 from engines.rhythm.music import bpm_beats  # noqa: E402
@@ -37,18 +37,6 @@ from motion.metrics import foot_slip  # noqa: E402
 from schemas.rhythm import RhythmDatabaseSpec, RhythmRequest  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data" / "cmu-salsa"
-
-
-class _Keep:
-    def __init__(self) -> None:
-        self.best: Solution | None = None
-
-    def solution(self, solution: Solution) -> str:
-        self.best = solution
-        return "r"
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        pass
 
 
 def _library(clips: list[str]) -> tuple[MotionLibrary, dict[str, Any], str]:
@@ -109,7 +97,7 @@ def main() -> None:
     spec = RhythmDatabaseSpec.model_validate({"kind": "rhythm", "beats_per_movement": 4, **spec_fields})
     t0 = time.perf_counter()
     arrays = library_to_arrays(lib)
-    arrays.update(RhythmEngine.build(spec, lib, _Keep(), lambda: False))
+    arrays.update(RhythmEngine.build(spec, lib, CollectingEmitter(), lambda: False))
     build_s = time.perf_counter() - t0
     engine = RhythmEngine(lib, arrays)
     t = engine.tables
@@ -127,12 +115,12 @@ def main() -> None:
     frames = r.root.shape[1]
 
     req = RhythmRequest.model_validate({"music": {"bpm": args.bpm, "duration_s": 20}, "seed": 2})
-    keep = _Keep()
+    keep = CollectingEmitter()
     t2 = time.perf_counter()
     engine.search(req, 10.0, keep, lambda: False)
     search_s = time.perf_counter() - t2
-    assert keep.best is not None
-    sol = keep.best
+    assert keep.latest is not None
+    sol = keep.latest
 
     free_n, free_trials = _largest_crowd(engine, args.crowd_seconds, avoid=False)
     steer_n, steer_trials = _largest_crowd(engine, args.crowd_seconds, avoid=True)

@@ -9,6 +9,7 @@ the workers or Redis.
 
 from __future__ import annotations
 
+import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -63,6 +64,43 @@ class Emitter(Protocol):
     def progress(self, fraction: float, message: str = "") -> None:
         """Publish progress of a long step, ``fraction`` in [0, 1]."""
         ...
+
+
+class CollectingEmitter:
+    """An :class:`Emitter` that keeps everything an engine reports, for running engines directly
+    from Python (benchmarks, notebooks, tests) without the job runtime.
+
+    ``solutions`` in emission order with ``times`` (seconds since the emitter was made);
+    ``progress_events`` as ``(fraction, message)``; ``solution`` returns ids ``r1, r2, ...``.
+    """
+
+    def __init__(self) -> None:
+        self.t0 = time.perf_counter()
+        self.solutions: list[Solution] = []
+        self.times: list[float] = []
+        self.progress_events: list[tuple[float, str]] = []
+
+    def solution(self, solution: Solution) -> str:
+        self.solutions.append(solution)
+        self.times.append(time.perf_counter() - self.t0)
+        return f"r{len(self.solutions)}"
+
+    def progress(self, fraction: float, message: str = "") -> None:
+        self.progress_events.append((fraction, message))
+
+    @property
+    def messages(self) -> list[str]:
+        return [message for _, message in self.progress_events]
+
+    @property
+    def latest(self) -> Solution | None:
+        """The last solution emitted (an anytime engine's best so far)."""
+        return self.solutions[-1] if self.solutions else None
+
+    @property
+    def best(self) -> Solution | None:
+        """The lowest-scoring solution (what the runtime reports as the job's result)."""
+        return min(self.solutions, key=lambda s: s.score) if self.solutions else None
 
 
 class Engine(ABC):

@@ -29,20 +29,10 @@ from engines.graph.model import EdgeTree, RootTracks
 from engines.library import ClipInput, MotionLibrary, build_library
 from motion import Motion
 from motion import rotations as rot
+from tests.engines.emitters import Collect
 from tests.motion.synthetic import walking_biped
 
 GAIT = 30  # frames per gait cycle of walking_biped at 30 fps
-
-
-class Collect:
-    def __init__(self) -> None:
-        self.events: list[tuple[float, str]] = []
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        self.events.append((fraction, message))
-
-    def solution(self, solution: Any) -> str:
-        return "r"
 
 
 def spec(**kw: Any) -> Any:
@@ -403,7 +393,7 @@ def test_build_graph_arrays_report_tracks_and_progress(walks: MotionLibrary) -> 
     turn = tracks.root_yaw[300:]
     assert turn[-1] - turn[0] == pytest.approx(np.radians(270.0), abs=0.05)  # unwrapped
     assert np.all(np.abs(np.diff(turn)) < 0.2)
-    fractions = [f for f, _ in emit.events]
+    fractions = [f for f, _ in emit.progress_events]
     assert fractions == sorted(fractions) and fractions[-1] == 1.0 and len(fractions) >= 3
     assert all(0.0 <= f <= 1.0 for f in fractions)
 

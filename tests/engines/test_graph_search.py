@@ -33,25 +33,11 @@ from engines.graph.search import GraphSearch
 from engines.library import MotionLibrary
 from motion import Motion, Skeleton
 from schemas.graph import GraphRequest
+from tests.engines.emitters import Collect
 
 from .graph_synthetic import synthetic_graph
 
 Graph = tuple[MotionLibrary, EdgeTree, RootTracks]
-
-
-class Collect:
-    def __init__(self) -> None:
-        self.solutions: list[Solution] = []
-        self.times: list[float] = []
-        self.t0 = time.perf_counter()
-
-    def solution(self, solution: Solution) -> str:
-        self.solutions.append(solution)
-        self.times.append(time.perf_counter() - self.t0)
-        return f"r{len(self.solutions)}"
-
-    def progress(self, fraction: float, message: str = "") -> None:
-        pass
 
 
 @pytest.fixture(scope="module")
