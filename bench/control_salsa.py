@@ -1,7 +1,7 @@
 """Accuracy of the control-by-example engine: leave-one-dance-out on the CMU salsa couples.
 
 Usage: ``python bench/control_salsa.py [--held 07,12] [--jobs 2] [--yaw 25] [--move 0.8,-1.1]
-[--budget 10] [--cache DIR]`` from the project root (needs ../shared/data/cmu-salsa).
+[--budget 10] [--cache DIR] [--request JSON]`` from the project root (needs ../shared/data/cmu-salsa).
 
 The protocol of ``../shared/acceptance/control.py``, run in process: for each held-out dance ``NN``
 of the 14 couples (``60_NN`` leader, ``61_NN`` follower), a ``control`` database is built from the
@@ -9,8 +9,8 @@ other 13 pairs (beats segmentation, 2 beats per segment); the held-out leader an
 rigidly on the floor (rotated about +Y by ``--yaw`` degrees, then translated by ``--move X,Z`` in the
 BVH file's units, as the check's ``yaw_transform``); the follower is generated from the moved
 leader (the engine's best solution within ``--budget`` seconds; default the requests' 10 s, as the
-check's ``segue synth``), and compared with the moved real follower, output frame ``i`` against the
-follower frame nearest in time.
+check's ``segue synth``; ``--request`` adds request fields such as ``k``), and compared with the
+moved real follower, output frame ``i`` against the follower frame nearest in time.
 
 Prints one JSON object on stdout (progress lines go to stderr)::
 
@@ -63,6 +63,7 @@ from motion import Motion  # noqa: E402
 from motion import rotations as rot  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.bvh import bvh_text, parse_bvh  # noqa: E402
+from motion.ground import from_ground_frame, ground_frames, to_ground_frame  # noqa: E402
 from schemas.databases import parse_database_spec  # noqa: E402
 from schemas.jobs import parse_job_request  # noqa: E402
 from workers.store import load_npz, npz_bytes  # noqa: E402
@@ -167,13 +168,132 @@ def follower_errors(out: Motion, follower: Motion, leader: Motion) -> dict[str, 
     }
 
 
-def run_dance(job: tuple[str, float, float, float, float | None, str | None]) -> tuple[str, dict[str, Any]]:
-    """One held-out dance: build (or load), move, synthesize, measure."""
-    held, yaw, tx, tz, budget, cache = job
+LEADER_POINTS = ("hip", "head", "rHand", "lHand")  # the engine's default control cloud
+
+
+def _points(motion: Motion, names: tuple[str, ...]) -> np.ndarray:
+    """``(F, len(names), 3)`` metres: the named joints' world positions."""
+    pos = motion.global_positions() * motion.metres_per_unit
+    return np.asarray(pos[:, [motion.skeleton.names.index(n) for n in names]])
+
+
+def _leader_frames(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """The leader's floor origin ``(F, 2)`` metres and heading ``(F,)`` radians."""
+    origin, head = ground_frames(motion)
+    return origin * motion.metres_per_unit, head
+
+
+def _window_features(motion: Motion, half_s: float, samples: int) -> np.ndarray:
+    """``(F, samples * 4 * 3)``: the leader's hip, head and hands at ``samples`` instants spanning
+    ``+-half_s`` around each frame (clamped at the ends), in that frame's ground frame (metres)."""
+    pts = _points(motion, LEADER_POINTS)
+    origin, head = _leader_frames(motion)
+    n = motion.num_frames
+    offs = np.round(np.linspace(-half_s, half_s, samples) * motion.fps).astype(int)
+    idx = np.clip(np.arange(n)[:, None] + offs[None, :], 0, n - 1)  # (F, samples)
+    local = to_ground_frame(pts[idx].reshape(n, -1, 3), origin, head)
+    return np.asarray(local.reshape(n, -1))
+
+
+def nearest_frame_follower(
+    pairs: list[tuple[Motion, Motion]],
+    leader: Motion,
+    half_s: float = 0.25,
+    samples: int = 5,
+    step_s: float = 0.1,
+) -> np.ndarray:
+    """The nearest-frame baseline (motion matching): every ``step_s`` seconds, the database frame
+    whose leader window (:func:`_window_features`) is nearest in Euclidean distance to the input
+    leader's; between searches the matched follower plays on frame by frame (within its clip). The
+    follower's :data:`POINTS` are taken relative to the database leader of their frame and placed
+    relative to the input leader of the output frame. Returns ``(F, 6, 3)`` metres."""
+    feats, rel, last = [], [], []
+    offset = 0
+    for lead, follow in pairs:
+        n = min(lead.num_frames, follow.num_frames)
+        lead, follow = lead.slice(0, n), follow.slice(0, n)
+        feats.append(_window_features(lead, half_s, samples))
+        origin, head = _leader_frames(lead)
+        rel.append(to_ground_frame(_points(follow, POINTS), origin, head))
+        last.append(np.full(n, offset + n - 1))
+        offset += n
+    db = np.concatenate(feats)
+    db_rel = np.concatenate(rel)
+    db_last = np.concatenate(last)
+    db_sq = (db**2).sum(1)
+    q = _window_features(leader, half_s, samples)
+    n_out = q.shape[0]
+    step = max(1, int(round(step_s * leader.fps)))
+    searched = np.arange(0, n_out, step)
+    match = np.empty(searched.size, dtype=np.intp)
+    for a in range(0, searched.size, 256):  # chunks of queries: never a frames x frames matrix
+        d = db_sq[None, :] - 2.0 * q[searched[a : a + 256]] @ db.T
+        match[a : a + 256] = np.argmin(d, axis=1)
+    k = np.arange(n_out) // step
+    frame = np.minimum(match[k] + np.arange(n_out) - searched[k], db_last[match[k]])
+    origin, head = _leader_frames(leader)
+    return np.asarray(from_ground_frame(db_rel[frame], origin, head))
+
+
+def average_partner(pairs: list[tuple[Motion, Motion]], leader: Motion) -> np.ndarray:
+    """The average-partner baseline: the follower's :data:`POINTS` averaged over every database frame
+    in its leader's ground frame, placed relative to the input leader. ``(F, 6, 3)`` metres."""
+    rel = []
+    for lead, follow in pairs:
+        n = min(lead.num_frames, follow.num_frames)
+        origin, head = _leader_frames(lead.slice(0, n))
+        rel.append(to_ground_frame(_points(follow.slice(0, n), POINTS), origin, head))
+    mean = np.concatenate(rel).mean(axis=0)
+    origin, head = _leader_frames(leader)
+    return np.asarray(from_ground_frame(np.repeat(mean[None], leader.num_frames, 0), origin, head))
+
+
+def points_error(points: np.ndarray, follower: Motion, height: float) -> float:
+    """Mean distance of ``points (F, 6, 3)`` (at the follower's rate) to the follower's, / height."""
+    n = min(points.shape[0], follower.num_frames)
+    return float(np.linalg.norm(points[:n] - _points(follower, POINTS)[:n], axis=-1).mean() / height)
+
+
+def points_jerk(points: np.ndarray, fps: float) -> float:
+    """Mean magnitude of the third derivative of ``points (F, K, 3)`` metres, m/s^3."""
+    third = np.diff(points, n=3, axis=0) * fps**3
+    return float(np.linalg.norm(third, axis=-1).mean())
+
+
+def baselines(held: str, leader: Motion, follower: Motion, out: Motion) -> dict[str, Any]:
+    """Error (x height) and jerk of the two baselines of the issue, and the jerk of the engine's
+    output and of the real follower, all on the six :data:`POINTS` at the control's rate."""
+    pairs = [
+        (
+            parse_bvh((SALSA / f"60_{t}_scaled.bvh").read_bytes()),
+            parse_bvh((SALSA / f"61_{t}_scaled.bvh").read_bytes()),
+        )
+        for t in trials()
+        if t != held
+    ]
+    height = float(_points(leader, ("head",))[:, 0, 1].max())
+    nearest = nearest_frame_follower(pairs, leader)
+    average = average_partner(pairs, leader)
+    return {
+        "nearest_frame_x_height": round(points_error(nearest, follower, height), 4),
+        "average_partner_x_height": round(points_error(average, follower, height), 4),
+        "jerk_m_s3": {
+            "output": round(points_jerk(_points(out, POINTS), out.fps), 1),
+            "nearest_frame": round(points_jerk(nearest, leader.fps), 1),
+            "real_follower": round(points_jerk(_points(follower, POINTS), follower.fps), 1),
+        },
+    }
+
+
+def run_dance(
+    job: tuple[str, float, float, float, float | None, str | None, dict[str, Any], bool],
+) -> tuple[str, dict[str, Any]]:
+    """One held-out dance: build (or load), move, synthesize, measure (and the baselines)."""
+    held, yaw, tx, tz, budget, cache, extra, with_baselines = job
     engine, build_s = engine_for(held, None if cache is None else Path(cache))
     leader = moved(parse_bvh((SALSA / f"60_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
     follower = moved(parse_bvh((SALSA / f"61_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
-    request_data: dict[str, Any] = {"engine": "control", "control": {"bvh": "lead.bvh"}}
+    request_data: dict[str, Any] = {**extra, "engine": "control", "control": {"bvh": "lead.bvh"}}
     if budget is not None:
         request_data["budget_s"] = budget
     request = parse_job_request(request_data)
@@ -194,6 +314,8 @@ def run_dance(job: tuple[str, float, float, float, float | None, str | None]) ->
         "synth_s": round(synth_s, 1),
         "frames": out.num_frames,
     }
+    if with_baselines:
+        result.update(baselines(held, leader, follower, out))
     log(f"dance {held}: {json.dumps(result)}")
     return held, result
 
@@ -205,6 +327,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--yaw", type=float, default=25.0, help="rotation of the held-out couple, degrees")
     ap.add_argument("--move", default="0.8,-1.1", help="floor translation X,Z of the held-out couple")
     ap.add_argument("--budget", type=float, default=None, help="search budget, s (default: the request's)")
+    ap.add_argument(
+        "--request", default="{}", help="extra request fields as a JSON object, e.g. '{\"k\": 0.2}'"
+    )
+    ap.add_argument(
+        "--baselines",
+        action="store_true",
+        help="also measure the nearest-frame and average-partner baselines and the jerk of each",
+    )
     ap.add_argument("--cache", type=Path, default=None, help="directory to keep built databases in")
     args = ap.parse_args(argv)
     tune_process()
@@ -226,8 +356,14 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--jobs must be at least 1")
     if args.budget is not None and args.budget <= 0:
         ap.error("--budget must be positive")
+    try:
+        extra = json.loads(args.request)
+    except json.JSONDecodeError as exc:
+        ap.error(f"--request is not JSON: {exc}")
+    if not isinstance(extra, dict):
+        ap.error("--request takes a JSON object")
     cache = None if args.cache is None else str(args.cache.resolve())
-    jobs = [(h, args.yaw, tx, tz, args.budget, cache) for h in held]
+    jobs = [(h, args.yaw, tx, tz, args.budget, cache, extra, args.baselines) for h in held]
     log(f"{len(jobs)} held-out dance(s): {','.join(held)}; {args.jobs} process(es)")
     if args.jobs == 1:
         results = [run_dance(job) for job in jobs]

@@ -282,6 +282,12 @@ class ControlRequest(JobRequestBase):
         le=5,
         description="also compare this much control motion before and after each segment (0 = the paper)",
     )
+    alignment: Literal["floor", "rigid"] = Field(
+        default="floor",
+        description="how a segment is aligned to the control: 'floor' = rotation about the vertical + "
+        "floor translation (closed form; the paper's), 'rigid' = full 3-D rigid transform (Procrustes; "
+        "about 30x slower preparation; may tilt or lift the target, e.g. for controls not on a level floor)",
+    )
     solve_fps: float = Field(default=10.0, gt=0, le=240, description="rate of the downsampled solve")
     beam: float | None = Field(
         default=None,

@@ -1,9 +1,10 @@
 """Post-processing (Hsu et al. 2004, Sec. 5): the chosen target segments on the full skeleton.
 
 Each segment is copied from its target clip, uniformly stretched to its duration, moved by its
-alignment (rotation about +Y, floor translation), and the pieces are concatenated at the control's
-frame rate; the jumps at the boundaries are spread by :func:`motion.smoothing.smooth_cuts`, and the
-instances' foot contacts and handhold flags are carried to the output frames (by provenance).
+alignment (rotation about +Y and floor translation, or the full 3-D rigid transform), and the
+pieces are concatenated at the control's frame rate; the jumps at the boundaries are spread by
+:func:`motion.smoothing.smooth_cuts`, and the instances' foot contacts and handhold flags are
+carried to the output frames (by provenance).
 """
 
 from __future__ import annotations
@@ -108,14 +109,19 @@ def assemble(
         ri = piece.root_positions.copy()
         jti = piece.joint_translations.copy()
         p = jti[:, k_tr] if carrier else ri
-        moved = np.stack(
-            (c * p[:, 0] + s * p[:, 2] + timed.tx[i], p[:, 1], -s * p[:, 0] + c * p[:, 2] + timed.tz[i]), -1
-        )
+        if timed.rot is not None and timed.trans is not None:  # full 3-D rigid alignment
+            moved = p @ timed.rot[i].T + timed.trans[i]
+            turn = rot.from_matrix(timed.rot[i])
+        else:
+            moved = np.stack(
+                (c * p[:, 0] + s * p[:, 2] + timed.tx[i], p[:, 1], -s * p[:, 0] + c * p[:, 2] + timed.tz[i]),
+                -1,
+            )
+            turn = rot.from_yaw(np.float64(np.arctan2(s, c)))
         if carrier:
             jti[:, k_tr] = moved
         else:
             ri = moved
-        turn = rot.from_yaw(np.float64(np.arctan2(s, c)))
         qi = piece.rotations.copy()
         qi[:, carrier] = rot.multiply(turn, qi[:, carrier])
         root[idx], q[idx], jt[idx] = ri, qi, jti

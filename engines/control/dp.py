@@ -79,6 +79,58 @@ def paired_alignment(windows: Array, templates: Array) -> tuple[Array, Array, Ar
     return np.maximum(res, 0.0), cos, sin, tx, tz
 
 
+def kabsch(h: Array) -> tuple[Array, Array]:
+    """Optimal proper rotations for centred cross-covariances ``h (..., 3, 3)`` (``h = sum a w^T`` of
+    template points ``a`` and window points ``w``): ``R (..., 3, 3)`` maximising ``trace(R h)``, so
+    ``R a`` best matches ``w``, and that maximum ``(...,)`` (the sum of the singular values with the
+    smallest one's sign flipped where a reflection would be needed)."""
+    u, sv, vt = np.linalg.svd(h)
+    sign = np.sign(np.linalg.det(u) * np.linalg.det(vt))
+    sign = np.where(sign == 0, 1.0, sign)
+    vt_fixed = vt.copy()
+    vt_fixed[..., 2, :] *= sign[..., None]
+    # h = u S vt; the best R is v diag(1, 1, sign) u^T
+    rot = np.swapaxes(vt_fixed, -1, -2) @ np.swapaxes(u, -1, -2)
+    best = sv[..., 0] + sv[..., 1] + sign * sv[..., 2]
+    return rot, best
+
+
+def paired_procrustes(windows: Array, templates: Array) -> tuple[Array, Array, Array]:
+    """Full 3-D rigid alignment (rotation + translation, no scale) of templates ``(M, N, 3)`` onto
+    windows ``(M, N, 3)``, row by row. Returns the residual sum of squares ``(M,)``, rotations
+    ``(M, 3, 3)`` and translations ``(M, 3)`` (``R a + t`` is the template placed on the window)."""
+    mw, ma = windows.mean(1), templates.mean(1)
+    cw, ca = windows - mw[:, None], templates - ma[:, None]
+    h = np.einsum("mni,mnj->mij", ca, cw)
+    rot, best = kabsch(h)
+    res = (cw**2).sum((1, 2)) + (ca**2).sum((1, 2)) - 2 * best
+    trans = mw - np.einsum("mij,mj->mi", rot, ma)
+    return np.maximum(res, 0.0), rot, trans
+
+
+def place_points(
+    points: Array,
+    cos: Array,
+    sin: Array,
+    tx: Array,
+    tz: Array,
+    rot: Array | None = None,
+    trans: Array | None = None,
+) -> Array:
+    """Points ``(N, ..., 3)`` moved by per-row transforms: the 3-D ``rot (N, 3, 3)``, ``trans (N, 3)``
+    when given, else the floor transform ``cos, sin, tx, tz`` (:func:`align_points`)."""
+    if rot is None or trans is None:
+        return align_points(points, cos, sin, tx, tz)
+    return rigid_points(points, rot, trans)
+
+
+def rigid_points(points: Array, rot: Array, trans: Array) -> Array:
+    """Points ``(N, ..., 3)`` moved by per-row rotations ``rot (N, 3, 3)`` then ``trans (N, 3)``."""
+    flat = points.reshape(points.shape[0], -1, 3)
+    out = np.einsum("nij,npj->npi", rot, flat) + trans[:, None, :]
+    return np.asarray(out.reshape(points.shape))
+
+
 # ------------------------------------------------------------------------------------- the problem
 
 
@@ -168,6 +220,20 @@ class Interpretation:
     dur: IntArray
     context: int
     cs: Array
+    rot: Array | None = None  # (C, T + 1, 3, 3) rigid (3-D) alignment rotations
+    trans: Array | None = None  # (C, T + 1, 3) rigid alignment translations
+
+    @property
+    def rigid(self) -> bool:
+        """Whether the alignments are full 3-D rigid transforms (else rotation about +Y + floor)."""
+        return self.rot is not None
+
+    def place(self, points: Array, cells: IntArray, ends: IntArray) -> Array:
+        """``points (n, ..., 3)`` moved by the alignment of ``cells (n,)`` ending at ``ends (n,)``."""
+        if self.rot is not None and self.trans is not None:
+            return rigid_points(points, self.rot[cells, ends], self.trans[cells, ends])
+        m = self.alignment(cells, ends)
+        return align_points(points, m[0], m[1], m[2], m[3])
 
     def alignment(self, cells: IntArray, ends: IntArray) -> Array:
         """``(4, n)``: ``cos, sin, tx, tz`` of the transform taking the stretched control segment of
@@ -217,72 +283,153 @@ class Interpretation:
 
 
 def interpretation(
-    x: Array, inst: Instances, cell_inst: IntArray, cell_dur: IntArray, rate: float, context: int = 0
+    x: Array,
+    inst: Instances,
+    cell_inst: IntArray,
+    cell_dur: IntArray,
+    rate: float,
+    context: int = 0,
+    rigid: bool = False,
 ) -> Interpretation:
     """Eq. 1-2 for every cell and every end time: one matrix product per duration.
 
     ``x``: ``(T, P, 3)`` the input cloud at ``rate``. ``context`` (frames) extends each comparison by
     the input and the source control around the segment on both sides (the input's ends repeated),
-    so a segment is also judged by the motion leading into and out of it (0 = the paper's D)."""
+    so a segment is also judged by the motion leading into and out of it (0 = the paper's D).
+    ``rigid``: the alignment is the full 3-D rigid transform (Procrustes: nine matrix products per
+    duration and one 3x3 SVD per cell and end time) instead of rotation about +Y + floor translation."""
+    if rigid:
+        return _rigid_interpretation(x, inst, cell_inst, cell_dur, rate, context)
     t_len, p, _ = x.shape
     c2 = 2 * context
     x = pad_edges(x, context)
     cells = cell_inst.shape[0]
-    D = np.full((cells, t_len + 1), np.inf)
-    Cc = np.zeros((cells, t_len + 1))
-    Ss = np.zeros((cells, t_len + 1))
+    # written once below: the first d columns of a duration-d row (no window yet) and rows longer
+    # than the input are infinite in D and zero in the cross-correlations (identity alignment)
+    D = np.empty((cells, t_len + 1))
+    Cc = np.empty((cells, t_len + 1))
+    Ss = np.empty((cells, t_len + 1))
     sum_a = np.zeros((cells, 2))
     n_pts_c = ((cell_dur + c2) * p).astype(np.float64)
     xx, xz, xy = x[..., 0], x[..., 2], x[..., 1]
     zero = np.zeros(1)
     cs_x = np.concatenate((zero, np.cumsum(xx.sum(1))))
     cs_z = np.concatenate((zero, np.cumsum(xz.sum(1))))
-    cs_sq = np.concatenate((zero, np.cumsum((xx**2 + xz**2).sum(1))))
-    cs_y2 = np.concatenate((zero, np.cumsum((xy**2).sum(1))))
+    cs_sq = np.concatenate((zero, np.cumsum((xx**2 + xz**2 + xy**2).sum(1))))
+    # every term is scaled by 1 / (P rate) up front, so D comes out in m^2 s without another pass
+    scale = 1.0 / (p * rate)
+    for d in np.unique(cell_dur):
+        d = int(d)
+        rows = np.flatnonzero(cell_dur == d)
+        n = rows.size
+        # cells sorted by duration: the rows of one duration are a contiguous block (basic slices)
+        blk = slice(int(rows[0]), int(rows[-1]) + 1) if rows[-1] - rows[0] + 1 == n else rows
+        head = min(d, t_len + 1)
+        D[blk, :head] = np.inf
+        Cc[blk, :head] = 0.0
+        Ss[blk, :head] = 0.0
+        if d > t_len:
+            continue
+        a = stretched_templates(inst, cell_inst[rows], d, rate, context)  # (n, d + 2c, P, 3)
+        n_pts = (d + c2) * p
+        a = a.reshape(n, n_pts, 3)
+        sa = a.sum(1)  # (n, 3)
+        # templates centred on the floor: their cross-correlation with any window is the centred one
+        centred = a[..., [0, 2]] - (sa[:, [0, 2]] / n_pts)[:, None, :]  # (n, N, 2)
+        # windows (nw, N, 3) flattened like the templates: frame-major, then point
+        win = np.lib.stride_tricks.sliding_window_view(x, d + c2, axis=0)  # (nw, P, 3, L)
+        win = win.transpose(0, 3, 1, 2).reshape(win.shape[0], n_pts, 3)
+        nw = win.shape[0]
+        ends = np.arange(d, t_len + 1)
+        e2 = ends + c2
+        sx, sz = cs_x[e2] - cs_x[ends - d], cs_z[e2] - cs_z[ends - d]
+        # one product gives the four planar cross terms: rows [ax; az], columns [wx | wz]
+        lhs = centred.transpose(2, 0, 1).reshape(2 * n, n_pts) * scale
+        rhs = win[..., [0, 2]].transpose(2, 0, 1).reshape(2 * nw, n_pts)
+        g = lhs @ rhs.T  # (2n, 2nw)
+        c_out, s_out = Cc[blk, d:], Ss[blk, d:]
+        np.add(g[:n, :nw], g[n:, nw:], out=c_out)  # ax.wx + az.wz
+        np.subtract(g[n:, :nw], g[:n, nw:], out=s_out)  # az.wx - ax.wz
+        # the rest of the residual in one more product: -2 ay.wy + the template's and the
+        # window's own centred sums of squares (extra columns of ones)
+        own_a = (centred**2).sum((1, 2)) + (a[..., 1] ** 2).sum(1)
+        own_w = cs_sq[e2] - cs_sq[ends - d] - (sx**2 + sz**2) / n_pts
+        lhs_y = np.empty((n, n_pts + 2))
+        lhs_y[:, :n_pts] = a[..., 1] * (-2.0 * scale)
+        lhs_y[:, n_pts] = own_a * scale
+        lhs_y[:, n_pts + 1] = scale
+        rhs_y = np.empty((nw, n_pts + 2))
+        rhs_y[:, :n_pts] = win[..., 1]
+        rhs_y[:, n_pts] = 1.0
+        rhs_y[:, n_pts + 1] = own_w
+        res = c_out * c_out
+        res += s_out * s_out
+        np.sqrt(res, out=res)  # |(c, s)| (np.hypot is several times slower)
+        res *= -2.0
+        res += lhs_y @ rhs_y.T
+        np.maximum(res, 0.0, out=res)
+        D[blk, d:] = res
+        sum_a[blk] = sa[:, [0, 2]]
+    return Interpretation(
+        D, Cc, Ss, sum_a, n_pts_c, cell_dur.astype(np.intp), context, np.stack((cs_x, cs_z), -1)
+    )
+
+
+def _rigid_interpretation(
+    x: Array, inst: Instances, cell_inst: IntArray, cell_dur: IntArray, rate: float, context: int
+) -> Interpretation:
+    """:func:`interpretation` with full 3-D rigid alignments (see there)."""
+    t_len, p, _ = x.shape
+    c2 = 2 * context
+    x = pad_edges(x, context)
+    cells = cell_inst.shape[0]
+    D = np.full((cells, t_len + 1), np.inf)
+    rot = np.zeros((cells, t_len + 1, 3, 3))
+    rot[...] = np.eye(3)
+    trans = np.zeros((cells, t_len + 1, 3))
+    zero = np.zeros((1, 3))
+    per_frame = x.sum(1)  # (T + 2c, 3)
+    cs = np.concatenate((zero, np.cumsum(per_frame, 0)))
+    cs_sq = np.concatenate(([0.0], np.cumsum((x**2).sum((1, 2)))))
     for d in np.unique(cell_dur):
         d = int(d)
         if d > t_len:
             continue
         rows = np.flatnonzero(cell_dur == d)
         a = stretched_templates(inst, cell_inst[rows], d, rate, context)  # (n, d + 2c, P, 3)
-        n_pts = (d + c2) * p
-        ax, az, ay = (
-            a[..., 0].reshape(len(rows), -1),
-            a[..., 2].reshape(len(rows), -1),
-            a[..., 1].reshape(len(rows), -1),
-        )
-        wx = np.lib.stride_tricks.sliding_window_view(xx, d + c2, axis=0)  # (T-d+1, P, d+2c)
-        wz = np.lib.stride_tricks.sliding_window_view(xz, d + c2, axis=0)
-        wy = np.lib.stride_tricks.sliding_window_view(xy, d + c2, axis=0)
-        wx = wx.transpose(0, 2, 1).reshape(wx.shape[0], -1)
-        wz = wz.transpose(0, 2, 1).reshape(wz.shape[0], -1)
-        wy = wy.transpose(0, 2, 1).reshape(wy.shape[0], -1)
+        n, n_pts = len(rows), (d + c2) * p
+        a_flat = a.reshape(n, -1, 3)
+        w = np.lib.stride_tricks.sliding_window_view(x, d + c2, axis=0)  # (nw, P, 3, d + 2c)
+        w = w.transpose(0, 3, 1, 2).reshape(w.shape[0], -1, 3)  # (nw, n_pts, 3)
         ends = np.arange(d, t_len + 1)
         e2 = ends + c2
-        sx, sz = cs_x[e2] - cs_x[ends - d], cs_z[e2] - cs_z[ends - d]
-        ssq, sy2 = cs_sq[e2] - cs_sq[ends - d], cs_y2[e2] - cs_y2[ends - d]
-        sax, saz = ax.sum(1), az.sum(1)
-        saa = (ax**2 + az**2).sum(1)
-        say2 = (ay**2).sum(1)
-        # (n, nw) products, already in the (cell, time) layout of D
-        c = ax @ wx.T + az @ wz.T
-        c -= (sax[:, None] * sx[None] + saz[:, None] * sz[None]) / n_pts
-        s = az @ wx.T - ax @ wz.T
-        s -= (saz[:, None] * sx[None] - sax[:, None] * sz[None]) / n_pts
-        res = (ay @ wy.T) * -2.0
-        res += (saa - (sax**2 + saz**2) / n_pts + say2)[:, None]
-        res += (ssq - (sx**2 + sz**2) / n_pts + sy2)[None]
-        res -= 2 * np.hypot(c, s)
+        sw = cs[e2] - cs[ends - d]  # (nw, 3)
+        sww = cs_sq[e2] - cs_sq[ends - d]
+        sa = a_flat.sum(1)  # (n, 3)
+        saa = (a_flat**2).sum((1, 2))
+        # centred cross-covariances h[c, t] = sum a w^T - sa sw^T / n_pts: nine (n, nw) products
+        h = np.empty((n, ends.size, 3, 3))
+        for i in range(3):
+            for j in range(3):
+                h[:, :, i, j] = a_flat[:, :, i] @ w[:, :, j].T - np.outer(sa[:, i], sw[:, j]) / n_pts
+        r, best = kabsch(h)
+        res = (saa - (sa**2).sum(1) / n_pts)[:, None] + (sww - (sw**2).sum(1) / n_pts)[None] - 2 * best
         np.maximum(res, 0.0, out=res)
-        res *= 1.0 / (p * rate)
-        # cells sorted by duration: the rows of one duration are a contiguous block (basic slices)
-        blk = slice(int(rows[0]), int(rows[-1]) + 1) if rows[-1] - rows[0] + 1 == rows.size else rows
-        D[blk, d:] = res
-        Cc[blk, d:] = c
-        Ss[blk, d:] = s
-        sum_a[blk, 0], sum_a[blk, 1] = sax, saz
+        D[rows, d:] = res / (p * rate)
+        rot[rows, d:] = r
+        trans[rows, d:] = sw[None] / n_pts - np.einsum("ctij,cj->cti", r, sa / n_pts)
+    empty = np.zeros((cells, t_len + 1))
     return Interpretation(
-        D, Cc, Ss, sum_a, n_pts_c, cell_dur.astype(np.intp), context, np.stack((cs_x, cs_z), -1)
+        D,
+        empty,
+        empty,
+        np.zeros((cells, 2)),
+        ((cell_dur + c2) * p).astype(np.float64),
+        cell_dur.astype(np.intp),
+        context,
+        np.zeros((t_len + c2 + 1, 2)),
+        rot,
+        trans,
     )
 
 
@@ -488,9 +635,10 @@ def solve(
         S = np.concatenate([pt[3] for pt in parts])
         E = np.concatenate([pt[4] for pt in parts])
         DS = np.concatenate([pt[5] for pt in parts])
-        m_all = interp.alignment(np.concatenate((P, S)), np.concatenate((tp, E)))
         pts = np.concatenate((tails[cell_inst[P]], heads[cell_inst[S]]))
-        placed = align_points(pts, m_all[0], m_all[1], m_all[2], m_all[3]).reshape(P.size + S.size, -1)
+        placed = interp.place(pts, np.concatenate((P, S)), np.concatenate((tp, E))).reshape(
+            P.size + S.size, -1
+        )
         y2, h2 = placed[: P.size], placed[P.size :]
         # q_j + k' |y_j - h_i|^2 = [q_j + k'|y_j|^2, -2k' y_j] . [1, h_i] + k'|h_i|^2: one matrix product
         ya = np.empty((P.size, y2.shape[1] + 1))
@@ -560,6 +708,8 @@ class Timed:
     tz: Array
     D: Array
     C: Array
+    rot: Array | None = None  # (L, 3, 3) with rigid (3-D) alignment: the segments' rotations
+    trans: Array | None = None  # (L, 3) and translations (cos/sin/tx/tz then hold their floor part)
 
 
 def retime(
@@ -574,13 +724,14 @@ def retime(
     window: int,
     constraints: list[tuple[int, float]] | None = None,
     context: int = 0,
+    rigid: bool = False,
 ) -> Timed:
     """The constrained DP at the full rate: the instances ``seq`` are fixed, each boundary moves
     within ``+-window`` frames of ``coarse_bounds`` (full-rate frames; first 0 and last ``T`` fixed)
     and durations stay within the stretch bounds.
 
     ``x``: ``(T, P, 3)`` the input at ``rate``; ``constraints``: ``(segment index, frame)`` pairs the
-    segment must keep covering."""
+    segment must keep covering; ``rigid``: full 3-D rigid alignments (see :func:`interpretation`)."""
     t_len = x.shape[0]
     n_seg = seq.shape[0]
     cb = np.round(np.asarray(coarse_bounds, dtype=np.float64)).astype(np.intp)
@@ -613,12 +764,19 @@ def retime(
     Dv, cosv, sinv = np.full(m, np.inf), np.ones(m), np.zeros(m)
     xp = pad_edges(x, context)
     txv, tzv = np.zeros(m), np.zeros(m)
+    rotv = np.repeat(np.eye(3)[None], m, 0) if rigid else None
+    transv = np.zeros((m, 3)) if rigid else None
     durs = flat_b - flat_a
     for d in np.unique(durs):
         rows = np.flatnonzero(durs == d)
         tmpl = stretched_templates(inst, seq[flat_seg[rows]], int(d), rate, context)
         win = xp[flat_a[rows, None] + np.arange(d + 2 * context)[None, :]]
         p = x.shape[1]
+        if rotv is not None and transv is not None:
+            res, r, t = paired_procrustes(win.reshape(rows.size, -1, 3), tmpl.reshape(rows.size, -1, 3))
+            rotv[rows], transv[rows] = r, t
+            Dv[rows] = res / (p * rate)
+            continue
         res, c, s, tx_, tz_ = paired_alignment(win.reshape(rows.size, -1, 3), tmpl.reshape(rows.size, -1, 3))
         Dv[rows], cosv[rows], sinv[rows], txv[rows], tzv[rows] = res / (p * rate), c, s, tx_, tz_
     q_pts = inst.tails.shape[1]
@@ -630,11 +788,23 @@ def retime(
         cur = np.arange(offs[i], offs[i + 1])
         if prev.size == 0 or cur.size == 0:
             raise Infeasible("re-timing found no legal boundaries")
-        y = align_points(
-            inst.tails[seq[i - 1]][None].repeat(prev.size, 0), cosv[prev], sinv[prev], txv[prev], tzv[prev]
+        y = place_points(
+            inst.tails[seq[i - 1]][None].repeat(prev.size, 0),
+            cosv[prev],
+            sinv[prev],
+            txv[prev],
+            tzv[prev],
+            None if rotv is None else rotv[prev],
+            None if transv is None else transv[prev],
         )
-        h = align_points(
-            inst.heads[seq[i]][None].repeat(cur.size, 0), cosv[cur], sinv[cur], txv[cur], tzv[cur]
+        h = place_points(
+            inst.heads[seq[i]][None].repeat(cur.size, 0),
+            cosv[cur],
+            sinv[cur],
+            txv[cur],
+            tzv[cur],
+            None if rotv is None else rotv[cur],
+            None if transv is None else transv[cur],
         )
         y2, h2 = y.reshape(prev.size, -1), h.reshape(cur.size, -1)
         cont = (y2**2).sum(1)[:, None] + (h2**2).sum(1)[None] - 2 * y2 @ h2.T
@@ -654,8 +824,32 @@ def retime(
     idx = np.array(chosen[::-1], dtype=np.intp)
     bounds = np.concatenate((flat_a[idx], flat_b[idx[-1:]]))
     # per-boundary continuity of the chosen states
-    y = align_points(inst.tails[seq[:-1]], cosv[idx[:-1]], sinv[idx[:-1]], txv[idx[:-1]], tzv[idx[:-1]])
-    h = align_points(inst.heads[seq[1:]], cosv[idx[1:]], sinv[idx[1:]], txv[idx[1:]], tzv[idx[1:]])
+    sel_rot = None if rotv is None else rotv[idx]
+    sel_trans = None if transv is None else transv[idx]
+    if sel_rot is not None and sel_trans is not None:
+        # the floor part of each rigid transform, for reports: yaw of the rotated +Z axis
+        fwd = sel_rot[:, :, 2]
+        yaw = np.arctan2(fwd[:, 0], fwd[:, 2])
+        cosv[idx], sinv[idx] = np.cos(yaw), np.sin(yaw)
+        txv[idx], tzv[idx] = sel_trans[:, 0], sel_trans[:, 2]
+    y = place_points(
+        inst.tails[seq[:-1]],
+        cosv[idx[:-1]],
+        sinv[idx[:-1]],
+        txv[idx[:-1]],
+        tzv[idx[:-1]],
+        None if sel_rot is None else sel_rot[:-1],
+        None if sel_trans is None else sel_trans[:-1],
+    )
+    h = place_points(
+        inst.heads[seq[1:]],
+        cosv[idx[1:]],
+        sinv[idx[1:]],
+        txv[idx[1:]],
+        tzv[idx[1:]],
+        None if sel_rot is None else sel_rot[1:],
+        None if sel_trans is None else sel_trans[1:],
+    )
     C = ((y - h) ** 2).sum(axis=(1, 2)) / q_pts if n_seg > 1 else np.zeros(0)
     Dsel = Dv[idx]
     return Timed(
@@ -670,4 +864,6 @@ def retime(
         tzv[idx],
         Dsel,
         C,
+        sel_rot,
+        sel_trans,
     )

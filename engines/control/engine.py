@@ -227,7 +227,10 @@ class ControlEngine(Engine):
         lengths_s = inst.length / inst.fps
         cell_inst, cell_dur = legal_cells(lengths_s, rate, request.stretch_s, request.stretch_ratio)
         constraints = self._constraints(request, x.shape[0], rate)
-        interp = interpretation(x, inst, cell_inst, cell_dur, rate, int(round(request.context_s * rate)))
+        rigid = request.alignment == "rigid"
+        interp = interpretation(
+            x, inst, cell_inst, cell_dur, rate, int(round(request.context_s * rate)), rigid=rigid
+        )
         apply_constraints(
             interp.D, cell_inst, cell_dur, [(s, int(np.floor(t * rate))) for s, t in constraints]
         )
@@ -349,6 +352,7 @@ class ControlEngine(Engine):
                 window,
                 seg_constraints,
                 int(round(request.context_s * rate_full)),
+                rigid=request.alignment == "rigid",
             )
         except Infeasible as exc:
             raise EngineError(str(exc)) from None
@@ -400,6 +404,14 @@ class ControlEngine(Engine):
                     "stretch": float(d / length),
                     "heading_deg": float(np.degrees(np.arctan2(timed.sin[i], timed.cos[i]))),
                     "translation": [float(timed.tx[i]), float(timed.tz[i])],
+                    **(
+                        {}
+                        if timed.rot is None or timed.trans is None
+                        else {
+                            "rotation_matrix": timed.rot[i].tolist(),
+                            "translation_3d": timed.trans[i].tolist(),
+                        }
+                    ),
                     "interpretation": float(timed.D[i]),
                     "continuity": float(timed.C[i - 1]) if i > 0 else 0.0,
                     "first_output_frame": int(first_out[i]) if i < first_out.size else None,

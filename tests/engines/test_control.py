@@ -19,6 +19,7 @@ from engines.control.dp import (
     interpretation,
     legal_cells,
     min_plus,
+    paired_procrustes,
     retime,
     solve,
 )
@@ -362,3 +363,111 @@ def test_context_and_velocity_continuity_options() -> None:
     assert np.allclose(
         three.tails[:, : engine.solver_instances_.tails.shape[1]], engine.solver_instances_.tails
     )
+
+
+def random_rotation(seed: int) -> np.ndarray:
+    """A random proper 3x3 rotation."""
+    q, r = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_procrustes_recovers_a_3d_rigid_move(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    tmpl = rng.normal(size=(4, 30, 3))
+    rots = np.stack([random_rotation(seed * 10 + i) for i in range(4)])
+    trans = rng.normal(size=(4, 3))
+    win = np.einsum("mij,mnj->mni", rots, tmpl) + trans[:, None]
+    res, r, t = paired_procrustes(win, tmpl)
+    assert np.allclose(res, 0.0, atol=1e-9)
+    assert np.allclose(r, rots, atol=1e-9) and np.allclose(t, trans, atol=1e-9)
+    assert np.allclose(np.linalg.det(r), 1.0)
+    # a mirror image is not reachable by a proper rotation: a positive residual, never a reflection
+    mirrored = win * np.array([-1.0, 1.0, 1.0])
+    res_m, r_m, _ = paired_procrustes(mirrored, tmpl)
+    assert (res_m > 1.0).all() and np.allclose(np.linalg.det(r_m), 1.0)
+
+
+def test_rigid_interpretation_matches_tilted_input_and_bounds_the_floor_one() -> None:
+    cloud = random_database(130, points=4, seed=5)
+    lengths = [6, 8, 7, 5, 9, 6, 8, 7, 6, 8, 7, 6, 8, 7, 6]
+    inst = instances_of(cloud, lengths)
+    order = [3, 11, 0]
+    x = np.concatenate([cloud[inst.start[s] : inst.start[s] + inst.length[s]] for s in order])
+    tilt = random_rotation(4)
+    x = x @ tilt.T + np.array([1.0, 0.3, -2.0])  # tilted off the floor: no yaw + floor move fits
+    ci, cd = legal_cells(inst.length / inst.fps, RATE, 0.1, None)
+    floor = interpretation(x, inst, ci, cd, RATE)
+    full = interpretation(x, inst, ci, cd, RATE, rigid=True)
+    finite = np.isfinite(floor.D)
+    assert np.array_equal(finite, np.isfinite(full.D))
+    assert (full.D[finite] <= floor.D[finite] + 1e-9).all()  # more freedom, never a worse fit
+    # the cell copying the first segment, ending where it ends, fits exactly, with the tilt
+    c = int(np.flatnonzero((ci == 3) & (cd == 5))[0])  # instance 3 lasts 5 frames
+    assert full.D[c, 5] == pytest.approx(0.0, abs=1e-9) and floor.D[c, 5] > 1e-3
+    assert np.allclose(full.rot[c, 5], tilt, atol=1e-6)  # type: ignore[index]
+    # the DP with rigid alignments recovers the sequence; the floor DP cannot fit it
+    res = solve(full, inst, ci, cd, k=0.0)
+    assert list(ci[res.cells]) == order and res.score == pytest.approx(0.0, abs=1e-8)
+    assert solve(floor, inst, ci, cd, k=0.0).score > 1e-3
+    # a rigid alignment of a yaw + floor move is that move
+    yawed = rigid(x @ tilt, 0.7, 0.4, -0.2)
+    both = interpretation(yawed, inst, ci, cd, RATE, rigid=True)
+    assert both.D[c, 5] == pytest.approx(0.0, abs=1e-9)
+    src = cloud[inst.start[3] : inst.start[3] + 1]  # the segment's first frame lands on the input's
+    placed = both.place(src, np.array([c]), np.array([5]))
+    assert placed == pytest.approx(yawed[:1], abs=1e-6)
+    # re-timing with rigid alignments keeps the recovered transform for assembly
+    timed = retime(x, inst, np.array(order), np.array([0, 5, 11, 17]), 0.0, RATE, 0.1, None, 1, rigid=True)
+    assert timed.rot is not None and timed.trans is not None
+    assert np.allclose(timed.rot, tilt, atol=1e-6) and timed.interpretation == pytest.approx(0.0, abs=1e-8)
+
+
+def tilted(motion, angle_deg: float):  # type: ignore[no-untyped-def]
+    """``motion`` rotated about the +X axis through the origin (its whole body leans)."""
+    from dataclasses import replace
+
+    from motion import rotations as rot
+
+    q = rot.from_axis_angle(np.array([1.0, 0.0, 0.0]), np.radians(angle_deg))
+    root = rot.rotate(q, motion.root_positions)
+    rotations = motion.rotations.copy()
+    rotations[:, 0] = rot.multiply(q, rotations[:, 0])
+    return replace(motion, root_positions=root, rotations=rotations)
+
+
+def test_rigid_alignment_option_end_to_end() -> None:
+    walks = [bvh_text(walking_biped(240, speed=1.0 + 0.2 * i, seed=i)).encode() for i in range(3)]
+    # each walker controls itself: a control motion, its own target
+    clips = [ClipInput(f"{role}{i}", w) for i, w in enumerate(walks) for role in ("lead", "walk")]
+    spec = parse_database_spec(
+        {
+            "kind": "control",
+            "pairs": [{"control": f"lead{i}", "target": f"walk{i}"} for i in range(3)],
+            "clips": [{"bvh": f"{c.name}.bvh", "name": c.name} for c in clips],
+            "segmentation": {"method": "fixed", "seconds": 0.5},
+        }
+    )
+    library = build_library(clips, spec.fps)
+    arrays = ControlEngine.build(spec, library, Collect(), lambda: False)
+    arrays.update(library_to_arrays(library))
+    engine = ControlEngine(library, arrays)
+    lean = tilted(walking_biped(90, speed=1.2, seed=1), 25.0)
+    hips_in = lean.global_positions()[:, 0]
+    errors = {}
+    for mode in ("floor", "rigid"):
+        req = parse_job_request(
+            {"engine": "control", "control": {"bvh": "c.bvh"}, "alignment": mode, "footskate": False}
+        )
+        req.attach_inputs({"c.bvh": bvh_text(lean).encode()})
+        out = Collect()
+        engine.search(req, 5.0, out, lambda: False)
+        sol = out.solutions[-1]
+        hips = sol.motion.global_positions()[:, 0]
+        errors[mode] = float(np.linalg.norm(hips - hips_in, axis=-1).mean())
+        seg = sol.annotations["segments"][0]
+        assert ("rotation_matrix" in seg) == (mode == "rigid")
+    assert errors["rigid"] < 0.02 < errors["floor"]
+    with pytest.raises(ValidationError, match="alignment"):
+        parse_job_request({"engine": "control", "control": {"bvh": "c.bvh"}, "alignment": "affine"})
