@@ -1,6 +1,7 @@
 """Speed of the control-by-example engine: seconds of input per second of compute, with beam and exact.
 
-Usage: ``python bench/control.py [--repeat N] [--held 07]`` from the project root (needs ../shared/data).
+Usage: ``python bench/control.py [--repeat N] [--held 07] [--solve-fps 7.5]`` from the project root
+(needs ../shared/data; ``--solve-fps`` overrides the requests' downsampled rate, e.g. the paper's 7.5 Hz).
 
 Two databases, as in Hsu et al. 2004 Sec. 6: the CMU salsa couples (13 pairs, the held-out dance's
 leader drives the follower; beats segmentation) and Bandai-Namco dataset-2 walks (30 clips, derived
@@ -136,7 +137,7 @@ def measure(engine: ControlEngine, request: Any, input_s: float, repeat: int) ->
     return out
 
 
-def salsa(held: str, repeat: int) -> dict[str, Any]:
+def salsa(held: str, repeat: int, solve_fps: float | None = None) -> dict[str, Any]:
     s = DATA / "cmu-salsa"
     trials = sorted({f.name[3:5] for f in s.glob("60_*_scaled.bvh")})
     engine = engine_for(
@@ -151,13 +152,14 @@ def salsa(held: str, repeat: int) -> dict[str, Any]:
         }
     )
     lead = s / f"60_{held}_scaled.bvh"
-    request = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}})
+    extra = {} if solve_fps is None else {"solve_fps": solve_fps}
+    request = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}, **extra})
     request.attach_inputs({"lead.bvh": lead.read_bytes()})
     motion = parse_bvh(lead.read_bytes())
     return {"database": f"cmu-salsa minus {held}", **measure(engine, request, motion.duration_s, repeat)}
 
 
-def walks(repeat: int) -> dict[str, Any]:
+def walks(repeat: int, solve_fps: float | None = None) -> dict[str, Any]:
     b = DATA / "bandai-namco" / "dataset-2"
     train = [
         b / f"dataset-2_{kind}_normal_{i:03d}.bvh"
@@ -173,8 +175,9 @@ def walks(repeat: int) -> dict[str, Any]:
     )
     held = parse_bvh((b / "dataset-2_walk_normal_012.bvh").read_bytes()).to_units("m")
     path, _ = ground_frames(held)
+    extra = {} if solve_fps is None else {"solve_fps": solve_fps}
     request = parse_job_request(
-        {"engine": "control", "control": {"trajectory": {"fps": held.fps, "points": path.tolist()}}}
+        {"engine": "control", "control": {"trajectory": {"fps": held.fps, "points": path.tolist()}}, **extra}
     )
     return {
         "database": "bandai dataset-2 walks (30 clips)",
@@ -186,11 +189,27 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--held", default="07", help="held-out salsa trial")
+    parser.add_argument(
+        "--solve-fps",
+        type=float,
+        default=None,
+        help="rate of the downsampled solve (default: the request's 10)",
+    )
     args = parser.parse_args()
+    if args.solve_fps is not None and args.solve_fps <= 0:
+        parser.error("--solve-fps must be positive")
     if not DATA.exists():
         print(json.dumps({"skipped": f"no shared data at {DATA}"}))
         return
-    print(json.dumps({"salsa": salsa(args.held, args.repeat), "walk": walks(args.repeat)}))
+    print(
+        json.dumps(
+            {
+                "solve_fps": 10.0 if args.solve_fps is None else args.solve_fps,
+                "salsa": salsa(args.held, args.repeat, args.solve_fps),
+                "walk": walks(args.repeat, args.solve_fps),
+            }
+        )
+    )
 
 
 if __name__ == "__main__":
