@@ -1,6 +1,6 @@
 """Benchmark of the annotation engine on the shared Bandai-Namco data; prints one JSON object.
 
-    python bench/annotations.py [--part all|build|search|propagation] [--datasets 1,2]
+    python bench/annotations.py [--part all|build|search|propagation|joined] [--datasets 1,2]
 
 * ``build``: build time of an annotated database of the whole set (dataset-1 and dataset-2; labels
   from the file names, ``--labelled`` clips per label labelled, the rest propagated), split into
@@ -8,8 +8,19 @@
 * ``search``: on that database, the time of one 32/16/8 pass for a 30 s output (median of
   ``--repeats``), and passes / solutions per second in anytime mode (``--budget`` seconds).
 * ``propagation``: on dataset-2, per-label and macro per-frame F1 on held-out clips as the number
-  of labelled clips per label grows from 1 to 5 (the others held out; clips picked at random,
-  ``--trials`` draws).
+  of labelled clips per label grows (``--ks``, default 1 to 5; the others held out; clips picked at
+  random, ``--trials`` draws), with the build's settings (every frame classified).
+* ``joined``: on dataset-2, whether propagation places label *changes* inside clips. Per ``--ks``
+  (default 3) and trial, the labelled clips are picked as in ``propagation`` and kept whole; the
+  held-out clips are shuffled (seeded by k and trial) and joined in pairs of different labels, the
+  second clip turned about +Y and moved on the floor so that it starts at the first one's last
+  ground position and heading. The library of labelled + joined clips is embedded and propagated
+  with the build's settings; on the joined frames (truth: each half's file label): macro per-frame
+  F1, and per-frame accuracy (the true label and no other) within 1 s either side of each join and
+  farther from it. Part of ``all``, being cheap: it embeds and propagates a new library per trial,
+  about 8 s a trial on one core (19 s with the default 2 trials); ``--ks`` applies to it too.
+
+``--spec '{"context_s": 0}'`` runs any part with other database settings than the spec's defaults.
 
 Figures are wall-clock on whatever else the machine runs; repeat for stable numbers.
 """
@@ -32,9 +43,12 @@ sys.path.insert(0, str(ROOT))
 
 from engines.annotations.build import SVM_DIMS, build_annotated, embed_library, standardize  # noqa: E402
 from engines.annotations.engine import AnnotationEngine, AnnotationSearch  # noqa: E402
-from engines.annotations.propagate import propagate  # noqa: E402
+from engines.annotations.propagate import Propagation, propagate  # noqa: E402
 from engines.base import CollectingEmitter  # noqa: E402
 from engines.library import ClipInput, MotionLibrary, build_library, library_to_arrays  # noqa: E402
+from motion import rotations as rot  # noqa: E402
+from motion.ground import ground_frames  # noqa: E402
+from motion.motion import Motion  # noqa: E402
 from schemas.annotations import AnnotatedDatabaseSpec, AnnotationRequest  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data" / "bandai-namco"
@@ -105,7 +119,7 @@ def bench_build(args: argparse.Namespace) -> tuple[dict[str, Any], AnnotationEng
     t0 = time.perf_counter()
     lib, _ = load(items, labelled)
     t_parse = time.perf_counter() - t0
-    spec = AnnotatedDatabaseSpec(clips=[{"bvh": Path(f).name} for f, _ in items])
+    spec = AnnotatedDatabaseSpec(clips=[{"bvh": Path(f).name} for f, _ in items], **args.spec)
     rec = CollectingEmitter()
     t0 = time.perf_counter()
     arrays = build_annotated(spec, lib, rec, lambda: False)
@@ -178,18 +192,41 @@ def bench_search(engine: AnnotationEngine, args: argparse.Namespace) -> dict[str
     }
 
 
+def propagate_as_built(
+    z: np.ndarray,
+    clip_of: np.ndarray,
+    counts: list[int],
+    labels: list[list[dict[str, Any]]],
+    spec: AnnotatedDatabaseSpec,
+    fps: float,
+) -> Propagation:
+    """:func:`propagate` with the build's settings (the spec's, every frame classified)."""
+    return propagate(
+        z,
+        clip_of,
+        counts,
+        labels,
+        c=spec.svm_c,
+        gammas=spec.gammas,
+        smooth_frames=int(round(spec.smooth_s * fps)) | 1,
+        exclusive=spec.exclusive,
+        switch_cost=spec.switch_s * fps,
+        self_training=spec.self_training,
+    )
+
+
 def bench_propagation(args: argparse.Namespace) -> dict[str, Any]:
     items = files(["2"])
     truth = [lab for _, lab in items]
     lib, _ = load(items, set())
-    spec = AnnotatedDatabaseSpec(clips=[{"bvh": Path(f).name} for f, _ in items])
+    spec = AnnotatedDatabaseSpec(clips=[{"bvh": Path(f).name} for f, _ in items], **args.spec)
     emb, _, _, _ = embed_library(lib, spec)
     z = standardize(emb, SVM_DIMS)
     counts = [m.num_frames for m in lib.motions]
     clip_of = np.repeat(np.arange(len(counts)), counts)
     truth_f = np.repeat(np.array(truth), counts)
     out: dict[str, Any] = {}
-    for k in range(1, 6):
+    for k in (int(x) for x in (args.ks or "1,2,3,4,5").split(",")):
         macros: list[float] = []
         clip_acc: list[float] = []
         per: list[dict[str, float]] = []
@@ -199,7 +236,7 @@ def bench_propagation(args: argparse.Namespace) -> dict[str, Any]:
                 [{"label": truth[i], "start": 0, "end": counts[i], "value": 1}] if i in labelled else []
                 for i in range(len(items))
             ]
-            prop = propagate(z, clip_of, counts, labels, c=spec.svm_c, gammas=spec.gammas, smooth_frames=7)
+            prop = propagate_as_built(z, clip_of, counts, labels, spec, lib.fps)
             held = np.repeat(np.array([i not in labelled for i in range(len(items))]), counts)
             f1 = f1_table(prop.vocab, prop.labels, truth_f, held)
             per.append(f1)
@@ -220,15 +257,131 @@ def bench_propagation(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+def join(first: Motion, second: Motion) -> Motion:
+    """``first`` followed by ``second`` (same skeleton), ``second`` turned about +Y and moved on the
+    floor so that its first frame has ``first``'s last ground position and heading."""
+    xz1, yaw1 = ground_frames(first)
+    xz2, yaw2 = ground_frames(second)
+    turn = rot.from_yaw(yaw1[-1] - yaw2[0])
+    root = rot.rotate(turn, second.root_positions)
+    start = rot.rotate(turn, np.array([xz2[0, 0], 0.0, xz2[0, 1]]))
+    root[:, [0, 2]] += xz1[-1] - start[[0, 2]]
+    rotations = second.rotations.copy()
+    rotations[:, 0] = rot.multiply(turn, second.rotations[:, 0])
+    return Motion(
+        first.skeleton,
+        np.concatenate((first.root_positions, root)),
+        np.concatenate((first.rotations, rotations)),
+        first.fps,
+        np.concatenate((first.joint_translations, second.joint_translations)),
+        first.units,
+        f"{first.name}+{second.name}",
+    )
+
+
+def pair_up(clips: list[int], truth: list[str], rng: np.random.Generator) -> list[tuple[int, int]]:
+    """Shuffled clips in pairs of different labels: each in turn with the next unpaired clip of
+    another label (a tail of one label stays unpaired)."""
+    rest = [int(i) for i in rng.permutation(clips)]
+    pairs: list[tuple[int, int]] = []
+    while rest:
+        a = rest.pop(0)
+        b = next((i for i in rest if truth[i] != truth[a]), None)
+        if b is None:
+            break
+        rest.remove(b)
+        pairs.append((a, b))
+    return pairs
+
+
+def bench_joined(args: argparse.Namespace) -> dict[str, Any]:
+    items = files(["2"])
+    truth = [lab for _, lab in items]
+    lib, _ = load(items, set())
+    spec = AnnotatedDatabaseSpec(clips=[{"bvh": Path(f).name} for f, _ in items], **args.spec)
+    near = int(round(lib.fps))  # frames either side of a join counted as near it
+    out: dict[str, Any] = {}
+    n_pairs: list[int] = []
+    for k in (int(x) for x in (args.ks or "3").split(",")):
+        macros: list[float] = []
+        acc_near: list[float] = []
+        acc_far: list[float] = []
+        for trial in range(args.trials):
+            picked = pick_labelled(truth, k, np.random.default_rng(100 * k + trial))
+            labelled = sorted(picked)
+            held_out = [i for i in range(len(items)) if i not in picked]
+            pairs = pair_up(held_out, truth, np.random.default_rng(10_000 + 100 * k + trial))
+            n_pairs.append(len(pairs))
+            motions = [lib.motions[i] for i in labelled]
+            motions += [join(lib.motions[a], lib.motions[b]) for a, b in pairs]
+            jlib = MotionLibrary(tuple(m.name for m in motions), tuple(motions), tuple(() for _ in motions))
+            emb, _, _, _ = embed_library(jlib, spec)
+            z = standardize(emb, SVM_DIMS)
+            counts = [m.num_frames for m in motions]
+            clip_of = np.repeat(np.arange(len(counts)), counts)
+            labels: list[list[dict[str, Any]]] = [
+                [{"label": truth[i], "start": 0, "end": lib.motions[i].num_frames, "value": 1}]
+                for i in labelled
+            ]
+            labels += [[] for _ in pairs]
+            prop = propagate_as_built(z, clip_of, counts, labels, spec, lib.fps)
+            truth_f = np.concatenate(
+                [np.repeat(truth[i], lib.motions[i].num_frames) for i in labelled]
+                + [
+                    np.repeat([truth[a], truth[b]], [lib.motions[a].num_frames, lib.motions[b].num_frames])
+                    for a, b in pairs
+                ]
+            )
+            held = clip_of >= len(labelled)
+            f1 = f1_table(prop.vocab, prop.labels, truth_f, held)
+            macros.append(float(np.mean(list(f1.values()))))
+            on = prop.labels > 0
+            truth_col = np.array([prop.vocab.index(t) for t in truth_f])
+            right = on[np.arange(len(truth_f)), truth_col] & (on.sum(axis=1) == 1)
+            near_join = np.zeros(len(truth_f), dtype=bool)
+            ends = np.cumsum(counts)
+            for n, (a, _) in enumerate(pairs):
+                end = int(ends[len(labelled) + n])
+                start = end - counts[len(labelled) + n]
+                change = start + lib.motions[a].num_frames  # first frame of the second clip
+                near_join[max(start, change - near) : min(end, change + near)] = True
+            acc_near.append(float(right[held & near_join].mean()))
+            acc_far.append(float(right[held & ~near_join].mean()))
+        out[str(k)] = {
+            "macro_f1": round(float(np.mean(macros)), 4),
+            "accuracy_near_change": round(float(np.mean(acc_near)), 4),
+            "accuracy_far_from_change": round(float(np.mean(acc_far)), 4),
+        }
+    return {
+        "dataset": "bandai-namco dataset-2",
+        "pairs": int(round(float(np.mean(n_pairs)))),
+        "trials": args.trials,
+        "by_labelled_clips": out,
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--part", default="all", choices=["all", "build", "search", "propagation"])
+    ap.add_argument("--part", default="all", choices=["all", "build", "search", "propagation", "joined"])
     ap.add_argument("--datasets", default="1,2")
     ap.add_argument("--labelled", type=int, default=3)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--budget", type=float, default=5.0)
     ap.add_argument("--trials", type=int, default=2)
+    ap.add_argument(
+        "--ks", default=None, help="propagation / joined: labelled clips per label (default 1,2,3,4,5 / 3)"
+    )
+    ap.add_argument(
+        "--spec",
+        default="{}",
+        help="database spec settings as a JSON object, e.g. '{\"context_s\": 0}' (default: the spec's)",
+    )
     args = ap.parse_args()
+    try:
+        args.spec = json.loads(args.spec)
+        AnnotatedDatabaseSpec(clips=[{"bvh": "x.bvh"}], **args.spec)
+    except (json.JSONDecodeError, TypeError, ValueError) as exc:
+        ap.error(f"--spec: {exc}")
     if not DATA.is_dir():
         print(json.dumps({"skipped": f"no data at {DATA}"}))
         return
@@ -240,6 +393,8 @@ def main() -> None:
             result["search"] = bench_search(engine, args)
     if args.part in ("all", "propagation"):
         result["propagation"] = bench_propagation(args)
+    if args.part in ("all", "joined"):
+        result["joined"] = bench_joined(args)
     print(json.dumps(result))
 
 

@@ -36,6 +36,13 @@ class AnnotatedDatabaseSpec(DatabaseSpecBase):
         default=1.0, gt=0, le=10, description="SVM embedding: joint positions over this window (s)"
     )
     window_samples: int = Field(default=7, ge=1, le=61, description="time samples of the SVM window")
+    context_s: float = Field(
+        default=4.0,
+        ge=0,
+        le=20,
+        description="SVM embedding: coarse context window around the frame (s; 0 = none)",
+    )
+    context_samples: int = Field(default=9, ge=0, le=61, description="time samples of the context window")
     svm_joints: list[str] | None = Field(
         default=None,
         min_length=1,
@@ -54,6 +61,19 @@ class AnnotatedDatabaseSpec(DatabaseSpecBase):
     )
     smooth_s: float = Field(
         default=0.2, ge=0, le=5, description="moving average of SVM decision values before the sign (s)"
+    )
+    exclusive: bool = Field(
+        default=True,
+        description="labels never annotated together exclude each other (each frame: best allowed set)",
+    )
+    switch_s: float = Field(
+        default=1.0,
+        ge=0,
+        le=30,
+        description="with exclusive: cost of a label change within a clip (s of unit margin; 0 = none)",
+    )
+    self_training: int = Field(
+        default=1, ge=0, le=5, description="self-training rounds on the confidently propagated frames"
     )
     predict_step_s: float = Field(
         default=0.1, ge=0, le=1, description="classify frames this far apart, interpolate in between (s)"

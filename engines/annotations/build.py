@@ -6,7 +6,8 @@ Arrays stored beside the motion library (all numeric or str, JSON in 0-d str arr
   reference as written), used in provenance.
 * ``ann.vocab`` ``(L,)`` str; ``ann.labels`` ``(F, L)`` int8 +1/-1 per database frame (the user's
   labels where given, the SVMs' elsewhere); ``ann.known`` ``(F, L)`` bool (user-given);
-  ``ann.decision`` ``(F, L)`` float32 SVM decision values; ``ann.report`` JSON: per label the
+  ``ann.decision`` ``(F, L)`` float32 signed confidence of the labels (SVM decision values;
+  see :mod:`engines.annotations.propagate`); ``ann.report`` JSON: per label the
   training counts, chosen gamma and cross-validated precision / recall / F1.
 * ``ann.features`` ``(F, d)`` float32: ``F(f)`` (:func:`engines.annotations.blocks.pca_features`).
 * ``ann.ground_xz`` ``(F, 2)`` metres and ``ann.ground_yaw`` ``(F,)`` radians: each frame's body
@@ -30,9 +31,9 @@ from .features import (
     body_joints,
     clip_frames,
     continuity_raw,
+    embedding_offsets,
     svm_joint_indices,
     window_embedding,
-    window_offsets,
 )
 from .propagate import propagate
 
@@ -57,7 +58,9 @@ def embed_library(library: MotionLibrary, spec: Any) -> tuple[FloatArray, FloatA
     sk = library.motions[0].skeleton
     svm_j = svm_joint_indices(sk, spec.svm_joints)
     body = body_joints(sk)
-    offsets = window_offsets(library.fps, spec.window_s, spec.window_samples)
+    offsets = embedding_offsets(
+        library.fps, spec.window_s, spec.window_samples, spec.context_s, spec.context_samples
+    )
     emb, raw, xzs, yaws = [], [], [], []
     for m in library.motions:
         pos, xz, yaw = clip_frames(m)
@@ -110,6 +113,9 @@ def _build(spec: Any, library: MotionLibrary, emit: Emitter, should_stop: Should
         max_train_frames=spec.max_train_frames,
         smooth_frames=smooth,
         step=max(1, int(round(spec.predict_step_s * library.fps))),
+        exclusive=spec.exclusive,
+        switch_cost=spec.switch_s * library.fps,
+        self_training=spec.self_training,
         progress=svm_progress,
         should_stop=should_stop,
     )

@@ -7,7 +7,10 @@ Two embeddings of every database frame, both in that frame's torso (ground) fram
 * :func:`window_embedding` (Sec. 3.1, the SVM input): the positions of a few joints over a
   one-second window centred on the frame, sampled at ``samples`` instants, ``(F, S*K*3)`` metres.
   The paper uses every joint at every frame of the window; a subsample keeps the SVM quick and
-  loses little (neighbouring frames are nearly collinear).
+  loses little (neighbouring frames are nearly collinear). A coarser, longer context window
+  (:func:`embedding_offsets`) adds what the body did before and after: the straight stretch of a
+  turning walk and the raise of a raise-up look like plain walking and the raise of a wave
+  within one second, not within four.
 * :func:`continuity_features` (Sec. 3.2, the input of the PCA giving ``F(f)``): positions,
   velocities and accelerations of every body joint, each group divided by its RMS over the clip
   set so that the three carry comparable weight; ``(F, 9*J)``.
@@ -71,6 +74,19 @@ def window_offsets(fps: float, window_s: float, samples: int) -> IntArray:
     """``(S,)`` frame offsets of the window samples, symmetric about 0."""
     half = 0.5 * window_s * fps
     return np.unique(np.round(np.linspace(-half, half, samples)).astype(np.intp))
+
+
+def embedding_offsets(
+    fps: float, window_s: float, samples: int, context_s: float = 0.0, context_samples: int = 0
+) -> IntArray:
+    """``(S,)`` sorted frame offsets of the SVM embedding: the fine window
+    (:func:`window_offsets`) and, when ``context_s > 0`` and ``context_samples > 0``, a coarse
+    context window of ``context_samples`` instants over ``context_s`` seconds (shared offsets
+    counted once)."""
+    fine = window_offsets(fps, window_s, samples)
+    if context_s <= 0 or context_samples <= 0:
+        return fine
+    return np.unique(np.concatenate((fine, window_offsets(fps, context_s, context_samples))))
 
 
 def window_embedding(

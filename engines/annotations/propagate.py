@@ -17,8 +17,26 @@ Choices the paper leaves open (see :class:`schemas.annotations.AnnotatedDatabase
 * training frames are subsampled evenly (at most ``max_train_frames`` per label, half of them
   positives when there are enough), with balanced class weights; cross-validation runs on at most
   ``cv_frames`` of them.
-* decision values are averaged over ``smooth_s`` within each clip before taking the sign, which
+* decision values are averaged over ``smooth_s`` within each clip before labelling, which
   removes single-frame flicker at the edges of actions.
+
+Three additions in the paper's spirit (``exclusive``, ``switch_s`` and ``self_training`` in the
+spec; each can be turned off):
+
+* **exclusive labels**: labels never annotated on the same frame are taken to exclude each other.
+  The allowed label sets are the cliques of the co-occurrence graph (:func:`label_states`: each
+  label alone, walk + wave when some frame carries both, ...), and every frame gets the set whose
+  signs agree best with all the SVMs' decision values, instead of each label thresholding its
+  own uncalibrated SVM (which leaves frames with no label or two exclusive ones).
+* **temporal consistency**: the sets are chosen per clip by dynamic programming
+  (:func:`viterbi`) with a cost per change, so a clip changes labels where the evidence for the
+  change outweighs the cost, not at every ambiguous frame.
+* **self-training** (transductive): the most confident propagated frames of each label set join
+  the training set with a lower weight, the SVMs retrain with the same gamma, and every frame is
+  labelled again (:func:`pseudo_labels`).
+
+The stored decision value of a propagated label is its signed confidence: half the per-frame
+score lost by flipping it (``|d|`` of its SVM when labels are independent).
 """
 
 from __future__ import annotations
@@ -214,6 +232,156 @@ def strided_decision(
     return np.asarray((1 - w) * values[at] + w * values[bt], dtype=np.float32)
 
 
+def cooccurrence(values: Int8Array, known: BoolArray) -> BoolArray:
+    """``(L, L)`` whether two labels are both +1 on some user-annotated frame (the diagonal: whether
+    a label has any positive frame)."""
+    pos = (known & (values > 0)).astype(np.float64)
+    return np.asarray(pos.T @ pos > 0)
+
+
+def label_states(values: Int8Array, known: BoolArray, max_states: int = 512) -> Int8Array | None:
+    """The label combinations propagation may assign, as ``(S, L)`` +1 / -1 rows.
+
+    Labels that never co-occur on an annotated frame are taken as mutually exclusive, so the
+    states are the cliques of the co-occurrence graph (:func:`cooccurrence`): every label alone,
+    every co-occurring pair (e.g. walk + wave), and so on, plus the empty state (no label), last:
+    a frame that no SVM claims (every decision value negative) stays unlabelled rather than being
+    forced into the least unlikely label, so motion unlike anything labelled (a kick among walks
+    and runs) is not offered to the search as one of them. ``None`` when no label has a positive
+    frame or there are more than ``max_states`` cliques (then labels are decided independently)."""
+    co = cooccurrence(values, known)
+    n = co.shape[0]
+    cliques: list[list[int]] = []
+
+    def grow(current: list[int], candidates: list[int]) -> bool:
+        for i, j in enumerate(candidates):
+            clique = [*current, j]
+            cliques.append(clique)
+            if len(cliques) > max_states:
+                return False
+            if not grow(clique, [k for k in candidates[i + 1 :] if co[j, k]]):
+                return False
+        return True
+
+    if not grow([], [j for j in range(n) if co[j, j]]) or not cliques:
+        return None
+    states = -np.ones((len(cliques) + 1, n), dtype=np.int8)
+    for s, clique in enumerate(cliques):
+        states[s, clique] = 1
+    return states
+
+
+def viterbi(score: FloatArray, counts: Sequence[int], switch_cost: float, batch: int = 64) -> IntArray:
+    """Per clip, the state sequence maximizing the summed per-frame ``score`` ``(F, S)`` minus
+    ``switch_cost`` per change of state; returns ``(F,)`` state indices.
+
+    Clips are processed in batches of similar length (vectorized over clips and states)."""
+    f_total, n_states = score.shape
+    out = np.zeros(f_total, dtype=np.intp)
+    if f_total == 0:
+        return out
+    c = np.asarray(counts, dtype=np.intp)
+    start = np.concatenate(([0], np.cumsum(c)[:-1]))
+    order = np.argsort(c, kind="stable")
+    order = order[c[order] > 0]
+    ar = np.arange(n_states)
+    for b in range(0, order.size, batch):
+        clips = order[b : b + batch]
+        n = c[clips]
+        first = start[clips]
+        t_max = int(n.max())
+        acc = score[first].copy()  # (B, S)
+        back = np.zeros((t_max, clips.size, n_states), dtype=np.int32)
+        for t in range(1, t_max):
+            live = t < n
+            best = acc.argmax(axis=1)
+            jump = acc[np.arange(clips.size), best] - switch_cost
+            stay = acc >= jump[:, None]
+            back[t] = np.where(stay, ar[None, :], best[:, None])
+            rows = np.minimum(first + t, f_total - 1)
+            new = np.maximum(acc, jump[:, None]) + score[rows]
+            acc = np.where(live[:, None], new, acc)
+        state = acc.argmax(axis=1)
+        for t in range(t_max - 1, -1, -1):
+            ends = np.flatnonzero(t < n)
+            out[first[ends] + t] = state[ends]
+            if t:
+                state[ends] = back[t, ends, state[ends]]
+    return out
+
+
+def decode(
+    decision: FloatArray,
+    values: Int8Array,
+    known: BoolArray,
+    counts: Sequence[int],
+    states: Int8Array | None,
+    switch_cost: float,
+    floor: float = 0.05,
+) -> tuple[Int8Array, FloatArray]:
+    """Labels of every frame from the (smoothed) SVM decision values ``(F, L)``.
+
+    With ``states`` (:func:`label_states`) each frame gets one allowed label combination: the
+    one whose signs agree best with the decision values (score ``sum_j s_j d_j``), chosen per
+    clip by :func:`viterbi` with ``switch_cost`` (decision units x frames) per change, so a clip
+    changes labels only where the evidence for the change outweighs the cost. User-given values
+    constrain the states of their frames. Without ``states``, each label is the sign of its
+    decision value.
+
+    Returns
+    -------
+    labels: ``(F, L)`` int8 +1 / -1 (user-given values where known).
+    confidence: ``(F, L)`` >= 0: half the per-frame score lost by flipping that label to the best
+        state with the other value (``|d_j|`` for independent labels), at least ``floor``.
+    """
+    if states is None:
+        labels = np.where(known, values, np.where(decision >= 0, 1, -1)).astype(np.int8)
+        conf = np.maximum(np.abs(decision), floor)
+        return labels, np.where(known, 1.0, conf)
+    s = states.astype(np.float64)
+    score = decision @ s.T  # (F, S)
+    if known.any():
+        clash = (known[:, None, :] & (states[None, :, :] != values[:, None, :])).sum(axis=2)
+        score = score - 1e6 * clash
+    pick = viterbi(score, counts, switch_cost)
+    labels = np.where(known, values, states[pick]).astype(np.int8)
+    own = score[np.arange(score.shape[0]), pick]
+    conf = np.full(decision.shape, floor)
+    for j in range(states.shape[1]):
+        for sign in (1, -1):
+            at = states[pick, j] == sign
+            other = states[:, j] != sign
+            if not at.any():
+                continue
+            if other.any():
+                alt = score[np.ix_(np.flatnonzero(at), np.flatnonzero(other))].max(axis=1)
+                conf[at, j] = np.maximum(0.5 * (own[at] - alt), floor)
+            else:  # no state has the other value: as sure as the SVM is
+                conf[at, j] = np.maximum(np.abs(decision[at, j]), floor)
+    return labels, np.where(known, 1.0, conf)
+
+
+def pseudo_labels(labels: Int8Array, confidence: FloatArray, known: BoolArray, fraction: float) -> BoolArray:
+    """``(F,)`` frames to add to the training set in a self-training round: among frames with no
+    user-given value, the most confident ``fraction`` of each assigned label combination (the
+    frame's confidence is its least confident label), so that every combination contributes in
+    proportion and none takes over."""
+    free = ~known.any(axis=1)
+    chosen = np.zeros(labels.shape[0], dtype=bool)
+    if fraction <= 0 or not free.any():
+        return chosen
+    conf = confidence.min(axis=1)
+    idx = np.flatnonzero(free)
+    _, group = np.unique(labels[idx], axis=0, return_inverse=True)
+    group = np.asarray(group).reshape(-1)
+    for g in np.unique(group):
+        members = idx[group == g]
+        k = int(round(fraction * members.size))
+        if k:
+            chosen[members[np.argsort(-conf[members], kind="stable")[:k]]] = True
+    return chosen
+
+
 @dataclass(slots=True)
 class Propagation:
     """Result of :func:`propagate`: per database frame and label."""
@@ -221,11 +389,24 @@ class Propagation:
     vocab: list[str]
     labels: Int8Array  # (F, L) +1 / -1
     known: BoolArray  # (F, L) user-given
-    decision: npt.NDArray[np.float32]  # (F, L) smoothed SVM decision values (+-1 where known)
+    decision: npt.NDArray[np.float32]  # (F, L) signed confidence of the labels (+-1 where known)
     models: list[LabelModel]
 
     def report_json(self) -> str:
         return json.dumps([m.to_json() for m in self.models])
+
+
+def _fit(
+    embedding: FloatArray,
+    y: Int8Array,
+    frames: IntArray,
+    weights: FloatArray,
+    c: float,
+    gamma: float,
+) -> SVC:
+    model = SVC(C=c, kernel="rbf", gamma=gamma, class_weight="balanced")
+    model.fit(embedding[frames], y[frames], sample_weight=weights)
+    return model
 
 
 def propagate(
@@ -241,6 +422,11 @@ def propagate(
     cv_frames: int = 1200,
     smooth_frames: int = 1,
     step: int = 1,
+    exclusive: bool = True,
+    switch_cost: float = 0.0,
+    self_training: int = 0,
+    pseudo_fraction: float = 0.5,
+    pseudo_weight: float = 0.5,
     progress: Callable[[float, str], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
 ) -> Propagation:
@@ -255,14 +441,32 @@ def propagate(
     smooth_frames: moving-average width of the decision values (odd frames; 1 = none).
     step: classify every ``step``-th frame of a clip (and its last) and interpolate the decision
         values linearly in between (the window embedding changes slowly; 1 = every frame).
+    exclusive: labels that never co-occur on an annotated frame exclude each other; every frame
+        gets the allowed combination that best fits all the SVMs (:func:`decode`), else each label
+        is the sign of its own SVM.
+    switch_cost: with ``exclusive``, the cost (decision units x frames) of a change of labels
+        within a clip; 0 decides every frame on its own.
+    self_training: rounds of transductive self-training: the most confident ``pseudo_fraction``
+        of the propagated frames of each label combination join the training set with weight
+        ``pseudo_weight`` (the user's frames weigh 1), the SVMs retrain (same gamma) and the
+        frames are labelled again.
     """
     vocab = vocabulary(labels)
     values, known = known_labels(labels, counts, vocab)
-    out = values.copy()
-    decision = values.astype(np.float32)
+    n_frames, n_labels = values.shape
+    decision = values.astype(np.float64)
     scale = 1.0 / max(float(embedding.var(axis=0).sum()), 1e-12)
     grid = [g * scale for g in gammas]
+    states = label_states(values, known) if exclusive else None
     models: list[LabelModel] = []
+    fitted: list[tuple[SVC, float] | None] = []
+    rounds = 1 + max(int(self_training), 0)
+    total_steps = max(n_labels * rounds, 1)
+
+    def finish_step(done: int, message: str) -> None:
+        if progress is not None:
+            progress(done / total_steps, message)
+
     for j, name in enumerate(vocab):
         if should_stop is not None and should_stop():
             raise InterruptedError("stopped")
@@ -271,16 +475,15 @@ def propagate(
         unknown = np.flatnonzero(~k)
         if n_pos == 0 or n_neg == 0:
             status = "no positives" if n_pos == 0 else "no negatives"
-            out[unknown, j] = -1 if n_pos == 0 else 1
-            decision[unknown, j] = float(out[unknown[:1], j][0]) if unknown.size else 0.0
+            decision[unknown, j] = -1.0 if n_pos == 0 else 1.0
             models.append(LabelModel(name, status, n_pos, n_neg))
+            fitted.append(None)
         else:
             train = training_frames(v, k, max_train_frames)
             cv_idx = train[_even_pick(np.arange(train.size), cv_frames)]
             gamma, cv = cross_validate(embedding[cv_idx], v[cv_idx], clip_of_frame[cv_idx], grid, c, folds)
             gamma = grid[len(grid) // 2] if gamma is None else gamma
-            model = SVC(C=c, kernel="rbf", gamma=gamma, class_weight="balanced")
-            model.fit(embedding[train], v[train])
+            model = _fit(embedding, v, train, np.ones(train.size), c, gamma)
             if unknown.size:
                 decision[unknown, j] = strided_decision(
                     model, embedding, clip_of_frame, counts, unknown, step
@@ -297,19 +500,45 @@ def propagate(
                     int(model.support_.size),
                 )
             )
-        if progress is not None:
-            m = models[-1]
-            cv_txt = (
-                f"cv precision {m.cv['precision']:.2f} recall {m.cv['recall']:.2f}"
-                if m.cv
-                else "cv n/a (needs 2+ labelled clips)"
-            )
-            progress((j + 1) / max(len(vocab), 1), f"label {name!r}: {m.status}, {cv_txt}")
-    if smooth_frames > 1 and vocab:
-        smoothed = smooth_within_clips(decision.astype(np.float64), counts, smooth_frames)
-        decision = np.where(known, values, smoothed).astype(np.float32)
-        pred = np.where(smoothed >= 0, 1, -1).astype(np.int8)
-        out = np.where(known, values, pred).astype(np.int8)
-    else:
-        out = np.where(known, values, np.where(decision >= 0, 1, -1)).astype(np.int8)
-    return Propagation(vocab, out, known, decision, models)
+            fitted.append((model, gamma))
+        m = models[-1]
+        cv_txt = (
+            f"cv precision {m.cv['precision']:.2f} recall {m.cv['recall']:.2f}"
+            if m.cv
+            else "cv n/a (needs 2+ labelled clips)"
+        )
+        finish_step(j + 1, f"label {name!r}: {m.status}, {cv_txt}")
+
+    def label_frames(raw: FloatArray) -> tuple[Int8Array, FloatArray]:
+        smoothed = smooth_within_clips(raw, counts, smooth_frames) if n_labels else raw
+        smoothed = np.where(known, values, smoothed)
+        return decode(smoothed, values, known, counts, states, switch_cost)
+
+    out, conf = label_frames(decision)
+    for r in range(1, rounds):
+        chosen = pseudo_labels(out, conf, known, pseudo_fraction)
+        if not chosen.any():
+            break
+        for j, name in enumerate(vocab):
+            if should_stop is not None and should_stop():
+                raise InterruptedError("stopped")
+            fit = fitted[j]
+            unknown = np.flatnonzero(~known[:, j])
+            if fit is not None and unknown.size:
+                v = values[:, j]
+                real = training_frames(v, known[:, j], max_train_frames)
+                extra = training_frames(out[:, j], chosen & ~known[:, j], max_train_frames)
+                frames = np.concatenate((real, extra))
+                y = np.where(known[:, j], v, out[:, j]).astype(np.int8)
+                w = np.concatenate((np.ones(real.size), np.full(extra.size, pseudo_weight)))
+                if np.unique(y[frames]).size == 2:
+                    model = _fit(embedding, y, frames, w, c, fit[1])
+                    decision[unknown, j] = strided_decision(
+                        model, embedding, clip_of_frame, counts, unknown, step
+                    )
+                    models[j].train_frames = int(frames.size)
+                    models[j].support_vectors = int(model.support_.size)
+            finish_step(r * n_labels + j + 1, f"self-training round {r}: label {name!r}")
+        out, conf = label_frames(decision)
+    signed = np.where(known, values, out * conf).astype(np.float32)
+    return Propagation(vocab, out, known, signed, models)
