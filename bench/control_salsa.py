@@ -1,7 +1,8 @@
 """Accuracy of the control-by-example engine: leave-one-dance-out on the CMU salsa couples.
 
 Usage: ``python bench/control_salsa.py [--held 07,12] [--jobs 2] [--yaw 25] [--move 0.8,-1.1]
-[--budget 10] [--cache DIR] [--request JSON]`` from the project root (needs ../shared/data/cmu-salsa).
+[--budget 10] [--cache DIR] [--request JSON] [--database JSON] [--baselines]`` from the project
+root (needs ../shared/data/cmu-salsa; ``--database`` adds database spec fields).
 
 The protocol of ``../shared/acceptance/control.py``, run in process: for each held-out dance ``NN``
 of the 14 couples (``60_NN`` leader, ``61_NN`` follower), a ``control`` database is built from the
@@ -27,6 +28,7 @@ Prints one JSON object on stdout (progress lines go to stderr)::
   points expressed relative to the hip (world axes, so the heading still counts), same unit;
 * ``build_s``: seconds to build the database (library + control arrays), ``null`` when it was loaded
   from ``--cache``; ``synth_s``: seconds of the whole search request; ``frames``: output frames;
+  ``instances``: instances the database keeps after clustering;
 * ``mean_error_x_height``: mean of ``error_x_height`` over the dances run;
 * ``dances_over_0_17``: the dances whose error exceeds the acceptance bar (0.17);
 * ``load_avg``: the machine's 1, 5 and 15 minute load averages at the end (timings are noisy on a
@@ -88,8 +90,9 @@ def trials() -> list[str]:
     return sorted({f.name[3:5] for f in SALSA.glob("60_*_scaled.bvh")})
 
 
-def database_spec(held: str) -> dict[str, Any]:
-    """The check's database: every couple but ``held``, beats segmentation (2 beats per segment)."""
+def database_spec(held: str, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The check's database: every couple but ``held``, beats segmentation (2 beats per segment),
+    with ``extra`` spec fields (e.g. ``cluster_threshold_m``) on top."""
     return {
         "kind": "control",
         "pairs": [
@@ -98,6 +101,7 @@ def database_spec(held: str) -> dict[str, Any]:
             if t != held
         ],
         "segmentation": {"method": "beats", "beats_per_segment": 2},
+        **(extra or {}),
     }
 
 
@@ -113,10 +117,12 @@ def cache_key(spec_data: dict[str, Any]) -> str:
     return h.hexdigest()[:16]
 
 
-def engine_for(held: str, cache: Path | None) -> tuple[ControlEngine, float | None]:
+def engine_for(
+    held: str, cache: Path | None, extra: dict[str, Any] | None = None
+) -> tuple[ControlEngine, float | None]:
     """The engine on the database without ``held`` and the seconds its build took (``None`` when
     it was loaded from ``cache``, where it is saved as ``db_<held>_<key>.npz`` after a build)."""
-    spec_data = database_spec(held)
+    spec_data = database_spec(held, extra)
     path = None if cache is None else cache / f"db_{held}_{cache_key(spec_data)}.npz"
     if path is not None and path.exists():
         arrays = load_npz(path.read_bytes())
@@ -286,11 +292,11 @@ def baselines(held: str, leader: Motion, follower: Motion, out: Motion) -> dict[
 
 
 def run_dance(
-    job: tuple[str, float, float, float, float | None, str | None, dict[str, Any], bool],
+    job: tuple[str, float, float, float, float | None, str | None, dict[str, Any], bool, dict[str, Any]],
 ) -> tuple[str, dict[str, Any]]:
     """One held-out dance: build (or load), move, synthesize, measure (and the baselines)."""
-    held, yaw, tx, tz, budget, cache, extra, with_baselines = job
-    engine, build_s = engine_for(held, None if cache is None else Path(cache))
+    held, yaw, tx, tz, budget, cache, extra, with_baselines, db_extra = job
+    engine, build_s = engine_for(held, None if cache is None else Path(cache), db_extra)
     leader = moved(parse_bvh((SALSA / f"60_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
     follower = moved(parse_bvh((SALSA / f"61_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
     request_data: dict[str, Any] = {**extra, "engine": "control", "control": {"bvh": "lead.bvh"}}
@@ -313,6 +319,7 @@ def run_dance(
         "build_s": None if build_s is None else round(build_s, 1),
         "synth_s": round(synth_s, 1),
         "frames": out.num_frames,
+        "instances": int(engine.kept_.size),
     }
     if with_baselines:
         result.update(baselines(held, leader, follower, out))
@@ -329,6 +336,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--budget", type=float, default=None, help="search budget, s (default: the request's)")
     ap.add_argument(
         "--request", default="{}", help="extra request fields as a JSON object, e.g. '{\"k\": 0.2}'"
+    )
+    ap.add_argument(
+        "--database",
+        default="{}",
+        help="extra database spec fields as a JSON object, e.g. '{\"cluster_threshold_m\": 0.05}'",
     )
     ap.add_argument(
         "--baselines",
@@ -363,7 +375,13 @@ def main(argv: list[str] | None = None) -> int:
     if not isinstance(extra, dict):
         ap.error("--request takes a JSON object")
     cache = None if args.cache is None else str(args.cache.resolve())
-    jobs = [(h, args.yaw, tx, tz, args.budget, cache, extra, args.baselines) for h in held]
+    try:
+        db_extra = json.loads(args.database)
+    except json.JSONDecodeError as exc:
+        ap.error(f"--database is not JSON: {exc}")
+    if not isinstance(db_extra, dict):
+        ap.error("--database takes a JSON object")
+    jobs = [(h, args.yaw, tx, tz, args.budget, cache, extra, args.baselines, db_extra) for h in held]
     log(f"{len(jobs)} held-out dance(s): {','.join(held)}; {args.jobs} process(es)")
     if args.jobs == 1:
         results = [run_dance(job) for job in jobs]
