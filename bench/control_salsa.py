@@ -66,6 +66,7 @@ from motion import rotations as rot  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.bvh import bvh_text, parse_bvh  # noqa: E402
 from motion.ground import from_ground_frame, ground_frames, to_ground_frame  # noqa: E402
+from motion.metrics import points_jerk  # noqa: E402
 from schemas.databases import parse_database_spec  # noqa: E402
 from schemas.jobs import parse_job_request  # noqa: E402
 from workers.store import load_npz, npz_bytes  # noqa: E402
@@ -258,12 +259,6 @@ def points_error(points: np.ndarray, follower: Motion, height: float) -> float:
     """Mean distance of ``points (F, 6, 3)`` (at the follower's rate) to the follower's, / height."""
     n = min(points.shape[0], follower.num_frames)
     return float(np.linalg.norm(points[:n] - _points(follower, POINTS)[:n], axis=-1).mean() / height)
-
-
-def points_jerk(points: np.ndarray, fps: float) -> float:
-    """Mean magnitude of the third derivative of ``points (F, K, 3)`` metres, m/s^3."""
-    third = np.diff(points, n=3, axis=0) * fps**3
-    return float(np.linalg.norm(third, axis=-1).mean())
 
 
 def baselines(held: str, leader: Motion, follower: Motion, out: Motion) -> dict[str, Any]:

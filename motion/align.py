@@ -3,7 +3,9 @@
 * :func:`rigid_align_2d` — rotation about the vertical (Y) axis plus a translation on the floor,
   the alignment of Kovar & Gleicher and of Hsu et al. 2004; optionally weighted per point (e.g.
   per frame), batched over any leading axes.
-* :func:`kabsch` — full 3-D rotation + translation (weighted Kabsch/Procrustes, no reflections).
+* :func:`kabsch` — full 3-D rotation + translation (weighted Kabsch/Procrustes, no reflections);
+  :func:`rotation_from_covariance` its rotation step, for callers that build the cross-covariances
+  themselves (e.g. by matrix products over many windows at once).
 """
 
 from __future__ import annotations
@@ -116,11 +118,24 @@ def kabsch(source: Array, target: Array, weights: Array | None = None) -> tuple[
     ms = (w * s).sum(-2) / wsum
     mt = (w * t).sum(-2) / wsum
     h = np.einsum("...ni,...nj->...ij", w * (s - ms[..., None, :]), t - mt[..., None, :])
-    u, _, vt = np.linalg.svd(h)
+    r, _ = rotation_from_covariance(h)
+    trans = mt - np.einsum("...ij,...j->...i", r, ms)
+    return r, trans
+
+
+def rotation_from_covariance(h: Array) -> tuple[Array, Array]:
+    """The Kabsch step: from centred cross-covariances ``h = sum_n w_n s_n t_n^T`` ``(..., 3, 3)``
+    (source points ``s``, target points ``t``), the proper rotations ``(..., 3, 3)`` maximising
+    ``trace(R h)`` (so ``R s`` best matches ``t``) and that maximum ``(...,)``: the sum of the
+    singular values, the smallest one's sign flipped where a reflection would fit better. The
+    weighted residual is then ``sum w |s|^2 + sum w |t|^2 - 2 maximum`` (centred points)."""
+    hh = np.asarray(h, dtype=np.float64)
+    if hh.shape[-2:] != (3, 3):
+        raise MotionError(f"cross-covariances must be (..., 3, 3), got {hh.shape}")
+    u, sv, vt = np.linalg.svd(hh)
     d = np.sign(np.linalg.det(vt.swapaxes(-1, -2) @ u.swapaxes(-1, -2)))
     d = np.where(d == 0, 1.0, d)
     fix = np.ones((*d.shape, 3))
     fix[..., 2] = d
     r = vt.swapaxes(-1, -2) @ (fix[..., :, None] * u.swapaxes(-1, -2))
-    trans = mt - np.einsum("...ij,...j->...i", r, ms)
-    return r, trans
+    return r, sv[..., 0] + sv[..., 1] + d * sv[..., 2]

@@ -1,7 +1,8 @@
 """Quality metrics of a motion, in metres and seconds.
 
 * :func:`foot_slip` — mean horizontal speed of feet while in contact (m/s; 0 is ideal).
-* :func:`jerk` — mean magnitude of the third time derivative of joint positions (m/s^3).
+* :func:`jerk` — mean magnitude of the third time derivative of joint positions (m/s^3);
+  :func:`points_jerk` the same for any point array.
 * :func:`cut_discontinuity` — at each cut, how far the step across the cut departs from the
   neighbouring steps (m), the largest over joints.
 """
@@ -44,10 +45,17 @@ def foot_slip(
 
 def jerk(motion: Motion, positions: Array | None = None) -> float:
     """Mean magnitude of the third derivative of all joint positions, m/s^3."""
-    if motion.num_frames < 4:
-        return 0.0
     pos = (motion.global_positions() if positions is None else positions) * motion.metres_per_unit
-    third = np.diff(pos, n=3, axis=0) * motion.fps**3
+    return points_jerk(pos, motion.fps)
+
+
+def points_jerk(points: Array, fps: float) -> float:
+    """Mean magnitude of the third time derivative of ``points (F, ..., 3)`` metres sampled at
+    ``fps``, m/s^3 (0 with fewer than 4 frames)."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.shape[0] < 4:
+        return 0.0
+    third = np.diff(p, n=3, axis=0) * fps**3
     return float(np.linalg.norm(third, axis=-1).mean())
 
 

@@ -33,6 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from motion.align import kabsch, rotation_from_covariance
+
 from .points import sample_cloud
 
 Array = npt.NDArray[np.float64]
@@ -79,33 +81,14 @@ def paired_alignment(windows: Array, templates: Array) -> tuple[Array, Array, Ar
     return np.maximum(res, 0.0), cos, sin, tx, tz
 
 
-def kabsch(h: Array) -> tuple[Array, Array]:
-    """Optimal proper rotations for centred cross-covariances ``h (..., 3, 3)`` (``h = sum a w^T`` of
-    template points ``a`` and window points ``w``): ``R (..., 3, 3)`` maximising ``trace(R h)``, so
-    ``R a`` best matches ``w``, and that maximum ``(...,)`` (the sum of the singular values with the
-    smallest one's sign flipped where a reflection would be needed)."""
-    u, sv, vt = np.linalg.svd(h)
-    sign = np.sign(np.linalg.det(u) * np.linalg.det(vt))
-    sign = np.where(sign == 0, 1.0, sign)
-    vt_fixed = vt.copy()
-    vt_fixed[..., 2, :] *= sign[..., None]
-    # h = u S vt; the best R is v diag(1, 1, sign) u^T
-    rot = np.swapaxes(vt_fixed, -1, -2) @ np.swapaxes(u, -1, -2)
-    best = sv[..., 0] + sv[..., 1] + sign * sv[..., 2]
-    return rot, best
-
-
 def paired_procrustes(windows: Array, templates: Array) -> tuple[Array, Array, Array]:
     """Full 3-D rigid alignment (rotation + translation, no scale) of templates ``(M, N, 3)`` onto
-    windows ``(M, N, 3)``, row by row. Returns the residual sum of squares ``(M,)``, rotations
-    ``(M, 3, 3)`` and translations ``(M, 3)`` (``R a + t`` is the template placed on the window)."""
-    mw, ma = windows.mean(1), templates.mean(1)
-    cw, ca = windows - mw[:, None], templates - ma[:, None]
-    h = np.einsum("mni,mnj->mij", ca, cw)
-    rot, best = kabsch(h)
-    res = (cw**2).sum((1, 2)) + (ca**2).sum((1, 2)) - 2 * best
-    trans = mw - np.einsum("mij,mj->mi", rot, ma)
-    return np.maximum(res, 0.0), rot, trans
+    windows ``(M, N, 3)``, row by row (:func:`motion.align.kabsch`). Returns the residual sum of
+    squares ``(M,)``, rotations ``(M, 3, 3)`` and translations ``(M, 3)`` (``R a + t`` is the
+    template placed on the window)."""
+    rot, trans = kabsch(templates, windows)
+    placed = np.einsum("mij,mnj->mni", rot, templates) + trans[:, None, :]
+    return ((placed - windows) ** 2).sum((1, 2)), rot, trans
 
 
 def place_points(
@@ -412,7 +395,7 @@ def _rigid_interpretation(
         for i in range(3):
             for j in range(3):
                 h[:, :, i, j] = a_flat[:, :, i] @ w[:, :, j].T - np.outer(sa[:, i], sw[:, j]) / n_pts
-        r, best = kabsch(h)
+        r, best = rotation_from_covariance(h)
         res = (saa - (sa**2).sum(1) / n_pts)[:, None] + (sww - (sw**2).sum(1) / n_pts)[None] - 2 * best
         np.maximum(res, 0.0, out=res)
         D[rows, d:] = res / (p * rate)

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from motion import MotionError
-from motion.align import apply_rigid_2d, kabsch, rigid_align_2d
+from motion.align import apply_rigid_2d, kabsch, rigid_align_2d, rotation_from_covariance
 
 RNG = np.random.default_rng(11)
 
@@ -62,3 +62,19 @@ def test_kabsch_recovers_rotation_without_reflection() -> None:
     mirrored = src * np.array([-1.0, 1, 1])
     rr, _ = kabsch(src[0], mirrored[0])
     assert np.linalg.det(rr) == pytest.approx(1.0)
+
+
+def test_rotation_from_covariance_gives_the_residual_in_closed_form() -> None:
+    rng = np.random.default_rng(3)
+    src = rng.normal(size=(5, 12, 3))
+    tgt = rng.normal(size=(5, 12, 3))  # unrelated points: a real residual to predict
+    cs, ct = src - src.mean(1, keepdims=True), tgt - tgt.mean(1, keepdims=True)
+    h = np.einsum("mni,mnj->mij", cs, ct)
+    rot, best = rotation_from_covariance(h)
+    rot_k, trans = kabsch(src, tgt)
+    np.testing.assert_allclose(rot, rot_k, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(rot), 1.0)
+    residual = ((np.einsum("mij,mnj->mni", rot, src) + trans[:, None] - tgt) ** 2).sum((1, 2))
+    np.testing.assert_allclose(residual, (cs**2).sum((1, 2)) + (ct**2).sum((1, 2)) - 2 * best, rtol=1e-10)
+    with pytest.raises(MotionError):
+        rotation_from_covariance(np.zeros((4, 2, 2)))

@@ -8,7 +8,7 @@ import pytest
 from motion import read_bvh
 from motion.contacts import detect_contacts, foot_joints
 from motion.features import torso_features
-from motion.metrics import cut_discontinuity, foot_slip, jerk
+from motion.metrics import cut_discontinuity, foot_slip, jerk, points_jerk
 from motion.samples import sample_path
 from motion.smoothing import displacement_profile, smooth_cuts
 
@@ -95,3 +95,12 @@ def test_foot_joints_by_name_and_torso_features() -> None:
     )
     np.testing.assert_allclose(rotated.positions, tf.positions, atol=1e-6)
     assert tf.stacked().shape == (90, 3 * 6 + 7)
+
+
+def test_points_jerk_of_a_cubic_is_its_third_derivative() -> None:
+    fps = 50.0
+    t = np.arange(40) / fps
+    points = np.zeros((40, 2, 3))
+    points[:, 0, 0] = 2.0 * t**3  # third derivative 12 m/s^3 on one point, 0 on the other
+    assert points_jerk(points, fps) == pytest.approx(6.0)
+    assert points_jerk(points[:3], fps) == 0.0
