@@ -43,6 +43,11 @@ class AnnotatedDatabaseSpec(DatabaseSpecBase):
         description="SVM embedding: coarse context window around the frame (s; 0 = none)",
     )
     context_samples: int = Field(default=9, ge=0, le=61, description="time samples of the context window")
+    refine_changes: bool = Field(
+        default=True,
+        description="re-locate each label change within a clip with fine-window-only SVMs "
+        "(within half the context window)",
+    )
     svm_joints: list[str] | None = Field(
         default=None,
         min_length=1,

@@ -18,7 +18,7 @@ Arrays stored beside the motion library (all numeric or str, JSON in 0-d str arr
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -34,8 +34,9 @@ from .features import (
     embedding_offsets,
     svm_joint_indices,
     window_embedding,
+    window_offsets,
 )
-from .propagate import propagate
+from .propagate import SvmEmbedding, propagate
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -52,15 +53,22 @@ def _check(should_stop: ShouldStop) -> None:
         raise InterruptedError("build stopped")
 
 
-def embed_library(library: MotionLibrary, spec: Any) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Per database frame: the SVM window embedding ``(F, E)`` (raw metres), the continuity input
-    ``(F, 3, D)``, ground positions ``(F, 2)`` m and headings ``(F,)`` rad."""
+def embed_library(
+    library: MotionLibrary, spec: Any
+) -> tuple[SvmEmbedding, FloatArray, FloatArray, FloatArray]:
+    """Per database frame: the SVM window embedding (raw metres; ``combined`` ``(F, E)``, and with
+    ``spec.refine_changes`` and a context window also its ``fine`` window columns ``(F, E_f)``,
+    ``reach`` half the context window in frames), the continuity input ``(F, 3, D)``, ground
+    positions ``(F, 2)`` m and headings ``(F,)`` rad."""
     sk = library.motions[0].skeleton
     svm_j = svm_joint_indices(sk, spec.svm_joints)
     body = body_joints(sk)
     offsets = embedding_offsets(
         library.fps, spec.window_s, spec.window_samples, spec.context_s, spec.context_samples
     )
+    fine_offsets = window_offsets(library.fps, spec.window_s, spec.window_samples)
+    reach = int(round(0.5 * spec.context_s * library.fps))
+    refine = bool(spec.refine_changes) and reach > 0 and offsets.size > fine_offsets.size
     emb, raw, xzs, yaws = [], [], [], []
     for m in library.motions:
         pos, xz, yaw = clip_frames(m)
@@ -68,11 +76,32 @@ def embed_library(library: MotionLibrary, spec: Any) -> tuple[FloatArray, FloatA
         raw.append(continuity_raw(pos, xz, yaw, body, m.fps))
         xzs.append(xz)
         yaws.append(yaw)
-    return np.concatenate(emb), np.concatenate(raw), np.concatenate(xzs), np.concatenate(yaws)
+    combined = np.concatenate(emb)
+    fine = None
+    if refine:  # columns are (sample, joint, xyz), samples in the order of offsets
+        per = 3 * svm_j.size
+        cols = [i * per + q for i in np.flatnonzero(np.isin(offsets, fine_offsets)) for q in range(per)]
+        fine = combined[:, cols]
+    svm = SvmEmbedding(combined, fine, reach if refine else 0)
+    return svm, np.concatenate(raw), np.concatenate(xzs), np.concatenate(yaws)
 
 
-def standardize(x: FloatArray, dims: int, seed: int = 0, sample: int = 20_000) -> FloatArray:
-    """Columns to zero mean and unit variance, then the leading ``dims`` principal components."""
+@overload
+def standardize(x: FloatArray, dims: int, seed: int = 0, sample: int = 20_000) -> FloatArray: ...
+
+
+@overload
+def standardize(x: SvmEmbedding, dims: int, seed: int = 0, sample: int = 20_000) -> SvmEmbedding: ...
+
+
+def standardize(
+    x: FloatArray | SvmEmbedding, dims: int, seed: int = 0, sample: int = 20_000
+) -> FloatArray | SvmEmbedding:
+    """Columns to zero mean and unit variance, then the leading ``dims`` principal components
+    (``(F, min(E, dims))``; of each part of an :class:`SvmEmbedding`)."""
+    if isinstance(x, SvmEmbedding):
+        fine = None if x.fine is None else standardize(x.fine, dims, seed, sample)
+        return SvmEmbedding(standardize(x.combined, dims, seed, sample), fine, x.reach)
     z = (x - x.mean(axis=0)) / np.maximum(x.std(axis=0), 1e-9)
     if z.shape[1] <= dims:
         return np.asarray(z, dtype=np.float64)

@@ -20,8 +20,8 @@ Choices the paper leaves open (see :class:`schemas.annotations.AnnotatedDatabase
 * decision values are averaged over ``smooth_s`` within each clip before labelling, which
   removes single-frame flicker at the edges of actions.
 
-Three additions in the paper's spirit (``exclusive``, ``switch_s`` and ``self_training`` in the
-spec; each can be turned off):
+Four additions in the paper's spirit (``exclusive``, ``switch_s``, ``self_training`` and
+``refine_changes`` in the spec; each can be turned off):
 
 * **exclusive labels**: labels never annotated on the same frame are taken to exclude each other.
   The allowed label sets are the cliques of the co-occurrence graph (:func:`label_states`: each
@@ -34,6 +34,10 @@ spec; each can be turned off):
 * **self-training** (transductive): the most confident propagated frames of each label set join
   the training set with a lower weight, the SVMs retrain with the same gamma, and every frame is
   labelled again (:func:`pseudo_labels`).
+* **sharp changes** (``refine_changes``): the context window that labels whole actions well
+  blurs where a label changes inside a clip, so, given the fine window's embedding alone
+  (:class:`SvmEmbedding`), a second SVM per label trained on it places every change again
+  (:func:`refine_changes`).
 
 The stored decision value of a propagated label is its signed confidence: half the per-frame
 score lost by flipping it (``|d|`` of its SVM when labels are independent).
@@ -44,6 +48,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 from typing import Any
 
 import numpy as np
@@ -310,6 +315,121 @@ def viterbi(score: FloatArray, counts: Sequence[int], switch_cost: float, batch:
     return out
 
 
+def change_windows(pick: IntArray, counts: Sequence[int], reach: int) -> BoolArray:
+    """``(F,)`` frames within ``2 * reach`` frames of a change of state ``pick`` ``(F,)`` inside a
+    clip: the frames whose fine-window scores :func:`refine_changes` reads."""
+    near = np.zeros(pick.size, dtype=bool)
+    if reach <= 0 or pick.size == 0:
+        return near
+    c = np.asarray(counts, dtype=np.intp)
+    ends = np.cumsum(c)
+    clip = np.repeat(np.arange(c.size), c)
+    change = np.flatnonzero(pick[1:] != pick[:-1]) + 1
+    change = change[clip[change] == clip[change - 1]]
+    for t in change:
+        lo = max(int(ends[clip[t]] - c[clip[t]]), int(t) - 2 * reach)
+        hi = min(int(ends[clip[t]]), int(t) + 2 * reach)
+        near[lo:hi] = True
+    return near
+
+
+def _runs(pick: IntArray, start: int, end: int) -> list[tuple[int, int, int]]:
+    """``(first, stop, state)`` of the runs of equal ``pick`` in frames ``[start, end)``."""
+    seg = pick[start:end]
+    cut = np.flatnonzero(seg[1:] != seg[:-1]) + 1
+    bounds = [0, *cut.tolist(), seg.size]
+    return [(start + bounds[i], start + bounds[i + 1], int(seg[bounds[i]])) for i in range(len(bounds) - 1)]
+
+
+REFINE_AGREE = 2.0 / 3.0
+"""Share of each flank's frames on which the fine-window SVMs must side with the decoded state
+before they may move a change (:func:`refine_changes`)."""
+
+
+def refine_changes(
+    pick: IntArray,
+    fine_score: FloatArray,
+    counts: Sequence[int],
+    reach: int,
+    min_run: int | None = None,
+    agree: float = REFINE_AGREE,
+) -> IntArray:
+    """Re-locate the changes of state inside clips on the evidence of a shorter window.
+
+    Parameters
+    ----------
+    pick: ``(F,)`` decoded state of each frame (clips end to end, ``counts`` frames each).
+    fine_score: ``(F, S)`` per-frame score of each state from fine-window-only SVMs; only the
+        frames of :func:`change_windows` are read.
+    reach: frames; how far the decoding's (context) window blurs a change, half its width.
+    min_run: frames (default ``reach``); shorter runs between two runs of different states are
+        taken as the blur of one change (a context window straddling a change matches neither
+        action, so the decoding there often says no label, or a third one).
+    agree: in ``[0, 1]``; see below.
+
+    A change from state ``a`` to ``b`` (with the short runs in between, from frame ``first`` to
+    ``stop``) moves to the frame ``t`` in ``[first - reach, stop + reach]`` maximizing
+    ``sum_{f < t} score[f, a] + sum_{f >= t} score[f, b]`` (two states, one change; the short runs
+    go), without crossing the neighbouring changes (moved ones on the left, old ones on the
+    right; the runs of ``a`` and ``b`` keep at least one frame). It moves only if the fine scores
+    prefer ``a`` to ``b`` on at least ``agree`` of the frames between ``2 * reach`` and ``reach``
+    before the change, and ``b`` to ``a`` on as many after it (each flank at least one frame of
+    its run): beyond the blur the decoding is trusted, so fine SVMs that cannot tell the two
+    states apart there (the straight start of a turning walk against a plain walk) do not
+    place the change. Returns the refined ``(F,)`` states."""
+    if reach < 0:
+        raise ValueError(f"reach must be >= 0, got {reach}")
+    if not 0.0 <= agree <= 1.0:
+        raise ValueError(f"agree must be in [0, 1], got {agree}")
+    if fine_score.ndim != 2 or fine_score.shape[0] != pick.size:
+        raise ValueError(f"fine_score must be (F, S) with F = {pick.size}, got {fine_score.shape}")
+    out = pick.copy()
+    if reach == 0 or pick.size == 0:
+        return out
+    short = reach if min_run is None else min_run
+    offset = 0
+    for n in counts:
+        start, end = offset, offset + int(n)
+        offset = end
+        runs = _runs(pick, start, end) if n else []
+        if len(runs) < 2:
+            continue
+        last = len(runs) - 1
+        kept = [i for i, (a, b, _) in enumerate(runs) if i in (0, last) or b - a >= short]
+        # changes to place, as (run before, run after): consecutive kept runs of different states
+        # merge the short runs between them; otherwise each change is placed on its own
+        steps: list[tuple[int, int]] = []
+        for i, k in pairwise(kept):
+            if runs[i][2] != runs[k][2]:
+                steps.append((i, k))
+            else:
+                steps.extend((m, m + 1) for m in range(i, k))
+        prev = start  # first frame of the run before the next change (after moving)
+        for i, k in steps:
+            a, b = runs[i][2], runs[k][2]
+            first, stop = runs[i][1], runs[k][0]  # frames [first, stop) are the short runs
+            lo = max(prev + 1, first - reach)
+            hi = min(runs[k][1] - 1, stop + reach)
+            l0 = max(prev, first - 2 * reach)
+            l1 = max(l0 + 1, first - reach)
+            r1 = min(runs[k][1], stop + 2 * reach)
+            r0 = min(r1 - 1, stop + reach)
+            before = float(np.mean(fine_score[l0:l1, a] > fine_score[l0:l1, b]))
+            after = float(np.mean(fine_score[r0:r1, b] > fine_score[r0:r1, a]))
+            if hi < lo or min(before, after) < agree:
+                prev = stop
+                continue
+            seg = fine_score[lo - 1 : hi + 1]  # frames lo-1 .. hi
+            # change at lo + m: frames lo-1 .. lo+m-1 are a, lo+m .. hi are b
+            left = np.cumsum(seg[:, a])
+            right = np.cumsum(seg[::-1, b])[::-1]
+            best = lo + int(np.argmax(left[:-1] + right[1:]))
+            out[lo - 1 : best] = a
+            out[best : hi + 1] = b
+            prev = best
+    return out
+
+
 def decode(
     decision: FloatArray,
     values: Int8Array,
@@ -318,6 +438,7 @@ def decode(
     states: Int8Array | None,
     switch_cost: float,
     floor: float = 0.05,
+    refine: Callable[[IntArray, FloatArray], IntArray] | None = None,
 ) -> tuple[Int8Array, FloatArray]:
     """Labels of every frame from the (smoothed) SVM decision values ``(F, L)``.
 
@@ -327,6 +448,10 @@ def decode(
     changes labels only where the evidence for the change outweighs the cost. User-given values
     constrain the states of their frames. Without ``states``, each label is the sign of its
     decision value.
+
+    ``refine`` (with ``states``), given the decoded ``(F,)`` state indices and the ``(F, S)``
+    penalty of each state for clashing with user-given values, returns the final states (the
+    changes re-located by :func:`refine_changes`).
 
     Returns
     -------
@@ -340,10 +465,14 @@ def decode(
         return labels, np.where(known, 1.0, conf)
     s = states.astype(np.float64)
     score = decision @ s.T  # (F, S)
+    penalty = np.zeros_like(score)
     if known.any():
         clash = (known[:, None, :] & (states[None, :, :] != values[:, None, :])).sum(axis=2)
-        score = score - 1e6 * clash
+        penalty = 1e6 * clash
+        score = score - penalty
     pick = viterbi(score, counts, switch_cost)
+    if refine is not None:
+        pick = refine(pick, penalty)
     labels = np.where(known, values, states[pick]).astype(np.int8)
     own = score[np.arange(score.shape[0]), pick]
     conf = np.full(decision.shape, floor)
@@ -382,6 +511,28 @@ def pseudo_labels(labels: Int8Array, confidence: FloatArray, known: BoolArray, f
     return chosen
 
 
+@dataclass(frozen=True, slots=True)
+class SvmEmbedding:
+    """The SVM inputs of every database frame.
+
+    ``combined`` ``(F, E)``: the standardized embedding of the fine window plus the coarse context
+    (what the label SVMs classify). ``fine`` ``(F, E_f)`` or ``None``: the fine window alone, for
+    re-locating label changes (:func:`refine_changes`) within ``reach`` frames (half the context
+    window: how far the context blurs a change)."""
+
+    combined: FloatArray
+    fine: FloatArray | None = None
+    reach: int = 0
+
+    def __post_init__(self) -> None:
+        if self.fine is not None and self.fine.shape[0] != self.combined.shape[0]:
+            raise ValueError(
+                f"fine embedding has {self.fine.shape[0]} frames, combined {self.combined.shape[0]}"
+            )
+        if self.reach < 0:
+            raise ValueError(f"reach must be >= 0, got {self.reach}")
+
+
 @dataclass(slots=True)
 class Propagation:
     """Result of :func:`propagate`: per database frame and label."""
@@ -410,7 +561,7 @@ def _fit(
 
 
 def propagate(
-    embedding: FloatArray,
+    embedding: FloatArray | SvmEmbedding,
     clip_of_frame: IntArray,
     counts: Sequence[int],
     labels: Sequence[Sequence[dict[str, Any]]],
@@ -434,7 +585,11 @@ def propagate(
 
     Parameters
     ----------
-    embedding: ``(F, E)`` standardized window embeddings of every database frame.
+    embedding: ``(F, E)`` standardized window embeddings of every database frame, or an
+        :class:`SvmEmbedding`; when it has a ``fine`` part (and ``exclusive``), one more SVM per
+        label is trained on the fine window alone (same training frames, the same gamma multiple)
+        and every label change inside a clip is re-located on its decision values within
+        ``reach`` frames (:func:`refine_changes`).
     clip_of_frame: ``(F,)`` clip index of each frame; ``counts`` the clips' frame counts.
     labels: per clip, its label ranges (``{label, start, end, value}``, database frames).
     gammas: grid of multiples of ``1 / total variance of the embedding``.
@@ -451,6 +606,11 @@ def propagate(
         ``pseudo_weight`` (the user's frames weigh 1), the SVMs retrain (same gamma) and the
         frames are labelled again.
     """
+    if isinstance(embedding, SvmEmbedding):
+        fine_emb, reach = embedding.fine, embedding.reach
+        embedding = embedding.combined
+    else:
+        fine_emb, reach = None, 0
     vocab = vocabulary(labels)
     values, known = known_labels(labels, counts, vocab)
     n_frames, n_labels = values.shape
@@ -458,6 +618,9 @@ def propagate(
     scale = 1.0 / max(float(embedding.var(axis=0).sum()), 1e-12)
     grid = [g * scale for g in gammas]
     states = label_states(values, known) if exclusive else None
+    refining = fine_emb is not None and reach > 0 and states is not None
+    fine_scale = 1.0 / max(float(fine_emb.var(axis=0).sum()), 1e-12) if fine_emb is not None else 1.0
+    fine_models: list[SVC | None] = []
     models: list[LabelModel] = []
     fitted: list[tuple[SVC, float] | None] = []
     rounds = 1 + max(int(self_training), 0)
@@ -478,12 +641,18 @@ def propagate(
             decision[unknown, j] = -1.0 if n_pos == 0 else 1.0
             models.append(LabelModel(name, status, n_pos, n_neg))
             fitted.append(None)
+            fine_models.append(None)
         else:
             train = training_frames(v, k, max_train_frames)
             cv_idx = train[_even_pick(np.arange(train.size), cv_frames)]
             gamma, cv = cross_validate(embedding[cv_idx], v[cv_idx], clip_of_frame[cv_idx], grid, c, folds)
             gamma = grid[len(grid) // 2] if gamma is None else gamma
             model = _fit(embedding, v, train, np.ones(train.size), c, gamma)
+            if refining:
+                assert fine_emb is not None
+                fine_models.append(
+                    _fit(fine_emb, v, train, np.ones(train.size), c, gamma / scale * fine_scale)
+                )
             if unknown.size:
                 decision[unknown, j] = strided_decision(
                     model, embedding, clip_of_frame, counts, unknown, step
@@ -509,10 +678,30 @@ def propagate(
         )
         finish_step(j + 1, f"label {name!r}: {m.status}, {cv_txt}")
 
+    fine_decision = np.where(known, values, 0.0)
+    fine_done: BoolArray = np.asarray(known.all(axis=1), dtype=bool)
+
+    def refine(pick: IntArray, penalty: FloatArray) -> IntArray:
+        assert fine_emb is not None and states is not None
+        need = change_windows(pick, counts, reach) & ~fine_done
+        rows = np.flatnonzero(need)
+        if rows.size:
+            for j, fm in enumerate(fine_models):
+                free = rows[~known[rows, j]]
+                if fm is None:
+                    fine_decision[free, j] = decision[free, j]
+                elif free.size:
+                    fine_decision[free, j] = fm.decision_function(fine_emb[free])
+            fine_done[rows] = True
+        fine_score = fine_decision @ states.T.astype(np.float64) - penalty
+        return refine_changes(pick, fine_score, counts, reach)
+
     def label_frames(raw: FloatArray) -> tuple[Int8Array, FloatArray]:
         smoothed = smooth_within_clips(raw, counts, smooth_frames) if n_labels else raw
         smoothed = np.where(known, values, smoothed)
-        return decode(smoothed, values, known, counts, states, switch_cost)
+        return decode(
+            smoothed, values, known, counts, states, switch_cost, refine=refine if refining else None
+        )
 
     out, conf = label_frames(decision)
     for r in range(1, rounds):

@@ -7,14 +7,18 @@ import itertools
 from typing import Any
 
 import numpy as np
+import pytest
 
 from engines.annotations.features import embedding_offsets, window_offsets
 from engines.annotations.propagate import (
+    SvmEmbedding,
+    change_windows,
     decode,
     known_labels,
     label_states,
     propagate,
     pseudo_labels,
+    refine_changes,
     viterbi,
 )
 
@@ -169,3 +173,106 @@ def test_embedding_offsets_add_a_coarse_context() -> None:
     assert embedding_offsets(30.0, 1.0, 7, 0.0, 9).tolist() == fine.tolist()
     both = embedding_offsets(30.0, 1.0, 7, 4.0, 9)
     assert both.tolist() == sorted(set(fine.tolist()) | set(range(-60, 61, 15)))
+
+
+def _two_state_score(n: int, change: int) -> np.ndarray:
+    """``(n, 2)`` scores preferring state 0 before ``change`` and state 1 from it on."""
+    score = np.zeros((n, 2))
+    score[:change, 0], score[change:, 1] = 1.0, 1.0
+    return score
+
+
+def test_refine_changes_moves_a_blurred_change_to_the_sharp_evidence() -> None:
+    n, reach = 100, 10
+    pick = np.array([0] * 56 + [1] * 44)  # the context-window decoding put the change at 56
+    fine = _two_state_score(n, 50)  # the fine window says 50
+    assert refine_changes(pick, fine, [n], reach).tolist() == [0] * 50 + [1] * 50
+    # never farther than reach: the sharp evidence 12 frames away only pulls the change 10
+    far = refine_changes(np.array([0] * 62 + [1] * 38), fine, [n], reach)
+    assert np.flatnonzero(np.diff(far)).tolist() == [51]
+    # reach 0 leaves the decoding alone; changes are never carried across clips
+    np.testing.assert_array_equal(refine_changes(pick, fine, [n], 0), pick)
+    np.testing.assert_array_equal(refine_changes(pick, fine, [56, 44], reach), pick)
+
+
+def test_refine_changes_absorbs_short_blur_runs_between_two_states() -> None:
+    n, reach = 100, 10
+    # state 0, then 6 frames of the empty state 2 where the context straddles the change, then 1
+    pick = np.array([0] * 47 + [2] * 6 + [1] * 47)
+    fine = np.zeros((n, 3))
+    fine[:, :2] = _two_state_score(n, 50)
+    assert refine_changes(pick, fine, [n], reach).tolist() == [0] * 50 + [1] * 50
+    # a run of reach frames or more is an action of its own: only its two changes move
+    long_run = np.array([0] * 40 + [2] * 20 + [1] * 40)
+    out = refine_changes(long_run, fine, [n], reach, min_run=reach)
+    assert set(out[40:60].tolist()) >= {2}
+    # min_run 1 keeps every run: the short run shrinks to one frame but stays
+    kept = refine_changes(pick, fine, [n], reach, min_run=1)
+    assert (kept == 2).sum() >= 1 and kept[0] == 0 and kept[-1] == 1
+
+
+def test_refine_changes_needs_fine_svms_that_agree_beyond_the_blur() -> None:
+    n, reach = 100, 10
+    pick = np.array([0] * 56 + [1] * 44)
+    fine = _two_state_score(n, 50)
+    fine[30:47] = [0.0, 1.0]  # 10-20 frames before the change the fine SVMs prefer the other state
+    np.testing.assert_array_equal(refine_changes(pick, fine, [n], reach), pick)
+    assert refine_changes(pick, fine, [n], reach, agree=0.0).tolist() == [0] * 50 + [1] * 50
+
+
+def test_refine_changes_rejects_bad_input() -> None:
+    pick = np.zeros(10, dtype=np.intp)
+    with pytest.raises(ValueError, match="reach"):
+        refine_changes(pick, np.zeros((10, 2)), [10], -1)
+    with pytest.raises(ValueError, match="agree"):
+        refine_changes(pick, np.zeros((10, 2)), [10], 3, agree=1.5)
+    with pytest.raises(ValueError, match="fine_score"):
+        refine_changes(pick, np.zeros((9, 2)), [10], 3)
+    with pytest.raises(ValueError, match="frames"):
+        SvmEmbedding(np.zeros((10, 3)), np.zeros((9, 2)), 3)
+
+
+def test_change_windows_cover_twice_the_reach_within_clips() -> None:
+    pick = np.array([0] * 20 + [1] * 20 + [1] * 20)
+    near = change_windows(pick, [40, 20], 3)
+    assert np.flatnonzero(near).tolist() == list(range(14, 26))  # the clip boundary at 40 is no change
+    assert not change_windows(pick, [40, 20], 0).any()
+
+
+def test_propagate_refines_changes_with_the_fine_embedding() -> None:
+    """A combined embedding whose context straddles a change matches neither action (as a 4 s
+    window half walk, half wave does), and a sharp fine one: the fine SVMs put the change back
+    where it is and the frames between get a label again."""
+    rng = np.random.default_rng(2)
+    n, blur = 60, 12
+    centre = {"A": np.array([0.0, 0.0]), "B": np.array([3.0, 0.0])}
+
+    def clip(parts: list[tuple[str, int]]) -> tuple[np.ndarray, np.ndarray]:
+        fine = np.concatenate([centre[k] + 0.2 * rng.normal(size=(m, 2)) for k, m in parts])
+        # the context: mean and spread over 2 * blur + 1 frames (the spread is large only where
+        # the window straddles a change, unlike any labelled frame)
+        pad = np.pad(fine, [(blur, blur), (0, 0)], mode="edge")
+        win = np.stack([pad[i : i + 2 * blur + 1] for i in range(fine.shape[0])])
+        return np.hstack((fine, 3.0 * win.mean(axis=1), 9.0 * win.std(axis=1))), fine
+
+    clips = [clip([("A", n)]), clip([("B", n)]), clip([("A", n)]), clip([("B", n)])]
+    joined = [clip([("A", 40), ("B", 40)]) for _ in range(3)]
+    combined = np.concatenate([c for c, _ in clips + joined])
+    fine = np.concatenate([f for _, f in clips + joined])
+    counts = [n] * 4 + [80] * 3
+    clip_of = np.repeat(np.arange(len(counts)), counts)
+    labels: list[list[dict[str, Any]]] = [[_full("A", n)], [_full("B", n)], [_full("A", n)], [_full("B", n)]]
+    labels += [[] for _ in joined]
+    kw: dict[str, Any] = {"gammas": [1.0], "switch_cost": 5.0, "self_training": 0}
+    plain = propagate(combined, clip_of, counts, labels, **kw)
+    sharp = propagate(SvmEmbedding(combined, fine, blur), clip_of, counts, labels, **kw)
+    want = np.concatenate([np.tile([[1, -1]], (40, 1)), np.tile([[-1, 1]], (40, 1))] * 3)
+    wrong = {
+        name: int(np.sum(np.any(p.labels[4 * n :] != want, axis=1)))
+        for name, p in (("plain", plain), ("sharp", sharp))
+    }
+    assert wrong["plain"] >= 6 and wrong["sharp"] <= 2, wrong
+    assert np.all(np.sign(sharp.decision) == sharp.labels)
+    # without a fine part (or with reach 0) nothing changes
+    same = propagate(SvmEmbedding(combined, None, blur), clip_of, counts, labels, **kw)
+    np.testing.assert_array_equal(same.labels, plain.labels)
