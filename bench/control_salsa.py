@@ -322,6 +322,17 @@ def run_dance(
     return held, result
 
 
+def json_object(ap: argparse.ArgumentParser, option: str, text: str) -> dict[str, Any]:
+    """The JSON object given to ``option``; a usage error naming the option otherwise."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        ap.error(f"{option} is not JSON: {exc}")
+    if not isinstance(value, dict):
+        ap.error(f"{option} takes a JSON object")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--held", default=None, help="held-out dances, comma separated (default: all 14)")
@@ -363,19 +374,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--jobs must be at least 1")
     if args.budget is not None and args.budget <= 0:
         ap.error("--budget must be positive")
-    try:
-        extra = json.loads(args.request)
-    except json.JSONDecodeError as exc:
-        ap.error(f"--request is not JSON: {exc}")
-    if not isinstance(extra, dict):
-        ap.error("--request takes a JSON object")
+    extra = json_object(ap, "--request", args.request)
+    db_extra = json_object(ap, "--database", args.database)
     cache = None if args.cache is None else str(args.cache.resolve())
-    try:
-        db_extra = json.loads(args.database)
-    except json.JSONDecodeError as exc:
-        ap.error(f"--database is not JSON: {exc}")
-    if not isinstance(db_extra, dict):
-        ap.error("--database takes a JSON object")
     jobs = [(h, args.yaw, tx, tz, args.budget, cache, extra, args.baselines, db_extra) for h in held]
     log(f"{len(jobs)} held-out dance(s): {','.join(held)}; {args.jobs} process(es)")
     if args.jobs == 1:

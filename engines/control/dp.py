@@ -763,6 +763,19 @@ def retime(
         res, c, s, tx_, tz_ = paired_alignment(win.reshape(rows.size, -1, 3), tmpl.reshape(rows.size, -1, 3))
         Dv[rows], cosv[rows], sinv[rows], txv[rows], tzv[rows] = res / (p * rate), c, s, tx_, tz_
     q_pts = inst.tails.shape[1]
+
+    def place_states(points: Array, rows: IntArray) -> Array:
+        """``points (n, ..., 3)`` moved by the alignments of states ``rows (n,)``."""
+        return place_points(
+            points,
+            cosv[rows],
+            sinv[rows],
+            txv[rows],
+            tzv[rows],
+            None if rotv is None else rotv[rows],
+            None if transv is None else transv[rows],
+        )
+
     offs = np.concatenate(([0], np.cumsum([s[0].size for s in states])))
     Q = Dv[offs[0] : offs[1]].copy()
     backs: list[IntArray] = []
@@ -771,24 +784,8 @@ def retime(
         cur = np.arange(offs[i], offs[i + 1])
         if prev.size == 0 or cur.size == 0:
             raise Infeasible("re-timing found no legal boundaries")
-        y = place_points(
-            inst.tails[seq[i - 1]][None].repeat(prev.size, 0),
-            cosv[prev],
-            sinv[prev],
-            txv[prev],
-            tzv[prev],
-            None if rotv is None else rotv[prev],
-            None if transv is None else transv[prev],
-        )
-        h = place_points(
-            inst.heads[seq[i]][None].repeat(cur.size, 0),
-            cosv[cur],
-            sinv[cur],
-            txv[cur],
-            tzv[cur],
-            None if rotv is None else rotv[cur],
-            None if transv is None else transv[cur],
-        )
+        y = place_states(inst.tails[seq[i - 1]][None].repeat(prev.size, 0), prev)
+        h = place_states(inst.heads[seq[i]][None].repeat(cur.size, 0), cur)
         y2, h2 = y.reshape(prev.size, -1), h.reshape(cur.size, -1)
         cont = (y2**2).sum(1)[:, None] + (h2**2).sum(1)[None] - 2 * y2 @ h2.T
         total = Q[:, None] + (k / q_pts) * np.maximum(cont, 0.0)
@@ -815,24 +812,8 @@ def retime(
         yaw = np.arctan2(fwd[:, 0], fwd[:, 2])
         cosv[idx], sinv[idx] = np.cos(yaw), np.sin(yaw)
         txv[idx], tzv[idx] = sel_trans[:, 0], sel_trans[:, 2]
-    y = place_points(
-        inst.tails[seq[:-1]],
-        cosv[idx[:-1]],
-        sinv[idx[:-1]],
-        txv[idx[:-1]],
-        tzv[idx[:-1]],
-        None if sel_rot is None else sel_rot[:-1],
-        None if sel_trans is None else sel_trans[:-1],
-    )
-    h = place_points(
-        inst.heads[seq[1:]],
-        cosv[idx[1:]],
-        sinv[idx[1:]],
-        txv[idx[1:]],
-        tzv[idx[1:]],
-        None if sel_rot is None else sel_rot[1:],
-        None if sel_trans is None else sel_trans[1:],
-    )
+    y = place_states(inst.tails[seq[:-1]], idx[:-1])
+    h = place_states(inst.heads[seq[1:]], idx[1:])
     C = ((y - h) ** 2).sum(axis=(1, 2)) / q_pts if n_seg > 1 else np.zeros(0)
     Dsel = Dv[idx]
     return Timed(
