@@ -19,6 +19,8 @@ import numpy as np
 import numpy.typing as npt
 
 from motion import Motion
+from motion.plausibility import Reference, reference_from_positions
+from motion.quality import QualityInputs, QualityReport, assess
 
 from .library import MotionLibrary
 
@@ -40,9 +42,12 @@ class Solution:
     score: total cost, lower is better.
     terms: the score's terms by name.
     provenance: per output frame, ``(clip name, source frame)``.
-    constraint_errors: per constraint, its error (metres, degrees, frames...).
-    metrics: extra quality figures; the runtime adds foot slip and jerk.
+    constraint_errors: per constraint, its error measured on ``motion`` and whether it is
+        satisfied (the ``quality`` report's, filled by :meth:`Engine.finish`).
+    metrics: the engine's own figures (search statistics...); the quality report adds its own.
     annotations: per-frame annotations propagated to the output (e.g. contacts).
+    quality: the quality report of ``motion`` (:func:`motion.quality.assess`); the runtime
+        computes one (plausibility only) for engines that leave it out.
     """
 
     motion: Motion
@@ -52,6 +57,7 @@ class Solution:
     constraint_errors: dict[str, Any] = field(default_factory=dict)
     metrics: dict[str, float] = field(default_factory=dict)
     annotations: dict[str, Any] = field(default_factory=dict)
+    quality: QualityReport | None = None
 
 
 class Emitter(Protocol):
@@ -116,16 +122,60 @@ class Engine(ABC):
     def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
         self.library = library
         self.arrays = arrays
+        self._reference: Reference | None = None
 
     @classmethod
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         """Kind-specific database arrays computed from the library (default: none)."""
         return {}
 
+    @classmethod
+    def example_clips(cls, library: MotionLibrary, arrays: Arrays) -> list[int]:
+        """Library clips whose motion the engine's outputs are made of (default: every clip); the
+        quality report's plausibility limits come from them (a control database's targets, not
+        its controls)."""
+        return list(range(len(library.motions)))
+
+    @classmethod
+    def quality_reference_of(cls, library: MotionLibrary, arrays: Arrays) -> Reference:
+        """What the examples do (:class:`motion.plausibility.Reference`), stored with the
+        database (:meth:`Reference.to_arrays`) or measured now for databases built before."""
+        stored = Reference.from_arrays(arrays)
+        if stored is not None:
+            return stored
+        examples = []
+        for i in cls.example_clips(library, arrays):
+            m = library.motions[i]
+            examples.append((m.global_positions() * m.metres_per_unit, m.skeleton, m.fps))
+        return reference_from_positions(examples)
+
+    @property
+    def quality_reference(self) -> Reference:
+        """This database's :meth:`quality_reference_of` (measured once per loaded engine)."""
+        if self._reference is None:
+            self._reference = self.quality_reference_of(self.library, self.arrays)
+        return self._reference
+
+    def finish(self, solution: Solution, inputs: QualityInputs | None = None) -> Solution:
+        """``solution`` with its quality report against this database's examples
+        (:func:`finish_solution`)."""
+        return finish_solution(solution, inputs, self.quality_reference)
+
     @abstractmethod
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
         """Answer a request, calling ``emit.solution`` for every improvement, until done, out of
         budget or ``should_stop()``."""
+
+
+def finish_solution(
+    solution: Solution, inputs: QualityInputs | None, reference: Reference | None
+) -> Solution:
+    """``solution`` with its quality report: :func:`motion.quality.assess` of its motion against
+    the request's goals (``inputs``) and the database's examples (``reference``)."""
+    report = assess(solution.motion, inputs, reference)
+    solution.quality = report
+    solution.constraint_errors = report.constraint_errors
+    return solution
 
 
 def empty_arrays() -> Arrays:

@@ -4,7 +4,9 @@ For every contact run of a foot joint (ankle or toe) the joint is pinned to one 
 the mean of its positions over the run (horizontal ``x, z`` and height ``y``, so the foot rests on
 the floor height seen in that run). The correction ``target - position`` is faded in before a run
 and out after it over ``blend_s`` seconds (smoothstep), and when two runs of a joint are closer
-than twice that, the correction is interpolated across the gap, so nothing pops.
+than twice that, the correction is interpolated across the gap, so nothing pops; a gap too short for
+the foot to travel between two pinned places at :data:`PIN_TRAVEL_M_S` is first widened
+(:func:`widen_jumps`: across a cut, two clips' planted feet may not line up).
 
 Each leg is found by walking parents up from its foot joint: ankle -> knee -> hip, skipping
 joints that sit at the same place as their child (zero-length bones). Per frame, vectorised over
@@ -12,7 +14,10 @@ frames, the leg is solved in closed form:
 
 1. the knee rotates about the normal of the hip-knee-ankle plane (so it keeps bending in its
    original plane, towards its original pole) until the hip-ankle distance is the target's
-   distance (law of cosines; clamped to the reachable range);
+   distance (law of cosines). Beyond the leg's own extension in that frame, the distance is
+   eased towards full extension ("soft IK": ``base + room * (1 - exp(-excess / room))``), so a
+   target just out of reach bends the knee a little less instead of snapping it straight for a
+   frame (a visible pop); the unreached part is left as residual;
 2. the hip swings by the shortest arc that takes the ankle onto the target direction;
 3. the ankle keeps its original global orientation (the foot does not rotate with the leg), and
    when a toe joint of that foot is pinned too, the foot turns by the shortest arc that brings
@@ -46,6 +51,10 @@ Array = npt.NDArray[np.float64]
 
 _TOE = re.compile(r"toe", re.IGNORECASE)
 _SAME_PLACE = 1e-6  # bones shorter than this fraction of the leg's longest offset are skipped
+SOFT_IK_START = 0.97
+PIN_TRAVEL_M_S = 1.5
+"""A foot moves between two pinned places no faster than this on average (``widen_jumps``)."""
+"""Fraction of a leg's full reach beyond which a stretching target is eased (soft IK)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,12 +168,54 @@ def leg_chains(motion: Motion, joints: npt.NDArray[np.intp], rest: Array | None 
     return tuple(legs)
 
 
+def widen_jumps(
+    positions: Array, flags: npt.NDArray[np.bool_], frames_per_metre: float, max_gap: int
+) -> npt.NDArray[np.bool_]:
+    """``(F,)`` contact flags of one joint whose gaps between runs leave the foot time to travel
+    between the runs' pinned places at no more than ``1 / frames_per_metre`` metres per frame: a gap
+    shorter than that (up to ``max_gap`` frames) is widened by taking frames from the ends of both
+    runs (each keeps at least one frame); a gap of at most ``max_gap / 2`` frames between runs less
+    than a frame's travel apart is a flicker of the contact, and is filled.
+
+    The pin correction is interpolated across a gap; a foot pinned to two places 30 cm apart two
+    frames apart (e.g. across a cut between two clips whose planted feet do not line up) would jump
+    between them. ``positions (F, 3)`` are the joint's, in the units ``frames_per_metre`` uses."""
+    col = np.array(flags, dtype=bool, copy=True)
+    if max_gap <= 1 or not col.any():
+        return col
+    edges = np.diff(col.astype(np.int8), prepend=0, append=0)
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # ends exclusive
+    if starts.size < 2:
+        return col
+    sums = np.add.reduceat(np.where(col[:, None], positions, 0.0), starts, axis=0)
+    targets = sums / (ends - starts)[:, None]
+    for i in range(1, starts.size):
+        travel = float(np.linalg.norm(targets[i] - targets[i - 1]))
+        gap = int(starts[i] - ends[i - 1])
+        if travel * frames_per_metre < 1.0 and gap <= max_gap // 2:
+            col[ends[i - 1] : starts[i]] = True  # a flicker: the foot stays where it is
+            continue
+        need = min(int(np.ceil(travel * frames_per_metre)), max_gap)
+        short = need - gap
+        if short <= 0:
+            continue
+        take_a = min(short - short // 2, max(ends[i - 1] - starts[i - 1] - 1, 0))
+        take_b = min(short - take_a, max(ends[i] - starts[i] - 1, 0))
+        col[ends[i - 1] - take_a : ends[i - 1]] = False
+        col[starts[i] : starts[i] + take_b] = False
+        ends[i - 1] -= take_a
+        starts[i] += take_b
+    return col
+
+
 def _smoothstep(x: Array) -> Array:
     x = np.clip(x, 0.0, 1.0)
     return np.asarray(x * x * (3.0 - 2.0 * x))
 
 
-def pin_corrections(positions: Array, flags: npt.NDArray[np.bool_], blend: int) -> tuple[Array, Array]:
+def pin_corrections(
+    positions: Array, flags: npt.NDArray[np.bool_], blend: int, heights: Array | None = None
+) -> tuple[Array, Array]:
     """Per-frame correction that pins one joint during each contact run, with faded edges.
 
     Parameters
@@ -175,6 +226,9 @@ def pin_corrections(positions: Array, flags: npt.NDArray[np.bool_], blend: int) 
         ``(F,)`` contact flags.
     blend:
         Fade length in frames (0: no fade).
+    heights:
+        ``(F,)`` the height the joint should rest at in each frame (default: its own): a run is
+        pinned at the mean of these over the run.
 
     Returns
     -------
@@ -194,7 +248,12 @@ def pin_corrections(positions: Array, flags: npt.NDArray[np.bool_], blend: int) 
     starts = np.flatnonzero(edges == 1)
     ends = np.flatnonzero(edges == -1)  # exclusive
     run_of = np.cumsum(edges[:-1] == 1) - 1
-    sums = np.add.reduceat(np.where(c[:, None], positions, 0.0), starts, axis=0)
+    rest = (
+        positions
+        if heights is None
+        else np.concatenate((positions[:, :1], heights[:, None], positions[:, 2:]), axis=1)
+    )
+    sums = np.add.reduceat(np.where(c[:, None], rest, 0.0), starts, axis=0)
     targets = sums / (ends - starts)[:, None]
     corr[c] = targets[run_of[c]] - positions[c]
     weight[c] = 1.0
@@ -213,6 +272,16 @@ def pin_corrections(positions: Array, flags: npt.NDArray[np.bool_], blend: int) 
     w_out = np.where(has_e, _smoothstep(1.0 - (f - e) / span), 0.0)
     w_in = np.where(has_s, _smoothstep(1.0 - (s - f) / span), 0.0)
     corr[gap] = w_out[:, None] * corr[np.maximum(e, 0)] + w_in[:, None] * corr[np.minimum(s, n - 1)]
+    # between runs the joint never goes below both its own height and the runs' rest heights (the
+    # faded corrections of two runs at different heights would otherwise push it into the floor)
+    rest_y = np.full(n, np.inf)
+    rest_y[c] = targets[run_of[c], 1]
+    below = np.minimum(
+        np.where(has_e, rest_y[np.maximum(e, 0)], np.inf),
+        np.where(has_s, rest_y[np.minimum(s, n - 1)], np.inf),
+    )
+    lowest = np.minimum(below, positions[gap, 1])
+    corr[gap, 1] = np.maximum(corr[gap, 1], lowest - positions[gap, 1])
     weight[gap] = np.minimum(w_out + w_in, 1.0)
     return corr, weight
 
@@ -268,6 +337,11 @@ def _solve_leg(
     dist = np.linalg.norm(to_target, axis=-1)
     lo = np.abs(l1 - l2) * (1.0 + 1e-6) + 1e-9 * (l1 + l2)
     hi = (l1 + l2) * (1.0 - 1e-6)
+    # soft IK: past the frame's own extension (or 97% of full reach), ease towards full reach
+    base = np.minimum(np.maximum(np.linalg.norm(a - h, axis=-1), SOFT_IK_START * hi), hi)
+    room = np.maximum(hi - base, 1e-12)
+    over = dist > base
+    dist = np.where(over, base + room * (1.0 - np.exp(-np.maximum(dist - base, 0.0) / room)), dist)
     dist = np.clip(dist, lo, hi)
     # 1. knee: angle between thigh and shin directions (0 = straight) from the law of cosines.
     cos_cur = np.einsum("ij,ij->i", thigh, shin) / np.maximum(l1 * l2, 1e-300)
@@ -292,7 +366,7 @@ def _solve_leg(
     if leg.toe >= 0:
         foot = pos[frames, leg.toe] - a
         if toe_target is not None and toe_weight is not None:
-            q_toe = _scaled_rotation(_arc(foot, toe_target - reached), toe_weight)
+            q_toe = _scaled_rotation(_arc(foot, _toe_direction(toe_target - reached, foot)), toe_weight)
             g_ankle = rot.multiply(q_toe, g_ankle)
             foot = rot.rotate(q_toe, foot)
         toe_reached = reached + foot
@@ -306,6 +380,23 @@ def _solve_leg(
     ankle_parent_new = rot.multiply(q_hip, rot.multiply(q_knee, grot[frames, par[leg.ankle]]))
     local[frames, leg.ankle] = rot.multiply(rot.inverse(ankle_parent_new), g_ankle)
     return np.asarray(reached), toe_reached
+
+
+def _toe_direction(to_target: Array, foot: Array) -> Array:
+    """The unit direction ``(N, 3)`` to point the foot (ankle to toe) for a toe target
+    ``to_target`` away from the ankle reached: at the target, but never so steeply down that the
+    toe ends more than a tenth of the foot's length below the target's height (an ankle that could
+    not reach its own place, e.g. a leg that cannot stretch as far as a smoothed cut asks, would
+    otherwise drive the toe into the floor). A smooth maximum keeps the direction continuous."""
+    length = np.maximum(np.linalg.norm(foot, axis=-1), 1e-12)
+    norm = np.maximum(np.linalg.norm(to_target, axis=-1), 1e-12)
+    point = to_target[:, 1] / norm
+    floor = np.clip(to_target[:, 1] / length - 0.1, -1.0, 1.0)
+    uy = np.clip(0.5 * (point + floor + np.sqrt((point - floor) ** 2 + 0.05**2)), -1.0, 1.0)
+    h = to_target[:, [0, 2]]
+    hn = np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-12)
+    horizontal = h / hn * np.sqrt(np.maximum(1.0 - uy**2, 0.0))[:, None]
+    return np.stack((horizontal[:, 0], uy, horizontal[:, 1]), axis=-1)
 
 
 def _forward(motion: Motion, pos: Array) -> Array:
@@ -376,6 +467,7 @@ def solve_foot_skate(
     blend_s: float = 0.1,
     root_adjust: bool = False,
     max_root_shift_m: float = 0.05,
+    heights: Array | None = None,
 ) -> FootSkateResult:
     """Pin feet during contacts by leg IK; the full result (see :func:`remove_foot_skate`).
 
@@ -393,6 +485,10 @@ def solve_foot_skate(
         (smoothed over ``blend_s``, at most ``max_root_shift_m`` metres) and solve again.
     max_root_shift_m:
         Largest root translation, metres (converted with ``motion.metres_per_unit``).
+    heights:
+        ``(F, K)`` the height (motion units) each contact joint should rest at in each frame,
+        e.g. its height in the source clips before cuts were smoothed (smoothing a cut between
+        clips of different hip heights lowers or raises the feet); default: the joints' own.
     """
     if not (np.isfinite(blend_s) and blend_s >= 0):
         raise MotionError(f"blend_s must be a non-negative number of seconds, got {blend_s}")
@@ -405,6 +501,8 @@ def solve_foot_skate(
     n = motion.num_frames
     if flags.shape != (n, joints.size):
         raise MotionError(f"contact flags must be (F, K) = ({n}, {joints.size}), got {flags.shape}")
+    if heights is not None and np.shape(heights) != (n, joints.size):
+        raise MotionError(f"rest heights must be (F, K) = ({n}, {joints.size}), got {np.shape(heights)}")
     no_shift = np.zeros((n, 3))
     if not flags.any():
         return FootSkateResult(motion, leg_chains(motion, joints), np.zeros(flags.shape), no_shift)
@@ -415,8 +513,11 @@ def solve_foot_skate(
     blend = int(round(blend_s * motion.fps))
     corr = np.zeros((n, joints.size, 3))
     weight = np.zeros((n, joints.size))
+    frames_per_unit = motion.fps * motion.metres_per_unit / PIN_TRAVEL_M_S
     for slot, j in enumerate(joints):
-        corr[:, slot], weight[:, slot] = pin_corrections(pos[:, j], flags[:, slot], blend)
+        runs = widen_jumps(pos[:, j], flags[:, slot], frames_per_unit, 2 * blend)
+        rest = None if heights is None else heights[:, slot]
+        corr[:, slot], weight[:, slot] = pin_corrections(pos[:, j], runs, blend, rest)
     forward = _forward(motion, pos)
     local, residual, errors = _solve_all(motion, legs, pos, grot, corr, weight, forward)
     root_shift = no_shift
@@ -448,6 +549,7 @@ def remove_foot_skate(
     blend_s: float = 0.1,
     root_adjust: bool = False,
     max_root_shift_m: float = 0.05,
+    heights: Array | None = None,
 ) -> Motion:
     """The motion with planted feet kept in place (a pure function; the input is not modified).
 
@@ -466,6 +568,8 @@ def remove_foot_skate(
         ``(joints (K,), flags (F, K))``; default :func:`motion.contacts.detect_contacts`.
     blend_s:
         Fade time in seconds around each contact run.
+    heights:
+        ``(F, K)`` rest heights of the contact joints (see :func:`solve_foot_skate`).
 
     Raises
     ------
@@ -480,5 +584,10 @@ def remove_foot_skate(
     >>> clean = remove_foot_skate(walk)
     """
     return solve_foot_skate(
-        motion, contacts, blend_s=blend_s, root_adjust=root_adjust, max_root_shift_m=max_root_shift_m
+        motion,
+        contacts,
+        blend_s=blend_s,
+        root_adjust=root_adjust,
+        max_root_shift_m=max_root_shift_m,
+        heights=heights,
     ).motion

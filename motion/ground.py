@@ -76,13 +76,25 @@ def heading(motion: Motion, positions: Array | None = None) -> Array:
     :func:`facing_pairs`): forward = left x up. Skeletons without left/right names fall back to
     the root joint's rotated +Z axis.
     """
-    pairs = facing_pairs(motion.skeleton)
-    if not pairs:
+    if not facing_pairs(motion.skeleton):
         return np.unwrap(rot.yaw(motion.rotations[:, 0]))
     pos = motion.global_positions() if positions is None else positions
-    across = np.zeros((motion.num_frames, 3))
+    facing = facing_from_positions(motion.skeleton, pos)
+    if facing is None:  # pragma: no cover - facing_pairs found pairs above
+        raise MotionError("no left/right joints to face by")
+    return facing
+
+
+def facing_from_positions(skeleton: Skeleton, positions: Array) -> Array | None:
+    """``(F,)`` unwrapped heading (radians) from joint ``positions (F, J, 3)`` alone (the hips'
+    left-minus-right vector, :func:`facing_pairs`); ``None`` when the skeleton has no left/right
+    joints."""
+    pairs = facing_pairs(skeleton)
+    if not pairs:
+        return None
+    across = np.zeros((positions.shape[0], 3))
     for left, right in pairs:
-        v = pos[:, left] - pos[:, right]
+        v = positions[:, left] - positions[:, right]
         n = np.linalg.norm(v[:, [0, 2]], axis=-1, keepdims=True)
         across += v / np.maximum(n, 1e-12)
     # forward = across x up = (-across_z, 0, across_x)

@@ -13,6 +13,7 @@ class EventType(StrEnum):
     started = "started"
     progress = "progress"
     solution = "solution"
+    alternative = "alternative"
     done = "done"
     failed = "failed"
     cancelled = "cancelled"
@@ -26,8 +27,11 @@ class JobEvent(BaseModel):
     """One event of a job.
 
     ``data`` by type: ``progress`` ``{"fraction": 0..1, "message"}``; ``solution`` ``{"score",
-    "terms", "elapsed_ms", "result"}`` (score: lower is better); ``done``/``cancelled`` ``{"result"}``
-    (the best result, or null); ``failed`` ``{"error": {"code", "message"}}``.
+    "terms", "elapsed_ms", "result", "ok", "reasons"}`` (a new best: scores strictly decrease; lower
+    is better; ``ok``/``reasons`` from the result's quality report); ``alternative`` the same for
+    a result that is not a new best (e.g. the graph engine's other local minima);
+    ``done``/``cancelled`` ``{"result", "ok", "reasons"}`` (the best result, or null); ``failed``
+    ``{"error": {"code", "message"}}``.
     """
 
     id: int = Field(ge=1)

@@ -109,6 +109,14 @@ class GraphRequest(JobRequestBase):
     seconds: float | None = Field(default=None, gt=0, le=3600, description="or in seconds")
     constraints: list[Constraint] = Field(default_factory=list, max_length=1000)
     alternatives: int = Field(default=1, ge=1, le=20, description="distinct local minima to return")
+    rounds: int | None = Field(
+        default=None,
+        ge=0,
+        le=100_000,
+        description="stop after this many search rounds (the search also stops when it converges); "
+        "with a seed, a search that ends by rounds or convergence within its budget returns the same "
+        "motion on every machine and from every face (CLI, HTTP)",
+    )
     weights: GraphWeights = Field(default_factory=GraphWeights)
     smoothing_frames: int = Field(default=15, ge=0, le=300, description="displacement smoothing half-width")
     footskate: bool = Field(

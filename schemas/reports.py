@@ -14,14 +14,31 @@ class ProvenanceEntry(BaseModel):
 
 
 class Report(BaseModel):
-    """The report of one result: score terms, constraint errors, metrics and per-frame provenance."""
+    """The report of one result, measured on the motion returned (``motion.quality.assess``):
+    whether it is ``ok`` and why not, each constraint's error with ``satisfied``, physical
+    plausibility against the database's examples, score terms, metrics and per-frame provenance."""
 
     job: str
     result: str
     engine: str
+    ok: bool | None = Field(
+        default=None,
+        description="every constraint satisfied and every plausibility figure within its limit "
+        "(null for reports written before quality reports existed)",
+    )
+    reasons: list[str] = Field(default_factory=list, description="why ok is false, one line each")
     score: float
     terms: dict[str, float] = Field(default_factory=dict)
-    constraint_errors: dict[str, Any] = Field(default_factory=dict)
+    constraint_errors: dict[str, Any] = Field(
+        default_factory=dict,
+        description="per constraint (body[0], joint[1], length, ...): its error measured on the "
+        "output, the tolerance and satisfied",
+    )
+    plausibility: dict[str, dict[str, Any]] = Field(
+        default_factory=dict,
+        description="per figure (root_speed, turn_rate, foot_slide, floor_penetration, joint_step, "
+        "join_spikes, jerk): value, unit, reference (the examples), limit and ok",
+    )
     metrics: dict[str, float] = Field(default_factory=dict)
     frames: int
     fps: float

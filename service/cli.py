@@ -40,7 +40,7 @@ from motion.io import OUTPUT_SUFFIXES, load_motion, save_motion
 from motion.resample import resample
 from motion.samples import SAMPLES, sample_path
 from motion.units import METRES_PER_UNIT
-from schemas import EventType, JobEvent
+from schemas import EventType, JobEvent, Report
 from schemas.jobs import RequestError
 from workers.execute import JobFailure
 
@@ -239,10 +239,11 @@ def _echo(event: JobEvent) -> None:
         print(
             f"  {100 * event.data.get('fraction', 0):5.1f}%  {event.data.get('message', '')}", file=sys.stderr
         )
-    elif event.type == EventType.solution:
+    elif event.type in (EventType.solution, EventType.alternative):
+        verdict = "" if event.data.get("ok") is None else (" ok" if event.data["ok"] else " NOT ok")
         print(
-            f"  solution {event.data['result']}: score {event.data['score']:.6g} "
-            f"after {event.data['elapsed_ms']:.0f} ms",
+            f"  {event.type.value} {event.data['result']}: score {event.data['score']:.6g} "
+            f"after {event.data['elapsed_ms']:.0f} ms,{verdict}",
             file=sys.stderr,
         )
     elif event.type == EventType.failed:
@@ -280,7 +281,17 @@ def cmd_synth(args: argparse.Namespace) -> int:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
         print(f"wrote {args.out}: {motion.num_frames} frames at {motion.fps:g} fps, score {report.score:.6g}")
+        print(quality_summary(report))
     return 0
+
+
+def quality_summary(report: Report) -> str:
+    """One line per reason a result is not ok (``quality: ok`` when it is)."""
+    if report.ok is None:
+        return "quality: not measured"
+    if report.ok:
+        return "quality: ok (every constraint met, plausible against the database's examples)"
+    return "quality: NOT ok\n" + "\n".join(f"  - {r}" for r in report.reasons)
 
 
 class _events_sink:  # noqa: N801 - a tiny context manager used like a function

@@ -20,7 +20,8 @@ from engines.base import Engine, EngineError, Solution
 from engines.library import ClipInput, MotionLibrary, build_library, library_from_arrays, library_to_arrays
 from engines.registry import UnavailableError, engine_class, kind_class
 from motion import Motion, MotionError
-from motion.metrics import foot_slip, jerk
+from motion.plausibility import Reference
+from motion.quality import assess
 from schemas import DatabaseStatus, EventType, JobInfo, JobStatus, ProvenanceEntry, Report
 from schemas.databases import DatabaseSpecBase, parse_database_spec
 from schemas.jobs import JobRequestBase, parse_job_request
@@ -69,33 +70,47 @@ SaveResult = Callable[[str, Motion, Report], None]
 
 class SolutionRecorder:
     """The engine-facing side of a job (an ``engines.base.Emitter``): turns each solution into a
-    result (motion + :class:`~schemas.Report`, saved through ``save``) and a ``solution`` event."""
+    result (motion + :class:`~schemas.Report`, saved through ``save``) and an event.
+
+    A result that beats every earlier one is a ``solution`` event (so their scores strictly
+    decrease); any other (an alternative the engine offers) is an ``alternative`` event. Every
+    report carries the quality report of its motion (:func:`motion.quality.assess`): the engine's
+    own, or one measured here against ``reference`` for engines that give none."""
 
     def __init__(
-        self, job_id: str, engine: str, publish: Publish, save: SaveResult, attempt: int = 1
+        self,
+        job_id: str,
+        engine: str,
+        publish: Publish,
+        save: SaveResult,
+        attempt: int = 1,
+        reference: Reference | None = None,
     ) -> None:
         self.job_id, self.engine, self.publish, self.save = job_id, engine, publish, save
+        self.reference = reference
         # a re-run after a lost worker numbers its results apart, so earlier events stay valid
         self.prefix = "r" if attempt <= 1 else f"a{attempt}r"
         self.t0 = time.perf_counter()
         self.count = 0
         self.best: tuple[float, str] | None = None
+        self.verdicts: dict[str, tuple[bool | None, list[str]]] = {}
 
     def solution(self, solution: Solution) -> str:
         self.count += 1
         rid = f"{self.prefix}{self.count}"
         motion = solution.motion
-        metrics = (
-            {"foot_slip_m_s": foot_slip(motion), "jerk_m_s3": jerk(motion)} if motion.num_frames > 3 else {}
-        )
-        metrics.update(solution.metrics)
+        quality = solution.quality or assess(motion, None, self.reference)
+        metrics = {**quality.metrics, **solution.metrics}
         report = Report(
             job=self.job_id,
             result=rid,
             engine=self.engine,
+            ok=quality.ok,
+            reasons=quality.reasons,
             score=float(solution.score),
             terms={k: float(v) for k, v in solution.terms.items()},
-            constraint_errors=solution.constraint_errors,
+            constraint_errors=quality.constraint_errors,
+            plausibility=quality.plausibility,
             metrics={k: float(v) for k, v in metrics.items()},
             frames=motion.num_frames,
             fps=motion.fps,
@@ -103,16 +118,20 @@ class SolutionRecorder:
             annotations=solution.annotations,
         )
         self.save(rid, motion, report)
-        if self.best is None or solution.score < self.best[0]:
+        self.verdicts[rid] = (quality.ok, quality.reasons)
+        improved = self.best is None or solution.score < self.best[0]
+        if improved:
             self.best = (float(solution.score), rid)
         elapsed_ms = (time.perf_counter() - self.t0) * 1e3
         self.publish(
-            EventType.solution,
+            EventType.solution if improved else EventType.alternative,
             {
                 "score": float(solution.score),
                 "terms": report.terms,
                 "elapsed_ms": round(elapsed_ms, 1),
                 "result": rid,
+                "ok": quality.ok,
+                "reasons": quality.reasons,
             },
         )
         return rid
@@ -125,6 +144,13 @@ class SolutionRecorder:
     @property
     def best_result(self) -> str | None:
         return None if self.best is None else self.best[1]
+
+    def verdict(self, rid: str | None) -> dict[str, Any]:
+        """``{"ok", "reasons"}`` of a result, for the terminal event."""
+        if rid is None or rid not in self.verdicts:
+            return {}
+        ok, reasons = self.verdicts[rid]
+        return {"ok": ok, "reasons": reasons}
 
 
 def execute_job(
@@ -194,6 +220,8 @@ def build_database_bytes(
         raise JobFailure("cancelled", "build cancelled")
     arrays = library_to_arrays(library)
     arrays.update(extra)
+    publish(EventType.progress, {"fraction": 0.99, "message": "measuring the examples (quality reference)"})
+    arrays.update(engine_cls.quality_reference_of(library, arrays).to_arrays())
     return npz_bytes(arrays), library
 
 
@@ -259,15 +287,15 @@ def run_search(
 ) -> None:
     """Run an engine's search and publish the terminal event (``done`` or ``cancelled`` with the
     best result); raises :class:`JobFailure` when it found nothing."""
-    recorder = SolutionRecorder(job_id, engine.name, publish, save, attempt)
+    recorder = SolutionRecorder(job_id, engine.name, publish, save, attempt, engine.quality_reference)
     engine.search(request, request.budget_s, recorder, should_stop)
     best = recorder.best_result
     if should_stop():
-        publish(EventType.cancelled, {"result": best})
+        publish(EventType.cancelled, {"result": best, **recorder.verdict(best)})
     elif best is None:
         raise JobFailure("no_solution", "the engine found no solution within the budget")
     else:
-        publish(EventType.done, {"result": best})
+        publish(EventType.done, {"result": best, **recorder.verdict(best)})
 
 
 def _synth(

@@ -4,12 +4,19 @@ The source frames are concatenated (the skeleton of the clip giving the most fra
 is moved on the floor by its placement (:func:`engines.annotations.search.placements`; for
 skeletons whose joint 0 is a fixed reference, such as Bandai-Namco's ``joint_Root``, its children
 are moved instead, as in the graph engine), the cuts are smoothed with the displacement blend of
-:func:`motion.smoothing.smooth_cuts`, and foot skate is removed (:mod:`motion.footskate`) when
-that module is installed.
+:func:`motion.smoothing.smooth_cuts`, the end constraint's remaining error (the search meets it
+only as well as its cuts between pooled solutions allow, Sec. 3.4) is spread over the motion
+within the database's physical limits (:func:`motion.floorfit.floor_correction`), and foot skate
+is removed (:mod:`motion.footskate`).
+
+:func:`quality_inputs` says what the quality report measures the result against: the length, the
+start placement, the end constraint, each frame constraint (the clip frame's pose) and each
+painted run of the timeline (honoured by the labels of the frames played there).
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import replace
 from typing import Any
 
@@ -17,14 +24,17 @@ import numpy as np
 import numpy.typing as npt
 
 from motion import Motion
+from motion.floorfit import CorrectionLimits, FloorGoal, floor_correction
 from motion.footskate import remove_foot_skate
-from motion.ground import apply_floor_transform, static_reference_root
+from motion.goals import BodyGoal, Goal, LabelGoal, LengthGoal, PoseGoal, body_pose
+from motion.ground import apply_floor_transform, ground_frames, static_reference_root
 from motion.metrics import cut_discontinuity
+from motion.quality import QualityInputs
 from motion.smoothing import smooth_cuts
 
 from ..base import Arrays
 from ..library import MotionLibrary
-from .search import TRANSITION_MARGIN, Candidate, Database, Problem, cuts_of, end_pose, wrap
+from .search import TRANSITION_MARGIN, Candidate, Database, Problem, cuts_of
 
 IntArray = npt.NDArray[np.intp]
 
@@ -44,9 +54,16 @@ class Frames:
 
 
 def assemble(
-    db: Database, frames: Frames, pb: Problem, cand: Candidate, smoothing: int, footskate: bool
+    db: Database,
+    frames: Frames,
+    pb: Problem,
+    cand: Candidate,
+    smoothing: int,
+    footskate: bool,
+    limits: CorrectionLimits | None = None,
 ) -> tuple[Motion, IntArray]:
-    """The motion of ``cand.sigma`` placed, smoothed and cleaned; and its cut frames ``(X,)``."""
+    """The motion of ``cand.sigma`` placed, smoothed, corrected towards the end constraint
+    (within ``limits``; ``None``: without limit) and cleaned; and its cut frames ``(X,)``."""
     sigma = cand.sigma
     clips = db.clip_of[sigma]
     main = frames.library.motions[int(np.bincount(clips).argmax())]
@@ -61,6 +78,14 @@ def assemble(
     cuts = cuts_of(db, sigma)
     if cuts.size and smoothing >= 1:
         motion = smooth_cuts(motion, cuts, smoothing)
+    if pb.end_xz is not None:
+        xz, yaw = ground_frames(motion)
+        goals = [
+            FloorGoal(0, pb.start_xz, pb.start_yaw),
+            FloorGoal(pb.n - 1, pb.end_xz, pb.end_yaw),
+        ]
+        corr = floor_correction(xz * motion.metres_per_unit, yaw, motion.fps, goals, limits)
+        motion = apply_floor_transform(motion, corr.theta, corr.shift, frames.static)
     if footskate:
         motion = remove_foot_skate(motion)
     return motion, cuts
@@ -117,24 +142,41 @@ def label_report(db: Database, pb: Problem, sigma: IntArray) -> tuple[dict[str, 
     return annotations, metrics
 
 
-def constraint_report(db: Database, pb: Problem, cand: Candidate, motion: Motion) -> dict[str, Any]:
-    """Errors of the frame and end constraints, measured on the result."""
-    out: dict[str, Any] = {"length": {"frames": abs(motion.num_frames - pb.n)}}
-    for i, (t, g) in enumerate(pb.constraints):
-        got = int(cand.sigma[t])
-        same_clip = db.clip_of[got] == db.clip_of[g]
-        out[f"frame[{i}]"] = {
-            "frame": t,
-            "met": bool(got == g),
-            "frames_off": int(abs(got - g)) if same_clip else None,
-        }
+def quality_inputs(
+    db: Database, frames: Frames, pb: Problem, sigma: IntArray, cuts: IntArray
+) -> QualityInputs:
+    """What the quality report measures the motion of ``sigma`` (database frames, ``(n,)``)
+    against (module docstring). Timeline runs are the painted values (later entries over earlier
+    ones): each run of 1 or -1 of one label is a ``label[i]`` goal, honoured where the frame
+    played carries (or does not carry) the label, frames within :data:`TRANSITION_MARGIN` of the
+    run's ends not counted."""
+    goals: list[Goal] = [LengthGoal(pb.n), BodyGoal("start", 0, pb.start_xz, pb.start_yaw)]
     if pb.end_xz is not None:
-        exz, eyaw = end_pose(db, cand.sigma, cand.theta, cand.shift)
-        e: dict[str, Any] = {"position_m": float(np.linalg.norm(exz - pb.end_xz))}
-        if pb.end_yaw is not None:
-            e["heading_deg"] = float(np.degrees(abs(float(wrap(eyaw - pb.end_yaw)))))
-        out["end"] = e
-    return out
+        goals.append(BodyGoal("end", pb.n - 1, pb.end_xz, pb.end_yaw))
+    for i, (t, g) in enumerate(pb.constraints):
+        c = int(db.clip_of[g])
+        src = frames.library.motions[c]
+        k = int(g - db.clip_start[c])
+        pose = body_pose(src.slice(k, k + 1).global_positions() * src.metres_per_unit, src.skeleton)[0]
+        played = int(sigma[t]) if t < sigma.size else -1
+        same = played >= 0 and int(db.clip_of[played]) == c
+        extra = {"met": played == g, "frames_off": abs(played - g) if same else None}
+        goals.append(PoseGoal(f"frame[{i}]", t, pose, extra=extra))
+    achieved = db.labels[sigma][:, pb.cols] if pb.cols.size else np.zeros((sigma.size, 0))
+    k = 0
+    for col in range(pb.cols.size):
+        values = pb.q[:, col]
+        edges = np.flatnonzero(np.diff(np.concatenate(([0.0], values, [0.0]))))
+        for a, b in itertools.pairwise(edges):
+            v = int(values[a])
+            if v == 0:
+                continue
+            got = achieved[a:b, col]
+            honoured: npt.NDArray[np.bool_] = np.asarray(got > 0 if v > 0 else got <= 0)
+            label = db.vocab[int(pb.cols[col])]
+            goals.append(LabelGoal(f"label[{k}]", label, int(a), int(b), v, honoured, TRANSITION_MARGIN))
+            k += 1
+    return QualityInputs(goals=tuple(goals), joins=np.asarray(cuts, dtype=np.intp))
 
 
 def discontinuity(motion: Motion, cuts: IntArray) -> dict[str, float]:

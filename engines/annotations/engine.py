@@ -24,9 +24,11 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
+from motion.floorfit import CorrectionLimits
+
 from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
 from ..library import MotionLibrary
-from .assemble import Frames, assemble, constraint_report, discontinuity, label_report
+from .assemble import Frames, assemble, discontinuity, label_report, quality_inputs
 from .build import BLAS_THREADS, build_annotated
 from .search import (
     Candidate,
@@ -115,8 +117,10 @@ class AnnotationEngine(Engine):
 
     def solution(self, cand: Candidate, pb: Problem, request: Any, passes: int, elapsed: float) -> Solution:
         """The assembled motion and report of a candidate."""
+        ref = self.quality_reference
+        limits = CorrectionLimits(ref.root_speed_max, ref.turn_rate_max)
         motion, cuts = assemble(
-            self.db, self.frames, pb, cand, int(request.smoothing_frames), bool(request.footskate)
+            self.db, self.frames, pb, cand, int(request.smoothing_frames), bool(request.footskate), limits
         )
         annotations, metrics = label_report(self.db, pb, cand.sigma)
         metrics.update(discontinuity(motion, cuts))
@@ -126,7 +130,7 @@ class AnnotationEngine(Engine):
             (self.db.refs[int(self.db.clip_of[g])], int(g - self.db.clip_start[self.db.clip_of[g]]))
             for g in cand.sigma
         ]
-        return Solution(
+        solution = Solution(
             motion=motion,
             score=cand.score,
             terms={
@@ -135,10 +139,10 @@ class AnnotationEngine(Engine):
                 "end": end,
             },
             provenance=provenance,
-            constraint_errors=constraint_report(self.db, pb, cand, motion),
             metrics=metrics,
             annotations=annotations,
         )
+        return self.finish(solution, quality_inputs(self.db, self.frames, pb, cand.sigma, cuts))
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
         with threadpool_limits(limits=BLAS_THREADS):

@@ -23,6 +23,8 @@ from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
 from motion import Motion, MotionError
 from motion.bvh import parse_bvh
+from motion.goals import Goal, LengthGoal, PathGoal
+from motion.quality import QualityInputs
 
 from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
 from ..library import MotionLibrary
@@ -61,13 +63,20 @@ BEAM_WIDTH = 10.0
 BEAM_CELLS = (64, 256)
 
 
+PATH_TOLERANCE_CM = 10.0
+"""How far (RMS) a walker's body may be from a performed path and still follow it: the hips sway
+a few centimetres either side of the path at every step."""
+
+
 @dataclass(slots=True)
 class ControlInputCloud:
-    """The control as a point cloud at its own rate: ``cloud (F, P, 3)`` metres, ``fps``."""
+    """The control as a point cloud at its own rate: ``cloud (F, P, 3)`` metres, ``fps``; for a
+    performed path, the path itself (``path (F, 2)`` metres, after the request's smoothing)."""
 
     cloud: Array
     fps: float
     source: str
+    path: Array | None = None
 
 
 class ControlEngine(Engine):
@@ -125,6 +134,12 @@ class ControlEngine(Engine):
         return entry
 
     @classmethod
+    def example_clips(cls, library: MotionLibrary, arrays: Arrays) -> list[int]:
+        """The target clips: outputs are made of them (controls are only read)."""
+        targets = {t for _, t in ControlDatabase.from_arrays(arrays).pairs}
+        return [i for i, name in enumerate(library.names) if name in targets]
+
+    @classmethod
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         try:
             with threadpool_limits(limits=1):
@@ -147,7 +162,7 @@ class ControlEngine(Engine):
                     "this database's controls are motions: send a control BVH"
                 )
             tr = ctl.trajectory
-            cloud, _ = trajectory_control(
+            cloud, path = trajectory_control(
                 np.asarray(tr.points, dtype=np.float64),
                 tr.fps,
                 sep,
@@ -156,7 +171,7 @@ class ControlEngine(Engine):
                 max_speed_m_s=tr.max_speed_m_s,
                 speed_window_s=tr.speed_window_s,
             )
-            return ControlInputCloud(cloud, float(tr.fps), "trajectory")
+            return ControlInputCloud(cloud, float(tr.fps), "trajectory", path)
         try:
             data = request.input_bytes(ctl.bvh)
         except KeyError as exc:
@@ -437,7 +452,11 @@ class ControlEngine(Engine):
             "coarse_score": float(res.score),
             **timings,
         }
-        return Solution(
+        goals: list[Goal] = [LengthGoal(ctl.cloud.shape[0])]
+        if ctl.path is not None:
+            frames = np.arange(ctl.path.shape[0], dtype=np.intp)
+            goals.append(PathGoal("path", frames, ctl.path, tolerance_cm=PATH_TOLERANCE_CM))
+        solution = Solution(
             motion=motion,
             score=timed.score,
             terms={"interpretation": timed.interpretation, "continuity": timed.continuity},
@@ -445,3 +464,5 @@ class ControlEngine(Engine):
             metrics=metrics,
             annotations=annotations,
         )
+        joins = np.asarray([c for c in out.cuts if 0 < c < motion.num_frames], dtype=np.intp)
+        return self.finish(solution, QualityInputs(goals=tuple(goals), joins=joins))

@@ -6,16 +6,19 @@
 2. **Smooth.** The discontinuities at the cuts are spread over ``+-smoothing_frames`` frames with
    the paper's displacement blend (:func:`motion.smoothing.smooth_cuts`).
 3. **Meet the body constraints.** The body's remaining error at each body constraint (position
-   and, when given, heading), measured on the smoothed motion, is distributed linearly over the
-   frames since the previous body constraint; before the first one and after the last one the
-   correction is rigid. The heading correction turns the path with the body (each frame's step is
-   rotated by the correction angle of that frame), the position correction is a linear ramp; both
-   are applied as one per-frame floor transform, so the constraints are met to numerical
-   precision.
-4. **Clean the feet.** Smoothing and the body correction make planted feet slide; the source
-   clips' foot contacts at the provenance frames (:func:`motion.contacts.detect_contacts` on each
-   clip, cached) are propagated to the output, and :func:`motion.footskate.remove_foot_skate`
-   pins each contact run with leg IK (contacts stored by the build, see
+   and, when given, heading) and the floor part of each joint constraint's error, measured on the
+   smoothed motion, are spread over the frames since the previous one, as evenly as the
+   database's physical limits allow (:func:`motion.floorfit.floor_correction`: never faster or
+   turning faster than the fastest example, at most 15 % more speed than the frame has plus
+   5 cm/s); before the first one and after the last one the correction is rigid. The heading
+   correction turns the path with the body, the position correction is a ramp; both are applied
+   as one per-frame floor transform. What the limits do not allow stays as error, and the
+   quality report says so (the paper spreads without limit, which can drag a body at any speed).
+4. **Clean the feet.** Smoothing and the body correction make planted feet slide (and sink or
+   float where a cut between clips of different hip heights is smoothed); the source clips' foot
+   contacts at the provenance frames (:func:`motion.contacts.detect_contacts` on each clip,
+   cached) are propagated to the output, and :func:`motion.footskate.remove_foot_skate` pins each
+   contact run, at the feet's height in the source frames, with leg IK (contacts stored by the build, see
    :class:`~engines.graph.model.FootContacts`). Only leg joint rotations change: the root and the hips
    (thighs), hence the body constraints, are untouched. Around each joint constraint on a leg
    joint, that leg's contacts are dropped (``blend`` frames either side) so the constrained joint
@@ -37,15 +40,26 @@ from typing import Any
 import numpy as np
 
 from motion import Motion
-from motion.contacts import foot_joints
 from motion.errors import MotionError
+from motion.floorfit import CorrectionLimits, FloorGoal, floor_correction
 from motion.footskate import leg_chains, remove_foot_skate
-from motion.ground import apply_floor_transform, ground_frames, static_reference_root
+from motion.goals import (
+    BodyGoal,
+    Goal,
+    JointGoal,
+    LabelGoal,
+    LengthGoal,
+    ObstacleGoal,
+    PoseGoal,
+    body_pose,
+)
+from motion.ground import apply_floor_transform, body_root, ground_frames, static_reference_root
+from motion.quality import QualityInputs
 from motion.smoothing import smooth_cuts
 
 from ..library import MotionLibrary
 from .model import FloatArray, FootContacts, IntArray, RootTracks
-from .paths import BoolArray, Pieces, Placement, rotate2, wrap_angle
+from .paths import BoolArray, Pieces, Placement
 from .score import Problem, compile_problem
 from .tracks import foot_contacts
 
@@ -74,30 +88,19 @@ def _concatenate(library: MotionLibrary, pieces: Pieces) -> Motion:
     )
 
 
-def _correction(
-    body_xz: FloatArray, body_yaw: FloatArray, problem: Problem
-) -> tuple[FloatArray, FloatArray] | None:
-    """Per-frame floor transform ``theta (F,)``, ``shift (F, 2)`` meeting the body constraints."""
-    n = body_xz.shape[0]
-    targets = [b for b in problem.bodies if b.frame < n]
-    if not targets:
-        return None
-    f = np.arange(n)
-    kt = np.array([b.frame for b in targets if b.heading is not None], dtype=np.float64)
-    ka = np.array(
-        [float(wrap_angle(b.heading - body_yaw[b.frame])) for b in targets if b.heading is not None]
-    )
-    alpha = np.interp(f, kt, ka) if kt.size else np.zeros(n)
-    steps = np.zeros((n, 2))
-    steps[1:] = rotate2(alpha[1:], np.diff(body_xz, axis=0))
-    path = np.cumsum(steps, axis=0)
-    t0 = targets[0].frame
-    path += body_xz[t0] - path[t0]
-    rt = np.array([b.frame for b in targets], dtype=np.float64)
-    res = np.stack([b.xz - path[b.frame] for b in targets])
-    ramp = np.stack((np.interp(f, rt, res[:, 0]), np.interp(f, rt, res[:, 1])), axis=-1)
-    goal = path + ramp
-    return alpha, goal - rotate2(alpha, body_xz)
+def floor_goals(motion: Motion, positions: FloatArray, problem: Problem) -> list[FloorGoal]:
+    """The floor goals of a motion's body and joint constraints (:mod:`motion.floorfit`): body
+    constraints as they are, joint constraints as their floor part, aimed through the joint's
+    offset from the body (``positions (F, J, 3)`` in the motion's units)."""
+    n = motion.num_frames
+    mpu = motion.metres_per_unit
+    goals = [FloorGoal(b.frame, b.xz, b.heading) for b in problem.bodies if b.frame < n]
+    body = positions[:, body_root(motion.skeleton)][:, [0, 2]] * mpu
+    for j in problem.joints:
+        if j.frame < n:
+            offset = positions[j.frame, j.joint, [0, 2]] * mpu - body[j.frame]
+            goals.append(FloorGoal(j.frame, j.position[[0, 2]], None, offset))
+    return goals
 
 
 FOOT_BLEND_S = 0.1
@@ -132,11 +135,15 @@ def propagated_contacts(
 
 
 def clean_feet(
-    motion: Motion, contacts: tuple[IntArray, BoolArray], problem: Problem, blend_s: float = FOOT_BLEND_S
+    motion: Motion,
+    contacts: tuple[IntArray, BoolArray],
+    problem: Problem,
+    blend_s: float = FOOT_BLEND_S,
+    heights: FloatArray | None = None,
 ) -> Motion:
-    """:func:`motion.footskate.remove_foot_skate` with the given contacts, except around joint
-    constraints on leg joints (see the module docstring); the motion unchanged when its legs
-    cannot be found."""
+    """:func:`motion.footskate.remove_foot_skate` with the given contacts (and rest ``heights``
+    ``(F, K)`` of the contact joints), except around joint constraints on leg joints (see the
+    module docstring); the motion unchanged when its legs cannot be found."""
     joints, flags = contacts
     if not flags.any():
         return motion
@@ -156,7 +163,7 @@ def clean_feet(
                     if leg.hip in chain:
                         cols = [s for s in (leg.ankle_slot, leg.toe_slot) if s >= 0]
                         flags[max(jt.frame - blend, 0) : jt.frame + blend + 1, cols] = False
-        return remove_foot_skate(motion, (joints, flags), blend_s=blend_s)
+        return remove_foot_skate(motion, (joints, flags), blend_s=blend_s, heights=heights)
     except MotionError:  # no hip-knee-ankle chains above the feet: nothing to pin
         return motion
 
@@ -171,6 +178,7 @@ def assemble(
     *,
     feet: bool = True,
     contacts: FootContacts | None = None,
+    limits: CorrectionLimits | None = None,
 ) -> tuple[Motion, list[tuple[str, int]]]:
     """The motion a path plays, placed, smoothed and meeting its body constraints.
 
@@ -189,6 +197,9 @@ def assemble(
     contacts:
         The database's foot contacts (:class:`~engines.graph.model.FootContacts`); computed from
         the library (and cached) when not given.
+    limits:
+        How much of the body constraints' error a frame may absorb (step 3); ``None`` spreads it
+        without limit (the paper's rule).
 
     Returns
     -------
@@ -206,89 +217,67 @@ def assemble(
     motion = _concatenate(library, pieces)
     theta, shift = placement.per_frame()
     motion = apply_floor_transform(motion, theta, shift, static)
+    placed = motion  # the source frames as they are, before the cuts are smoothed
     cuts = [int(s) for s in pieces.start[1:] if 0 < s < motion.num_frames]
     window = int(getattr(request, "smoothing_frames", 0))
     if cuts and window >= 1:
         motion = smooth_cuts(motion, cuts, window)
-    if problem.bodies:
-        xz, yaw = body_frames(motion)
-        corr = _correction(xz, yaw, problem)
-        if corr is not None:
-            motion = apply_floor_transform(motion, corr[0], corr[1], static)
+    if problem.bodies or problem.joints:
+        positions = motion.global_positions()
+        goals = floor_goals(motion, positions, problem)
+        if goals:
+            xz, yaw = body_frames(motion, positions)
+            corr = floor_correction(xz, yaw, motion.fps, goals, limits)
+            motion = apply_floor_transform(motion, corr.theta, corr.shift, static)
     clips, frames = pieces.source()
     if feet and motion.num_frames > 1:
         if contacts is None:
             contacts = library_contacts(library)
         if contacts.joints.size:
-            motion = clean_feet(motion, propagated_contacts(contacts, tracks, clips, frames), problem)
+            joints, flags = propagated_contacts(contacts, tracks, clips, frames)
+            # planted feet rest at their height in the source frames (smoothing a cut between clips
+            # of different hip heights lowers or raises them)
+            rest = placed.global_positions()[:, joints, 1]
+            motion = clean_feet(motion, (joints, flags), problem, heights=rest)
     provenance = [(library.names[int(c)], int(f)) for c, f in zip(clips, frames, strict=True)]
     return motion, provenance
 
 
-def constraint_errors(
-    motion: Motion, provenance: list[tuple[str, int]], problem: Problem, library: MotionLibrary
-) -> dict[str, Any]:
-    """Each constraint's error measured on an assembled motion: ``length`` (frames), ``body[i]``
-    (``position_cm``, ``heading_deg``), ``joint[i]`` (``position_cm``, ``velocity_cm_s``),
-    ``pose[i]`` (``frames`` off in the source clip, ``held``), ``label[i]`` (``frames`` wrong of
-    ``window``), ``obstacle[i]`` (``frames`` with root or a foot inside, deepest ``depth_cm``)."""
-    out: dict[str, Any] = {"length": {"frames": abs(motion.num_frames - problem.length)}}
-    n = motion.num_frames
-    pos = np.ascontiguousarray(motion.global_positions()) * motion.metres_per_unit
-    xz, yaw = body_frames(motion, pos / motion.metres_per_unit)
+def quality_inputs(
+    motion: Motion,
+    provenance: list[tuple[str, int]],
+    cuts: IntArray,
+    problem: Problem,
+    library: MotionLibrary,
+) -> QualityInputs:
+    """What the quality report measures an assembled motion against (:mod:`motion.goals`): the
+    length; each body, joint and obstacle constraint; each pose constraint as the clip frame's
+    pose (and whether that very frame plays there: ``held``, ``frames`` off in its clip); each
+    label constraint honoured by the labels of the frames played; ``cuts`` as joins."""
+    goals: list[Goal] = [LengthGoal(problem.length)]
     for b in problem.bodies:
-        if b.frame >= n:
-            out[b.name] = {"frame": b.frame, "position_cm": None, "missing": True}
-            continue
-        e: dict[str, Any] = {
-            "frame": b.frame,
-            "position_cm": round(float(np.linalg.norm(xz[b.frame] - b.xz)) * 100, 4),
-        }
-        if b.heading is not None:
-            e["heading_deg"] = round(abs(float(np.degrees(wrap_angle(yaw[b.frame] - b.heading)))), 4)
-        out[b.name] = e
+        goals.append(BodyGoal(b.name, b.frame, b.xz, b.heading))
     for j in problem.joints:
-        if j.frame >= n:
-            out[j.name] = {"frame": j.frame, "position_cm": None, "missing": True}
-            continue
-        e = {
-            "frame": j.frame,
-            "position_cm": round(float(np.linalg.norm(pos[j.frame, j.joint] - j.position)) * 100, 4),
-        }
-        if j.velocity is not None:
-            a, b2 = max(j.frame - 1, 0), min(j.frame + 1, n - 1)
-            v = (pos[b2, j.joint] - pos[a, j.joint]) * motion.fps / max(b2 - a, 1)
-            e["velocity_cm_s"] = round(float(np.linalg.norm(v - j.velocity)) * 100, 4)
-        out[j.name] = e
+        goals.append(JointGoal(j.name, j.frame, j.joint, j.position, j.velocity))
     index = {name: i for i, name in enumerate(library.names)}
+    n = motion.num_frames
     for p in problem.poses:
-        if p.frame >= n:
-            out[p.name] = {"frame": p.frame, "held": False, "frames": None}
-            continue
-        clip, src = provenance[p.frame]
-        same = index[clip] == p.clip
-        out[p.name] = {
-            "frame": p.frame,
-            "held": same and src == p.clip_frame,
-            "frames": abs(src - p.clip_frame) if same else None,
-        }
+        src = library.motions[p.clip]
+        frame_pos = src.slice(p.clip_frame, p.clip_frame + 1).global_positions() * src.metres_per_unit
+        extra: dict[str, Any] = {"held": False, "frames": None}
+        if p.frame < n:
+            clip, at = provenance[p.frame]
+            same = index[clip] == p.clip
+            extra = {"held": same and at == p.clip_frame, "frames": abs(at - p.clip_frame) if same else None}
+        goals.append(PoseGoal(p.name, p.frame, body_pose(frame_pos, src.skeleton)[0], extra=extra))
     starts = np.concatenate(([0], np.cumsum([m.num_frames for m in library.motions])))
     rows = np.array([starts[index[c]] + f for c, f in provenance], dtype=np.int64)
     for lb in problem.labels:
-        t = np.arange(lb.start, min(lb.end, n))
-        ok = lb.good[rows[t] + 1] - lb.good[rows[t]]
-        wrong = int((lb.end - lb.start) - ok.sum())
-        out[lb.name] = {"frames": wrong, "window": lb.end - lb.start}
-    if problem.obstacles:
-        try:
-            feet = list(foot_joints(motion.skeleton))
-        except MotionError:
-            feet = []
-        pts = np.concatenate((xz[:, None, :], pos[:, feet][:, :, [0, 2]]), axis=1)
-        for ob in problem.obstacles:
-            d = ob.depth(pts).max(axis=1)
-            out[ob.name] = {
-                "frames": int(np.count_nonzero(d > 0)),
-                "depth_cm": round(float(d.max(initial=0.0)) * 100, 4),
-            }
-    return out
+        t = np.arange(lb.start, lb.end)
+        honoured = np.zeros(t.size, dtype=bool)
+        inside = t < n
+        honoured[inside] = (lb.good[rows[t[inside]] + 1] - lb.good[rows[t[inside]]]) > 0
+        goals.append(LabelGoal(lb.name, lb.label, lb.start, lb.end, lb.value, honoured))
+    for ob in problem.obstacles:
+        goals.append(ObstacleGoal(ob.name, ob.region))
+    return QualityInputs(goals=tuple(goals), joins=np.asarray(cuts, dtype=np.intp))

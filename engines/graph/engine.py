@@ -38,6 +38,11 @@ class GraphEngine(Engine):
         return build_graph(spec, library, emit, should_stop)
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
-        GraphSearch(self.library, self.tree, self.tracks, request.seed, contacts=self.contacts).run(
-            request, budget_s, emit, should_stop
-        )
+        GraphSearch(
+            self.library,
+            self.tree,
+            self.tracks,
+            request.seed,
+            contacts=self.contacts,
+            reference=self.quality_reference,
+        ).run(request, budget_s, emit, should_stop)

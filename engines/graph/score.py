@@ -3,15 +3,21 @@
 ``S = w_c sum cost(e) + w_f F + w_b B + w_j J + w_l L + w_o O``, every term dimensionless with the
 paper's units: an error of **10 frames**, of **30 cm** and of **10 degrees** cost the same (1).
 
-* ``continuity`` = sum of the transition costs of the edges whose cut lies inside the output.
+* ``continuity`` = sum of the transition costs of the edges whose cut lies inside the output,
+  plus a penalty for pieces shorter than :data:`MIN_PIECE_S` between two cuts.
 * ``length`` F = ``(missing frames / 10)^2``: a path that plays fewer frames than asked for (paths
   are truncated to the length, so a long enough path has F = 0 and the output is exact).
 * ``body`` B: the first body constraint (in time) *places* the motion (so it is always met); each
   other one adds ``weight * ((distance / 0.30 m)^2 + (heading error / 10 deg)^2)`` (no heading
-  term when its heading is free). When the first one leaves the heading free, the motion is turned
+  term when its heading is free), where the errors are the corrections assembly will spread over
+  the frames since the previous constraint (:mod:`engines.graph.fit`), plus ``(excess / 5 cm)^2``
+  and ``(excess / 5 deg)^2`` for the part of them beyond the database's physical limits (which
+  will not be delivered). When the first one leaves the heading free, the motion is turned
   about it so that it heads for the second body constraint.
 * ``joint`` J: per joint constraint ``weight * ((distance / 0.30 m)^2 + (velocity error /
-  0.30 m/s)^2)`` (velocity term only when given), from the library's joint positions.
+  0.30 m/s)^2)`` (velocity term only when given), from the library's joint positions; the floor
+  part of the distance, which assembly corrects like a body constraint's, is charged as that
+  correction (and its excess).
 * ``label`` L: per label constraint ``weight * frames / 10``, counting the frames of its window
   that lack a wanted label (value 1) or carry an unwanted one (value -1), from the clips' labels.
 * ``obstacle`` O: every ``step`` output frames (2 or more, at most 100 samples), the root and the
@@ -38,9 +44,11 @@ import numpy as np
 
 from motion import MotionError
 from motion.contacts import foot_joints
+from motion.regions import FloorRegion
 
 from ..base import EngineError
 from ..library import MotionLibrary
+from .fit import BatchFit, FitGrid, batch_fit, fit_grid
 from .model import FloatArray, IntArray, RootTracks
 from .paths import (
     BatchPieces,
@@ -64,13 +72,28 @@ from .paths import (
 FRAMES_UNIT = 10.0
 """Frames that cost 1 (length, labels, time inside obstacles)."""
 METRES_UNIT = 0.30
-"""Metres that cost 1 (body and joint positions, obstacle depth)."""
+"""Metres that cost 1 (body and joint positions)."""
 RADIANS_UNIT = float(np.radians(10.0))
 """Heading error that costs 1 (10 degrees)."""
 VELOCITY_UNIT = 0.30
 """Joint velocity error (m/s) that costs 1."""
 OBSTACLE_SAMPLES = 100
 """At most this many sampled output frames per path for obstacles (every 2 frames or more)."""
+MIN_PIECE_S = 0.2
+"""Pieces of motion between two cuts shorter than this (seconds) are penalised: two cuts a
+frame or two apart jolt the body however well each one matches (the displacement smoothing of
+one overlaps the other)."""
+SHORT_PIECE_COST = 2.0
+"""Penalty of a one-frame piece (twice a typical transition's cost), falling quadratically to 0
+at :data:`MIN_PIECE_S`."""
+EXCESS_METRES = 0.05
+"""Body correction beyond what assembly's physical limits allow (it will not be delivered: the
+goal stays missed by that much) costs 1 per 5 cm, the report's tolerance."""
+EXCESS_RADIANS = float(np.radians(5.0))
+"""Likewise for heading: 1 per 5 degrees beyond the limits."""
+OBSTACLE_DEPTH_UNIT = 0.05
+"""Obstacle depth (metres) that doubles a sample's cost (:data:`METRES_UNIT` is too lenient for
+"stay out")."""
 OBSTACLE_MARGIN = 0.05
 """Obstacles are grown by this much (metres) while searching, so that the frames between samples
 stay out too (feet move a few centimetres per frame)."""
@@ -128,41 +151,15 @@ class LabelTarget:
 
 @dataclass(frozen=True, slots=True)
 class ObstacleTarget:
-    """A floor region: a disc (``center``, ``radius``) or a polygon ``(V, 2)``, metres."""
+    """An obstacle: a floor region (:class:`motion.regions.FloorRegion`) the root and feet avoid."""
 
     name: str
     weight: float
-    center: FloatArray | None = None
-    radius: float = 0.0
-    polygon: FloatArray | None = None
+    region: FloorRegion
 
     def depth(self, points: FloatArray, margin: float = 0.0) -> FloatArray:
-        """How far (metres) floor points ``(..., 2)`` are inside the region grown by ``margin``
-        metres (0 outside)."""
-        if self.center is not None:
-            d = self.radius + margin - np.linalg.norm(points - self.center, axis=-1)
-            return np.asarray(np.maximum(d, 0.0))
-        assert self.polygon is not None
-        return polygon_depth(points, self.polygon, margin)
-
-
-def polygon_depth(points: FloatArray, polygon: FloatArray, margin: float = 0.0) -> FloatArray:
-    """How far ``(...)`` points ``(..., 2)`` are inside a simple polygon ``(V, 2)`` grown by
-    ``margin`` metres: ``margin`` + the distance to the boundary inside (even-odd rule),
-    ``margin`` - that distance outside, never below 0."""
-    a = polygon
-    b = np.roll(polygon, -1, axis=0)
-    p = points[..., None, :]  # (..., 1, 2)
-    ax, az, bx, bz = a[:, 0], a[:, 1], b[:, 0], b[:, 1]
-    px, pz = p[..., 0], p[..., 1]
-    crosses = (az > pz) != (bz > pz)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x_at = ax + (pz - az) * (bx - ax) / (bz - az)
-    inside = (np.count_nonzero(crosses & (px < x_at), axis=-1) % 2) == 1
-    ab = b - a
-    t = np.clip(((p - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
-    dist = np.linalg.norm(p - (a + t[..., None] * ab), axis=-1).min(axis=-1)
-    return np.asarray(np.maximum(np.where(inside, margin + dist, margin - dist), 0.0))
+        """How far (metres) floor points ``(..., 2)`` are inside the region grown by ``margin``."""
+        return self.region.depth(points, margin)
 
 
 @dataclass(frozen=True)
@@ -180,6 +177,7 @@ class Problem:
     obstacles: tuple[ObstacleTarget, ...] = ()
     table: JointTable | None = None
     foot_columns: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+    grid: FitGrid | None = None
 
     @property
     def placed_by(self) -> BodyTarget | None:
@@ -271,16 +269,12 @@ def compile_problem(request: Any, library: MotionLibrary, tracks: RootTracks) ->
             np.cumsum(good, out=cum[1:])
             labels.append(LabelTarget(name("label"), c.label, start, end, int(c.value), c.weight, cum))
         elif c.type == "obstacle":
-            if c.disc is not None:
-                obstacles.append(
-                    ObstacleTarget(
-                        name("obstacle"), c.weight, np.asarray(c.disc.center, float), float(c.disc.radius)
-                    )
-                )
-            else:
-                obstacles.append(
-                    ObstacleTarget(name("obstacle"), c.weight, polygon=np.asarray(c.polygon, float))
-                )
+            region = (
+                FloorRegion.disc(c.disc.center, c.disc.radius)
+                if c.disc is not None
+                else FloorRegion.from_polygon(c.polygon)
+            )
+            obstacles.append(ObstacleTarget(name("obstacle"), c.weight, region))
         else:  # pragma: no cover - the schema's union is closed
             raise EngineError(f"unknown constraint type {c.type!r}")
 
@@ -303,6 +297,14 @@ def compile_problem(request: Any, library: MotionLibrary, tracks: RootTracks) ->
     if cols:
         table = JointTable(library, tracks, cols)
     joint_targets = tuple(JointTarget(n, t, j, cols.index(j), p, v, wt) for n, t, j, p, v, wt in joints)
+    grid = None
+    if len(bodies) >= 2 or joints or obstacles:
+        grid = fit_grid(
+            length,
+            [(b.frame, b.xz, b.heading, b.weight) for b in bodies],
+            [jt.frame for jt in joint_targets],
+            _obstacle_step(length) if obstacles else None,
+        )
     return Problem(
         length,
         fps,
@@ -314,7 +316,13 @@ def compile_problem(request: Any, library: MotionLibrary, tracks: RootTracks) ->
         tuple(obstacles),
         table,
         feet,
+        grid,
     )
+
+
+def _obstacle_step(length: int) -> int:
+    """Output frames between obstacle samples (2 or more, at most :data:`OBSTACLE_SAMPLES`)."""
+    return max(2, -(-length // OBSTACLE_SAMPLES))
 
 
 def _label_values(library: MotionLibrary, tracks: RootTracks, label: str) -> IntArray:
@@ -438,8 +446,11 @@ def _neutralise(batch: PathBatch, valid: BoolArray) -> PathBatch:
     )
 
 
-def score_batch(index: GraphIndex, problem: Problem, batch: PathBatch) -> BatchScore:
-    """Score every path of a batch (invalid paths and paths breaking a pose constraint score inf)."""
+def score_batch(index: GraphIndex, problem: Problem, batch: PathBatch, *, rough: bool = False) -> BatchScore:
+    """Score every path of a batch (invalid paths and paths breaking a pose constraint score inf).
+
+    ``rough``: a quicker estimate for ranking many candidates (chain seeds): body and joint
+    errors as they are before assembly's correction (the paper's terms), obstacles left out."""
     valid = batch_valid(index, batch)
     batch = _neutralise(batch, valid)
     if problem.poses:
@@ -459,24 +470,44 @@ def score_batch(index: GraphIndex, problem: Problem, batch: PathBatch) -> BatchS
     e = batch.edges
     cut = (e >= 0) & (pieces.start[:, 1:] < T)
     continuity = np.where(cut, index.tree.cost[np.maximum(e, 0)], 0.0).sum(axis=1)
+    continuity += _short_pieces(pieces, T, problem.fps)
     length = (np.maximum(T - pieces.total, 0) / FRAMES_UNIT) ** 2
+    fit = None if rough else _fit(index, problem, pieces, theta, shift)
     body = np.zeros(batch.size)
-    for b in problem.bodies[1:]:
-        yaw, xz = body_at(index, pieces, theta, shift, b.frame)
-        cost = (np.linalg.norm(xz - b.xz, axis=-1) / METRES_UNIT) ** 2
-        if b.heading is not None:
-            cost = cost + (wrap_angle(yaw - b.heading) / RADIANS_UNIT) ** 2
-        body += b.weight * cost
     joint = np.zeros(batch.size)
+    if fit is not None and problem.grid is not None:
+        grid = problem.grid
+        for h in range(1, grid.head_at.size):
+            inc = (fit.head_inc[:, h] / RADIANS_UNIT) ** 2 + (fit.head_excess[:, h] / EXCESS_RADIANS) ** 2
+            body += grid.head_weight[h] * inc
+        for gi in range(1, grid.floor_at.size):
+            ref = int(grid.floor_ref[gi])
+            wt = problem.bodies[ref].weight if grid.floor_kind[gi] == 0 else problem.joints[ref].weight
+            inc, excess = fit.floor_inc[:, gi], fit.floor_excess[:, gi]
+            cost = wt * ((inc / METRES_UNIT) ** 2 + (excess / EXCESS_METRES) ** 2)
+            if grid.floor_kind[gi] == 0:
+                body += cost
+            else:
+                joint += cost
+    else:
+        for b in problem.bodies[1:]:
+            yaw, xz = body_at(index, pieces, theta, shift, b.frame)
+            cost = (np.linalg.norm(xz - b.xz, axis=-1) / METRES_UNIT) ** 2
+            if b.heading is not None:
+                cost = cost + (wrap_angle(yaw - b.heading) / RADIANS_UNIT) ** 2
+            body += b.weight * cost
     if problem.joints:
         assert problem.table is not None
         for jt in problem.joints:
             j, clip, frame = locate(pieces, jt.frame)
             p = problem.table.at(clip, frame)[:, jt.column]
-            th, sh = theta[rows, j], shift[rows, j]
-            xz = rotate2(th, p[:, [0, 2]]) + sh
-            d2 = ((xz - jt.position[[0, 2]]) ** 2).sum(-1) + (p[:, 1] - jt.position[1]) ** 2
-            cost = d2 / METRES_UNIT**2
+            th = theta[rows, j]
+            if fit is None:  # rough: the whole error as played
+                xz = rotate2(th, p[:, [0, 2]]) + shift[rows, j]
+                cost = ((xz - jt.position[[0, 2]]) ** 2).sum(-1) / METRES_UNIT**2
+            else:  # the floor part is corrected by assembly (charged above as the correction it needs)
+                cost = np.zeros(batch.size)
+            cost = cost + (p[:, 1] - jt.position[1]) ** 2 / METRES_UNIT**2
             if jt.velocity is not None:
                 v = problem.table.velocity(clip, frame, problem.fps)[:, jt.column]
                 vxz = rotate2(th, v[:, [0, 2]])
@@ -492,7 +523,7 @@ def score_batch(index: GraphIndex, problem: Problem, batch: PathBatch) -> BatchS
         g = np.clip(g, 0, lb.good.size - 1)
         good = np.where(span > 0, lb.good[np.clip(g + span, 0, lb.good.size - 1)] - lb.good[g], 0).sum(axis=1)
         label += lb.weight * ((lb.end - lb.start) - good) / FRAMES_UNIT
-    obstacle = _obstacles(index, problem, pieces, theta, shift) if problem.obstacles else np.zeros(batch.size)
+    obstacle = _obstacles(problem, fit) if problem.obstacles and fit is not None else np.zeros(batch.size)
     terms = {
         "continuity": w["continuity"] * continuity,
         "length": w["length"] * length,
@@ -506,37 +537,49 @@ def score_batch(index: GraphIndex, problem: Problem, batch: PathBatch) -> BatchS
     return BatchScore(total, terms, valid, batch, pieces, theta, shift)
 
 
-def _obstacles(
+def _short_pieces(pieces: BatchPieces, length: int, fps: float) -> FloatArray:
+    """``(B,)`` the penalty of pieces shorter than :data:`MIN_PIECE_S` between two cuts (not the
+    first or the last piece): ``SHORT_PIECE_COST * (missing frames / shortest)^2`` each."""
+    shortest = max(2, int(round(MIN_PIECE_S * fps)))
+    count = pieces.count
+    inner = (count > 0) & (pieces.start > 0) & (pieces.start + count < length)
+    missing = np.where(inner, np.maximum(shortest - count, 0), 0) / shortest
+    return np.asarray(SHORT_PIECE_COST * (missing**2).sum(axis=1))
+
+
+def _fit(
     index: GraphIndex, problem: Problem, pieces: BatchPieces, theta: FloatArray, shift: FloatArray
-) -> FloatArray:
-    """Obstacle term ``(B,)`` (unweighted by ``w_o``), rows processed in chunks."""
-    T = problem.length
-    step = max(2, -(-T // OBSTACLE_SAMPLES))
-    ts = np.arange(0, T, step)
-    out = np.zeros(pieces.clip.shape[0])
-    chunk = max(1, 200_000 // (ts.size * (1 + problem.foot_columns.size)))
-    for lo in range(0, out.size, chunk):
-        sl = slice(lo, lo + chunk)
-        starts, counts = pieces.start[sl], pieces.count[sl]
-        frames_out = counts.sum(axis=1)
-        tt = np.minimum(ts[None, :], np.maximum(frames_out - 1, 0)[:, None])  # (b, S)
-        j = (starts[:, None, :] <= tt[:, :, None]).sum(-1) - 1
-        r = np.arange(starts.shape[0])[:, None]
-        clip = pieces.clip[sl][r, j]
-        frame = pieces.first[sl][r, j] + (tt - starts[r, j])
-        th, sh = theta[sl][r, j], shift[sl][r, j]
-        _, root = index.ground(clip, frame)
-        pts = [root[..., None, :]]
-        if problem.foot_columns.size and problem.table is not None:
-            feet = problem.table.at(clip, frame)[..., problem.foot_columns, :][..., [0, 2]]
-            pts.append(feet)
-        local = np.concatenate(pts, axis=-2)  # (b, S, K, 2)
-        world = rotate2(th[..., None], local) + sh[..., None, :]
-        for ob in problem.obstacles:
-            d = ob.depth(world, OBSTACLE_MARGIN).max(axis=-1)  # (b, S)
-            out[sl] += ob.weight * np.where(
-                d > 0, (step / FRAMES_UNIT) * (1.0 + d / METRES_UNIT) ** 2, 0.0
-            ).sum(axis=1)
+) -> BatchFit | None:
+    """The estimated body-constraint correction of the batch (:mod:`engines.graph.fit`), or
+    ``None`` when the problem has no goal to correct towards nor obstacle to test."""
+    if problem.grid is None:
+        return None
+    body_xz = np.array([b.xz for b in problem.bodies], dtype=np.float64).reshape(-1, 2)
+    joint_xz = np.array([j.position[[0, 2]] for j in problem.joints], dtype=np.float64).reshape(-1, 2)
+    columns = np.array([j.column for j in problem.joints], dtype=np.int64)
+    return batch_fit(
+        index, problem.grid, pieces, theta, shift, body_xz, joint_xz, problem.table, columns, problem.fps
+    )
+
+
+def _obstacles(problem: Problem, fit: BatchFit) -> FloatArray:
+    """Obstacle term ``(B,)`` (unweighted by ``w_o``) at the corrected sample frames."""
+    assert problem.grid is not None
+    grid = problem.grid
+    step = grid.step
+    cols = grid.samples
+    root = fit.goal[:, cols][:, :, None, :]  # (B, S, 1, 2)
+    pts = [root]
+    if problem.foot_columns.size and problem.table is not None:
+        feet = problem.table.at(fit.clip[:, cols], fit.frame[:, cols])[..., problem.foot_columns, :]
+        pts.append(fit.corrected(feet[..., [0, 2]], cols))
+    world = np.concatenate(pts, axis=-2)  # (B, S, K, 2)
+    out = np.zeros(world.shape[0])
+    for ob in problem.obstacles:
+        d = ob.depth(world, OBSTACLE_MARGIN).max(axis=-1)  # (B, S)
+        out += ob.weight * np.where(
+            d > 0, (step / FRAMES_UNIT) * (1.0 + d / OBSTACLE_DEPTH_UNIT) ** 2, 0.0
+        ).sum(axis=1)
     return out
 
 

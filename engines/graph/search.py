@@ -21,7 +21,7 @@ The loop (paper Sec. 4.2, steps 1-6):
    (at most :data:`MAX_CHAINS` per chain size, a random subset beyond), each with a few lengths
    of its first piece (:data:`CHAIN_STARTS`), and scored in batches cheapest continuity first,
    stopping once the continuity alone exceeds the ``population``-th best score (branch and bound)
-   or after ``chain_share`` of the budget. The :data:`CHAIN_POLISH` best are *polished* together
+   or after :data:`MAX_CHAIN_SCORES` candidates. The :data:`CHAIN_POLISH` best are *polished* together
    by vectorised hill climbing (start slides of :data:`POLISH_SHIFTS` frames, each edge demoted
    to either child; the paths that improved are tried again), and the best distinct clip
    sequences start the population; the next ones (up to :data:`CHAIN_QUEUE`) are the fresh seeds
@@ -51,13 +51,20 @@ The loop (paper Sec. 4.2, steps 1-6):
 4. **Fresh seeds** (``fresh`` per round) join the population, which is capped at ``population``
    paths (the worst older paths go first).
 
+5. **Converge**: the search stops after :data:`PATIENCE` rounds without a better path (the
+   paper's "repeat until no better path can be generated"), after the request's ``rounds``, or
+   when the budget is spent.
+
 Anytime: every round whose best path improved emits a solution (the first one right after the
 first seeds); ``should_stop`` and the budget are checked every few milliseconds. At the end, the
 ``request.alternatives`` best distinct local minima (different clip sequences; the population
-fills in when there are too few) are emitted after the best one, each with a higher score, so
-the runtime's best (lowest score) stays the best path; the search stops early enough to leave
-time for them (estimated from the first emission). All randomness comes from one
-``numpy.random.Generator`` seeded with the request's seed; only the budget cut-off depends on time.
+fills in when there are too few) are emitted after the best one, each with a higher score (the
+runtime publishes them as ``alternative`` events, so ``solution`` events stay strictly
+improving); the search stops early enough to leave time for them (estimated from the first
+emission). All randomness comes from one ``numpy.random.Generator`` seeded with the request's
+seed, and every bound on work counts candidates, not seconds: only the budget cut-off depends on
+time, so a search that converges (or reaches ``rounds``) within its budget returns the same
+motion for the same seed from the CLI, the HTTP API or any worker.
 """
 
 from __future__ import annotations
@@ -70,9 +77,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..base import Emitter, EngineError, ShouldStop, Solution
+from motion.floorfit import CorrectionLimits
+from motion.plausibility import Reference
+
+from ..base import Emitter, EngineError, ShouldStop, Solution, finish_solution
 from ..library import MotionLibrary
-from .assemble import assemble, constraint_errors
+from .assemble import assemble, quality_inputs
 from .model import EdgeTree, FloatArray, FootContacts, IntArray, RootTracks
 from .paths import GraphIndex, Path, PathBatch, batch_valid, clip_sequence, path_pieces, trim
 from .score import Evaluation, PoseTarget, Problem, compile_problem, evaluate, score_batch
@@ -87,13 +97,23 @@ POSE_SEEDS = 32
 """Seeds drawn per batch when pose constraints shape them (each is built by a Python loop)."""
 MAX_CUTS = 8
 """Most cuts tried between two consecutive pose constraints."""
+PATIENCE = 25
+"""Rounds without a better path after which the search stops (converged)."""
+MAX_CHAIN_SCORES = 150_000
+"""Most chain seeds scored (cheapest continuity first): a bound on work, not on time, so the
+seeds, and the search after them, are the same on any machine."""
 MAX_CHAINS = 150_000
 """Most chains of root edges per chain size enumerated for chain seeds (a random subset beyond)."""
 CHAIN_QUEUE = 100
 """Chain seeds kept (distinct clip sequences): the best start the population, the rest wait as
 fresh seeds of later rounds."""
 CHAIN_STARTS = (0.15, 0.5, 0.85)
+CHAIN_RESCORE = 8000
+"""Chain seeds scored exactly (best rough scores first) when the exact score needs assembly's
+correction estimate (:mod:`engines.graph.fit`)."""
 CHAIN_POLISH = 2000
+CHAIN_POLISH_EXACT = 250
+"""Chain seeds polished when the exact score needs the correction estimate (each costs more)."""
 """Best chain seeds polished by vectorised hill climbing before the population takes them."""
 POLISH_SHIFTS = (-20, -10, -5, -2, -1, 1, 2, 5, 10, 20)
 """Start-frame slides tried by the polish."""
@@ -156,9 +176,14 @@ class GraphSearch:
         from the library when not given).
     seed_bias:
         Fraction of random walkers that are biased towards few, cheap cuts (module docstring).
-    chain_edges, chain_share:
-        Longest chains of root edges enumerated for chain seeds (0: none) and the most of the
-        budget their scan may take.
+    chain_edges:
+        Longest chains of root edges enumerated for chain seeds (0: none).
+    patience:
+        Rounds without a better path after which the search has converged and stops.
+    reference:
+        What the database's examples do (:class:`motion.plausibility.Reference`): the physical
+        limits of the body-constraint correction and the quality report's reference. ``None``:
+        corrections without limit, plausibility reported but not gated.
 
     Examples
     --------
@@ -182,7 +207,8 @@ class GraphSearch:
         contacts: FootContacts | None = None,
         seed_bias: float = 0.5,
         chain_edges: int = 3,
-        chain_share: float = 0.3,
+        patience: int = PATIENCE,
+        reference: Reference | None = None,
     ) -> None:
         self.library = library
         self.tree = tree
@@ -198,7 +224,11 @@ class GraphSearch:
         self.contacts = contacts
         self.seed_bias = seed_bias
         self.chain_edges = chain_edges
-        self.chain_share = chain_share
+        self.patience = patience
+        self.reference = reference
+        self.limits = (
+            None if reference is None else CorrectionLimits(reference.root_speed_max, reference.turn_rate_max)
+        )
         self.index_ = GraphIndex.of(tree, tracks)
         if self.index_.n_clips != len(library.motions):
             raise EngineError("the graph and the motion library disagree on the clips")
@@ -222,8 +252,14 @@ class GraphSearch:
         *,
         max_rounds: int | None = None,
     ) -> None:
-        """Search until ``budget_s`` seconds have passed, ``should_stop()`` or ``max_rounds``
-        rounds, emitting every new best and then the alternatives (module docstring)."""
+        """Search until the search converges (:attr:`patience` rounds without a better path:
+        the paper's "until no better path can be generated"), ``max_rounds`` rounds (or the
+        request's ``rounds``), ``budget_s`` seconds or ``should_stop()``, emitting every new best
+        and then the alternatives (module docstring). Only the budget depends on time: a search
+        that converges or reaches its rounds within the budget gives the same result for the same
+        seed on any machine."""
+        if getattr(request, "rounds", None) is not None:
+            max_rounds = int(request.rounds)
         t0 = time.perf_counter()
         problem = compile_problem(request, self.library, self.tracks)
         rng = np.random.default_rng(self.seed)
@@ -251,12 +287,13 @@ class GraphSearch:
             reserve = min(self._emit_cost * (request.alternatives - 1) * 1.2, 0.2 * budget_s)
             clock.deadline = t0 + budget_s - reserve
             if self.chain_edges and not problem.poses:
-                population = self._merge(population + self._chain_members(problem, rng, clock, budget_s))
+                population = self._merge(population + self._chain_members(problem, rng, clock))
                 if population[0].score < best[0]:
                     best = (population[0].score, population[0].path)
                     emitted_best = self._emit(emit, request, best[1], rank=0, local=False)
             rnd = 0
-            while max_rounds is None or rnd < max_rounds:
+            last_gain = 0
+            while (max_rounds is None or rnd < max_rounds) and rnd - last_gain < self.patience:
                 rnd += 1
                 self.rounds_ = rnd
                 population = self._round(problem, population, rng, rnd, clock)
@@ -270,6 +307,7 @@ class GraphSearch:
                         best = (s, p)
                 if best[1] != emitted_best:
                     emitted_best = self._emit(emit, request, best[1], rank=0, local=False)
+                    last_gain = rnd
         except _Stop as stop:
             cancelled = stop.cancelled
         if best is None:
@@ -344,14 +382,12 @@ class GraphSearch:
             mid = new_mid[fits]
         return out
 
-    def _chain_members(
-        self, problem: Problem, rng: np.random.Generator, clock: _Clock, budget_s: float
-    ) -> list[_Member]:
+    def _chain_members(self, problem: Problem, rng: np.random.Generator, clock: _Clock) -> list[_Member]:
         """Seeds from short chains of root edges (:meth:`_chains`), each with a few first-piece
         lengths, scored cheapest continuity first (branch and bound: a chain's score is at least
         the sum of its edge costs, so the scan stops once that exceeds the ``population``-th best
         score found); the best distinct clip sequences are returned. Bounded by
-        ``chain_share`` of the budget."""
+        :data:`MAX_CHAIN_SCORES` candidates."""
         t = self.tree
         T = problem.length
         w_c = problem.weights["continuity"]
@@ -369,25 +405,29 @@ class GraphSearch:
         order = np.argsort(np.concatenate(bounds), kind="stable")
         batch = PathBatch.concat(parts).take(order)  # cheapest continuity first
         bound = np.concatenate(bounds)[order]
-        deadline = time.perf_counter() + self.chain_share * budget_s
+        rough = problem.grid is not None  # the exact score costs more: rank by the rough one first
         scores = np.full(order.size, np.inf)
         kth = np.inf  # the population-th best score so far
-        for c0 in range(0, order.size, CHUNK * 4):
+        for c0 in range(0, min(order.size, MAX_CHAIN_SCORES), CHUNK * 4):
             clock.check()
-            if time.perf_counter() > deadline:
-                break
-            c1 = min(c0 + CHUNK * 4, order.size)
+            c1 = min(c0 + CHUNK * 4, order.size, MAX_CHAIN_SCORES)
             if bound[c0] >= kth:
                 break
             part = PathBatch(batch.start_clip[c0:c1], batch.start_frame[c0:c1], batch.edges[c0:c1])
-            scores[c0:c1] = score_batch(self.index_, problem, part).total
+            scores[c0:c1] = score_batch(self.index_, problem, part, rough=rough).total
             done = scores[:c1]
             if done.size >= self.population:
                 kth = float(np.partition(done, self.population - 1)[self.population - 1])
-        ranked = np.argsort(scores, kind="stable")[:CHAIN_POLISH]
+        if rough:
+            keep = np.argsort(scores, kind="stable")[:CHAIN_RESCORE]
+            keep = keep[np.isfinite(scores[keep])]
+            exact = PathBatch(batch.start_clip[keep], batch.start_frame[keep], batch.edges[keep])
+            scores = np.full(order.size, np.inf)
+            scores[keep] = self._scores(problem, exact, clock)[0]
+        ranked = np.argsort(scores, kind="stable")[: CHAIN_POLISH_EXACT if rough else CHAIN_POLISH]
         ranked = ranked[np.isfinite(scores[ranked])]
         top = PathBatch(batch.start_clip[ranked], batch.start_frame[ranked], batch.edges[ranked])
-        top, top_scores = self._polish(problem, top, scores[ranked], clock, deadline=deadline)
+        top, top_scores = self._polish(problem, top, scores[ranked], clock)
         out: list[_Member] = []
         sequences: set[tuple[int, ...]] = set()
         for r in np.argsort(top_scores, kind="stable"):
@@ -444,8 +484,7 @@ class GraphSearch:
                     ed.append(kids)
             owner = np.concatenate(rows)
             cand = PathBatch(batch.start_clip[owner], np.concatenate(sf), np.concatenate(ed))
-            s = score_batch(self.index_, problem, cand)
-            total = np.where(s.pieces.total >= problem.length, s.total, np.inf)
+            total, starts = self._scores(problem, cand, clock)
             best = np.full(b, np.inf)
             np.minimum.at(best, owner, total)
             improved = best < scores - 1e-9
@@ -457,10 +496,24 @@ class GraphSearch:
             first[owner[hit[::-1]]] = hit[::-1]
             active = np.flatnonzero(improved)
             pick = first[active]
-            batch.start_frame[active] = s.batch.start_frame[pick]
-            batch.edges[active] = s.batch.edges[pick]
+            batch.start_frame[active] = starts[pick]
+            batch.edges[active] = cand.edges[pick]
             scores[active] = best[active]
         return batch, scores
+
+    def _scores(self, problem: Problem, cands: PathBatch, clock: _Clock) -> tuple[FloatArray, IntArray]:
+        """Totals ``(B,)`` of full-length paths (inf for shorter ones) and their re-anchored
+        start frames, scored :data:`CHUNK` at a time between budget and cancel checks."""
+        totals = np.empty(cands.size)
+        starts = np.empty(cands.size, dtype=np.int64)
+        for lo in range(0, cands.size, CHUNK):
+            clock.check()
+            hi = min(lo + CHUNK, cands.size)
+            part = PathBatch(cands.start_clip[lo:hi], cands.start_frame[lo:hi], cands.edges[lo:hi])
+            s = score_batch(self.index_, problem, part)
+            totals[lo:hi] = np.where(s.pieces.total >= problem.length, s.total, np.inf)
+            starts[lo:hi] = s.batch.start_frame
+        return totals, starts
 
     # -- rounds ------------------------------------------------------------------------------
     def _round(
@@ -561,7 +614,7 @@ class GraphSearch:
         return path
 
     def solution(self, ev: Evaluation, request: Any, *, rank: int = 0, local: bool = False) -> Solution:
-        """The :class:`~engines.base.Solution` of an evaluated path (assembled motion, report)."""
+        """The :class:`~engines.base.Solution` of an evaluated path (assembled motion, quality report)."""
         motion, provenance = assemble(
             self.library,
             self.tracks,
@@ -571,22 +624,25 @@ class GraphSearch:
             self._problem,
             contacts=self.contacts,
             feet=request.footskate,
+            limits=self.limits,
         )
-        errors = constraint_errors(motion, provenance, self._problem, self.library)
+        cuts = ev.pieces.start[1:]
+        cuts = cuts[(cuts > 0) & (cuts < motion.num_frames)]
+        inputs = quality_inputs(motion, provenance, cuts, self._problem, self.library)
         metrics = {
             "pieces": float(ev.pieces.clip.size),
             "alternative": float(rank),
             "local_minimum": float(local),
             "search_rounds": float(self.rounds_),
         }
-        return Solution(
+        solution = Solution(
             motion=motion,
             score=ev.score,
             terms=dict(ev.terms),
             provenance=provenance,
-            constraint_errors=errors,
             metrics=metrics,
         )
+        return finish_solution(solution, inputs, self.reference)
 
     # -- mutations ---------------------------------------------------------------------------
     def mutations(self, path: Path, rng: np.random.Generator, stage: int | None = None) -> PathBatch:

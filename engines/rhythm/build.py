@@ -159,6 +159,20 @@ def _align_signs(q: Array, labels: npt.NDArray[np.intp], centre: npt.NDArray[np.
     return np.asarray(np.where(dots < 0, -q, q))
 
 
+def consecutive_runs(
+    clip_of: npt.NDArray[np.intp], index_in_clip: npt.NDArray[np.intp]
+) -> list[npt.NDArray[np.intp]]:
+    """Movement indices in runs of consecutive movements of one clip (a gap where an irregular span
+    was left out starts a new run): the observed transitions of the behavioural likelihood."""
+    runs: list[npt.NDArray[np.intp]] = []
+    for c in np.unique(clip_of):
+        members = np.flatnonzero(clip_of == c)
+        members = members[np.argsort(index_in_clip[members], kind="stable")]
+        breaks = np.flatnonzero(np.diff(index_in_clip[members]) != 1) + 1
+        runs.extend(np.split(members, breaks))
+    return runs
+
+
 def build_rhythm(spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
     """The ``rhythm.*`` arrays of a database (module doc)."""
     emit.progress(0.55, "motion beats")
@@ -188,9 +202,7 @@ def build_rhythm(spec: Any, library: MotionLibrary, emit: Emitter, should_stop: 
     emit.progress(0.85, "transition graph")
     td = transition_differences(mv, spec.velocity_weight)
     clip_of = mv.src_clip
-    sequences = [
-        np.flatnonzero(clip_of == c)[np.argsort(mv.index_in_clip[clip_of == c])] for c in np.unique(clip_of)
-    ]
+    sequences = consecutive_runs(clip_of, mv.index_in_clip)
     graph = transition_graph(
         td,
         labels,

@@ -24,18 +24,19 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.ndimage import gaussian_filter1d
-from scipy.signal import argrelextrema
 
 from motion import Motion, MotionError, Skeleton
-from motion.metrics import foot_slip
+from motion.goals import BeatGoal, Character, LengthGoal
+from motion.metrics import beat_align_scores
+from motion.plausibility import SPEED_P99_MARGIN, SPEED_WINDOW_S
+from motion.quality import QualityInputs
 from motion.skeleton import POSITION_CHANNELS
 
 from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
 from ..library import MotionLibrary
 from .build import build_rhythm, tables_from_arrays
 from .music import MusicError, bpm_beats, parse_midi
-from .synth import Control, Dancers, Tables, initial_dancers, synthesize
+from .synth import Control, Dancers, SpeedLimits, Tables, initial_dancers, synthesize
 
 Array = npt.NDArray[np.float64]
 
@@ -63,34 +64,6 @@ def music_beats(request: Any) -> Array:
     if beats[-1] > 3600:
         raise EngineError("the music is longer than an hour")
     return beats
-
-
-def beat_align_scores(
-    positions: Array, fps: float, music_s: Array, sigma_s: float = 0.05
-) -> tuple[float, float, Array]:
-    """Beat-align scores of ``positions (F, J, 3)`` (metres) against music beats (seconds).
-
-    Motion beats are local minima of the summed joint speed. AIST++/mint: for every motion beat
-    (minimum within +-1/6 s), ``exp(-d^2 / 2 sigma^2)`` of the distance to the nearest music beat,
-    averaged; Bailando: for every inner music beat, the same of the distance to the nearest minimum
-    of the speed smoothed by a 5-frames-at-60-fps Gaussian. Returns (mint, bailando, motion beats s).
-    """
-    if positions.shape[0] < 5:
-        return 0.0, 0.0, np.zeros(0)
-    speed = np.linalg.norm(np.diff(positions, axis=0), axis=-1).sum(axis=1) * fps
-    mb = argrelextrema(speed, np.less, order=max(1, int(round(10 / 60 * fps))))[0] / fps
-    mint = (
-        float(np.mean([np.exp(-np.min((music_s - b) ** 2) / (2 * sigma_s**2)) for b in mb]))
-        if mb.size
-        else 0.0
-    )
-    mb2 = argrelextrema(gaussian_filter1d(speed, 5 / 60 * fps), np.less)[0] / fps
-    inner = music_s[1:-1]
-    if mb2.size and inner.size:
-        bail = float(np.mean([np.exp(-np.min((mb2 - m) ** 2) / (2 * sigma_s**2)) for m in inner]))
-    else:
-        bail = 0.0
-    return mint, bail, mb
 
 
 def combined_skeleton(skeletons: list[Skeleton], prefixes: list[str]) -> Skeleton:
@@ -233,6 +206,15 @@ class RhythmEngine(Engine):
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         return build_rhythm(spec, library, emit, should_stop)
 
+    @property
+    def speed_limits(self) -> SpeedLimits:
+        """What the beat accent must not drive the body beyond: the examples' fastest turn rate,
+        and their fastest speed but no more than the quality report allows the 99th percentile
+        (:data:`motion.plausibility.SPEED_P99_MARGIN` times the examples')."""
+        ref = self.quality_reference
+        speed = min(ref.root_speed_max, SPEED_P99_MARGIN * ref.root_speed_p99)
+        return SpeedLimits(speed, ref.turn_rate_max, SPEED_WINDOW_S)
+
     # -- synthesis ----------------------------------------------------------------------------
     def make_control(
         self, request: Any, beats: Array, dancers: Dancers
@@ -285,7 +267,7 @@ class RhythmEngine(Engine):
         )
         control = self.make_control(request, beats, dancers)
         rng = np.random.default_rng(request.seed)
-        r = synthesize(t, beats, fps, dancers, rng, control, accent=request.accent)
+        r = synthesize(t, beats, fps, dancers, rng, control, accent=request.accent, limits=self.speed_limits)
         leaders = [
             Motion(self.leader_skeleton, r.root[c], r.rot[c], fps, r.jt[c], "m", f"rhythm_{c}")
             for c in range(request.characters)
@@ -331,14 +313,6 @@ class RhythmEngine(Engine):
         else:
             beat_err = float("nan")
         motion = _assemble(leaders, partners, request.couples)
-        extra_metrics: dict[str, float] = {}
-        if motion is not first:
-            # the runtime's foot slip sees one skeleton; on a crowd, average it per character
-            slips = [foot_slip(m) for m in leaders + partners]
-            extra_metrics = {
-                "foot_slip_m_s": float(np.mean(slips)),
-                "foot_slip_max_m_s": float(np.max(slips)),
-            }
         names = self.meta["examples"]
         src = self.tables.src_frames
         dom = r.dominant[0]
@@ -358,29 +332,49 @@ class RhythmEngine(Engine):
             "beat_error_s": beat_err if np.isfinite(beat_err) else 0.0,
             "misaligned": 1.0 - 0.5 * (mint + bail),
         }
-        emit.solution(
-            Solution(
-                motion=motion,
-                score=terms["misaligned"],
-                terms=terms,
-                provenance=provenance,
-                metrics={
-                    "beat_align_mint": mint,
-                    "beat_align_bailando": bail,
-                    "music_bpm": 60.0 / float(np.median(np.diff(beats))),
-                    "characters": float(request.characters),
-                    **extra_metrics,
-                },
-                annotations={
-                    "music_beats_s": [round(float(b), 4) for b in beats],
-                    "motion_beats_s": [round(float(b), 4) for b in motion_beats],
-                    "speed_minima_s": [round(float(b), 4) for b in speed_minima],
-                    "movements": movements,
-                    "characters": request.characters,
-                    "couples": bool(request.couples),
-                },
-            )
+        chars: list[tuple[str, Skeleton]] = []
+        for c, lead in enumerate(leaders):
+            chars.append((f"c{c}_lead" if partners else f"c{c}", lead.skeleton))
+            if partners:
+                chars.append((f"c{c}_follow", partners[c].skeleton))
+        joins = np.array([p["start_frame"] for p in r.plans if p["start_frame"] > 0], dtype=np.intp)
+        inputs = QualityInputs(
+            goals=(LengthGoal(int(np.floor(beats[-1] * first.fps + 1e-9)) + 1), BeatGoal("music", beats)),
+            characters=_characters(chars, motion) if motion is not first else (),
+            joins=joins,
         )
+        solution = Solution(
+            motion=motion,
+            score=terms["misaligned"],
+            terms=terms,
+            provenance=provenance,
+            metrics={
+                "music_bpm": 60.0 / float(np.median(np.diff(beats))),
+                "characters": float(request.characters),
+            },
+            annotations={
+                "music_beats_s": [round(float(b), 4) for b in beats],
+                "motion_beats_s": [round(float(b), 4) for b in motion_beats],
+                "speed_minima_s": [round(float(b), 4) for b in speed_minima],
+                "movements": movements,
+                "characters": request.characters,
+                "couples": bool(request.couples),
+            },
+        )
+        emit.solution(self.finish(solution, inputs))
+
+
+def _characters(skeletons: list[tuple[str, Skeleton]], motion: Motion) -> tuple[Character, ...]:
+    """The characters ``(label, skeleton)`` of a combined output (:func:`combined_skeleton`:
+    joint 0 is the static ``world``, then each character's joints in its own order)."""
+    out: list[Character] = []
+    base = 1
+    for label, sk in skeletons:
+        out.append(Character(np.arange(base, base + sk.num_joints, dtype=np.intp), sk, label))
+        base += sk.num_joints
+    if base != motion.num_joints:
+        raise EngineError(f"the combined skeleton has {motion.num_joints} joints, the characters {base}")
+    return tuple(out)
 
 
 def _clean(m: Motion) -> Motion:

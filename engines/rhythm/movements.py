@@ -88,6 +88,10 @@ def rotate_points_yaw(p: Array, angle: Array) -> Array:
     return out
 
 
+MAX_BEAT_RATIO = 1.5
+"""Largest ratio of a movement's longest to its shortest beat for a basic movement."""
+
+
 def warp_frames(beats_s: Array, fps: float, beats_per_movement: int, frames_per_beat: int) -> Array:
     """``(C, N)`` fractional source frames of the ``C = (len(beats) - 1) // B`` movements of a clip.
 
@@ -134,8 +138,12 @@ def extract_movements(examples: list[Example], beats_per_movement: int) -> Movem
     """Cut, time-warp and normalize the basic movements of ``examples``.
 
     The common beat period is the median beat period of all examples; ``P`` is that period in
-    frames (at least 4). Raises :class:`MotionError` when no example has ``beats_per_movement + 1``
-    beats.
+    frames (at least 4). Spans whose beats are irregular (the longest beat more than
+    :data:`MAX_BEAT_RATIO` times the shortest: a missed or an extra beat) are not basic movements:
+    normalizing them to equal beats would play part of them half again as fast, and they are left
+    out (unless no span is regular). ``index_in_clip`` keeps each movement's place among its
+    clip's spans, so gaps show where one was left out. Raises :class:`MotionError` when no example
+    has ``beats_per_movement + 1`` beats.
     """
     if not examples:
         raise MotionError("no examples to cut into movements")
@@ -146,6 +154,7 @@ def extract_movements(examples: list[Example], beats_per_movement: int) -> Movem
     period = float(np.median(periods))
     p = max(4, int(round(period * fps)))
     roots, rots, jts, clips, frames, idx, ends_xz, ends_yaw = [], [], [], [], [], [], [], []
+    kept: list[npt.NDArray[np.bool_]] = []
     proots, prots = [], []
     for ci, ex in enumerate(examples):
         b = np.asarray(ex.beats_s, dtype=np.float64)
@@ -154,6 +163,9 @@ def extract_movements(examples: list[Example], beats_per_movement: int) -> Movem
         if src.shape[0] == 0:
             continue
         src = np.clip(src, 0.0, ex.motion.num_frames - 1)
+        spans = np.diff(b[: src.shape[0] * beats_per_movement + 1]).reshape(src.shape[0], beats_per_movement)
+        regular = spans.max(axis=1) <= MAX_BEAT_RATIO * spans.min(axis=1)
+        kept.append(regular)
         c, n = src.shape
         sampled = sample_at(ex.motion, src.reshape(-1))
         pos = sampled.global_positions()
@@ -186,20 +198,23 @@ def extract_movements(examples: list[Example], beats_per_movement: int) -> Movem
             f"no example has {beats_per_movement + 1} motion beats: nothing to cut into "
             f"{beats_per_movement}-beat movements"
         )
+    keep = np.concatenate(kept)
+    if not keep.any():
+        keep[:] = True  # no clean span at all: irregular movements rather than none
     couples = [e.partner is not None for e in examples]
     if any(couples) and not all(couples):
         raise MotionError("examples must be all solo or all couples")
-    end_xz, end_yaw = np.concatenate(ends_xz), np.concatenate(ends_yaw)
-    root_all = np.concatenate(roots)
+    end_xz, end_yaw = np.concatenate(ends_xz)[keep], np.concatenate(ends_yaw)[keep]
+    root_all = np.concatenate(roots)[keep]
     duration = beats_per_movement * period
     body_path = np.concatenate((np.zeros((end_xz.shape[0], 1, 2)), end_xz[:, None, :]), axis=1)
     return Movements(
         root=root_all,
-        rot=np.concatenate(rots),
-        jt=np.concatenate(jts),
-        src_clip=np.concatenate(clips),
-        src_frames=np.concatenate(frames),
-        index_in_clip=np.concatenate(idx),
+        rot=np.concatenate(rots)[keep],
+        jt=np.concatenate(jts)[keep],
+        src_clip=np.concatenate(clips)[keep],
+        src_frames=np.concatenate(frames)[keep],
+        index_in_clip=np.concatenate(idx)[keep],
         end_xz=end_xz,
         end_yaw=end_yaw,
         params=arc_parameters(body_path, end_yaw, duration),
@@ -207,8 +222,8 @@ def extract_movements(examples: list[Example], beats_per_movement: int) -> Movem
         beats_per_movement=beats_per_movement,
         period_s=period,
         fps=fps,
-        partner_root=np.concatenate(proots) if proots else None,
-        partner_rot=np.concatenate(prots) if prots else None,
+        partner_root=np.concatenate(proots)[keep] if proots else None,
+        partner_rot=np.concatenate(prots)[keep] if prots else None,
     )
 
 

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .engine import RhythmEngine
-from .synth import Control, MovementPlan, initial_dancers, plan_movement, render
+from .synth import Control, MovementPlan, accented, bounded_accent, initial_dancers, plan_movement, render
 
 Array = npt.NDArray[np.float64]
 
@@ -42,6 +42,7 @@ class LiveDancer:
         self.tables = engine.tables
         self.fps = float(fps or self.tables.fps)
         self.accent = float(accent)
+        self.limits = engine.speed_limits
         self.rng = np.random.default_rng(seed)
         self.dancers = initial_dancers(1, "grid", 1.0, np.zeros(2), 0.0)
         self.plan: MovementPlan | None = None
@@ -89,8 +90,9 @@ class LiveDancer:
             self.beat_in_movement = 0
         n = max(1, int(round(period * self.fps)))
         x = np.arange(n) / n
-        s = x - self.accent * np.sin(2 * np.pi * x) / (2 * np.pi)
-        u = t.frames_per_beat * (self.beat_in_movement + s)
+        beat = np.full(n, self.beat_in_movement, dtype=np.intp)
+        a = bounded_accent(t, self.plan, beat, x, self.accent, self.limits, self.fps)
+        u = t.frames_per_beat * (self.beat_in_movement + accented(x, a))
         r = render(t, self.plan, u)
         msg = {
             "type": "frames",

@@ -18,6 +18,9 @@ Time warp: within music beat ``k`` (from ``b_k`` to ``b_k+1``) the movement fram
 ``s(1) = 1``, so every motion beat lands exactly on its music beat; ``a > 0`` slows the motion
 around the beat (rate ``1 - a``) and speeds it between beats (``1 + a``), accentuating the beat
 as the speed minimum the eye (and the beat-align scores) look for. ``a = 0`` is the paper's linear warp.
+Since the accent speeds the motion up between beats (up to ``1 + a`` times), each movement's
+accent is lowered where it would drive the body faster, or turn it faster, than the fastest
+example (:func:`bounded_accent`); the accent used is in each movement's plan.
 """
 
 from __future__ import annotations
@@ -138,17 +141,73 @@ class Rendered:
     plans: list[dict[str, Any]] = field(default_factory=list)
 
 
-def warp(
-    beats_s: Array, times_s: Array, beats_per_movement: int, frames_per_beat: int, accent: float
-) -> tuple[IntArray, Array]:
-    """Movement index ``(F,)`` and movement frame ``u (F,)`` of every output time (module doc).
-
-    Times before the first beat hold the first frame; the final beat closes the last movement."""
+def beat_phase(beats_s: Array, times_s: Array, beats_per_movement: int) -> tuple[IntArray, IntArray, Array]:
+    """Per output time ``(F,)``: its movement, its beat within the movement and the fraction of
+    that beat elapsed ``x`` in [0, 1] (times before the first beat hold the first frame; the final
+    beat closes the last movement)."""
     b = np.asarray(beats_s, dtype=np.float64)
     k = np.clip(np.searchsorted(b, times_s, side="right") - 1, 0, b.size - 2)
     x = np.clip((times_s - b[k]) / (b[k + 1] - b[k]), 0.0, 1.0)
-    s = x - accent * np.sin(2.0 * np.pi * x) / (2.0 * np.pi)
-    return (k // beats_per_movement).astype(np.intp), frames_per_beat * (k % beats_per_movement + s)
+    return (k // beats_per_movement).astype(np.intp), (k % beats_per_movement).astype(np.intp), x
+
+
+def accented(x: Array, accent: float) -> Array:
+    """The accent warp within a beat, ``s(x) = x - a sin(2 pi x) / (2 pi)`` (module doc)."""
+    return np.asarray(x - accent * np.sin(2.0 * np.pi * x) / (2.0 * np.pi))
+
+
+def warp(
+    beats_s: Array, times_s: Array, beats_per_movement: int, frames_per_beat: int, accent: float
+) -> tuple[IntArray, Array]:
+    """Movement index ``(F,)`` and movement frame ``u (F,)`` of every output time (module doc)."""
+    mv, beat, x = beat_phase(beats_s, times_s, beats_per_movement)
+    return mv, frames_per_beat * (beat + accented(x, accent))
+
+
+@dataclass(frozen=True, slots=True)
+class SpeedLimits:
+    """The body's fastest floor speed (m/s) and turn rate (rad/s) in the examples, each measured
+    over ``window_s`` (:mod:`motion.plausibility`)."""
+
+    speed: float
+    turn: float
+    window_s: float
+
+
+def bounded_accent(
+    t: Tables, plan: MovementPlan, beat: IntArray, x: Array, accent: float, limits: SpeedLimits, fps: float
+) -> float:
+    """The largest accent up to ``accent`` with which a planned movement, rendered at the output
+    frames whose beat and phase are ``beat``, ``x`` ``(F,)``, keeps the body (root) within
+    ``limits`` (or no faster than the unaccented warp when that already exceeds them), found by
+    bisection. The accent speeds the motion up between beats (up to ``1 + a`` times), and a dancer
+    does not move faster than the fastest example for the sake of an accent."""
+    if accent <= 0 or x.size < 3:
+        return max(accent, 0.0)
+    w = max(1, int(round(limits.window_s * fps)))
+    if x.size <= w:
+        return accent
+
+    def excess(a: float) -> float:
+        u = t.frames_per_beat * (beat + accented(x, a))
+        root = _blend_at(t.root, plan.members, plan.weights, u, False)[..., [0, 2]]  # (C, F, 2)
+        q = _blend_at(t.rot[:, :, :1], plan.members, plan.weights, u, True)[:, :, 0]  # (C, F, 4)
+        yaw = np.unwrap(rot.yaw(q), axis=1)
+        speed = np.linalg.norm(root[:, w:] - root[:, :-w], axis=-1).max() * fps / w
+        turn = np.abs(yaw[:, w:] - yaw[:, :-w]).max() * fps / w
+        return float(max(speed / max(limits.speed, 1e-9), turn / max(limits.turn, 1e-9)))
+
+    allowed = max(1.0, excess(0.0))
+    if excess(accent) <= allowed:
+        return accent
+    lo, hi = 0.0, accent
+    for _ in range(6):
+        mid = 0.5 * (lo + hi)
+        if excess(mid) <= allowed:
+            lo = mid
+        else:
+            hi = mid
+    return lo
 
 
 def _smooth_fade(u: Array, length: float) -> Array:
@@ -358,15 +417,18 @@ def synthesize(
     rng: np.random.Generator,
     control: ControlFn | None = None,
     accent: float = 0.5,
+    limits: SpeedLimits | None = None,
 ) -> Rendered:
     """Frames ``0 .. floor(beats[-1] * fps)`` of every character, movements time-warped onto the beats.
 
     ``control(beat_index, dancers)`` returns the targets for the movement starting at that beat
-    (or None for free dancing)."""
+    (or None for free dancing). With ``limits``, each movement's accent is lowered as far as it
+    must be to keep the body within them (:func:`bounded_accent`)."""
     b = np.asarray(beats_s, dtype=np.float64)
     n_frames = int(np.floor(b[-1] * fps + 1e-9)) + 1
     times = np.arange(n_frames) / fps
-    mv_index, u = warp(b, times, t.beats_per_movement, t.frames_per_beat, accent)
+    mv_index, beat, x = beat_phase(b, times, t.beats_per_movement)
+    u = np.empty(n_frames)
     n_moves = int(mv_index.max()) + 1
     c = dancers.count
     j = t.rot.shape[2]
@@ -388,6 +450,8 @@ def synthesize(
         s, e = int(bounds[m]), int(bounds[m + 1])
         if e <= s:
             continue
+        a = accent if limits is None else bounded_accent(t, plan, beat[s:e], x[s:e], accent, limits, fps)
+        u[s:e] = t.frames_per_beat * (beat[s:e] + accented(x[s:e], a))
         r = render(t, plan, u[s:e])
         out_root[:, s:e], out_rot[:, s:e], out_jt[:, s:e] = r.root, r.rot, r.jt
         if out_proot is not None and out_prot is not None and r.proot is not None and r.prot is not None:
@@ -399,7 +463,8 @@ def synthesize(
                 "start_beat": m * t.beats_per_movement,
                 "group": int(plan.group[0]),
                 "members": [int(x) for x in plan.members[0]],
-                "weights": [round(float(x), 4) for x in plan.weights[0]],
+                "weights": [round(float(w), 4) for w in plan.weights[0]],
+                "accent": round(float(a), 3),
             }
         )
     return Rendered(out_root, out_rot, out_jt, out_proot, out_prot, dominant, u, plans)

@@ -155,4 +155,4 @@ def test_pairs_build_and_synth_through_the_cli_runtime(tmp_path: Path, sample_co
     assert result is not None
     motion, report = result
     assert motion.num_frames == 360 and report.fps == 120.0 and len(report.provenance) == 360
-    assert report.annotations["segments"] and "foot_slip_m_s" in report.metrics
+    assert report.annotations["segments"] and "foot_slide_m_s" in report.metrics and report.ok is not None

@@ -20,7 +20,8 @@ export const state = {
   viewer: { playing: false, time: 0, duration: 0, characters: [], frames: {} },
   tool: 'path',
   job: null, // {id, tool, status, submitted_ms}
-  solutions: [], // {job, result, score, elapsed_ms, terms, at_ms}
+  solutions: [], // {job, result, score, elapsed_ms, terms, at_ms, ok, reasons, alternative}
+  quality: null, // the drawn result's {result, ok, reasons}
   current: null, // {tool, job, result, score, frames, fps, drawn_ms}
   timings: {}, // tool -> ms from pressing the button to the first solution drawn
   firstDraw: {}, // tool -> where that time went (event arrival, download, parse, draw; ms)
@@ -139,6 +140,7 @@ function viewClip(name) {
   viewer.set('clip', motion);
   state.current = { tool: 'library', clip: name, frames: motion.frames, fps: motion.fps };
   $('sol-info').textContent = `clip ${name} · ${motion.frames} frames at ${motion.fps.toFixed(0)} fps`;
+  $('sol-quality').hidden = true;
   for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = true;
   viewer.seek(0);
   viewer.play();
@@ -374,6 +376,8 @@ export async function runJob(tool, request) {
   const t0 = performance.now();
   state.solutions = [];
   state.current = null;
+  state.quality = null;
+  $('sol-quality').hidden = true;
   $('alternatives').textContent = '';
   for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = true;
   $('sol-info').textContent = 'submitting…';
@@ -389,12 +393,15 @@ export async function runJob(tool, request) {
       $('sol-info').textContent = `${Math.round(ev.data.fraction * 100)}% ${ev.data.message || ''}`;
     } else if (ev.type === 'started') {
       state.job.status = 'running';
-    } else if (ev.type === 'solution') {
-      const sol = { job: info.id, result: ev.data.result, score: ev.data.score, elapsed_ms: ev.data.elapsed_ms, terms: ev.data.terms, at_ms: performance.now() - t0 };
+    } else if (ev.type === 'solution' || ev.type === 'alternative') {
+      // solutions are new bests (drawn as they come); alternatives are other candidates to pick
+      const sol = { job: info.id, result: ev.data.result, score: ev.data.score, elapsed_ms: ev.data.elapsed_ms, terms: ev.data.terms, at_ms: performance.now() - t0,
+        ok: ev.data.ok, reasons: ev.data.reasons || [], alternative: ev.type === 'alternative' };
       state.solutions.push(sol);
-      const opt = new Option(`${sol.result} · score ${sol.score.toFixed(3)}`, sol.result);
+      const mark = sol.ok === false ? ' · not ok' : '';
+      const opt = new Option(`${sol.result} · ${sol.alternative ? 'alternative · ' : ''}score ${sol.score.toFixed(3)}${mark}`, sol.result);
       $('alternatives').add(opt);
-      if (sol.score < best) {
+      if (ev.type === 'solution' && sol.score < best) {
         best = sol.score;
         $('alternatives').value = sol.result;
         requestDraw(run, sol);
@@ -433,9 +440,21 @@ async function drawSolution(run, sol) {
     state.firstDraw[run.tool] = { drawn_ms: drawn, event_ms, download_ms, parse_ms, draw_ms, result: sol.result };
   }
   $('sol-info').textContent = `${sol.result} · score ${sol.score.toFixed(3)} · found at ${(sol.elapsed_ms / 1000).toFixed(2)} s · ${motion.frames} frames`;
+  showQuality(sol);
   for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = false;
   if (first) { viewer.seek(0); viewer.play(); }
   tools[run.tool]?.onResult?.(motion);
+}
+
+// The result's quality report in one badge: "ok", or "not ok" with the first reason (all on hover).
+function showQuality(sol) {
+  const el = $('sol-quality');
+  if (sol.ok === undefined || sol.ok === null) { el.hidden = true; return; }
+  el.hidden = false;
+  el.className = `quality ${sol.ok ? 'ok' : 'bad'}`;
+  el.textContent = sol.ok ? 'ok' : `not ok: ${sol.reasons[0] || ''}${sol.reasons.length > 1 ? ` (+${sol.reasons.length - 1})` : ''}`;
+  el.title = sol.ok ? 'every constraint met; as plausible as the database\'s examples' : sol.reasons.join('\n');
+  state.quality = { result: sol.result, ok: sol.ok, reasons: sol.reasons };
 }
 
 function rootPath(motion) {

@@ -1,0 +1,345 @@
+"""What a request asked of a motion, and how far the motion is from it.
+
+Each goal is a small frozen dataclass an engine builds from its request (engine-independent
+terms: output frames, joint indices of the output skeleton, floor positions ``[x, z]`` metres,
+headings in radians about +Y); :func:`measure` measures it on the returned motion's joint
+positions and says whether it is ``satisfied`` against its stated tolerance. The entry keys are
+those of the report's ``constraint_errors`` (``body[1]``: ``frame``, ``position_cm``,
+``heading_deg``, ``satisfied``, ``tolerance_cm``, ``tolerance_deg``...).
+
+Defaults follow Arikan & Forsyth 2002, who report body and joint constraints met within 5 cm and
+5 degrees.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .contacts import foot_joints
+from .errors import MotionError
+from .ground import body_root, facing_from_positions, to_ground_frame
+from .metrics import beat_align_scores
+from .regions import FloorRegion
+from .skeleton import Skeleton
+
+Array = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+POSITION_TOLERANCE_CM = 5.0
+HEADING_TOLERANCE_DEG = 5.0
+VELOCITY_TOLERANCE_CM_S = 20.0
+LABEL_MIN_FRACTION = 0.9
+BEAT_MIN_SCORE = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class Character:
+    """One character of an output: its joints (indices into the output skeleton, in the order of
+    ``skeleton``, the character's own skeleton used to find its hips, feet and facing) and a
+    label for messages."""
+
+    joints: npt.NDArray[np.intp]
+    skeleton: Skeleton
+    label: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class LengthGoal:
+    """The output should have ``frames`` frames."""
+
+    frames: int
+    name: str = "length"
+
+
+@dataclass(frozen=True, slots=True)
+class BodyGoal:
+    """The body (hips on the floor, facing) at ``xz`` (metres) facing ``heading`` (radians, or
+    free) at output ``frame``."""
+
+    name: str
+    frame: int
+    xz: Array
+    heading: float | None = None
+    character: int = 0
+    tolerance_cm: float = POSITION_TOLERANCE_CM
+    tolerance_deg: float = HEADING_TOLERANCE_DEG
+
+
+@dataclass(frozen=True, slots=True)
+class JointGoal:
+    """Output joint ``joint`` (an index of the output skeleton) at ``position (3,)`` metres, and
+    moving at ``velocity (3,)`` m/s when given, at output ``frame``."""
+
+    name: str
+    frame: int
+    joint: int
+    position: Array
+    velocity: Array | None = None
+    tolerance_cm: float = POSITION_TOLERANCE_CM
+    tolerance_cm_s: float = VELOCITY_TOLERANCE_CM_S
+
+
+@dataclass(frozen=True, slots=True)
+class PoseGoal:
+    """A whole pose at output ``frame``: ``pose (J, 3)`` joint positions (metres) of the
+    character's skeleton in the body's ground frame (:func:`body_pose`), e.g. a clip's frame.
+    ``extra`` entries (how the engine placed it) are copied into the report."""
+
+    name: str
+    frame: int
+    pose: Array
+    character: int = 0
+    tolerance_cm: float = POSITION_TOLERANCE_CM
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class ObstacleGoal:
+    """The body root and the feet of every character stay out of a floor region."""
+
+    name: str
+    region: FloorRegion
+    tolerance_cm: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class LabelGoal:
+    """Output frames ``[start, end)`` should carry (``value`` 1) or not carry (-1) ``label``;
+    ``honoured (end - start,)`` says, per frame, whether the frame played there does (its source
+    frame's labels). Frames within ``margin`` of either end (transitions) are not counted for
+    ``satisfied``, which needs ``min_fraction`` of the rest honoured."""
+
+    name: str
+    label: str
+    start: int
+    end: int
+    value: int
+    honoured: BoolArray
+    margin: int = 0
+    min_fraction: float = LABEL_MIN_FRACTION
+
+
+@dataclass(frozen=True, slots=True)
+class PathGoal:
+    """The body should follow a floor path: ``xz (P, 2)`` metres at output ``frames (P,)``."""
+
+    name: str
+    frames: npt.NDArray[np.intp]
+    xz: Array
+    character: int = 0
+    tolerance_cm: float = POSITION_TOLERANCE_CM
+
+
+@dataclass(frozen=True, slots=True)
+class BeatGoal:
+    """The motion's beats should land on the music's ``beats_s (B,)`` seconds: both published
+    beat-align scores (:func:`motion.metrics.beat_align_scores`) at least ``min_score`` for every
+    character."""
+
+    name: str
+    beats_s: Array
+    min_score: float = BEAT_MIN_SCORE
+
+
+Goal = LengthGoal | BodyGoal | JointGoal | PoseGoal | ObstacleGoal | LabelGoal | PathGoal | BeatGoal
+
+
+def body_track(positions: Array, skeleton: Skeleton) -> tuple[Array, Array | None]:
+    """The body's floor position ``(F, 2)`` (the hips' projection) and heading ``(F,)`` radians
+    (``None`` without left/right joints) from one character's joint positions ``(F, J, 3)``."""
+    return positions[:, body_root(skeleton)][:, [0, 2]], facing_from_positions(skeleton, positions)
+
+
+def body_pose(positions: Array, skeleton: Skeleton) -> Array:
+    """``(F, J, 3)`` joint positions in each frame's body ground frame (origin under the hips,
+    +Z along the heading), the frame poses are compared in."""
+    xz, yaw = body_track(positions, skeleton)
+    return to_ground_frame(positions, xz, np.zeros(positions.shape[0]) if yaw is None else yaw)
+
+
+def _deg(a: float) -> float:
+    return float(np.degrees(abs((a + np.pi) % (2 * np.pi) - np.pi)))
+
+
+def _r(x: float) -> float:
+    return round(float(x), 4)
+
+
+def measure(
+    goal: Goal,
+    positions: Array,
+    fps: float,
+    characters: Sequence[Character],
+    reachable_m_s: float | None = None,
+) -> tuple[dict[str, Any], str | None]:
+    """Measure one goal on ``positions (F, J, 3)`` (metres, the whole output) at ``fps``.
+
+    Returns the report entry and, when the goal is not satisfied, a one-line reason. With
+    ``reachable_m_s`` (the fastest example's speed), an unmet body goal says how far the body
+    could have gone."""
+    n = positions.shape[0]
+
+    def char(i: int) -> tuple[Array, Skeleton]:
+        if not 0 <= i < len(characters):
+            raise MotionError(f"{goal.name}: character {i} is not in the output")
+        c = characters[i]
+        return positions[:, c.joints], c.skeleton
+
+    if isinstance(goal, LengthGoal):
+        ok = n == goal.frames
+        e: dict[str, Any] = {"frames": abs(n - goal.frames), "asked": goal.frames, "got": n, "satisfied": ok}
+        return e, None if ok else f"length: {n} frames, asked for {goal.frames}"
+
+    if isinstance(goal, (BodyGoal, JointGoal, PoseGoal)) and not 0 <= goal.frame < n:
+        e = {"frame": goal.frame, "position_cm": None, "missing": True, "satisfied": False}
+        return e, f"{goal.name}: frame {goal.frame} is beyond the motion's {n} frames"
+
+    if isinstance(goal, BodyGoal):
+        pos, sk = char(goal.character)
+        xz, yaw = body_track(pos, sk)
+        dist = float(np.linalg.norm(xz[goal.frame] - goal.xz))
+        e = {"frame": goal.frame, "position_cm": _r(100 * dist), "tolerance_cm": goal.tolerance_cm}
+        ok = 100 * dist <= goal.tolerance_cm
+        why = [f"{100 * dist:.1f} cm from its goal"] if not ok else []
+        if goal.heading is not None:
+            if yaw is None:
+                raise MotionError(f"{goal.name}: the skeleton has no left/right joints to measure a heading")
+            herr = _deg(float(yaw[goal.frame]) - goal.heading)
+            e.update(heading_deg=_r(herr), tolerance_deg=goal.tolerance_deg)
+            if herr > goal.tolerance_deg:
+                ok = False
+                why.append(f"{herr:.1f} deg off its heading")
+        e["satisfied"] = ok
+        if ok:
+            return e, None
+        reason = f"{goal.name} (frame {goal.frame}): " + " and ".join(why)
+        reason += f" (tolerance {goal.tolerance_cm:g} cm / {goal.tolerance_deg:g} deg)"
+        if reachable_m_s is not None and reachable_m_s > 0:
+            start = xz[0]
+            away = float(np.linalg.norm(goal.xz - start))
+            reach = reachable_m_s * goal.frame / fps
+            if away > reach:
+                reason += f": goal {away:.1f} m away, reachable {reach:.1f} m in {goal.frame + 1} frames"
+                e["reachable_m"] = _r(reach)
+        return e, reason
+
+    if isinstance(goal, JointGoal):
+        p = positions[goal.frame, goal.joint]
+        dist = 100 * float(np.linalg.norm(p - goal.position))
+        e = {"frame": goal.frame, "position_cm": _r(dist), "tolerance_cm": goal.tolerance_cm}
+        ok = dist <= goal.tolerance_cm
+        why = [f"{dist:.1f} cm from its target"] if not ok else []
+        if goal.velocity is not None:
+            a, b = max(goal.frame - 1, 0), min(goal.frame + 1, n - 1)
+            v = (positions[b, goal.joint] - positions[a, goal.joint]) * fps / max(b - a, 1)
+            verr = 100 * float(np.linalg.norm(v - goal.velocity))
+            e.update(velocity_cm_s=_r(verr), tolerance_cm_s=goal.tolerance_cm_s)
+            if verr > goal.tolerance_cm_s:
+                ok = False
+                why.append(f"velocity {verr:.0f} cm/s off")
+        e["satisfied"] = ok
+        return e, None if ok else f"{goal.name} (frame {goal.frame}): " + " and ".join(why) + (
+            f" (tolerance {goal.tolerance_cm:g} cm)"
+        )
+
+    if isinstance(goal, PoseGoal):
+        pos, sk = char(goal.character)
+        got = body_pose(pos[goal.frame : goal.frame + 1], sk)[0]
+        err = 100 * float(np.linalg.norm(got - goal.pose, axis=-1).max())
+        ok = err <= goal.tolerance_cm
+        e = {"frame": goal.frame, **dict(goal.extra), "pose_cm": _r(err), "tolerance_cm": goal.tolerance_cm}
+        e["satisfied"] = ok
+        return e, None if ok else (
+            f"{goal.name} (frame {goal.frame}): a joint is {err:.1f} cm from the wanted pose "
+            f"(tolerance {goal.tolerance_cm:g} cm)"
+        )
+
+    if isinstance(goal, ObstacleGoal):
+        deepest = np.zeros(n)
+        for c in characters:
+            pos = positions[:, c.joints]
+            pts = [pos[:, body_root(c.skeleton)][:, None, [0, 2]]]
+            with contextlib.suppress(MotionError):  # no feet by name: the body root alone
+                pts.append(pos[:, foot_joints(c.skeleton)][:, :, [0, 2]])
+            deepest = np.maximum(deepest, goal.region.depth(np.concatenate(pts, axis=1)).max(axis=1))
+        depth_cm = 100 * float(deepest.max(initial=0.0))
+        inside = int(np.count_nonzero(deepest > goal.tolerance_cm / 100 + 1e-9))
+        ok = inside == 0
+        e = {"frames": inside, "depth_cm": _r(depth_cm), "tolerance_cm": goal.tolerance_cm, "satisfied": ok}
+        return e, None if ok else (
+            f"{goal.name}: the body or a foot is inside for {inside} frames, {depth_cm:.1f} cm deep"
+        )
+
+    if isinstance(goal, LabelGoal):
+        h = np.asarray(goal.honoured, dtype=bool)
+        window = goal.end - goal.start
+        if h.shape != (window,):
+            raise MotionError(f"{goal.name}: {h.shape[0]} honoured flags for a {window}-frame window")
+        core = h[goal.margin : window - goal.margin] if window > 2 * goal.margin else h
+        fraction = float(core.mean()) if core.size else 1.0
+        ok = fraction >= goal.min_fraction
+        e = {
+            "label": goal.label,
+            "value": goal.value,
+            "start": goal.start,
+            "end": goal.end,
+            "frames": int(window - h.sum()),
+            "window": window,
+            "honoured": _r(fraction),
+            "margin": goal.margin,
+            "tolerance": goal.min_fraction,
+            "satisfied": ok,
+        }
+        want = "carry" if goal.value > 0 else "avoid"
+        return e, None if ok else (
+            f"{goal.name}: frames {goal.start}-{goal.end} should {want} {goal.label!r}; "
+            f"{100 * fraction:.0f}% do (at least {100 * goal.min_fraction:.0f}%)"
+        )
+
+    if isinstance(goal, PathGoal):
+        pos, sk = char(goal.character)
+        xz, _ = body_track(pos, sk)
+        f = np.asarray(goal.frames, dtype=np.intp)
+        keep = (f >= 0) & (f < n)
+        d = np.linalg.norm(xz[f[keep]] - goal.xz[keep], axis=-1) * 100
+        rms = float(np.sqrt(np.mean(d**2))) if d.size else 0.0
+        ok = bool(keep.all()) and rms <= goal.tolerance_cm
+        e = {
+            "rms_cm": _r(rms),
+            "max_cm": _r(float(d.max(initial=0.0))),
+            "frames": int(keep.sum()),
+            "tolerance_cm": goal.tolerance_cm,
+            "satisfied": ok,
+        }
+        return e, None if ok else (
+            f"{goal.name}: the body is {rms:.1f} cm (RMS) from the path (tolerance {goal.tolerance_cm:g} cm)"
+        )
+
+    if isinstance(goal, BeatGoal):
+        scores = [beat_align_scores(positions[:, c.joints], fps, goal.beats_s)[:2] for c in characters]
+        mint = [s[0] for s in scores]
+        bail = [s[1] for s in scores]
+        worst = int(np.argmin(np.minimum(mint, bail)))
+        ok = min(mint[worst], bail[worst]) >= goal.min_score
+        e = {
+            "beat_align_mint": _r(mint[worst]),
+            "beat_align_bailando": _r(bail[worst]),
+            "beat_align_mint_mean": _r(float(np.mean(mint))),
+            "beat_align_bailando_mean": _r(float(np.mean(bail))),
+            "beats": int(goal.beats_s.size),
+            "character": worst,
+            "tolerance": goal.min_score,
+            "satisfied": ok,
+        }
+        return e, None if ok else (
+            f"{goal.name}: beat alignment {mint[worst]:.2f} (mint) / {bail[worst]:.2f} (Bailando), "
+            f"at least {goal.min_score:g} asked"
+        )
+
+    raise MotionError(f"unknown goal {goal!r}")  # pragma: no cover - the union is closed
