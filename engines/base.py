@@ -18,7 +18,7 @@ from typing import Any, ClassVar, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from motion import Motion
+from motion import Motion, MotionError, Skeleton
 from motion.plausibility import Reference, reference_from_positions
 from motion.quality import QualityInputs, QualityReport, assess
 
@@ -123,6 +123,7 @@ class Engine(ABC):
         self.library = library
         self.arrays = arrays
         self._reference: Reference | None = None
+        self._floors: dict[tuple[str, ...], dict[int, tuple[float, float]]] = {}
 
     @classmethod
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
@@ -156,6 +157,25 @@ class Engine(ABC):
             self._reference = self.quality_reference_of(self.library, self.arrays)
         return self._reference
 
+    def foot_floor(self, skeleton: Skeleton) -> dict[int, tuple[float, float]]:
+        """Per foot joint of ``skeleton`` (:func:`motion.contacts.foot_joints`), its height when
+        planted in the examples of that skeleton (the 5th percentile over their frames) and the
+        lowest it goes (0.1st percentile), metres; empty when none share it or it has no feet.
+        Cached per skeleton."""
+        key = skeleton.names
+        got = self._floors.get(key)
+        if got is None:
+            stored = self.arrays.get(FLOOR_PREFIX + "names")
+            if stored is not None and tuple(str(n) for n in stored) == key:
+                planted = np.asarray(self.arrays[FLOOR_PREFIX + "planted"], dtype=np.float64)
+                lowest = np.asarray(self.arrays[FLOOR_PREFIX + "lowest"], dtype=np.float64)
+                feet = np.asarray(self.arrays[FLOOR_PREFIX + "joints"], dtype=np.intp)
+                got = {int(j): (float(a), float(b)) for j, a, b in zip(feet, planted, lowest, strict=True)}
+            else:
+                got = foot_floor_of(self.library, self.example_clips(self.library, self.arrays), skeleton)
+            self._floors[key] = got
+        return got
+
     def finish(self, solution: Solution, inputs: QualityInputs | None = None) -> Solution:
         """``solution`` with its quality report against this database's examples
         (:func:`finish_solution`)."""
@@ -165,6 +185,47 @@ class Engine(ABC):
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
         """Answer a request, calling ``emit.solution`` for every improvement, until done, out of
         budget or ``should_stop()``."""
+
+
+FLOOR_PREFIX = "quality.floor."
+"""Arrays of the examples' foot floor heights stored with a database (:func:`foot_floor_arrays`)."""
+
+
+def foot_floor_of(
+    library: MotionLibrary, examples: list[int], skeleton: Skeleton
+) -> dict[int, tuple[float, float]]:
+    """:meth:`Engine.foot_floor` measured on the ``examples`` clips of ``library`` that share
+    ``skeleton``."""
+    from motion.contacts import foot_joints
+
+    same = [library.motions[i] for i in examples if library.motions[i].skeleton.names == skeleton.names]
+    try:
+        feet = foot_joints(skeleton)
+    except MotionError:
+        return {}
+    if not same or not feet.size:
+        return {}
+    heights = np.concatenate([m.global_positions()[:, feet, 1] * m.metres_per_unit for m in same])
+    planted, lowest = np.percentile(heights, [5, 0.1], axis=0)
+    return {int(j): (float(a), float(b)) for j, a, b in zip(feet, planted, lowest, strict=True)}
+
+
+def foot_floor_arrays(library: MotionLibrary, examples: list[int]) -> Arrays:
+    """The foot floor heights of the first example's skeleton, as npz-ready arrays (stored at
+    build so that the first request does not measure them)."""
+    if not examples:
+        return {}
+    skeleton = library.motions[examples[0]].skeleton
+    floor = foot_floor_of(library, examples, skeleton)
+    if not floor:
+        return {}
+    joints = sorted(floor)
+    return {
+        FLOOR_PREFIX + "names": np.array(skeleton.names, dtype=str),
+        FLOOR_PREFIX + "joints": np.array(joints, dtype=np.int64),
+        FLOOR_PREFIX + "planted": np.array([floor[j][0] for j in joints]),
+        FLOOR_PREFIX + "lowest": np.array([floor[j][1] for j in joints]),
+    }
 
 
 def finish_solution(

@@ -468,6 +468,7 @@ def solve_foot_skate(
     root_adjust: bool = False,
     max_root_shift_m: float = 0.05,
     heights: Array | None = None,
+    floor: Array | None = None,
 ) -> FootSkateResult:
     """Pin feet during contacts by leg IK; the full result (see :func:`remove_foot_skate`).
 
@@ -489,6 +490,11 @@ def solve_foot_skate(
         ``(F, K)`` the height (motion units) each contact joint should rest at in each frame,
         e.g. its height in the source clips before cuts were smoothed (smoothing a cut between
         clips of different hip heights lowers or raises the feet); default: the joints' own.
+    floor:
+        ``(K,)`` the lowest height (motion units) each contact joint may reach, in any frame: a
+        joint that would go lower (a blended or smoothed leg swinging through the floor) is lifted
+        to it by the same leg IK, height only. The lift is zero where the joint is above, so it
+        fades in and out with the joint's own motion.
     """
     if not (np.isfinite(blend_s) and blend_s >= 0):
         raise MotionError(f"blend_s must be a non-negative number of seconds, got {blend_s}")
@@ -503,8 +509,10 @@ def solve_foot_skate(
         raise MotionError(f"contact flags must be (F, K) = ({n}, {joints.size}), got {flags.shape}")
     if heights is not None and np.shape(heights) != (n, joints.size):
         raise MotionError(f"rest heights must be (F, K) = ({n}, {joints.size}), got {np.shape(heights)}")
+    if floor is not None and np.shape(floor) != (joints.size,):
+        raise MotionError(f"floor heights must be (K,) = ({joints.size},), got {np.shape(floor)}")
     no_shift = np.zeros((n, 3))
-    if not flags.any():
+    if not flags.any() and floor is None:
         return FootSkateResult(motion, leg_chains(motion, joints), np.zeros(flags.shape), no_shift)
     pos, grot = motion.fk()  # (F, J, 3) and (F, J, 4) views of joint-major arrays: gathered per joint
     legs = leg_chains(motion, joints, pos[0])
@@ -518,6 +526,11 @@ def solve_foot_skate(
         runs = widen_jumps(pos[:, j], flags[:, slot], frames_per_unit, 2 * blend)
         rest = None if heights is None else heights[:, slot]
         corr[:, slot], weight[:, slot] = pin_corrections(pos[:, j], runs, blend, rest)
+        if floor is not None:
+            # never below the floor: lift the joint (height only) wherever it would sink under it
+            lift = np.maximum(float(floor[slot]) - (pos[:, j, 1] + corr[:, slot, 1]), 0.0)
+            corr[:, slot, 1] += lift
+            weight[:, slot] = np.where(lift > 0, 1.0, weight[:, slot])
     forward = _forward(motion, pos)
     local, residual, errors = _solve_all(motion, legs, pos, grot, corr, weight, forward)
     root_shift = no_shift
@@ -550,6 +563,7 @@ def remove_foot_skate(
     root_adjust: bool = False,
     max_root_shift_m: float = 0.05,
     heights: Array | None = None,
+    floor: Array | None = None,
 ) -> Motion:
     """The motion with planted feet kept in place (a pure function; the input is not modified).
 
@@ -568,8 +582,9 @@ def remove_foot_skate(
         ``(joints (K,), flags (F, K))``; default :func:`motion.contacts.detect_contacts`.
     blend_s:
         Fade time in seconds around each contact run.
-    heights:
-        ``(F, K)`` rest heights of the contact joints (see :func:`solve_foot_skate`).
+    heights, floor:
+        ``(F, K)`` rest heights and ``(K,)`` lowest heights of the contact joints (see
+        :func:`solve_foot_skate`).
 
     Raises
     ------
@@ -590,4 +605,5 @@ def remove_foot_skate(
         root_adjust=root_adjust,
         max_root_shift_m=max_root_shift_m,
         heights=heights,
+        floor=floor,
     ).motion

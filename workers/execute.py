@@ -16,7 +16,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from engines.base import Engine, EngineError, Solution
+from engines.base import Engine, EngineError, Solution, foot_floor_arrays
 from engines.library import ClipInput, MotionLibrary, build_library, library_from_arrays, library_to_arrays
 from engines.registry import UnavailableError, engine_class, kind_class
 from motion import Motion, MotionError
@@ -222,6 +222,7 @@ def build_database_bytes(
     arrays.update(extra)
     publish(EventType.progress, {"fraction": 0.99, "message": "measuring the examples (quality reference)"})
     arrays.update(engine_cls.quality_reference_of(library, arrays).to_arrays())
+    arrays.update(foot_floor_arrays(library, engine_cls.example_clips(library, arrays)))
     return npz_bytes(arrays), library
 
 

@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from motion import Motion
+from motion.contacts import detect_contacts
 from motion.floorfit import CorrectionLimits, FloorGoal, floor_correction
 from motion.footskate import remove_foot_skate
 from motion.goals import BodyGoal, Goal, LabelGoal, LengthGoal, PoseGoal, body_pose
@@ -61,6 +62,7 @@ def assemble(
     smoothing: int,
     footskate: bool,
     limits: CorrectionLimits | None = None,
+    floor: dict[int, tuple[float, float]] | None = None,
 ) -> tuple[Motion, IntArray]:
     """The motion of ``cand.sigma`` placed, smoothed, corrected towards the end constraint
     (within ``limits``; ``None``: without limit) and cleaned; and its cut frames ``(X,)``."""
@@ -87,8 +89,19 @@ def assemble(
         corr = floor_correction(xz * motion.metres_per_unit, yaw, motion.fps, goals, limits)
         motion = apply_floor_transform(motion, corr.theta, corr.shift, frames.static)
     if footskate:
-        motion = remove_foot_skate(motion)
+        motion = clean_feet(motion, floor)
     return motion, cuts
+
+
+def clean_feet(motion: Motion, floor: dict[int, tuple[float, float]] | None) -> Motion:
+    """:func:`motion.footskate.remove_foot_skate` with contacts detected on the motion and, given
+    the examples' foot heights ``floor`` (:meth:`engines.base.Engine.foot_floor`), no foot lower
+    than theirs."""
+    joints, flags = detect_contacts(motion)
+    lowest = None
+    if floor and all(int(j) in floor for j in joints):
+        lowest = np.array([floor[int(j)][1] for j in joints]) / motion.metres_per_unit
+    return remove_foot_skate(motion, (joints, flags), floor=lowest)
 
 
 def _ranges(flags: npt.NDArray[np.bool_]) -> list[list[int]]:

@@ -119,8 +119,16 @@ class AnnotationEngine(Engine):
         """The assembled motion and report of a candidate."""
         ref = self.quality_reference
         limits = CorrectionLimits(ref.root_speed_max, ref.turn_rate_max)
+        floor = self.foot_floor(self.library.motions[0].skeleton)
         motion, cuts = assemble(
-            self.db, self.frames, pb, cand, int(request.smoothing_frames), bool(request.footskate), limits
+            self.db,
+            self.frames,
+            pb,
+            cand,
+            int(request.smoothing_frames),
+            bool(request.footskate),
+            limits,
+            floor,
         )
         annotations, metrics = label_report(self.db, pb, cand.sigma)
         metrics.update(discontinuity(motion, cuts))

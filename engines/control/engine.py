@@ -382,8 +382,12 @@ class ControlEngine(Engine):
             return motion
         joints = np.array([motion.skeleton.names.index(n) for n in self.db.contact_joints], dtype=np.intp)
         flags = self.db.contacts[out.global_frames]
+        floor = self.foot_floor(motion.skeleton)
+        lowest = None
+        if floor and all(int(j) in floor for j in joints):
+            lowest = np.array([floor[int(j)][1] for j in joints]) / motion.metres_per_unit
         try:
-            return remove_foot_skate(motion, (joints, flags))
+            return remove_foot_skate(motion, (joints, flags), floor=lowest)
         except MotionError:
             return motion
 

@@ -18,7 +18,8 @@
    float where a cut between clips of different hip heights is smoothed); the source clips' foot
    contacts at the provenance frames (:func:`motion.contacts.detect_contacts` on each clip,
    cached) are propagated to the output, and :func:`motion.footskate.remove_foot_skate` pins each
-   contact run, at the feet's height in the source frames, with leg IK (contacts stored by the build, see
+   contact run, at the feet's height in the source frames, with leg IK, and lifts any foot that
+   would go lower than the examples' feet ever do (contacts stored by the build, see
    :class:`~engines.graph.model.FootContacts`). Only leg joint rotations change: the root and the hips
    (thighs), hence the body constraints, are untouched. Around each joint constraint on a leg
    joint, that leg's contacts are dropped (``blend`` frames either side) so the constrained joint
@@ -140,10 +141,12 @@ def clean_feet(
     problem: Problem,
     blend_s: float = FOOT_BLEND_S,
     heights: FloatArray | None = None,
+    floor: FloatArray | None = None,
 ) -> Motion:
     """:func:`motion.footskate.remove_foot_skate` with the given contacts (and rest ``heights``
-    ``(F, K)`` of the contact joints), except around joint constraints on leg joints (see the
-    module docstring); the motion unchanged when its legs cannot be found."""
+    ``(F, K)`` and lowest heights ``floor (K,)`` of the contact joints), except around joint
+    constraints on leg joints (see the module docstring); the motion unchanged when its legs
+    cannot be found."""
     joints, flags = contacts
     if not flags.any():
         return motion
@@ -163,7 +166,7 @@ def clean_feet(
                     if leg.hip in chain:
                         cols = [s for s in (leg.ankle_slot, leg.toe_slot) if s >= 0]
                         flags[max(jt.frame - blend, 0) : jt.frame + blend + 1, cols] = False
-        return remove_foot_skate(motion, (joints, flags), blend_s=blend_s, heights=heights)
+        return remove_foot_skate(motion, (joints, flags), blend_s=blend_s, heights=heights, floor=floor)
     except MotionError:  # no hip-knee-ankle chains above the feet: nothing to pin
         return motion
 
@@ -179,6 +182,7 @@ def assemble(
     feet: bool = True,
     contacts: FootContacts | None = None,
     limits: CorrectionLimits | None = None,
+    floor: dict[int, tuple[float, float]] | None = None,
 ) -> tuple[Motion, list[tuple[str, int]]]:
     """The motion a path plays, placed, smoothed and meeting its body constraints.
 
@@ -200,6 +204,9 @@ def assemble(
     limits:
         How much of the body constraints' error a frame may absorb (step 3); ``None`` spreads it
         without limit (the paper's rule).
+    floor:
+        Per foot joint, the examples' (planted, lowest) heights in metres
+        (:meth:`engines.base.Engine.foot_floor`): no foot goes lower (step 4).
 
     Returns
     -------
@@ -238,7 +245,10 @@ def assemble(
             # planted feet rest at their height in the source frames (smoothing a cut between clips
             # of different hip heights lowers or raises them)
             rest = placed.global_positions()[:, joints, 1]
-            motion = clean_feet(motion, (joints, flags), problem, heights=rest)
+            lowest = None
+            if floor and all(int(j) in floor for j in joints):
+                lowest = np.array([floor[int(j)][1] for j in joints]) / motion.metres_per_unit
+            motion = clean_feet(motion, (joints, flags), problem, heights=rest, floor=lowest)
     provenance = [(library.names[int(c)], int(f)) for c, f in zip(clips, frames, strict=True)]
     return motion, provenance
 

@@ -45,4 +45,5 @@ class GraphEngine(Engine):
             request.seed,
             contacts=self.contacts,
             reference=self.quality_reference,
+            foot_floor=self.foot_floor(self.library.motions[0].skeleton),
         ).run(request, budget_s, emit, should_stop)

@@ -184,6 +184,8 @@ class GraphSearch:
         What the database's examples do (:class:`motion.plausibility.Reference`): the physical
         limits of the body-constraint correction and the quality report's reference. ``None``:
         corrections without limit, plausibility reported but not gated.
+    foot_floor:
+        The examples' foot heights (:meth:`engines.base.Engine.foot_floor`) for foot cleanup.
 
     Examples
     --------
@@ -209,6 +211,7 @@ class GraphSearch:
         chain_edges: int = 3,
         patience: int = PATIENCE,
         reference: Reference | None = None,
+        foot_floor: dict[int, tuple[float, float]] | None = None,
     ) -> None:
         self.library = library
         self.tree = tree
@@ -226,6 +229,7 @@ class GraphSearch:
         self.chain_edges = chain_edges
         self.patience = patience
         self.reference = reference
+        self.foot_floor = foot_floor
         self.limits = (
             None if reference is None else CorrectionLimits(reference.root_speed_max, reference.turn_rate_max)
         )
@@ -625,6 +629,7 @@ class GraphSearch:
             contacts=self.contacts,
             feet=request.footskate,
             limits=self.limits,
+            floor=self.foot_floor,
         )
         cuts = ev.pieces.start[1:]
         cuts = cuts[(cuts > 0) & (cuts < motion.num_frames)]

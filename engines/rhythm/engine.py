@@ -298,8 +298,8 @@ class RhythmEngine(Engine):
         emit.progress(0.1, f"{beats.size} music beats")
         leaders, partners, r = self.synthesize(request, beats)
         if request.footskate:
-            leaders = [_clean(m) for m in leaders]
-            partners = [_clean(m) for m in partners]
+            leaders = [_clean(m, self.foot_floor(m.skeleton)) for m in leaders]
+            partners = [_clean(m, self.foot_floor(m.skeleton)) for m in partners]
             if should_stop():
                 return
         first = leaders[0]
@@ -377,11 +377,22 @@ def _characters(skeletons: list[tuple[str, Skeleton]], motion: Motion) -> tuple[
     return tuple(out)
 
 
-def _clean(m: Motion) -> Motion:
+def _clean(m: Motion, floor: dict[int, tuple[float, float]]) -> Motion:
+    """Planted feet kept still at the examples' planted height of each foot joint, and no foot
+    lower than the examples' lowest (``floor``: joint -> (planted, lowest) metres): blending
+    movements and fading their joins moves the body up and down and swings legs through the floor."""
+    from motion.contacts import detect_contacts
     from motion.footskate import remove_foot_skate
 
     try:
-        return remove_foot_skate(m)
+        joints, flags = detect_contacts(m)
+        if not floor or not all(int(j) in floor for j in joints):
+            return remove_foot_skate(m, (joints, flags))
+        rest = np.array([floor[int(j)][0] for j in joints])
+        lowest = np.array([floor[int(j)][1] for j in joints])
+        return remove_foot_skate(
+            m, (joints, flags), heights=np.broadcast_to(rest, flags.shape).copy(), floor=lowest
+        )
     except MotionError:
         return m  # no feet found by name: nothing to keep planted
 
