@@ -163,8 +163,12 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
         401: "a bearer token is required (auth enabled) or the token is not valid",
         404: "no such clip, database, job or result",
         409: "the resource is not ready (database building, job without a result...)",
-        413: "the upload is over the size limit",
+        403: "the request comes from a foreign origin (browsers: same origin or SEGUE_CORS_ORIGINS)",
+        413: "the body is over its size limit, or the job over the server's work budget",
+        415: "a JSON route was sent a body that is not 'Content-Type: application/json'",
         422: "the request is invalid (details lists each problem)",
+        429: "too many unfinished jobs or live sessions for this principal (see Retry-After)",
+        503: "the job backend cannot take jobs now (see Retry-After); nothing was stored",
     }.items()
 }
 """OpenAPI error responses (all :class:`~schemas.ErrorResponse`), picked per route."""

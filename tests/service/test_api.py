@@ -359,7 +359,7 @@ def test_unexpected_error_is_500_json(app: FastAPI) -> None:
 
     app.dependency_overrides[app_store] = BrokenStore
     try:
-        r = TestClient(app, raise_server_exceptions=False).get("/v1/clips")
+        r = TestClient(app, raise_server_exceptions=False, base_url="http://localhost").get("/v1/clips")
     finally:
         app.dependency_overrides.pop(app_store)
     err = error_of(r, 500, "internal")
@@ -376,39 +376,59 @@ def test_ws_unknown_job_closes_4404(client: TestClient) -> None:
 
 
 # -- auth -----------------------------------------------------------------------------------------
-def test_auth_on_writes_and_websockets(
-    client: TestClient, walk_db: dict[str, Any], override_settings: Callable[..., Settings]
+def test_tokens_name_principals_that_see_and_change_only_their_own(
+    client: TestClient, override_settings: Callable[..., Settings]
 ) -> None:
-    override_settings(api_tokens=("s3cret", "other"))
-    request = {"engine": "clip", "database": walk_db["id"], "clip": WALK_CLIP, "end": 10}
-    r = client.post("/v1/jobs", json=request)
-    error_of(r, 401, "unauthorized")
-    assert r.headers["www-authenticate"] == "Bearer"
-    r = client.post("/v1/jobs", json=request, headers={"Authorization": "Bearer wrong"})
-    error_of(r, 401, "invalid_token")
-    assert "invalid_token" in r.headers["www-authenticate"]
-    error_of(client.post("/v1/clips", params={"name": "a.bvh"}, content=b"x"), 401)
-    error_of(client.delete(f"/v1/databases/{walk_db['id']}"), 401)
-    error_of(client.post(f"/v1/jobs/{walk_db['build_job']}/cancel"), 401)
-    # reads stay open
-    assert client.get("/v1/clips").status_code == 200
-    assert client.get(f"/v1/databases/{walk_db['id']}").status_code == 200
-    job = client.post("/v1/jobs", json=request, headers={"Authorization": "Bearer s3cret"})
-    assert job.status_code == 202
+    override_settings(api_tokens=("alice:ta", "bob:tb", "root:tr"), admins=("root",))
+    alice, bob, root = ({"Authorization": f"Bearer {t}"} for t in ("ta", "tb", "tr"))
+    # every /v1 request needs a token now, reads too
+    error_of(client.get("/v1/clips"), 401, "unauthorized")
+    error_of(client.get("/v1/jobs", headers={"Authorization": "Bearer wrong"}), 401, "invalid_token")
+    error_of(client.post("/v1/jobs?token=ta", json={}), 401, "unauthorized")  # ?token= is for WebSockets
+    assert client.get("/openapi.json").status_code == 200  # the document stays open
+    clip = client.post("/v1/clips", files={"file": (WALK.name, WALK.read_bytes())}, headers=alice).json()
+    spec = {"kind": "clips", "clips": [{"clip": clip["id"]}], "fps": 30}
+    db = client.post("/v1/databases", json=spec, headers=alice).json()
+    if db["status"] != "ready":
+        with client.websocket_connect(f"/v1/jobs/{db['build_job']}/events?token=ta") as ws:
+            while ws.receive_json()["type"] not in ("done", "failed", "cancelled"):
+                pass
+    request = {"engine": "clip", "database": db["id"], "clip": WALK_CLIP, "end": 10}
+    job = client.post("/v1/jobs", json=request, headers=alice)
+    assert job.status_code == 202 and job.json()["owner"] == "alice"
     job_id = job.json()["id"]
+    # bob sees none of it: 404 as for things that do not exist, and empty lists
+    for path in (f"/v1/clips/{clip['id']}", f"/v1/databases/{db['id']}", f"/v1/jobs/{job_id}",
+                 f"/v1/jobs/{job_id}/events", f"/v1/jobs/{job_id}/report"):  # fmt: skip
+        error_of(client.get(path, headers=bob), 404, "not_found")
+    assert all(j["id"] != job_id for j in client.get("/v1/jobs", headers=bob).json())
+    assert client.get("/v1/clips", headers=bob).json() == []
+    error_of(client.post(f"/v1/jobs/{job_id}/cancel", headers=bob), 404)
+    error_of(client.delete(f"/v1/databases/{db['id']}", headers=bob), 404)
+    error_of(client.post("/v1/jobs", json=request, headers=bob), 404)  # not bob's database
     with (
         pytest.raises(WebSocketDenialResponse) as denied,
         client.websocket_connect(f"/v1/jobs/{job_id}/events"),
     ):
         pass
-    assert denied.value.status_code == 401 and denied.value.json()["error"]["code"] == "unauthorized"
-    with client.websocket_connect(f"/v1/jobs/{job_id}/events?token=other") as ws:
+    assert denied.value.status_code == 401
+    with (
+        pytest.raises(WebSocketDisconnect) as closed,
+        client.websocket_connect(f"/v1/jobs/{job_id}/events?token=tb") as ws,
+    ):
+        ws.receive_json()
+    assert closed.value.code == 4404
+    # alice and the admin see it
+    with client.websocket_connect(f"/v1/jobs/{job_id}/events?token=ta") as ws:
         assert ws.receive_json()["type"] == "queued"
-    headers = {"Authorization": "Bearer s3cret"}
-    with client.websocket_connect(f"/v1/jobs/{job_id}/events", headers=headers) as ws:
-        types: list[str] = []
-        while not types or types[-1] != "done":
-            types.append(ws.receive_json()["type"])
+    assert client.get(f"/v1/jobs/{job_id}", headers=root).status_code == 200
+    assert client.get(f"/v1/clips/{clip['id']}", headers=alice).status_code == 200
+    # the same bytes uploaded by bob are bob's own hold: deleting it leaves alice's clip alone
+    again = client.post("/v1/clips", files={"file": (WALK.name, WALK.read_bytes())}, headers=bob)
+    assert again.status_code == 201 and again.json()["id"] == clip["id"]
+    assert client.delete(f"/v1/clips/{clip['id']}", headers=bob).status_code == 204
+    assert client.get(f"/v1/clips/{clip['id']}", headers=alice).status_code == 200
+    error_of(client.get(f"/v1/clips/{clip['id']}", headers=bob), 404)
 
 
 def test_auth_off_by_default(client: TestClient) -> None:
@@ -445,6 +465,10 @@ def test_openapi_comes_from_the_schemas(client: TestClient) -> None:
     assert "HTTPValidationError" not in components
     body = doc["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["application/json"]["schema"]
     assert body == {"$ref": "#/components/schemas/JobRequest"} and "JobRequest" in components
-    spec_body = json.dumps(doc["paths"]["/v1/databases"]["post"]["requestBody"])
-    assert "ClipsDatabaseSpec" in spec_body and "RhythmDatabaseSpec" in spec_body
+    spec_body = doc["paths"]["/v1/databases"]["post"]["requestBody"]["content"]["application/json"]["schema"]
+    assert spec_body == {"$ref": "#/components/schemas/DatabaseSpec"}
+    assert "ClipsDatabaseSpec" in json.dumps(components["DatabaseSpec"])
+    assert "RhythmDatabaseSpec" in json.dumps(components["DatabaseSpec"])
+    links = doc["paths"]["/v1/jobs"]["post"]["responses"]["202"]["links"]
+    assert links["GetJob"]["parameters"] == {"job_id": "$response.body#/id"}
     assert "multipart/form-data" in doc["paths"]["/v1/clips"]["post"]["requestBody"]["content"]

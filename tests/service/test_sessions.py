@@ -22,6 +22,7 @@ from schemas.databases import DatabaseInfo
 from schemas.rhythm import RhythmDatabaseSpec
 from service.app import create_app
 from service.errors import install_error_handlers
+from service.limits import SessionQuota
 from service.routes import sessions
 from service.settings import Settings
 from tests.engines.rhythm_synthetic import library
@@ -60,11 +61,12 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     store.put_database_arrays(DB, npz_bytes(arrays))
     store.put_database_info(info.model_copy(update={"id": "notready", "status": DatabaseStatus.building}))
     app = FastAPI()
-    app.state.settings = Settings(data_dir=data)
+    app.state.settings = Settings(data_dir=data, allowed_hosts=("localhost", "testserver"))
     app.state.store = store
+    app.state.session_quota = SessionQuota(2)
     install_error_handlers(app)
     app.include_router(sessions.router)
-    with TestClient(app) as c:
+    with TestClient(app, base_url="http://localhost") as c:
         yield c
 
 
@@ -116,5 +118,5 @@ def test_session_refuses_unknown_or_unready_databases(client: TestClient, db: st
 
 
 def test_app_registers_the_session_route(tmp_path: Path) -> None:
-    app = create_app(Settings(data_dir=tmp_path))
+    app = create_app(Settings(data_dir=tmp_path, allowed_hosts=("localhost", "testserver")))
     assert app.url_path_for("rhythm_session") == "/v1/sessions/rhythm"
