@@ -22,6 +22,7 @@ from typing import Any
 
 import anyio
 import pydantic_core
+from fastapi import Depends
 from pydantic import TypeAdapter
 from starlette.requests import Request
 
@@ -120,3 +121,22 @@ def json_body_doc(schema_ref: str, description: str) -> dict[str, Any]:
             "content": {"application/json": {"schema": {"$ref": f"#/components/schemas/{schema_ref}"}}},
         }
     }
+
+
+async def require_json_intent(request: Request) -> None:
+    """Bodyless writes (``DELETE``, ``POST .../cancel``) must declare ``Content-Type:
+    application/json`` too (415 otherwise): a web page cannot send that cross-site without a CORS
+    preflight, so a forged form or a stray request cannot delete or cancel anything."""
+    content_type = request.headers.get("content-type", "")
+    if not is_json_type(content_type):
+        raise ApiError(
+            415,
+            "unsupported_media_type",
+            f"send this {request.method} with 'Content-Type: application/json' (the server refuses writes "
+            f"that a web page could forge), not {content_type or 'no content type'!r}",
+            {"content_type": content_type},
+        )
+
+
+JsonIntent = Depends(require_json_intent)
+"""Add to a bodyless write route: ``dependencies=[JsonIntent]``."""

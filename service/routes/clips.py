@@ -16,7 +16,7 @@ from workers.store import NotFoundError
 
 from ..deps import PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, responses
-from ..jsonbody import parse_limiter
+from ..jsonbody import JsonIntent, parse_limiter
 from ..owners import clip_for, visible
 from ..uploads import read_upload, upload_body
 
@@ -102,7 +102,12 @@ async def get_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> Cl
     return clip_for(store, principal, clip_id)
 
 
-@router.delete("/{clip_id}", status_code=status.HTTP_204_NO_CONTENT, responses=responses(401, 404, 422))
+@router.delete(
+    "/{clip_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    dependencies=[JsonIntent],
+    responses=responses(401, 404, 422, 415),
+)
 async def delete_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
     """Delete your clip (databases already built from it keep their data). The bytes go when no
     other principal holds the same clip."""

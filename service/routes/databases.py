@@ -20,7 +20,7 @@ from workers.store import NotFoundError, Store, now
 from ..deps import BackendDep, MetricsDep, Principal, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, conflict, responses
 from ..jobs_common import new_job_id, submit_job
-from ..jsonbody import json_body_doc, read_json, validate_off_loop
+from ..jsonbody import JsonIntent, json_body_doc, read_json, validate_off_loop
 from ..owners import database_for, visible
 
 SPEC_ADAPTER: TypeAdapter[Any] = TypeAdapter(DatabaseSpec)
@@ -188,7 +188,12 @@ async def get_database(db_id: str, store: StoreDep, principal: PrincipalDep) -> 
     return database_for(store, principal, db_id)
 
 
-@router.delete("/{db_id}", status_code=status.HTTP_204_NO_CONTENT, responses=responses(401, 404, 409, 422))
+@router.delete(
+    "/{db_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    dependencies=[JsonIntent],
+    responses=responses(401, 404, 409, 422, 415),
+)
 async def delete_database(db_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
     """Delete your database (409 while it is being built, or while unfinished jobs use it). The data
     goes when no other principal holds the same database."""

@@ -17,6 +17,7 @@ from workers.store import NotFoundError
 
 from ..deps import PrincipalDep, SettingsDep, StoreDep
 from ..errors import responses
+from ..jsonbody import JsonIntent
 from ..owners import file_for, visible
 from ..uploads import read_upload, upload_body
 
@@ -76,7 +77,12 @@ async def get_file(file_id: str, store: StoreDep, principal: PrincipalDep) -> Fi
     return file_for(store, principal, file_id)
 
 
-@router.delete("/{file_id}", status_code=status.HTTP_204_NO_CONTENT, responses=responses(401, 404, 422))
+@router.delete(
+    "/{file_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    dependencies=[JsonIntent],
+    responses=responses(401, 404, 422, 415),
+)
 async def delete_file(file_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
     """Delete your file (jobs already submitted with it fail if they still need it). The bytes go when
     no other principal holds the same file."""

@@ -22,7 +22,7 @@ from ..deps import BackendDep, MetricsDep, Principal, PrincipalDep, SettingsDep,
 from ..errors import ApiError, conflict, responses
 from ..exports import MEDIA_TYPES, ExportTarget, ResultFormat, export_bytes
 from ..jobs_common import submit_job
-from ..jsonbody import parse_limiter, read_json
+from ..jsonbody import JsonIntent, parse_limiter, read_json
 from ..owners import database_for, job_for, visible
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
@@ -162,7 +162,8 @@ async def get_job(job_id: str, backend: BackendDep, principal: PrincipalDep) -> 
     "/{job_id}/cancel",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=JobInfo,
-    responses=responses(401, 404, 422, 503),
+    dependencies=[JsonIntent],
+    responses=responses(401, 404, 415, 422, 503),
 )
 async def cancel(job_id: str, backend: BackendDep, principal: PrincipalDep) -> JobInfo:
     """Ask a job to stop; it ends with a ``cancelled`` event carrying its best result so far."""

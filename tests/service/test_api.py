@@ -26,6 +26,9 @@ from workers.store import Store, now
 
 from .conftest import WALK, WALK_CLIP, wait_events
 
+JSON = {"Content-Type": "application/json"}
+"""What bodyless writes (cancel, delete) declare."""
+
 BAD_BVH = (
     "HIERARCHY\nROOT a\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xrotation Yrotation Zrotation\n}\n"
     "MOTION\nFrames: 2\nFrame Time: 0.1\n1 2 3\n1 x 3\n"
@@ -61,9 +64,9 @@ def test_upload_list_get_delete(client: TestClient) -> None:
     assert clip["id"] in [c["id"] for c in client.get("/v1/clips").json()]
     assert client.get(f"/v1/clips/{clip['id']}").json() == clip
     assert client.get(f"/v1/clips/{path.name}").json()["id"] == clip["id"]  # by file name
-    assert client.delete(f"/v1/clips/{clip['id']}").status_code == 204
+    assert client.delete(f"/v1/clips/{clip['id']}", headers=JSON).status_code == 204
     error_of(client.get(f"/v1/clips/{clip['id']}"), 404, "not_found")
-    error_of(client.delete(f"/v1/clips/{clip['id']}"), 404, "not_found")
+    error_of(client.delete(f"/v1/clips/{clip['id']}", headers=JSON), 404, "not_found")
 
 
 def test_plain_bvh_raw_upload(client: TestClient) -> None:
@@ -141,7 +144,7 @@ def test_first_post_is_202_and_build_can_be_followed(client: TestClient, walk_cl
     assert [e["type"] for e in events][:2] == ["queued", "started"] and events[-1]["type"] == "done"
     assert client.get(f"/v1/databases/{db['id']}").json()["status"] == "ready"
     assert client.post("/v1/databases", json=spec).status_code == 200
-    assert client.delete(f"/v1/databases/{db['id']}").status_code == 204
+    assert client.delete(f"/v1/databases/{db['id']}", headers=JSON).status_code == 204
     error_of(client.get(f"/v1/databases/{db['id']}"), 404, "not_found")
 
 
@@ -192,7 +195,7 @@ def test_job_before_ready_is_409_and_building_database_cannot_be_deleted(
     db_id = _fake_database(store, DatabaseStatus.building, build_job=job.id)
     err = error_of(client.post("/v1/jobs", json={"engine": "clip", "database": db_id, "clip": "x"}), 409)
     assert err["code"] == "database_not_ready" and "building" in err["message"]
-    error_of(client.delete(f"/v1/databases/{db_id}"), 409, "database_building")
+    error_of(client.delete(f"/v1/databases/{db_id}", headers=JSON), 409, "database_building")
 
 
 @pytest.mark.parametrize(
@@ -284,7 +287,7 @@ def test_result_errors(client: TestClient, walk_db: dict[str, Any]) -> None:
     error_of(client.get(f"/v1/jobs/{job_id}/report", params={"result": "../x"}), 404, "not_found")
     error_of(client.get("/v1/jobs/nope/result"), 404, "not_found")
     error_of(client.get("/v1/jobs/nope"), 404, "not_found")
-    error_of(client.post("/v1/jobs/nope/cancel"), 404, "not_found")
+    error_of(client.post("/v1/jobs/nope/cancel", headers=JSON), 404, "not_found")
     error_of(client.get("/v1/nothing-here"), 404, "http_404")
 
 
@@ -296,7 +299,7 @@ def test_cancel_mid_search_keeps_best_so_far(client: TestClient, walk_db: dict[s
             event = ws.receive_json()
             seen.append(event)
             if event["type"] == "solution" and event["data"]["result"] == "r2":
-                r = client.post(f"/v1/jobs/{job['id']}/cancel")
+                r = client.post(f"/v1/jobs/{job['id']}/cancel", headers=JSON)
                 assert r.status_code == 202 and r.json()["id"] == job["id"]
             if event["type"] in ("done", "failed", "cancelled"):
                 break
@@ -310,7 +313,9 @@ def test_cancel_mid_search_keeps_best_so_far(client: TestClient, walk_db: dict[s
     assert info["status"] == "cancelled" and info["result"] == best
     bvh = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "bvh"})
     assert bvh.status_code == 200 and parse_bvh(bvh.content).num_frames > 0
-    assert client.post(f"/v1/jobs/{job['id']}/cancel").json()["status"] == "cancelled"  # idempotent
+    assert (
+        client.post(f"/v1/jobs/{job['id']}/cancel", headers=JSON).json()["status"] == "cancelled"
+    )  # idempotent
 
 
 def test_failed_job_ends_stream_with_failed(client: TestClient, walk_db: dict[str, Any]) -> None:
@@ -403,8 +408,8 @@ def test_tokens_name_principals_that_see_and_change_only_their_own(
         error_of(client.get(path, headers=bob), 404, "not_found")
     assert all(j["id"] != job_id for j in client.get("/v1/jobs", headers=bob).json())
     assert client.get("/v1/clips", headers=bob).json() == []
-    error_of(client.post(f"/v1/jobs/{job_id}/cancel", headers=bob), 404)
-    error_of(client.delete(f"/v1/databases/{db['id']}", headers=bob), 404)
+    error_of(client.post(f"/v1/jobs/{job_id}/cancel", headers=bob | JSON), 404)
+    error_of(client.delete(f"/v1/databases/{db['id']}", headers=bob | JSON), 404)
     error_of(client.post("/v1/jobs", json=request, headers=bob), 404)  # not bob's database
     with (
         pytest.raises(WebSocketDenialResponse) as denied,
@@ -426,7 +431,7 @@ def test_tokens_name_principals_that_see_and_change_only_their_own(
     # the same bytes uploaded by bob are bob's own hold: deleting it leaves alice's clip alone
     again = client.post("/v1/clips", files={"file": (WALK.name, WALK.read_bytes())}, headers=bob)
     assert again.status_code == 201 and again.json()["id"] == clip["id"]
-    assert client.delete(f"/v1/clips/{clip['id']}", headers=bob).status_code == 204
+    assert client.delete(f"/v1/clips/{clip['id']}", headers=bob | JSON).status_code == 204
     assert client.get(f"/v1/clips/{clip['id']}", headers=alice).status_code == 200
     error_of(client.get(f"/v1/clips/{clip['id']}", headers=bob), 404)
 
