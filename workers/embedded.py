@@ -89,6 +89,7 @@ class EmbeddedBackend:
                 cancel_grace_s=self.cancel_grace_s,
                 max_rss_bytes=self.max_rss_bytes,
                 on_ready=self._on_ready,
+                spawner=self._on_loop,
             )
             process.start()
             self._processes.append(process)
@@ -166,6 +167,17 @@ class EmbeddedBackend:
             if short is not None:
                 data = {**data, "short": short}
         self._call(self._record(task.job_id, type_, data, when))
+
+    def _on_loop(self, start: Any) -> None:
+        """Watch thread: start a child from the event loop's thread (the server's main thread)."""
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            raise RuntimeError("the event loop is closed")
+
+        async def call() -> None:
+            start()
+
+        asyncio.run_coroutine_threadsafe(call(), loop).result(timeout=60)
 
     def _on_ready(self) -> None:
         """Watch thread: a (re)started process can take a queued job."""

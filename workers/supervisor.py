@@ -192,9 +192,13 @@ class EngineProcess:
         max_rss_bytes: int | None = None,
         poll_s: float = 0.05,
         on_ready: Callable[[], None] | None = None,
+        spawner: Callable[[Callable[[], None]], None] | None = None,
     ) -> None:
         self.name, self.config = name, config
         self.on_ready = on_ready
+        self.spawner = spawner
+        """Runs ``process.start`` (e.g. on the owner's main thread, so the children are children of
+        that thread in ``/proc/<pid>/task/<pid>/children``); default: the watch thread."""
         self.on_event, self.on_end = on_event, on_end
         self.cancel_grace_s, self.max_rss_bytes, self.poll_s = cancel_grace_s, max_rss_bytes, poll_s
         self._ctx = mp.get_context("spawn")
@@ -286,8 +290,11 @@ class EngineProcess:
             daemon=True,
         )
         try:
-            process.start()
-        except OSError:
+            if self.spawner is not None:
+                self.spawner(process.start)
+            else:
+                process.start()
+        except Exception:
             log.exception("engine process %s could not start", self.name)
             return False
         parent_tasks.close()
