@@ -32,7 +32,7 @@ def test_non_finite_numbers_are_refused(client: TestClient, walk_db: dict[str, A
     raw = json.dumps(_job(walk_db["id"], position=[0.0, 0.0])).replace("[0.0, 0.0]", f"[{literal}, 0]")
     r = client.post("/v1/jobs", content=raw, headers={"content-type": "application/json"})
     error_of(r, 422, "invalid_request")
-    spec = '{"kind": "clips", "clips": [{"clip": "x"}], "fps": %s}' % literal
+    spec = '{"kind": "clips", "clips": [{"clip": "x"}], "fps": ' + literal + "}"
     error_of(client.post("/v1/databases", content=spec, headers={"content-type": "application/json"}), 422)
     assert _jobs_count(client) == before  # no job was stored
 
@@ -53,7 +53,7 @@ def test_non_finite_numbers_are_refused_by_the_schemas_too() -> None:
 
 
 def test_deep_nesting_is_422_not_500(client: TestClient, walk_db: dict[str, Any]) -> None:
-    deep = '{"engine": "clip", "database": "%s", "end": ' % walk_db["id"] + "[" * 5000 + "]" * 5000 + "}"
+    deep = f'{{"engine": "clip", "database": "{walk_db["id"]}", "end": ' + "[" * 5000 + "]" * 5000 + "}"
     err = error_of(client.post("/v1/jobs", content=deep, headers={"content-type": "application/json"}), 422)
     assert "nested too deeply" in err["message"]
     deep_spec = '{"kind": "graph", "clips": ' + "[" * 5000 + "]" * 5000 + "}"
@@ -95,9 +95,11 @@ def test_host_and_origin_are_checked(client: TestClient, walk_db: dict[str, Any]
     for origin in ("http://evil.example", "null", "http://localhost:9999"):
         r = client.post("/v1/jobs", json=body, headers={"origin": origin})
         error_of(r, 403, "cross_origin")
-    with pytest.raises(WebSocketDenialResponse) as denied:
-        with client.websocket_connect("/v1/jobs/x/events", headers={"origin": "http://evil.example"}):
-            pass
+    with (
+        pytest.raises(WebSocketDenialResponse) as denied,
+        client.websocket_connect("/v1/jobs/x/events", headers={"origin": "http://evil.example"}),
+    ):
+        pass
     assert denied.value.status_code == 403
     # the page itself is same-origin
     assert client.post("/v1/jobs", json=body, headers={"origin": "http://localhost"}).status_code == 202
