@@ -42,7 +42,8 @@ def test_schemathesis_finds_no_server_error_and_no_undocumented_status(tmp_path:
         _populate(url)
         run = subprocess.run(
             [SCHEMATHESIS, "run", f"{url}/openapi.json",
-             "--checks", "not_a_server_error,status_code_conformance", "--max-examples", "8", "--seed", "7", "--request-timeout", "20", "--workers", "1",
+             "--checks", "not_a_server_error,status_code_conformance", "--max-examples", "8",
+             "--seed", "7", "--request-timeout", "20", "--workers", "1",
              "--phases", "examples,coverage,fuzzing,stateful", "--suppress-health-check", "all"],
             capture_output=True, text=True, timeout=600, cwd=tmp_path,
         )  # fmt: skip
