@@ -241,6 +241,18 @@ class RedisBackend:
         )
         if not await client.set(self.keys.job(info.id), info.model_dump_json(), nx=True):
             return  # another API process got there first
+        # give the stream back the events this process knows (it followed the job), or at least the
+        # job's `queued` event, so the archive written at the end is whole and readers find them
+        known = list(self.hub.log(info.id).events) if self.hub.has(info.id) else []
+        if not known and floor >= 1:
+            when = info.created_at.timestamp()
+            known = [JobEvent(id=1, job=info.id, type=EventType.queued, time=when, data={})]
+        if not await client.exists(self.keys.events(info.id)):
+            for event in known:
+                with contextlib.suppress(redis.ResponseError):  # an id already there
+                    await client.xadd(
+                        self.keys.events(info.id), {"event": event.model_dump_json()}, id=stream_id(event.id)
+                    )
         await client.set(self.keys.event_seq(info.id), floor, nx=True)
         payload = json.dumps(request["payload"])
         await client.xadd(self.keys.jobs, {"job": info.id, "kind": str(request["kind"]), "payload": payload})
