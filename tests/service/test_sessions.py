@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
+from starlette.testclient import WebSocketDenialResponse
 from starlette.websockets import WebSocketDisconnect
 
 from engines.library import library_to_arrays
@@ -115,6 +116,27 @@ def test_session_refuses_unknown_or_unready_databases(client: TestClient, db: st
     ):
         ws.receive_json()
     assert closed.value.code == code
+
+
+def test_live_sessions_per_principal_are_limited(client: TestClient) -> None:
+    """The fixture's app allows 2 live sessions per principal: the third is refused with 429."""
+    url = f"/v1/sessions/rhythm?database={DB}"
+    with client.websocket_connect(url) as first, client.websocket_connect(url) as second:
+        assert first.receive_json()["type"] == second.receive_json()["type"] == "skeleton"
+        with pytest.raises(WebSocketDenialResponse) as refused, client.websocket_connect(url):
+            pass
+        assert refused.value.status_code == 429 and refused.value.headers["retry-after"]
+    with client.websocket_connect(url) as again:  # the held ones were released
+        assert again.receive_json()["type"] == "skeleton"
+
+
+def test_a_message_over_the_size_limit_ends_the_session(client: TestClient) -> None:
+    with client.websocket_connect(f"/v1/sessions/rhythm?database={DB}") as ws:
+        assert ws.receive_json()["type"] == "skeleton"
+        ws.send_text("x" * 10_000)
+        with pytest.raises(WebSocketDisconnect) as closed:
+            ws.receive_json()
+        assert closed.value.code == 1009
 
 
 def test_app_registers_the_session_route(tmp_path: Path) -> None:

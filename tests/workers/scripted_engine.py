@@ -24,6 +24,9 @@ class ScriptedRequest(JobRequestBase):
     step_s: float = Field(default=0.1, ge=0, le=60)
     fail_at: int | None = Field(default=None, description="raise an engine error at this step")
     input: str | None = Field(default=None, description="an input file; its size becomes a score term")
+    frames: int | None = Field(
+        default=None, ge=1, le=100_000, description="frames asked for (each solution has 10 + i frames)"
+    )
     spin_s: float = Field(
         default=0.0, ge=0, le=60, description="busy the CPU (holding the GIL, not polling should_stop) first"
     )

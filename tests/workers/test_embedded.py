@@ -207,3 +207,24 @@ def test_a_killed_engine_process_is_replaced_and_its_job_run_again(tmp_path: Pat
     assert [e.id for e in first_events] == list(range(1, len(first_events) + 1))
     assert later_events[-1].type == EventType.done
     assert health["restarts"] == 1 and health["workers_ready"] == 1 and "error" not in health
+
+
+def test_a_result_shorter_than_asked_says_so(tmp_path: Path) -> None:
+    async def scenario() -> list[JobEvent]:
+        store = Store(tmp_path)
+        backend = EmbeddedBackend(store, workers=1)
+        await backend.start()
+        try:
+            db = await _database(backend, store)
+            short = {"request": {"engine": "scripted", "database": db, "steps": 1, "frames": 100}}
+            full = {"request": {"engine": "scripted", "database": db, "steps": 1, "frames": 10}}
+            a = await _collect(backend, await _submit(backend, store, "synth", short))
+            b = await _collect(backend, await _submit(backend, store, "synth", full))
+            return [a[-1], b[-1]]
+        finally:
+            await backend.close()
+
+    short_done, full_done = asyncio.run(asyncio.wait_for(scenario(), 120))
+    assert short_done.type == full_done.type == EventType.done
+    assert short_done.data["short"] == {"frames": 10, "requested_frames": 100}
+    assert "short" not in full_done.data
