@@ -262,7 +262,10 @@ class RedisBackend:
     async def status(self, job_id: str) -> JobInfo:
         client, _ = self._redis()
         self.store.job_dir(job_id)  # NotFoundError for an invalid id
-        raw = await client.get(self.keys.job(job_id))
+        try:
+            raw = await client.get(self.keys.job(job_id))
+        except (redis.ConnectionError, redis.TimeoutError):
+            raw = None  # Redis is away: the store's record (kept in step at every status change)
         if raw:
             return JobInfo.model_validate_json(raw)
         return self.store.job_info(job_id)
@@ -272,6 +275,13 @@ class RedisBackend:
         info = await self.status(job_id)
         if info.status.finished:
             return info
+        try:
+            return await self._cancel(client, publisher, info)
+        except (redis.ConnectionError, redis.TimeoutError) as exc:
+            raise BackendUnavailable(f"Redis is unreachable: {exc}") from None
+
+    async def _cancel(self, client: aredis.Redis, publisher: AsyncEventPublisher, info: JobInfo) -> JobInfo:
+        job_id = info.id
         await client.set(self.keys.cancel(job_id), "1", ex=self.cancel_ttl_s)
         if info.status == JobStatus.queued:
             # no worker has it yet: end it now; a worker receiving it later finds the terminal marker

@@ -533,7 +533,7 @@ class Worker:
     def _stop_check(self, job_id: str) -> Callable[[], bool]:
         keys = (self.keys.cancel(job_id), self.keys.terminal(job_id))
         poll = self.settings.cancel_poll_s
-        state = {"next": 0.0, "stop": False}
+        state = {"next": 0.0, "stop": False, "warned": False}
 
         def should_stop() -> bool:
             if state["stop"]:
@@ -543,8 +543,11 @@ class Worker:
                 state["next"] = now + poll
                 try:
                     state["stop"] = bool(self.client.exists(*keys))
+                    state["warned"] = False
                 except redis.RedisError as exc:
-                    log.warning("cancel check failed: %s", exc)
+                    if not state["warned"]:  # once per outage, not every poll
+                        log.warning("cancel check failed: %s", exc)
+                        state["warned"] = True
             return bool(state["stop"])
 
         return should_stop
