@@ -77,6 +77,9 @@ class Settings(BaseSettings):
         description="estimated memory of one job at submission; also the RSS at which "
         "a worker's supervisor stops a job",
     )
+    max_database_frames: int = Field(
+        default=200_000, ge=1, description="frames of one database at its rate (all its clips), at submission"
+    )
     job_grace_s: float = Field(
         default=30.0,
         gt=0,

@@ -40,7 +40,8 @@ class WorkLimits:
 
 @dataclass(frozen=True, slots=True)
 class WorkEstimate:
-    """What a request will cost. ``frames`` is per character at the output rate (None: unknown)."""
+    """What a request will cost. ``frames`` is per character at the output rate (None: unknown);
+    ``characters`` counts every output motion (dancers, both partners of a couple, alternatives)."""
 
     frames: int | None
     characters: int
@@ -198,3 +199,9 @@ def shortfall(store: Any, job_id: str, payload: dict[str, Any], result: str | No
     if wanted is None or got is None or got >= SHORT_FRACTION * wanted:
         return None
     return {"frames": int(got), "requested_frames": int(wanted)}
+
+
+def database_frames(clips: list[tuple[int, float]], fps: float | None) -> int:
+    """Frames of a database at its rate: ``clips`` are (frames, fps) of its clips; ``fps`` the rate
+    the spec resamples them to (None: each keeps its own)."""
+    return sum(round(frames * (fps / clip_fps if fps else 1.0)) for frames, clip_fps in clips)

@@ -87,7 +87,9 @@ async def correct_labels(
     except EngineError as exc:
         raise ApiError(422, "invalid_request", str(exc)) from None
     shared = frozenset(c.clip for c in spec.clips if c.clip is not None)
-    return await create_from_spec(corrected, response, store, backend, metrics, principal, shared)
+    return await create_from_spec(
+        corrected, response, store, backend, metrics, principal, shared, settings.max_database_frames
+    )
 
 
 @router.get("/{db_id}/labels", responses=responses(401, 404, 409, 422))

@@ -15,6 +15,7 @@ from engines.registry import kind_class
 from schemas import ClipSource, DatabaseInfo, DatabaseSpec, DatabaseStatus
 from schemas.databases import DatabaseSpecBase, database_id, parse_database_spec
 from schemas.jobs import JobKind
+from workers.budget import database_frames
 from workers.store import NotFoundError, Store, now
 
 from ..deps import BackendDep, MetricsDep, Principal, PrincipalDep, SettingsDep, StoreDep
@@ -116,7 +117,30 @@ async def create_database(
     """Build a database from uploaded clips (202 with ``build_job``; follow its events), or return
     the existing one with the same content address (200)."""
     spec = await validate_off_loop(SPEC_ADAPTER, await read_json(request, settings), request, settings)
-    return await create_from_spec(spec, response, store, backend, metrics, principal)
+    quota = request.app.state.job_quota
+    quota.check(principal.name)
+    info = await create_from_spec(
+        spec, response, store, backend, metrics, principal, max_frames=settings.max_database_frames
+    )
+    if info.build_job and response.status_code == status.HTTP_202_ACCEPTED:
+        quota.add(principal.name, info.build_job)
+    return info
+
+
+def check_database_size(store: Store, spec: DatabaseSpecBase, hashes: list[str], limit: int | None) -> None:
+    """413 ``over_budget`` when the database would hold more than ``limit`` frames at its rate."""
+    if limit is None:
+        return
+    clips = [(info.frames, info.fps) for info in (store.clip_info(h) for h in hashes)]
+    total = database_frames(clips, spec.fps)
+    if total > limit:
+        raise ApiError(
+            413,
+            "over_budget",
+            f"the database would hold {total} frames at its rate, over the limit of {limit} "
+            "(SEGUE_MAX_DATABASE_FRAMES)",
+            {"frames": total, "limit": limit},
+        )
 
 
 async def create_from_spec(
@@ -127,10 +151,12 @@ async def create_from_spec(
     metrics: Any,
     principal: Principal,
     shared: frozenset[str] = frozenset(),
+    max_frames: int | None = None,
 ) -> DatabaseInfo:
     """The body of ``POST /v1/databases`` once the spec is valid (also used by corrections)."""
     kind_class(spec.kind)  # 422 unavailable for kinds whose engine has not landed
     resolved, hashes = resolve_clips(store, spec, principal, shared)
+    check_database_size(store, resolved, hashes, max_frames)
     db_id = database_id(resolved, hashes)
     # No await between this check and the job being stored (in submit_job, before the backend is
     # awaited), so concurrent posts of one spec in this process start one build.

@@ -189,3 +189,12 @@ def test_per_principal_job_limit_is_429(
         assert r.headers["retry-after"]
     finally:
         client.app.state.job_quota.limit = 256  # type: ignore[attr-defined]
+
+
+def test_database_size_is_checked_at_submission(
+    client: TestClient, walk_clip: dict[str, Any], override_settings: Callable[..., Settings]
+) -> None:
+    override_settings(max_database_frames=50)  # the walk is 317 frames at 120 fps: 79 at 30 fps
+    spec = {"kind": "clips", "clips": [{"clip": walk_clip["id"]}], "fps": 30}
+    err = error_of(client.post("/v1/databases", json=spec), 413, "over_budget")
+    assert err["details"] == {"frames": 79, "limit": 50}
