@@ -1,7 +1,8 @@
 """Schemathesis over the whole OpenAPI document of a real, populated server (a clip, a database and a
 job exist): no server error, and only documented status codes. Its stateful phase follows the
 document's links (``service.links``) from uploads, database builds and job submissions to reading
-them back, so the fuzz reaches real resources, not only 404s."""
+them back, so the fuzz reaches real resources, not only 404s. (The coverage phase, ~3,600 boundary
+cases and 25 s, runs in the acceptance check ``robust.py``; this test keeps to the quick phases.)"""
 
 from __future__ import annotations
 
@@ -42,9 +43,9 @@ def test_schemathesis_finds_no_server_error_and_no_undocumented_status(tmp_path:
         _populate(url)
         run = subprocess.run(
             [SCHEMATHESIS, "run", f"{url}/openapi.json",
-             "--checks", "not_a_server_error,status_code_conformance", "--max-examples", "8",
+             "--checks", "not_a_server_error,status_code_conformance", "--max-examples", "4",
              "--seed", "7", "--request-timeout", "20", "--workers", "1",
-             "--phases", "examples,coverage,fuzzing,stateful", "--suppress-health-check", "all"],
+             "--phases", "examples,fuzzing,stateful", "--suppress-health-check", "all"],
             capture_output=True, text=True, timeout=600, cwd=tmp_path,
         )  # fmt: skip
     summary = [line for line in run.stdout.splitlines() if "generated" in line or "Stateful" in line]
