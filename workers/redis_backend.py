@@ -95,6 +95,8 @@ class RedisBackend:
         self._reconciler: asyncio.Task[None] | None = None
         self.requeued = 0
         self.redis_ok = False
+        self.rescan_s = 30.0
+        self._next_rescan = 0.0
 
     # -- lifecycle ------------------------------------------------------------------------------
     async def start(self) -> None:
@@ -196,6 +198,11 @@ class RedisBackend:
         if not self.redis_ok and not first:
             log.warning("Redis is reachable again; reconciling %d unfinished jobs", len(self._unfinished))
         self.redis_ok = True
+        now = asyncio.get_running_loop().time()
+        if now >= self._next_rescan:  # jobs other API processes submitted (if one of them died)
+            self._next_rescan = now + self.rescan_s
+            stored = await asyncio.to_thread(self.store.list_jobs)
+            self._unfinished |= {i.id for i in stored if not i.status.finished}
         self._unfinished = await asyncio.to_thread(self._still_unfinished, set(self._unfinished))
         if not self._unfinished:
             return
