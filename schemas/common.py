@@ -12,9 +12,11 @@ content address of databases)."""
 
 
 class Strict(BaseModel):
-    """Base for request models: unknown fields are errors (a typo must not be silently ignored)."""
+    """Base for request models: unknown fields are errors (a typo must not be silently ignored), and
+    every number is finite (``NaN`` and ``Infinity`` are refused wherever a float is expected, so no
+    request can carry them into an engine or a result)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class ErrorBody(BaseModel):

@@ -19,18 +19,24 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.utils import get_openapi
 from pydantic import TypeAdapter
 
 from engines.registry import PLUGINS_ENV, load_plugins
+from schemas import DatabaseSpec
 from schemas.jobs import JobRequest
 from workers.backend import JobBackend
 from workers.embedded import EmbeddedBackend
 from workers.store import Store
 
 from .errors import install_error_handlers
+from .guard import CatchAll, HostOriginGuard
+from .limits import JobQuota, SessionQuota
+from .links import add_links
 from .metrics import HttpMetricsMiddleware, Metrics, observe_terminal_events
 from .routes import annotations, clips, databases, events, files, health, jobs, sessions
+from .routes.annotations import Corrections
 from .settings import Settings, get_settings
 from .web import mount_web
 
@@ -41,9 +47,11 @@ API_VERSION = "1"
 DESCRIPTION = """Motion synthesis by example. Upload BVH clips, build a database from them, submit
 jobs against it and stream their events; download results as BVH, GLB, JSON frames or NPZ.
 
-Every error body is `{"error": {"code", "message", "details"?}}`. When the server sets
-`SEGUE_API_TOKENS`, every write (POST, DELETE) and every WebSocket needs `Authorization: Bearer <token>`
-(WebSockets may pass `?token=` instead)."""
+Every error body is `{"error": {"code", "message", "details"?}}`. JSON bodies must be sent as
+`Content-Type: application/json` (at most `SEGUE_MAX_JSON_BYTES`, finite numbers only). When the server
+sets `SEGUE_API_TOKENS`, every `/v1` request needs `Authorization: Bearer <token>` (WebSockets may pass
+`?token=` instead); a token names a principal, which sees and changes only its own clips, files,
+databases and jobs. Without tokens the server is a single-user tool for this machine."""
 
 
 def make_backend(settings: Settings, store: Store) -> JobBackend:
@@ -53,7 +61,13 @@ def make_backend(settings: Settings, store: Store) -> JobBackend:
 
         backend: JobBackend = RedisBackend(store, settings.redis_url)
         return backend
-    return EmbeddedBackend(store, settings.workers)
+    return EmbeddedBackend(
+        store,
+        settings.workers,
+        cancel_grace_s=settings.cancel_grace_s,
+        time_grace_s=settings.job_grace_s,
+        max_rss_bytes=settings.max_job_memory_mb << 20,
+    )
 
 
 @asynccontextmanager
@@ -66,6 +80,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     store = Store(settings.data_dir)
     backend = make_backend(settings, store)
     observe_terminal_events(backend.hub, app.state.metrics, since=time.time())
+    app.state.job_quota = JobQuota(store, settings.max_queued_jobs)
     await backend.start()
     app.state.store, app.state.backend = store, backend
     log.info("segue API ready: data in %s, %s backend", settings.data_dir, type(backend).__name__)
@@ -79,12 +94,21 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         await backend.close()
 
 
-def _add_job_request_schema(schema: dict[str, Any]) -> None:
-    """Document ``POST /v1/jobs``'s body as the built-in :data:`schemas.jobs.JobRequest` union."""
-    request_schema = TypeAdapter(JobRequest).json_schema(ref_template="#/components/schemas/{model}")
+BODY_SCHEMAS: dict[str, Any] = {
+    "JobRequest": JobRequest,
+    "DatabaseSpec": DatabaseSpec,
+    "LabelCorrections": Corrections,
+}
+"""Request bodies the routes parse themselves (:mod:`service.jsonbody`), documented as components."""
+
+
+def _add_body_schemas(schema: dict[str, Any]) -> None:
+    """Document the JSON bodies of ``POST /v1/jobs``, ``/v1/databases`` and ``/corrections``."""
     components = schema.setdefault("components", {}).setdefault("schemas", {})
-    components.update(request_schema.pop("$defs", {}))
-    components["JobRequest"] = request_schema
+    for name, annotation in BODY_SCHEMAS.items():
+        body_schema = TypeAdapter(annotation).json_schema(ref_template="#/components/schemas/{model}")
+        components.update(body_schema.pop("$defs", {}))
+        components[name] = body_schema
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -107,10 +131,26 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.metrics = Metrics()
     app.state.backend = None
+    app.state.session_quota = SessionQuota(settings.max_sessions)
     install_error_handlers(app)
     for module in (clips, files, databases, annotations, jobs, events, health, sessions):
         app.include_router(module.router)
+    # innermost first: CatchAll turns a bug into the contract's 500 (keeping the connection), metrics
+    # count it, the guard refuses foreign hosts and origins before anything else runs, and CORS (only
+    # when origins are configured) answers preflights for the origins it allows
+    app.add_middleware(CatchAll)
     app.add_middleware(HttpMetricsMiddleware, metrics=app.state.metrics)
+    app.add_middleware(
+        HostOriginGuard, allowed_hosts=settings.allowed_hosts, cors_origins=settings.cors_origins
+    )
+    if settings.cors_origins:
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=list(settings.cors_origins),
+            allow_methods=["GET", "POST", "DELETE"],
+            allow_headers=["Authorization", "Content-Type"],
+            max_age=600,
+        )
     mount_web(app)  # the browser front end: web/ at / for every path no API route matches
 
     def openapi() -> dict[str, Any]:
@@ -122,7 +162,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 routes=app.routes,
                 tags=app.openapi_tags,
             )
-            _add_job_request_schema(schema)
+            _add_body_schemas(schema)
+            add_links(schema)
             app.openapi_schema = schema
         return app.openapi_schema
 

@@ -321,9 +321,30 @@ def cmd_serve(args: argparse.Namespace) -> int:
     if args.workers is not None:
         os.environ["SEGUE_WORKERS"] = str(args.workers)
     from service.app import create_app
+    from service.settings import get_settings
 
+    if not is_loopback(args.host) and not get_settings().auth_enabled:
+        print(
+            f"segue: error: --host {args.host} would open the API to the network without tokens; set "
+            "SEGUE_API_TOKENS (and SEGUE_ALLOWED_HOSTS) first: without tokens Segue is a single-user tool "
+            "for this machine",
+            file=sys.stderr,
+        )
+        return 2
     uvicorn.run(create_app(), host=args.host, port=args.port, log_level=args.log_level)
     return 0
+
+
+def is_loopback(host: str) -> bool:
+    """True for 127.0.0.0/8, ::1 and ``localhost``."""
+    import ipaddress
+
+    if host.strip("[]").lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
 
 
 def cmd_worker(args: argparse.Namespace) -> int:

@@ -86,6 +86,9 @@ class SegueClient:
         self.close()
 
     def _request(self, method: str, path: str, **kwargs: Any) -> httpx.Response:
+        if method != "GET" and not {"json", "content", "files", "data"} & set(kwargs):
+            # bodyless writes (cancel, delete) declare JSON, as the server requires
+            kwargs["headers"] = {"Content-Type": "application/json", **kwargs.get("headers", {})}
         response = self.http.request(method, path, **kwargs)
         if response.status_code >= 400:
             raise _error_from(response.status_code, response.content)

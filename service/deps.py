@@ -1,4 +1,7 @@
-"""Dependencies: the settings, store, backend and metrics of the running app, and bearer auth.
+"""Dependencies: the settings, store, backend and metrics of the running app, and the caller.
+
+Tokens name principals (``SEGUE_API_TOKENS="alice:t1,bob:t2"``); :class:`Principal` is who calls.
+Without tokens every caller is the one local user (:data:`LOCAL`), who may do everything.
 
 Routes take them as ``Annotated`` aliases (``store: StoreDep``); tests override
 :func:`app_settings` (``app.dependency_overrides[app_settings] = lambda: other``) to change what
@@ -7,7 +10,9 @@ routes see (e.g. switch auth on) without restarting the backend.
 
 from __future__ import annotations
 
+import hashlib
 import hmac
+from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends
@@ -55,35 +60,92 @@ StoreDep = Annotated[Store, Depends(app_store)]
 BackendDep = Annotated[JobBackend, Depends(app_backend)]
 MetricsDep = Annotated[Metrics, Depends(app_metrics)]
 
-_bearer = HTTPBearer(auto_error=False, description="required for writes when SEGUE_API_TOKENS is set")
+_bearer = HTTPBearer(auto_error=False, description="required on every /v1 route when SEGUE_API_TOKENS is set")
+
+LOCAL = "local"
+"""The principal of a server without tokens (a single-user tool): it owns and may do everything."""
+
+
+@dataclass(frozen=True, slots=True)
+class Principal:
+    """Who is calling: the name a token maps to (``SEGUE_API_TOKENS``), and whether it is an admin."""
+
+    name: str
+    admin: bool = False
+
+    def may(self, owners: set[str] | str | None) -> bool:
+        """True when the principal may read or change a thing held by ``owners`` (an admin always)."""
+        if self.admin:
+            return True
+        if isinstance(owners, str):
+            return owners == self.name
+        return bool(owners) and self.name in owners  # type: ignore[operator]
+
+
+def principal_of_token(entry: str) -> tuple[str, str]:
+    """``"alice:s3cret"`` -> ``("alice", "s3cret")``; a bare token is named by its hash."""
+    name, sep, token = entry.partition(":")
+    if sep and name.strip() and token:
+        return name.strip(), token
+    return "token-" + hashlib.sha256(entry.encode()).hexdigest()[:8], entry
+
+
+def token_table(settings: Settings) -> list[tuple[str, str]]:
+    """(principal, token) for every configured token."""
+    return [principal_of_token(entry) for entry in settings.api_tokens]
+
+
+def authenticate(settings: Settings, token: str | None) -> Principal | ApiError:
+    """The principal a token names, or the 401 to answer (no tokens configured: :data:`LOCAL`)."""
+    if not settings.auth_enabled:
+        return Principal(LOCAL, admin=True)
+    if not token:
+        return unauthorized("this server requires a bearer token: send 'Authorization: Bearer <token>'")
+    found = None
+    for name, known in token_table(settings):
+        if hmac.compare_digest(token.encode(), known.encode()):
+            found = name  # no early exit: the time taken does not depend on which token matched
+    if found is None:
+        return unauthorized("the bearer token is not valid", invalid=True)
+    return Principal(found, admin=found in settings.admins)
 
 
 def token_problem(settings: Settings, token: str | None) -> ApiError | None:
-    """Why ``token`` does not authorize a write (None when it does, or when auth is off)."""
-    if not settings.auth_enabled:
-        return None
-    if not token:
-        return unauthorized(
-            "this server requires a bearer token for writes: send 'Authorization: Bearer <token>'"
-        )
-    if not any(hmac.compare_digest(token.encode(), t.encode()) for t in settings.api_tokens):
-        return unauthorized("the bearer token is not valid", invalid=True)
-    return None
+    """Why ``token`` is refused (None when it is valid, or when auth is off)."""
+    result = authenticate(settings, token)
+    return result if isinstance(result, ApiError) else None
 
 
-def require_token(
+def current_principal(
+    conn: HTTPConnection,
     settings: SettingsDep,
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
-) -> None:
-    """Writes: a valid ``Authorization: Bearer`` token when ``SEGUE_API_TOKENS`` is set (else 401)."""
+) -> Principal:
+    """The caller (401 without a valid ``Authorization: Bearer`` token when tokens are set).
+
+    ``?token=`` is accepted on WebSockets only (browsers cannot set headers there); a token in the
+    query of another request would end up in access logs, so it is refused with a message saying so."""
     token = credentials.credentials if credentials is not None else None
-    problem = token_problem(settings, token)
-    if problem is not None:
-        raise problem
+    if token is None and settings.auth_enabled and conn.query_params.get("token"):
+        raise unauthorized(
+            "pass the token as 'Authorization: Bearer <token>'; ?token= is accepted on WebSockets only"
+        )
+    result = authenticate(settings, token)
+    if isinstance(result, ApiError):
+        raise result
+    return result
 
 
-AuthDep = Depends(require_token)
-"""Add to a write route: ``@router.post(..., dependencies=[AuthDep])``."""
+PrincipalDep = Annotated[Principal, Depends(current_principal)]
+AuthDep = Depends(current_principal)
+"""Add to a route that needs a caller but not its name: ``dependencies=[AuthDep]``."""
+
+
+def websocket_principal(
+    conn: HTTPConnection, settings: Settings, query_token: str | None
+) -> Principal | ApiError:
+    """The caller of a WebSocket: the ``Authorization`` header, else ``?token=``."""
+    return authenticate(settings, bearer_token(conn, query_token))
 
 
 def bearer_token(conn: HTTPConnection, query_token: str | None = None) -> str | None:

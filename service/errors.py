@@ -11,6 +11,7 @@ exception                                  status  code
 ``RequestValidationError`` / ``ValidationError``  422  ``invalid_request``
 ``schemas.jobs.RequestError``              422     ``invalid_request``
 ``engines.registry.UnavailableError``      422     ``unavailable``
+``workers.backend.BackendUnavailable``     503     ``backend_unavailable`` (+ ``Retry-After``)
 :class:`ApiError`                          its own (413 ``too_large``, 409 ``database_not_ready``...)
 ``HTTPException`` (routing: 404, 405)      its own ``http_<status>``
 anything else                              500     ``internal`` (a bug; logged)
@@ -32,6 +33,7 @@ from engines.registry import UnavailableError
 from motion import MotionError
 from schemas import ErrorBody, ErrorResponse
 from schemas.jobs import RequestError
+from workers.backend import BackendUnavailable
 from workers.store import NotFoundError
 
 log = logging.getLogger("segue.service")
@@ -138,6 +140,15 @@ async def _http_error(request: Request, exc: Exception) -> JSONResponse:
     return error_response(exc.status_code, f"http_{exc.status_code}", str(exc.detail), headers=headers)
 
 
+async def _backend_unavailable(request: Request, exc: Exception) -> JSONResponse:
+    return error_response(
+        503,
+        "backend_unavailable",
+        f"the job backend cannot take this now ({exc}); try again",
+        headers={"Retry-After": "5"},
+    )
+
+
 async def _internal(request: Request, exc: Exception) -> JSONResponse:
     log.exception("unhandled error on %s %s", request.method, request.url.path, exc_info=exc)
     return error_response(500, "internal", f"internal error ({type(exc).__name__}); see the server log")
@@ -152,6 +163,7 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(ValidationError, _validation_error)
     app.add_exception_handler(RequestError, _request_error)
     app.add_exception_handler(UnavailableError, _unavailable)
+    app.add_exception_handler(BackendUnavailable, _backend_unavailable)
     app.add_exception_handler(StarletteHTTPException, _http_error)
     app.add_exception_handler(Exception, _internal)
 
@@ -163,8 +175,12 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
         401: "a bearer token is required (auth enabled) or the token is not valid",
         404: "no such clip, database, job or result",
         409: "the resource is not ready (database building, job without a result...)",
-        413: "the upload is over the size limit",
+        403: "the request comes from a foreign origin (browsers: same origin or SEGUE_CORS_ORIGINS)",
+        413: "the body is over its size limit, or the job over the server's work budget",
+        415: "a JSON route was sent a body that is not 'Content-Type: application/json'",
         422: "the request is invalid (details lists each problem)",
+        429: "too many unfinished jobs or live sessions for this principal (see Retry-After)",
+        503: "the job backend cannot take jobs now (see Retry-After); nothing was stored",
     }.items()
 }
 """OpenAPI error responses (all :class:`~schemas.ErrorResponse`), picked per route."""

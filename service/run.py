@@ -18,6 +18,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--port", type=int, default=8000)
     ap.add_argument("--log-level", default="info")
     args = ap.parse_args(argv)
+    from .cli import is_loopback
+
+    if not is_loopback(args.host) and not get_settings().auth_enabled:
+        ap.error(f"--host {args.host} would open the API to the network without tokens; set SEGUE_API_TOKENS")
     run(args.host, args.port, get_settings(), args.log_level)
     return 0
 

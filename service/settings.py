@@ -14,6 +14,7 @@ from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from motion.bvh import DEFAULT_MAX_FRAMES, DEFAULT_MAX_JOINTS, BvhLimits
+from workers.budget import WorkLimits
 
 MiB = 1 << 20
 
@@ -27,12 +28,36 @@ class Settings(BaseSettings):
     redis_url: str | None = Field(default=None, description="Redis job backend; unset = embedded pool")
     workers: int = Field(default=2, ge=1, le=256, description="embedded backend: worker processes")
     api_tokens: Annotated[tuple[str, ...], NoDecode] = Field(
-        default=(), repr=False, description="comma-separated bearer tokens; empty = no auth"
+        default=(),
+        repr=False,
+        description="comma-separated bearer tokens, each 'principal:token' (a bare token names the "
+        "principal 'token-<first 8 hex digits of its sha256>'); empty = no auth, a single-user tool",
+    )
+    admins: Annotated[tuple[str, ...], NoDecode] = Field(
+        default=(), description="comma-separated principals that may read, cancel and delete everything"
     )
     max_upload_bytes: int = Field(default=64 * MiB, ge=1, description="largest accepted clip upload")
-    max_bvh_bytes: int = Field(
-        default=512 * MiB, ge=1, description="largest BVH text after gunzip (a gzip bomb stops here)"
+    max_bvh_bytes: int | None = Field(
+        default=None,
+        ge=1,
+        description="largest BVH text after gunzip (a gzip bomb stops here); default 4 x max_upload_bytes",
     )
+    max_json_bytes: int = Field(default=1 * MiB, ge=64, description="largest JSON request body, bytes")
+    max_parses: int = Field(
+        default=2, ge=1, le=256, description="request bodies (JSON, clip uploads) parsed at once"
+    )
+    allowed_hosts: Annotated[tuple[str, ...], NoDecode] = Field(
+        default=("127.0.0.1", "localhost", "::1"),
+        description="host names the server answers to (Host header; DNS-rebinding defence); '*' = any",
+    )
+    cors_origins: Annotated[tuple[str, ...], NoDecode] = Field(
+        default=(), description="origins (scheme://host:port) allowed to call the API from other pages"
+    )
+    max_queued_jobs: int = Field(
+        default=256, ge=1, description="unfinished jobs per principal (429 + Retry-After above it)"
+    )
+    max_sessions: int = Field(default=8, ge=1, description="live WebSocket sessions per principal")
+    session_inbox: int = Field(default=64, ge=1, le=100_000, description="unread messages per live session")
     max_frames: int = Field(default=DEFAULT_MAX_FRAMES, ge=1, description="most frames in one clip")
     max_joints: int = Field(default=DEFAULT_MAX_JOINTS, ge=1, description="most joints in one clip")
     engine_plugins: str | None = Field(
@@ -40,9 +65,36 @@ class Settings(BaseSettings):
     )
     ws_queue: int = Field(default=64, ge=2, le=100_000, description="per-WebSocket event queue bound")
 
-    @field_validator("api_tokens", mode="before")
+    max_output_frames: int = Field(
+        default=36_000, ge=1, description="output frames per character of one job (at the output rate)"
+    )
+    max_joint_frames: int = Field(
+        default=10_000_000, ge=1, description="characters x output frames x joints of one job"
+    )
+    max_job_memory_mb: int = Field(
+        default=4096,
+        ge=64,
+        description="estimated memory of one job at submission; also the RSS at which "
+        "a worker's supervisor stops a job",
+    )
+    max_database_frames: int = Field(
+        default=200_000, ge=1, description="frames of one database at its rate (all its clips), at submission"
+    )
+    job_grace_s: float = Field(
+        default=30.0,
+        gt=0,
+        description="a job running this long past its budget_s is stopped by its supervisor",
+    )
+    cancel_grace_s: float = Field(
+        default=2.0, gt=0, description="a cancelled job still running this long after the cancel is killed"
+    )
+    max_job_seconds: float = Field(
+        default=600.0, gt=0, description="estimated run time of one job (budget_s + assembly), seconds"
+    )
+
+    @field_validator("api_tokens", "admins", "allowed_hosts", "cors_origins", mode="before")
     @classmethod
-    def _split_tokens(cls, value: Any) -> Any:
+    def _split_list(cls, value: Any) -> Any:
         """Accept ``"a,b"`` (the environment form) as well as a sequence."""
         if isinstance(value, str):
             return tuple(t.strip() for t in value.split(",") if t.strip())
@@ -50,13 +102,37 @@ class Settings(BaseSettings):
 
     @property
     def auth_enabled(self) -> bool:
-        """True when writes and WebSockets need a bearer token."""
+        """True when every API request needs a bearer token."""
         return bool(self.api_tokens)
+
+    @property
+    def work_limits(self) -> WorkLimits:
+        """The work budget of one job (:mod:`workers.budget`)."""
+        return WorkLimits(
+            max_output_frames=self.max_output_frames,
+            max_joint_frames=self.max_joint_frames,
+            max_memory_bytes=self.max_job_memory_mb * MiB,
+            max_budget_s=self.max_job_seconds,
+        )
+
+    def work_limits_dict(self) -> dict[str, Any]:
+        """The work limits as the settings name them (for error details)."""
+        return {
+            "max_output_frames": self.max_output_frames,
+            "max_joint_frames": self.max_joint_frames,
+            "max_job_memory_mb": self.max_job_memory_mb,
+            "max_job_seconds": self.max_job_seconds,
+        }
+
+    @property
+    def inflate_limit(self) -> int:
+        """Largest BVH text after gunzip, bytes (``max_bvh_bytes``, default 4 x the upload limit)."""
+        return self.max_bvh_bytes if self.max_bvh_bytes is not None else 4 * self.max_upload_bytes
 
     @property
     def bvh_limits(self) -> BvhLimits:
         """The reader limits for uploaded clips."""
-        return BvhLimits(max_joints=self.max_joints, max_frames=self.max_frames, max_bytes=self.max_bvh_bytes)
+        return BvhLimits(max_joints=self.max_joints, max_frames=self.max_frames, max_bytes=self.inflate_limit)
 
 
 @lru_cache

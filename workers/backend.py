@@ -17,6 +17,11 @@ from typing import Any, Protocol
 from schemas import EventType, JobEvent, JobInfo
 
 
+class BackendUnavailable(RuntimeError):
+    """The backend cannot take a job now (Redis unreachable, no worker process can start); the
+    API answers 503 and keeps no record of the job."""
+
+
 class JobBackend(Protocol):
     """Where jobs run. All methods are called from the API's event loop."""
 

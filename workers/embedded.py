@@ -1,9 +1,22 @@
-"""The embedded backend (default, no Redis): jobs run in a local pool of spawned processes.
+"""The embedded backend (default, no Redis): jobs run in supervised engine processes of the API.
 
-Worker processes publish events through a multiprocessing queue; a thread in the API process
-drains it into the :class:`~workers.backend.EventHub` and the job's ``events.jsonl`` and
-``info.json`` in the store (so finished jobs can be replayed after a restart). Cancellation is a
-flag file the worker polls through ``should_stop``.
+``workers`` :class:`~workers.supervisor.EngineProcess` children run the jobs; their watch threads
+relay each event into the :class:`~workers.backend.EventHub` and the job's ``events.jsonl`` and
+``info.json`` in the store. Jobs wait in an in-memory queue for an idle process.
+
+Recovery (the store's job records are the source of truth):
+
+* a child that dies (SIGKILL, the OOM killer) is replaced at once and its job re-run, with a new
+  ``started`` event (``attempt`` n) and the same event ids, up to ``max_attempts`` runs
+  (then ``failed`` with code ``worker_lost``); the other processes and jobs are not touched;
+* at start-up, jobs a previous server process left ``queued`` or ``running`` are queued again, their
+  events replayed from ``events.jsonl`` so clients resume with ``after=`` where they were;
+* the supervisor kills a job that ignores its cancel for ``cancel_grace_s``, runs past its time limit
+  (``budget_s`` + ``time_grace_s``) or past ``max_rss_bytes`` of memory (see
+  :func:`~workers.supervisor.terminal_after_kill`).
+
+``health()`` reports the processes alive and ready, restarts, the queue and running jobs; it is an
+error (``/healthz`` 503) when no engine process is alive and none can start.
 """
 
 from __future__ import annotations
@@ -11,148 +24,230 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import multiprocessing as mp
-import os
-import threading
 import time
+from collections import deque
 from collections.abc import AsyncIterator
-from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 from typing import Any
 
 from schemas import DatabaseStatus, EventType, JobEvent, JobInfo, JobStatus
 from schemas.jobs import JobKind
 
-from .backend import EventHub
-from .execute import EngineCache, apply_event, execute_job
+from .backend import BackendUnavailable, EventHub
+from .budget import shortfall
+from .execute import apply_event
 from .store import NotFoundError, Store
+from .supervisor import (
+    ChildConfig,
+    EngineProcess,
+    Outcome,
+    Task,
+    engine_plugins,
+    terminal_after_kill,
+    time_limit,
+)
 
 log = logging.getLogger("segue.embedded")
 
-# -- worker process side -------------------------------------------------------------------------
-_STORE: Store | None = None
-_QUEUE: Any = None
-_CACHE = EngineCache()
 
-
-def _init_worker(root: str, queue: Any) -> None:
-    global _STORE, _QUEUE
-    from engines.registry import load_plugins
-    from motion.allocator import tune_process
-
-    tune_process()
-    load_plugins()
-    _STORE, _QUEUE = Store(root), queue
-
-
-def _cancel_flag(store: Store, job_id: str) -> Path:
-    return store.job_dir(job_id) / "cancel"
-
-
-def _run_job(job_id: str, kind: str, payload: dict[str, Any]) -> None:
-    assert _STORE is not None and _QUEUE is not None
-    store, queue = _STORE, _QUEUE
-    flag = _cancel_flag(store, job_id)
-    last_check = [0.0, False]
-
-    def should_stop() -> bool:
-        now = time.monotonic()
-        if not last_check[1] and now - last_check[0] > 0.02:
-            last_check[0], last_check[1] = now, flag.exists()
-        return bool(last_check[1])
-
-    def publish(type_: EventType, data: dict[str, Any]) -> None:
-        queue.put((job_id, type_.value, data, time.time()))
-
-    execute_job(store, job_id, kind, payload, publish, should_stop, _CACHE)
-
-
-def _warm_up() -> int:
-    return os.getpid()
-
-
-# -- API process side ----------------------------------------------------------------------------
 class EmbeddedBackend:
-    """Jobs in a local process pool (see the module docstring)."""
+    """Jobs in local supervised engine processes (see the module docstring)."""
 
-    def __init__(self, store: Store, workers: int = 2) -> None:
+    def __init__(
+        self,
+        store: Store,
+        workers: int = 2,
+        *,
+        max_attempts: int = 3,
+        cancel_grace_s: float = 2.0,
+        time_grace_s: float = 30.0,
+        build_timeout_s: float = 3600.0,
+        max_rss_bytes: int | None = None,
+    ) -> None:
         self.store = store
         self.workers = max(1, workers)
+        self.max_attempts = max_attempts
+        self.cancel_grace_s, self.time_grace_s = cancel_grace_s, time_grace_s
+        self.build_timeout_s, self.max_rss_bytes = build_timeout_s, max_rss_bytes
         self.hub = EventHub()
-        self._ctx = mp.get_context("spawn")
-        self._queue: Any = None
-        self._pool: ProcessPoolExecutor | None = None
-        self._drain: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._running: set[str] = set()
-        self._tasks: set[asyncio.Future[JobEvent]] = set()
+        self._processes: list[EngineProcess] = []
+        self._queue: deque[Task] = deque()
+        self._running: dict[str, Task] = {}
+        self._closing = False
+        self.reruns = 0
 
+    # -- lifecycle ------------------------------------------------------------------------------
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
-        self._queue = self._ctx.Queue()
-        self._pool = ProcessPoolExecutor(
-            max_workers=self.workers,
-            mp_context=self._ctx,
-            initializer=_init_worker,
-            initargs=(str(self.store.root), self._queue),
-        )
-        # start every worker now (spawn + imports take ~1 s) so the first job does not wait
-        await asyncio.gather(*(self._loop.run_in_executor(self._pool, _warm_up) for _ in range(self.workers)))
-        self._drain = threading.Thread(target=self._drain_queue, name="segue-events", daemon=True)
-        self._drain.start()
-        await self._fail_stale_jobs()
+        config = ChildConfig(store_root=str(self.store.root), plugins=engine_plugins())
+        for i in range(self.workers):
+            process = EngineProcess(
+                f"embedded-{i}",
+                config,
+                self._on_event,
+                self._on_end,
+                cancel_grace_s=self.cancel_grace_s,
+                max_rss_bytes=self.max_rss_bytes,
+                on_ready=self._on_ready,
+                spawner=self._on_loop,
+            )
+            process.start()
+            self._processes.append(process)
+        # spawning + imports take ~1 s: wait (off the loop) so the first job does not
+        for process in self._processes:
+            await asyncio.to_thread(process.ready.wait, 120)
+        await self._requeue_unfinished()
+        self._dispatch()
 
     async def close(self) -> None:
-        """Cancel running jobs, stop the pool and the event thread (without blocking the loop)."""
-        if self._pool is not None:
-            for job_id in list(self._running):
-                _cancel_flag(self.store, job_id).touch()
-            pool, self._pool = self._pool, None
-            await asyncio.to_thread(pool.shutdown, True, cancel_futures=True)
-        if self._queue is not None:
-            queue, self._queue = self._queue, None
-            queue.put(None)
-            if self._drain is not None:
-                await asyncio.to_thread(self._drain.join, 10)
+        """Stop the engine processes (running jobs stay ``running`` on disk and are re-queued by the
+        next server process)."""
+        self._closing = True
+        processes, self._processes = self._processes, []
+        await asyncio.gather(*(asyncio.to_thread(p.close) for p in processes))
 
-    async def _fail_stale_jobs(self) -> None:
-        """Jobs left queued/running by a previous server process can never finish: fail them
-        (and the databases they were building) so clients are not left waiting."""
+    # -- recovery -------------------------------------------------------------------------------
+    async def _requeue_unfinished(self) -> None:
+        """Queue again the jobs a previous server process left unfinished (the store is the truth)."""
         for info in self.store.list_jobs():
             if info.status.finished:
                 continue
             await self._replay_from_disk(info.id)
-            error = {
-                "error": {"code": "server_restarted", "message": "the server restarted before the job ended"}
-            }
-            await self._record(info.id, EventType.failed, error, time.time())
-            if info.kind == JobKind.build and info.database:
-                try:
-                    db = self.store.database_info(info.database)
-                except NotFoundError:
-                    continue
-                if db.status in (DatabaseStatus.queued, DatabaseStatus.building):
-                    self.store.put_database_info(
-                        db.model_copy(update={"status": DatabaseStatus.failed, "error": "server restarted"})
-                    )
-
-    def _drain_queue(self) -> None:
-        queue = self._queue
-        while True:
-            item = queue.get()
-            if item is None:
-                return
-            job_id, type_, data, when = item
-            assert self._loop is not None
-            fut = asyncio.run_coroutine_threadsafe(
-                self._record(job_id, EventType(type_), data, when), self._loop
-            )
             try:
-                fut.result(timeout=30)
-            except Exception:  # the loop is closing
-                log.exception("could not record an event of job %s", job_id)
+                request = self.store.job_request(info.id)
+            except NotFoundError:
+                await self._fail(info.id, "lost", "the job's request is missing from the store")
+                continue
+            attempts = sum(1 for e in self.hub.log(info.id).events if e.type == EventType.started)
+            if attempts >= self.max_attempts:
+                await self._fail(
+                    info.id, "worker_lost", f"the job was started {attempts} times and never ended"
+                )
+                continue
+            log.warning("re-queueing job %s left %s by a previous server process", info.id, info.status.value)
+            if info.kind == JobKind.build and info.database:
+                self._reset_database(info.database)
+            self._queue.append(
+                self._task(info.id, str(request["kind"]), dict(request["payload"]), attempts + 1)
+            )
+            self.reruns += 1
 
-    async def _record(self, job_id: str, type_: EventType, data: dict[str, Any], when: float) -> JobEvent:
+    def _reset_database(self, db_id: str) -> None:
+        try:
+            db = self.store.database_info(db_id)
+        except NotFoundError:
+            return
+        if db.status == DatabaseStatus.building:
+            self.store.put_database_info(db.model_copy(update={"status": DatabaseStatus.queued}))
+
+    def _task(self, job_id: str, kind: str, payload: dict[str, Any], attempt: int) -> Task:
+        limit = time_limit(kind, payload, self.time_grace_s, self.build_timeout_s)
+        return Task(job_id, kind, payload, attempt=attempt, time_limit_s=limit)
+
+    # -- dispatch (event loop) --------------------------------------------------------------------
+    def _dispatch(self) -> None:
+        if self._closing:
+            return
+        for process in self._processes:
+            if not self._queue:
+                return
+            if process.idle:
+                task = self._queue.popleft()
+                if process.run(task):
+                    self._running[task.job_id] = task
+                else:
+                    self._queue.appendleft(task)
+
+    def _on_event(self, task: Task, type_: EventType, data: dict[str, Any], when: float) -> None:
+        """Watch thread: relay an event of a running job (waits until it is recorded)."""
+        if type_ == EventType.started:
+            data = {**data, "attempt": task.attempt}
+        elif type_ == EventType.done and task.kind == "synth":
+            short = shortfall(self.store, task.job_id, task.payload, data.get("result"))
+            if short is not None:
+                data = {**data, "short": short}
+        self._call(self._record(task.job_id, type_, data, when))
+
+    def _on_loop(self, start: Any) -> None:
+        """Watch thread: start a child from the event loop's thread (the server's main thread)."""
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            raise RuntimeError("the event loop is closed")
+
+        async def call() -> None:
+            start()
+
+        asyncio.run_coroutine_threadsafe(call(), loop).result(timeout=60)
+
+    def _on_ready(self) -> None:
+        """Watch thread: a (re)started process can take a queued job."""
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(self._dispatch)
+
+    def _on_end(self, task: Task, outcome: Outcome, detail: str) -> None:
+        """Watch thread: a task is over (see :mod:`workers.supervisor` for the outcomes)."""
+        self._call(self._ended(task, outcome, detail))
+
+    def _call(self, coro: Any) -> None:
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            coro.close()
+            return
+        try:
+            asyncio.run_coroutine_threadsafe(coro, loop).result(timeout=60)
+        except Exception:
+            log.exception("the event loop could not take a job update")
+
+    async def _ended(self, task: Task, outcome: Outcome, detail: str) -> None:
+        self._running.pop(task.job_id, None)
+        try:
+            if outcome == "finished":
+                if not task.terminal:
+                    await self._fail(task.job_id, "internal", "the job ended without a terminal event")
+            elif outcome == "crashed":
+                if self._closing:
+                    return  # the server stops: the next one re-queues the job from the store
+                if task.terminal:
+                    return
+                if task.cancel_asked is not None:
+                    await self._record(task.job_id, EventType.cancelled, {"result": task.best}, time.time())
+                elif task.attempt >= self.max_attempts:
+                    await self._fail(
+                        task.job_id, "worker_lost", f"{detail}; gave up after {task.attempt} attempts"
+                    )
+                else:
+                    log.warning(
+                        "job %s: %s; running it again (attempt %d)", task.job_id, detail, task.attempt + 1
+                    )
+                    self.reruns += 1
+                    self._queue.appendleft(self._task(task.job_id, task.kind, task.payload, task.attempt + 1))
+            elif not task.terminal:
+                type_, data = terminal_after_kill(outcome, task, detail)
+                await self._record(task.job_id, type_, data, time.time())
+        finally:
+            self._dispatch()
+
+    async def _fail(self, job_id: str, code: str, message: str) -> None:
+        await self._record(
+            job_id, EventType.failed, {"error": {"code": code, "message": message}}, time.time()
+        )
+        info = self.store.job_info(job_id)
+        if info.kind == JobKind.build and info.database:
+            try:
+                db = self.store.database_info(info.database)
+            except NotFoundError:
+                return
+            if db.status in (DatabaseStatus.queued, DatabaseStatus.building):
+                self.store.put_database_info(
+                    db.model_copy(update={"status": DatabaseStatus.failed, "error": message})
+                )
+
+    async def _record(
+        self, job_id: str, type_: EventType, data: dict[str, Any], when: float
+    ) -> JobEvent | None:
+        if self.hub.log(job_id).terminal:
+            return None  # exactly one terminal event, nothing after it
         event = self.hub.make_event(job_id, type_, data, when)
         await self.hub.append(event)
         job_dir = self.store.job_dir(job_id)
@@ -160,45 +255,35 @@ class EmbeddedBackend:
             fh.write(event.model_dump_json() + "\n")
         info = apply_event(self.store.job_info(job_id), type_, data, event.id)
         self.store.put_job(info)
-        if type_.terminal:
-            self._running.discard(job_id)
         return event
 
+    # -- the backend protocol ---------------------------------------------------------------------
     async def submit(self, info: JobInfo, kind: str, payload: dict[str, Any]) -> JobInfo:
-        if self._pool is None or self._loop is None:
-            raise RuntimeError("the embedded backend is not started")
-        self._running.add(info.id)
+        if self._loop is None or self._closing:
+            raise BackendUnavailable("the embedded backend is not running")
+        if not any(p.ready.is_set() or p.failed_starts < 3 for p in self._processes):
+            raise BackendUnavailable("no engine process is alive and none could start")
         await self._record(info.id, EventType.queued, {}, time.time())
-        future = self._loop.run_in_executor(self._pool, _run_job, info.id, kind, payload)
-        future.add_done_callback(lambda f, job_id=info.id: self._finished(job_id, f))
+        self._queue.append(self._task(info.id, kind, payload, 1))
+        self._dispatch()
         return self.store.job_info(info.id)
-
-    def _finished(self, job_id: str, future: asyncio.Future[None]) -> None:
-        exc = future.exception() if not future.cancelled() else None
-        if exc is not None or future.cancelled():
-            # the worker process died (or the pool shut down) before a terminal event
-            msg = "worker process ended unexpectedly" if exc is not None else "backend shut down"
-            log.error("job %s: %s (%r)", job_id, msg, exc)
-            if not self.hub.log(job_id).terminal and self._loop is not None and not self._loop.is_closed():
-                task = asyncio.ensure_future(
-                    self._record(
-                        job_id,
-                        EventType.failed,
-                        {"error": {"code": "worker_lost", "message": msg}},
-                        time.time(),
-                    )
-                )
-                self._tasks.add(task)
-                task.add_done_callback(self._tasks.discard)
 
     async def status(self, job_id: str) -> JobInfo:
         return self.store.job_info(job_id)
 
     async def cancel(self, job_id: str) -> JobInfo:
         info = self.store.job_info(job_id)
-        if not info.status.finished:
-            _cancel_flag(self.store, job_id).touch()
-        return info
+        if info.status.finished:
+            return info
+        queued = next((t for t in self._queue if t.job_id == job_id), None)
+        if queued is not None:
+            self._queue.remove(queued)
+            await self._record(job_id, EventType.cancelled, {"result": info.result}, time.time())
+        else:
+            for process in self._processes:
+                if process.cancel(job_id):
+                    break
+        return self.store.job_info(job_id)
 
     async def _replay_from_disk(self, job_id: str) -> None:
         path = self.store.job_dir(job_id) / "events.jsonl"
@@ -218,7 +303,19 @@ class EmbeddedBackend:
             yield event
 
     async def health(self) -> dict[str, Any]:
-        return {"backend": "embedded", "workers": self.workers, "running_jobs": len(self._running)}
+        alive = sum(1 for p in self._processes if p.ready.is_set())
+        facts: dict[str, Any] = {
+            "backend": "embedded",
+            "workers": self.workers,
+            "workers_ready": alive,
+            "running_jobs": len(self._running),
+            "queued": len(self._queue),
+            "restarts": sum(p.restarts for p in self._processes),
+            "reruns": self.reruns,
+        }
+        if alive == 0 and all(p.failed_starts >= 3 for p in self._processes):
+            facts["error"] = "no engine process is alive and none could start"
+        return facts
 
 
 __all__ = ["EmbeddedBackend", "JobStatus", "NotFoundError"]

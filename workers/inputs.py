@@ -12,7 +12,7 @@ from pathlib import Path
 
 from schemas.bases import JobRequestBase
 
-from .store import NotFoundError, Store
+from .store import NotFoundError, Store, Visible
 
 MAX_INPUT_BYTES = 256 * 1024 * 1024
 """Largest input file the CLI reads (the API's upload limit applies to uploads)."""
@@ -22,14 +22,15 @@ class InputError(ValueError):
     """An input file that cannot be found or read; the message names the reference."""
 
 
-def resolve_inputs(store: Store, request: JobRequestBase) -> dict[str, str]:
+def resolve_inputs(store: Store, request: JobRequestBase, visible: Visible | None = None) -> dict[str, str]:
     """Reference -> upload id for every input file of ``request`` (ids given in ``inputs`` are
-    checked, the others looked up by id or name). Raises :class:`InputError` naming a missing one."""
+    checked, the others looked up by id or name, among the uploads ``visible`` accepts). Raises
+    :class:`InputError` naming a missing one."""
     resolved: dict[str, str] = {}
     for ref in request.input_files():
         given = request.inputs.get(ref, ref)
         try:
-            resolved[ref] = store.find_input(given)
+            resolved[ref] = store.find_input(given, visible)
         except NotFoundError as exc:
             raise InputError(f"input file {ref!r}: {exc}") from None
     return resolved

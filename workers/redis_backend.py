@@ -17,7 +17,17 @@ best result, every job ends with exactly one of ``done``/``failed``/``cancelled`
   is shared: one ``XREAD BLOCK`` over every followed job's stream (:class:`_StreamPump`), so an API
   process holds one blocked connection, not one per job (redis-py pools default to 100
   connections). A job Redis has forgotten replays from the store's ``events.jsonl`` archive.
-- **health**: live workers (heartbeat keys), queue length, pending entries, dead letters.
+- **health**: live workers (heartbeat keys), queue length, pending entries, dead letters; an error
+  (``/healthz`` 503) while Redis is unreachable.
+- **reconcile** (at start and every ``reconcile_s``): the store's job records are the source of
+  truth. An unfinished job Redis does not know (``segue:job:<job>`` missing: Redis restarted without
+  persistence, or restored an older snapshot) and that no live worker names in its heartbeat is
+  queued again once it has been missing for ``requeue_after_s`` (longer than a worker's heartbeat
+  period, so a worker still running it re-announces it first); its event counter is set to the last
+  id clients may have seen, so the re-run's events follow them. The stream and its group are
+  recreated when missing.
+- **submit while Redis is down** raises :class:`~workers.backend.BackendUnavailable` (503, and the
+  API removes the job's record).
 """
 
 from __future__ import annotations
@@ -36,7 +46,7 @@ import redis.asyncio as aredis
 
 from schemas import EventType, JobEvent, JobInfo, JobStatus
 
-from .backend import EventHub, JobLog
+from .backend import BackendUnavailable, EventHub, JobLog
 from .redis_events import (
     RETENTION_S,
     AsyncEventPublisher,
@@ -78,6 +88,15 @@ class RedisBackend:
         self._readers: dict[str, asyncio.Task[None]] = {}
         self._ready: dict[str, asyncio.Event] = {}
         self._pump_: _StreamPump | None = None
+        self.reconcile_s = 1.0
+        self.requeue_after_s = 3.0
+        self._unfinished: set[str] = set()
+        self._missing: dict[str, float] = {}
+        self._reconciler: asyncio.Task[None] | None = None
+        self.requeued = 0
+        self.redis_ok = False
+        self.rescan_s = 30.0
+        self._next_rescan = 0.0
 
     # -- lifecycle ------------------------------------------------------------------------------
     async def start(self) -> None:
@@ -91,18 +110,25 @@ class RedisBackend:
             timeout=30,
         )
         client = aredis.Redis.from_pool(pool)
-        await client.ping()
-        try:
-            await client.xgroup_create(self.keys.jobs, self.keys.group, id="0", mkstream=True)
-        except redis.ResponseError as exc:
-            if "BUSYGROUP" not in str(exc):
-                raise
         self._client = client
         self._publisher = AsyncEventPublisher(client, self.store, self.keys)
+        self._unfinished = {
+            i.id for i in await asyncio.to_thread(self.store.list_jobs) if not i.status.finished
+        }
+        try:
+            await self._reconcile(first=True)
+        except (redis.ConnectionError, redis.TimeoutError) as exc:
+            log.warning("Redis is not reachable yet (%s); jobs are refused with 503 until it is", exc)
         self._pump_ = _StreamPump(client, self.hub, self.keys, self.block_ms)
         self._pump_.start()
+        self._reconciler = asyncio.create_task(self._reconcile_loop(), name="segue-reconcile")
 
     async def close(self) -> None:
+        if self._reconciler is not None:
+            self._reconciler.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._reconciler
+            self._reconciler = None
         readers = list(self._readers.values())
         for task in readers:
             task.cancel()
@@ -133,16 +159,120 @@ class RedisBackend:
     async def submit(self, info: JobInfo, kind: str, payload: dict[str, Any]) -> JobInfo:
         client, publisher = self._redis()
         self.store.job_dir(info.id)  # NotFoundError for an invalid id
-        if not await client.set(self.keys.job(info.id), info.model_dump_json(), nx=True):
-            return await self.status(info.id)  # submitted before: nothing to do
-        await publisher.publish(info.id, EventType.queued, {})
-        await client.xadd(self.keys.jobs, {"job": info.id, "kind": kind, "payload": json.dumps(payload)})
+        try:
+            if not await client.set(self.keys.job(info.id), info.model_dump_json(), nx=True):
+                return await self.status(info.id)  # submitted before: nothing to do
+            await publisher.publish(info.id, EventType.queued, {})
+            await client.xadd(self.keys.jobs, {"job": info.id, "kind": kind, "payload": json.dumps(payload)})
+        except (redis.ConnectionError, redis.TimeoutError) as exc:
+            with contextlib.suppress(redis.RedisError):
+                await client.delete(
+                    self.keys.job(info.id), self.keys.events(info.id), self.keys.event_seq(info.id)
+                )
+            raise BackendUnavailable(f"Redis is unreachable: {exc}") from None
+        self._unfinished.add(info.id)
         return await self.status(info.id)
+
+    # -- reconcile -----------------------------------------------------------------------------------
+    async def _reconcile_loop(self) -> None:
+        while True:
+            await asyncio.sleep(self.reconcile_s)
+            try:
+                await self._reconcile()
+            except (redis.ConnectionError, redis.TimeoutError) as exc:
+                if self.redis_ok:
+                    log.warning("Redis unreachable (%s); will re-queue what it loses once it is back", exc)
+                self.redis_ok = False
+            except Exception:  # a bug: keep reconciling
+                log.exception("reconcile failed")
+
+    async def _reconcile(self, first: bool = False) -> None:
+        """Queue again the unfinished jobs Redis has forgotten (see the module docstring)."""
+        client, _ = self._redis()
+        await client.ping()
+        try:
+            await client.xgroup_create(self.keys.jobs, self.keys.group, id="0", mkstream=True)
+        except redis.ResponseError as exc:
+            if "BUSYGROUP" not in str(exc):
+                raise
+        if not self.redis_ok and not first:
+            log.warning("Redis is reachable again; reconciling %d unfinished jobs", len(self._unfinished))
+        self.redis_ok = True
+        now = asyncio.get_running_loop().time()
+        if now >= self._next_rescan:  # jobs other API processes submitted (if one of them died)
+            self._next_rescan = now + self.rescan_s
+            stored = await asyncio.to_thread(self.store.list_jobs)
+            self._unfinished |= {i.id for i in stored if not i.status.finished}
+        self._unfinished = await asyncio.to_thread(self._still_unfinished, set(self._unfinished))
+        if not self._unfinished:
+            return
+        running: set[str] = set()
+        async for key in client.scan_iter(match=self.keys.worker_pattern, count=500):
+            with contextlib.suppress(ValueError, TypeError, AttributeError):
+                job = json.loads(await client.get(key) or "{}").get("job")
+                if job:
+                    running.add(str(job))
+        now = asyncio.get_running_loop().time()
+        for job_id in sorted(self._unfinished):
+            if await client.exists(self.keys.job(job_id)):
+                self._missing.pop(job_id, None)
+                continue
+            info = await asyncio.to_thread(self.store.job_info, job_id)
+            if job_id in running:  # a worker still runs it: give Redis its status back
+                await client.set(self.keys.job(job_id), info.model_dump_json(), nx=True)
+                self._missing.pop(job_id, None)
+                continue
+            since = self._missing.setdefault(job_id, now)
+            if now - since >= self.requeue_after_s:
+                await self._requeue(client, info)
+                self._missing.pop(job_id, None)
+
+    def _still_unfinished(self, jobs: set[str]) -> set[str]:
+        out = set()
+        for job_id in jobs:
+            with contextlib.suppress(NotFoundError):
+                if not self.store.job_info(job_id).status.finished:
+                    out.add(job_id)
+        return out
+
+    async def _requeue(self, client: aredis.Redis, info: JobInfo) -> None:
+        try:
+            request = await asyncio.to_thread(self.store.job_request, info.id)
+        except NotFoundError:
+            return
+        archived = await asyncio.to_thread(read_archive, self.store, info.id)
+        floor = max(
+            info.last_event,
+            self.hub.log(info.id).last_id if self.hub.has(info.id) else 0,
+            archived[-1].id if archived else 0,
+        )
+        if not await client.set(self.keys.job(info.id), info.model_dump_json(), nx=True):
+            return  # another API process got there first
+        # give the stream back the events this process knows (it followed the job), or at least the
+        # job's `queued` event, so the archive written at the end is whole and readers find them
+        known = list(self.hub.log(info.id).events) if self.hub.has(info.id) else []
+        if not known and floor >= 1:
+            when = info.created_at.timestamp()
+            known = [JobEvent(id=1, job=info.id, type=EventType.queued, time=when, data={})]
+        if not await client.exists(self.keys.events(info.id)):
+            for event in known:
+                with contextlib.suppress(redis.ResponseError):  # an id already there
+                    await client.xadd(
+                        self.keys.events(info.id), {"event": event.model_dump_json()}, id=stream_id(event.id)
+                    )
+        await client.set(self.keys.event_seq(info.id), floor, nx=True)
+        payload = json.dumps(request["payload"])
+        await client.xadd(self.keys.jobs, {"job": info.id, "kind": str(request["kind"]), "payload": payload})
+        self.requeued += 1
+        log.warning("job %s was lost by Redis (status %s); queued again", info.id, info.status.value)
 
     async def status(self, job_id: str) -> JobInfo:
         client, _ = self._redis()
         self.store.job_dir(job_id)  # NotFoundError for an invalid id
-        raw = await client.get(self.keys.job(job_id))
+        try:
+            raw = await client.get(self.keys.job(job_id))
+        except (redis.ConnectionError, redis.TimeoutError):
+            raw = None  # Redis is away: the store's record (kept in step at every status change)
         if raw:
             return JobInfo.model_validate_json(raw)
         return self.store.job_info(job_id)
@@ -152,6 +282,13 @@ class RedisBackend:
         info = await self.status(job_id)
         if info.status.finished:
             return info
+        try:
+            return await self._cancel(client, publisher, info)
+        except (redis.ConnectionError, redis.TimeoutError) as exc:
+            raise BackendUnavailable(f"Redis is unreachable: {exc}") from None
+
+    async def _cancel(self, client: aredis.Redis, publisher: AsyncEventPublisher, info: JobInfo) -> JobInfo:
+        job_id = info.id
         await client.set(self.keys.cancel(job_id), "1", ex=self.cancel_ttl_s)
         if info.status == JobStatus.queued:
             # no worker has it yet: end it now; a worker receiving it later finds the terminal marker
@@ -271,9 +408,11 @@ class RedisBackend:
                 pending=pending,
                 dead_letters=int(await client.xlen(self.keys.dead)),
                 followed_jobs=len(self._readers),
+                unfinished_jobs=len(self._unfinished),
+                requeued=self.requeued,
             )
         except redis.RedisError as exc:
-            facts.update(redis="unreachable", error=str(exc))
+            facts.update(redis="unreachable", error=f"Redis is unreachable: {exc}")
         return facts
 
 

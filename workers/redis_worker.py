@@ -54,11 +54,20 @@ import redis
 
 from schemas import DatabaseStatus, EventType
 
-from .execute import EngineCache, execute_job
+from .budget import shortfall
 from .redis_cache import DatabaseCache
 from .redis_events import EventPublisher
 from .redis_keys import CHUNK_SIZE, DEAD_MAXLEN, DEFAULT_PREFIX, RedisKeys
 from .store import NotFoundError, Store
+from .supervisor import (
+    ChildConfig,
+    EngineProcess,
+    Outcome,
+    Task,
+    engine_plugins,
+    terminal_after_kill,
+    time_limit,
+)
 
 log = logging.getLogger("segue.redis.worker")
 
@@ -107,6 +116,10 @@ class WorkerSettings:
     lock_ttl_s: float = 30.0
     hang_grace_s: float = 120.0
     build_timeout_s: float = 3600.0
+    job_grace_s: float = 30.0
+    cancel_grace_s: float = 2.0
+    max_rss_bytes: int | None = None
+    publish_retry_s: float = 300.0
 
 
 @dataclass(slots=True)
@@ -142,7 +155,22 @@ class Worker:
         self.cache_client = redis.Redis.from_url(s.cache_url or s.redis_url)
         self.publisher = EventPublisher(self.client, self.store, self.keys)
         self.db_cache = DatabaseCache(self.cache_client, self.store, self.keys, chunk_size=s.chunk_size)
-        self.engines = EngineCache(s.engine_cache)
+        config = ChildConfig(
+            store_root=str(self.store.root),
+            plugins=engine_plugins(),
+            engine_cache=s.engine_cache,
+            cache_url=s.cache_url or s.redis_url,
+            prefix=s.prefix,
+            chunk_size=s.chunk_size,
+        )
+        self.engine = EngineProcess(
+            s.name,
+            config,
+            self._relay_event,
+            self._relay_end,
+            cancel_grace_s=s.cancel_grace_s,
+            max_rss_bytes=s.max_rss_bytes,
+        )
         self._touch = self.client.register_script(_TOUCH_LUA)
         self._extend = self.client.register_script(_EXTEND_LUA)
         self._release = self.client.register_script(_RELEASE_LUA)
@@ -177,6 +205,10 @@ class Worker:
                 return self.processed
             self._beat()
             beater.start()
+            self.engine.start()
+            while not self.engine.ready.wait(0.2):  # spawning + imports take ~1 s
+                if self._stop.is_set():
+                    return self.processed
             log.info("worker %s ready (group %s on %s)", self.name, self.keys.group, self.keys.jobs)
             while not self._stop.is_set():
                 try:
@@ -199,13 +231,16 @@ class Worker:
                     log.warning("Redis unavailable (%s); retrying in %.1f s", exc, backoff)
                     self._stop.wait(backoff)
                     backoff = min(backoff * 2, 5.0)
+                    startup = True
                 except Exception:  # e.g. the store's disk: the entry stays pending and is retried later
                     log.exception(
                         "worker %s: job processing failed; continuing in %.1f s", self.name, backoff
                     )
                     self._stop.wait(backoff)
                     backoff = min(backoff * 2, 5.0)
+                    startup = True  # take our own pending entry back at once
         finally:
+            self.engine.close()
             beat_stop.set()
             if beater.is_alive():
                 beater.join(timeout=5)
@@ -388,25 +423,96 @@ class Worker:
             publish = self._publisher_for(job_id, deliveries)
             should_stop = self._stop_check(job_id)
             if kind == "build" and isinstance(payload.get("database"), str):
-                self._build(job_id, payload, publish, should_stop)
+                self._build(job_id, payload, publish, should_stop, deliveries)
             else:
-                execute_job(
-                    self.store,
-                    job_id,
-                    kind,
-                    payload,
-                    publish,
-                    should_stop,
-                    self.engines,
-                    load_database_bytes=self.db_cache.load,
-                    save_database_bytes=self.db_cache.save,
-                    attempt=deliveries,
-                )
+                self._supervised(job_id, kind, payload, deliveries)
         finally:
             self._running = None
             self.publisher.forget(job_id)
         self._ack(entry_id)
         self.processed += 1
+
+    # -- running a job in the engine process ------------------------------------------------------
+    def _supervised(self, job_id: str, kind: str, payload: dict[str, Any], attempt: int) -> None:
+        """Run a job in the engine process until it ends; a crashed run is run again (up to
+        ``max_deliveries`` runs), a killed one gets its terminal event here."""
+        while True:
+            task, outcome, detail = self._run_once(job_id, kind, payload, attempt)
+            if outcome == "finished":
+                if not task.terminal:
+                    self._publish_safely(
+                        task,
+                        EventType.failed,
+                        {"error": {"code": "internal", "message": "the job ended without a terminal event"}},
+                    )
+                return
+            if task.terminal:
+                return
+            if outcome == "crashed":
+                if self._stop_check(job_id)():
+                    self._publish_safely(task, EventType.cancelled, {"result": task.best})
+                    return
+                if attempt >= self.settings.max_deliveries:
+                    message = f"{detail}; gave up after {attempt} runs"
+                    self._publish_safely(
+                        task, EventType.failed, {"error": {"code": "worker_lost", "message": message}}
+                    )
+                    return
+                attempt += 1
+                log.warning("job %s: %s; running it again (attempt %d)", job_id, detail, attempt)
+                continue
+            type_, data = terminal_after_kill(outcome, task, detail)
+            self._publish_safely(task, type_, data)
+            return
+
+    def _run_once(
+        self, job_id: str, kind: str, payload: dict[str, Any], attempt: int
+    ) -> tuple[Task, Outcome, str]:
+        done = threading.Event()
+        ending: dict[str, Any] = {}
+        limit = time_limit(kind, payload, self.settings.job_grace_s, self.settings.build_timeout_s)
+        task = Task(job_id, kind, payload, attempt=attempt, time_limit_s=limit)
+        task.context = (self._publisher_for(job_id, attempt), done, ending)
+        while not self.engine.run(task):  # the engine process is (re)starting
+            self.engine.ready.wait(0.2)
+        stop = self._stop_check(job_id)
+        while not done.wait(self.settings.cancel_poll_s):
+            if stop():
+                self.engine.cancel(job_id)
+        return task, ending["outcome"], ending["detail"]
+
+    def _relay_event(self, task: Task, type_: EventType, data: dict[str, Any], when: float) -> None:
+        """Supervisor thread: publish an event of the running job (retrying while Redis is away)."""
+        if type_ == EventType.done and task.kind == "synth":
+            short = shortfall(self.store, task.job_id, task.payload, data.get("result"))
+            if short is not None:
+                data = {**data, "short": short}
+        self._publish_safely(task, type_, data)
+
+    def _relay_end(self, task: Task, outcome: Outcome, detail: str) -> None:
+        _, done, ending = task.context
+        ending.update(outcome=outcome, detail=detail)
+        done.set()
+
+    def _publish_safely(self, task: Task, type_: EventType, data: dict[str, Any]) -> None:
+        publish = task.context[0]
+        deadline, backoff = time.monotonic() + self.settings.publish_retry_s, 0.1
+        while True:
+            try:
+                publish(type_, data)
+                return
+            except (redis.ConnectionError, redis.TimeoutError) as exc:
+                if time.monotonic() > deadline:
+                    log.error(
+                        "job %s: %s event lost, Redis unreachable for %.0f s (%s)",
+                        task.job_id,
+                        type_.value,
+                        self.settings.publish_retry_s,
+                        exc,
+                    )
+                    return
+                time.sleep(backoff)
+                backoff = min(backoff * 2, 2.0)
 
     def _time_limit(self, kind: str, payload: dict[str, Any]) -> float:
         if kind == "build":
@@ -427,7 +533,7 @@ class Worker:
     def _stop_check(self, job_id: str) -> Callable[[], bool]:
         keys = (self.keys.cancel(job_id), self.keys.terminal(job_id))
         poll = self.settings.cancel_poll_s
-        state = {"next": 0.0, "stop": False}
+        state = {"next": 0.0, "stop": False, "warned": False}
 
         def should_stop() -> bool:
             if state["stop"]:
@@ -437,8 +543,11 @@ class Worker:
                 state["next"] = now + poll
                 try:
                     state["stop"] = bool(self.client.exists(*keys))
+                    state["warned"] = False
                 except redis.RedisError as exc:
-                    log.warning("cancel check failed: %s", exc)
+                    if not state["warned"]:  # once per outage, not every poll
+                        log.warning("cancel check failed: %s", exc)
+                        state["warned"] = True
             return bool(state["stop"])
 
         return should_stop
@@ -457,6 +566,7 @@ class Worker:
         payload: dict[str, Any],
         publish: Callable[[EventType, dict[str, Any]], None],
         should_stop: Callable[[], bool],
+        attempt: int = 1,
     ) -> None:
         db_id = str(payload["database"])
         lock_key, token = self.keys.build_lock(db_id), f"{self.name}/{job_id}/{uuid.uuid4().hex[:8]}"
@@ -483,17 +593,7 @@ class Worker:
             if self._database_ready(db_id):
                 self._reuse_build(db_id, publish)
                 return
-            execute_job(
-                self.store,
-                job_id,
-                "build",
-                payload,
-                publish,
-                should_stop,
-                self.engines,
-                load_database_bytes=self.db_cache.load,
-                save_database_bytes=self.db_cache.save,
-            )
+            self._supervised(job_id, "build", payload, attempt)
         finally:
             if running is not None:
                 running.lock = None
@@ -551,6 +651,7 @@ def run_worker(
     chunk_size: int = CHUNK_SIZE,
     reclaim_idle_s: float = 30.0,
     engine_cache: int = 4,
+    max_rss_bytes: int | None = None,
 ) -> int:
     """Run a worker until ``stop`` is set (or SIGTERM/SIGINT when called from the main thread).
 
@@ -595,6 +696,7 @@ def run_worker(
         chunk_size=chunk_size,
         reclaim_idle_s=reclaim_idle_s,
         engine_cache=engine_cache,
+        max_rss_bytes=max_rss_bytes,
     )
     stop = stop or threading.Event()
     restore = _install_signals(stop) if threading.current_thread() is threading.main_thread() else None
@@ -629,6 +731,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--block-ms", type=int, default=1000, help="XREADGROUP block time")
     parser.add_argument("--reclaim-idle", type=float, default=30.0, help="idle backstop for hung workers, s")
     parser.add_argument("--chunk-size", type=int, default=CHUNK_SIZE, help="database cache chunk size, bytes")
+    parser.add_argument(
+        "--max-memory-mb",
+        type=int,
+        default=int(os.environ.get("SEGUE_MAX_JOB_MEMORY_MB", "4096")),
+        help="a job whose engine process passes this resident memory is stopped (0: no limit)",
+    )
     parser.add_argument("--log-level", default=os.environ.get("SEGUE_LOG_LEVEL", "INFO"))
     args = parser.parse_args(argv)
     if not args.redis:
@@ -649,6 +757,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             cache_url=args.cache_redis,
             chunk_size=args.chunk_size,
             reclaim_idle_s=args.reclaim_idle,
+            max_rss_bytes=args.max_memory_mb << 20 if args.max_memory_mb else None,
         )
     except KeyboardInterrupt:
         return 130

@@ -4,6 +4,9 @@ Layout under ``root``::
 
     clips/<sha256>.bvh            uploaded bytes (as uploaded, possibly gzip)
     clips/<sha256>.json           ClipInfo
+    clips/<sha256>.owners         JSON list of the principals holding the clip (likewise files/,
+                                  databases/<id>/owners): content-addressed things are shared, each
+                                  holder sees and deletes only its own hold
     databases/<id>/spec.json      the validated spec (clip references resolved to ids)
     databases/<id>/info.json      DatabaseInfo
     databases/<id>/data.npz       motion library + kind-specific arrays (allow_pickle=False)
@@ -24,9 +27,10 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -37,6 +41,9 @@ from schemas import ClipInfo, DatabaseInfo, JobInfo, Report
 from schemas.files import FileInfo
 
 Arrays = dict[str, Any]
+Owned = Literal["clips", "files", "databases"]
+Visible = Callable[[str], bool]
+"""``visible(id)``: may the caller see the clip, file or database with this id (ownership filter)."""
 
 
 class NotFoundError(LookupError):
@@ -137,21 +144,56 @@ class Store:
         infos = [ClipInfo.model_validate_json(p.read_bytes()) for p in (self.root / "clips").glob("*.json")]
         return sorted(infos, key=lambda c: c.created_at)
 
-    def find_clip(self, ref: str) -> ClipInfo:
-        """A clip by id, or by the file name it was uploaded with (the newest such upload)."""
+    def find_clip(self, ref: str, visible: Visible | None = None) -> ClipInfo:
+        """A clip by id, or by the file name it was uploaded with (the newest such upload), among
+        the clips ``visible`` accepts (default: all)."""
         try:
-            return self.clip_info(ref)
+            info = self.clip_info(ref)
+            if visible is None or visible(info.id):
+                return info
         except NotFoundError:
             pass
-        matches = [c for c in self.list_clips() if c.name == ref or c.name.removesuffix(".gz") == ref]
+        matches = [
+            c
+            for c in self.list_clips()
+            if (c.name == ref or c.name.removesuffix(".gz") == ref) and (visible is None or visible(c.id))
+        ]
         if not matches:
             raise NotFoundError(f"no uploaded clip named {ref!r}; upload it first (POST /v1/clips)")
         return matches[-1]
 
     def delete_clip(self, clip_id: str) -> None:
         info = self.clip_info(clip_id)
-        for suffix in (".json", ".bvh"):
+        for suffix in (".json", ".bvh", ".owners"):
             (self.root / "clips" / f"{info.id}{suffix}").unlink(missing_ok=True)
+
+    # -- holders of content-addressed things ----------------------------------------------------
+    def _owners_path(self, kind: Owned, item_id: str) -> Path:
+        if kind == "databases":
+            return self.db_dir(item_id) / "owners"
+        return self.root / kind / f"{_safe_id(item_id)}.owners"
+
+    def owners(self, kind: Owned, item_id: str) -> set[str]:
+        """The principals holding a clip, file or database (empty: recorded before owners were)."""
+        p = self._owners_path(kind, item_id)
+        try:
+            return set(json.loads(p.read_bytes()))
+        except (OSError, ValueError):
+            return set()
+
+    def add_owner(self, kind: Owned, item_id: str, principal: str) -> bool:
+        """Record ``principal`` as a holder; False when it held it already."""
+        held = self.owners(kind, item_id)
+        if principal in held:
+            return False
+        _atomic_write(self._owners_path(kind, item_id), json.dumps(sorted(held | {principal})).encode())
+        return True
+
+    def remove_owner(self, kind: Owned, item_id: str, principal: str) -> set[str]:
+        """Drop ``principal``'s hold; returns the holders left."""
+        held = self.owners(kind, item_id) - {principal}
+        _atomic_write(self._owners_path(kind, item_id), json.dumps(sorted(held)).encode())
+        return held
 
     # -- databases ----------------------------------------------------------------------------
     def db_dir(self, db_id: str) -> Path:
@@ -211,6 +253,11 @@ class Store:
         _atomic_write(meta, info.model_dump_json().encode())
         return info
 
+    def delete_file(self, file_id: str) -> None:
+        info = self.file_info(file_id)
+        for suffix in (".json", ".bin", ".owners"):
+            (self.root / "files" / f"{info.id}{suffix}").unlink(missing_ok=True)
+
     def file_info(self, file_id: str) -> FileInfo:
         p = self.root / "files" / f"{_safe_id(file_id)}.json"
         if not p.exists():
@@ -234,21 +281,24 @@ class Store:
         except NotFoundError:
             return self.file_bytes(upload_id)
 
-    def find_input(self, ref: str) -> str:
+    def find_input(self, ref: str, visible: Visible | None = None) -> str:
         """Resolve a request's input reference to an upload id: a clip or file id, or the name of an
-        uploaded clip or file (the newest upload of that name)."""
+        uploaded clip or file (the newest upload of that name), among those ``visible`` accepts."""
+        ok = visible or (lambda _id: True)
         for lookup in (self.clip_info, self.file_info):
             try:
-                return lookup(ref).id
+                found = lookup(ref).id
             except NotFoundError:
-                pass
+                continue
+            if ok(found):
+                return found
         base = ref.replace("\\", "/").rsplit("/", 1)[-1]
         named: list[tuple[datetime, str]] = [
             (c.created_at, c.id)
             for c in self.list_clips()
-            if c.name in (ref, base) or c.name.removesuffix(".gz") in (ref, base)
+            if (c.name in (ref, base) or c.name.removesuffix(".gz") in (ref, base)) and ok(c.id)
         ]
-        named += [(f.created_at, f.id) for f in self.list_files() if f.name in (ref, base)]
+        named += [(f.created_at, f.id) for f in self.list_files() if f.name in (ref, base) and ok(f.id)]
         if not named:
             raise NotFoundError(
                 f"no uploaded clip or file named {ref!r}; upload it first (POST /v1/clips for BVH, "

@@ -3,19 +3,27 @@
 from __future__ import annotations
 
 import hashlib
+from enum import StrEnum
 from typing import Annotated
 
+import anyio
 from fastapi import APIRouter, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
+from motion.units import METRES_PER_UNIT
 from schemas import ClipInfo
 from workers.store import NotFoundError
 
-from ..deps import AuthDep, SettingsDep, StoreDep
-from ..errors import responses
+from ..deps import PrincipalDep, SettingsDep, StoreDep
+from ..errors import ApiError, responses
+from ..jsonbody import JsonIntent, parse_limiter
+from ..owners import clip_for, visible
 from ..uploads import read_upload, upload_body
 
 router = APIRouter(prefix="/v1/clips", tags=["clips"])
+
+UnitName = StrEnum("UnitName", {u: u for u in METRES_PER_UNIT})  # type: ignore[misc]
+"""The length units a clip may declare (:data:`motion.units.METRES_PER_UNIT`)."""
 
 _UPLOAD_BODY = upload_body(
     "A BVH file (``.bvh`` or gzip ``.bvh.gz``): as multipart field ``file``, or as the "
@@ -27,7 +35,6 @@ _UPLOAD_BODY = upload_body(
     "",
     status_code=status.HTTP_201_CREATED,
     response_model=ClipInfo,
-    dependencies=[AuthDep],
     openapi_extra=_UPLOAD_BODY,
     responses=responses(
         400,
@@ -42,12 +49,16 @@ async def upload_clip(
     response: Response,
     store: StoreDep,
     settings: SettingsDep,
+    principal: PrincipalDep,
     name: Annotated[str | None, Query(max_length=255, description="file name (raw-body uploads)")] = None,
-    units: Annotated[str | None, Query(description="declared length unit (default: guessed)")] = None,
+    units: Annotated[
+        UnitName | None, Query(description="declared length unit (default: guessed from the height)")
+    ] = None,
 ) -> ClipInfo:
     """Upload a BVH clip; it is parsed and checked against the frame and joint limits.
 
-    Stored once per content hash: 201 for a new clip, 200 when the same bytes exist.
+    Stored once per content hash: 201 for a new clip, 200 when you uploaded the same bytes before
+    (409 ``units_conflict`` when that upload declared or was guessed other ``units``).
     """
     file_name, data = await read_upload(request, settings.max_upload_bytes, name)
     digest = hashlib.sha256(data).hexdigest()
@@ -55,31 +66,52 @@ async def upload_clip(
         existing = store.clip_info(digest)
     except NotFoundError:
         existing = None
-    if existing is not None:
+    if existing is None:
+        # parsing is the expensive, memory-hungry part: a bounded number at once, off the event loop
+        existing = await anyio.to_thread.run_sync(
+            store.put_clip,
+            file_name,
+            data,
+            settings.bvh_limits,
+            units.value if units is not None else None,
+            limiter=parse_limiter(request, settings),
+        )
+    elif units is not None and units.value != existing.units:
+        raise ApiError(
+            409,
+            "units_conflict",
+            f"these bytes were uploaded before as clip {existing.id} in units {existing.units!r}; a clip's "
+            f"units cannot change (delete it first to upload it again with units={units.value!r})",
+            {"clip": existing.id, "units": existing.units},
+        )
+    if not store.add_owner("clips", existing.id, principal.name):
         response.status_code = status.HTTP_200_OK
-        return existing
-    return await run_in_threadpool(store.put_clip, file_name, data, settings.bvh_limits, units)
+    return existing
 
 
-@router.get("", response_model=list[ClipInfo])
-async def list_clips(store: StoreDep) -> list[ClipInfo]:
-    """Every uploaded clip, oldest first."""
-    return store.list_clips()
+@router.get("", response_model=list[ClipInfo], responses=responses(401))
+async def list_clips(store: StoreDep, principal: PrincipalDep) -> list[ClipInfo]:
+    """Your uploaded clips, oldest first."""
+    mine = visible(store, principal, "clips")
+    return [c for c in await run_in_threadpool(store.list_clips) if mine(c.id)]
 
 
-@router.get("/{clip_id}", response_model=ClipInfo, responses=responses(404, 422))
-async def get_clip(clip_id: str, store: StoreDep) -> ClipInfo:
-    """One clip by id (or by the file name it was uploaded with)."""
-    return store.find_clip(clip_id)
+@router.get("/{clip_id}", response_model=ClipInfo, responses=responses(401, 404, 422))
+async def get_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> ClipInfo:
+    """One of your clips by id (or by the file name it was uploaded with)."""
+    return clip_for(store, principal, clip_id)
 
 
 @router.delete(
     "/{clip_id}",
     status_code=status.HTTP_204_NO_CONTENT,
-    dependencies=[AuthDep],
-    responses=responses(401, 404, 422),
+    dependencies=[JsonIntent],
+    responses=responses(401, 404, 422, 415),
 )
-async def delete_clip(clip_id: str, store: StoreDep) -> Response:
-    """Delete a clip (databases already built from it keep their data)."""
-    store.delete_clip(clip_id)
+async def delete_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
+    """Delete your clip (databases already built from it keep their data). The bytes go when no
+    other principal holds the same clip."""
+    info = clip_for(store, principal, clip_id)
+    if principal.admin or not store.remove_owner("clips", info.id, principal.name):
+        store.delete_clip(info.id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)

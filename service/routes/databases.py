@@ -6,34 +6,49 @@ and spec again returns the existing database instead of building it twice.
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Any
 
-from fastapi import APIRouter, Body, Response, status
+from fastapi import APIRouter, Request, Response, status
+from pydantic import TypeAdapter
 
 from engines.registry import kind_class
 from schemas import ClipSource, DatabaseInfo, DatabaseSpec, DatabaseStatus
 from schemas.databases import DatabaseSpecBase, database_id, parse_database_spec
 from schemas.jobs import JobKind
+from workers.budget import database_frames
 from workers.store import NotFoundError, Store, now
 
-from ..deps import AuthDep, BackendDep, MetricsDep, StoreDep
+from ..deps import BackendDep, MetricsDep, Principal, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, conflict, responses
 from ..jobs_common import new_job_id, submit_job
+from ..jsonbody import JsonIntent, json_body_doc, read_json, validate_off_loop
+from ..owners import database_for, visible
+
+SPEC_ADAPTER: TypeAdapter[Any] = TypeAdapter(DatabaseSpec)
+SPEC_BODY = json_body_doc("DatabaseSpec", "A database spec: the clips (uploaded) and the kind's settings.")
 
 router = APIRouter(prefix="/v1/databases", tags=["databases"])
 
 
-def resolve_clips(store: Store, spec: DatabaseSpecBase) -> tuple[DatabaseSpecBase, list[str]]:
+def resolve_clips(
+    store: Store, spec: DatabaseSpecBase, principal: Principal, shared: frozenset[str] = frozenset()
+) -> tuple[DatabaseSpecBase, list[str]]:
     """The spec with every clip given by id (names kept), and the clips' content hashes.
 
-    ``bvh`` is the file name of an uploaded clip, ``clip`` an uploaded clip's id (or file name).
+    ``bvh`` is the file name of an uploaded clip, ``clip`` an uploaded clip's id (or file name), among
+    the principal's clips and the ``shared`` ids (the clips of a database it holds, for corrections).
     Raises :class:`~service.errors.ApiError`: 404 naming a missing clip, 422 for repeated names.
     """
     resolved: list[ClipSource] = []
+    mine = visible(store, principal, "clips")
+
+    def allowed(clip_id: str) -> bool:
+        return clip_id in shared or mine(clip_id)
+
     for i, source in enumerate(spec.clips):
         ref = source.clip or source.bvh or ""  # ClipSource guarantees exactly one of them
         try:
-            info = store.find_clip(ref)
+            info = store.find_clip(ref, allowed)
         except NotFoundError:
             field = "clip" if source.clip is not None else "bvh"
             raise ApiError(
@@ -77,25 +92,71 @@ def _usable(store: Store, info: DatabaseInfo) -> bool:
     "",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=DatabaseInfo,
-    dependencies=[AuthDep],
+    openapi_extra=SPEC_BODY,
     responses=responses(
+        400,
         401,
         404,
+        413,
+        415,
         422,
+        429,
+        503,
         extra={200: {"model": DatabaseInfo, "description": "this database exists (ready or building)"}},
     ),
 )
 async def create_database(
-    spec: Annotated[DatabaseSpec, Body()],
+    request: Request,
     response: Response,
     store: StoreDep,
     backend: BackendDep,
     metrics: MetricsDep,
+    settings: SettingsDep,
+    principal: PrincipalDep,
 ) -> DatabaseInfo:
     """Build a database from uploaded clips (202 with ``build_job``; follow its events), or return
     the existing one with the same content address (200)."""
+    spec = await validate_off_loop(SPEC_ADAPTER, await read_json(request, settings), request, settings)
+    quota = request.app.state.job_quota
+    quota.check(principal.name)
+    info = await create_from_spec(
+        spec, response, store, backend, metrics, principal, max_frames=settings.max_database_frames
+    )
+    if info.build_job and response.status_code == status.HTTP_202_ACCEPTED:
+        quota.add(principal.name, info.build_job)
+    return info
+
+
+def check_database_size(store: Store, spec: DatabaseSpecBase, hashes: list[str], limit: int | None) -> None:
+    """413 ``over_budget`` when the database would hold more than ``limit`` frames at its rate."""
+    if limit is None:
+        return
+    clips = [(info.frames, info.fps) for info in (store.clip_info(h) for h in hashes)]
+    total = database_frames(clips, spec.fps)
+    if total > limit:
+        raise ApiError(
+            413,
+            "over_budget",
+            f"the database would hold {total} frames at its rate, over the limit of {limit} "
+            "(SEGUE_MAX_DATABASE_FRAMES)",
+            {"frames": total, "limit": limit},
+        )
+
+
+async def create_from_spec(
+    spec: DatabaseSpecBase,
+    response: Response,
+    store: Store,
+    backend: Any,
+    metrics: Any,
+    principal: Principal,
+    shared: frozenset[str] = frozenset(),
+    max_frames: int | None = None,
+) -> DatabaseInfo:
+    """The body of ``POST /v1/databases`` once the spec is valid (also used by corrections)."""
     kind_class(spec.kind)  # 422 unavailable for kinds whose engine has not landed
-    resolved, hashes = resolve_clips(store, spec)
+    resolved, hashes = resolve_clips(store, spec, principal, shared)
+    check_database_size(store, resolved, hashes, max_frames)
     db_id = database_id(resolved, hashes)
     # No await between this check and the job being stored (in submit_job, before the backend is
     # awaited), so concurrent posts of one spec in this process start one build.
@@ -104,6 +165,7 @@ async def create_database(
     except NotFoundError:
         existing = None
     if existing is not None and _usable(store, existing):
+        store.add_owner("databases", db_id, principal.name)
         response.status_code = status.HTTP_200_OK
         return existing
     job_id = new_job_id()
@@ -117,34 +179,64 @@ async def create_database(
         created_at=now(),
     )
     store.put_database_info(info, resolved.model_dump(mode="json"))
-    await submit_job(
-        store, backend, metrics, JobKind.build, {"database": db_id}, job_id=job_id, database=db_id
-    )
+    try:
+        await submit_job(
+            store,
+            backend,
+            metrics,
+            JobKind.build,
+            {"database": db_id},
+            job_id=job_id,
+            database=db_id,
+            owner=principal.name,
+        )
+    except BaseException:
+        # the build was not queued (the backend is down): leave no database that never builds
+        if existing is not None:
+            store.put_database_info(existing)
+        else:
+            store.delete_database(db_id)
+        raise
+    store.add_owner("databases", db_id, principal.name)
     return store.database_info(db_id)
 
 
-@router.get("", response_model=list[DatabaseInfo])
-async def list_databases(store: StoreDep) -> list[DatabaseInfo]:
-    """Every database, oldest first."""
-    return store.list_databases()
+@router.get("", response_model=list[DatabaseInfo], responses=responses(401))
+async def list_databases(store: StoreDep, principal: PrincipalDep) -> list[DatabaseInfo]:
+    """Your databases, oldest first."""
+    mine = visible(store, principal, "databases")
+    return [d for d in store.list_databases() if mine(d.id)]
 
 
-@router.get("/{db_id}", response_model=DatabaseInfo, responses=responses(404, 422))
-async def get_database(db_id: str, store: StoreDep) -> DatabaseInfo:
-    """One database: its status (``queued``, ``building``, ``ready``, ``failed``) and facts."""
-    return store.database_info(db_id)
+@router.get("/{db_id}", response_model=DatabaseInfo, responses=responses(401, 404, 422))
+async def get_database(db_id: str, store: StoreDep, principal: PrincipalDep) -> DatabaseInfo:
+    """One of your databases: its status (``queued``, ``building``, ``ready``, ``failed``) and facts."""
+    return database_for(store, principal, db_id)
 
 
 @router.delete(
     "/{db_id}",
     status_code=status.HTTP_204_NO_CONTENT,
-    dependencies=[AuthDep],
-    responses=responses(401, 404, 409, 422),
+    dependencies=[JsonIntent],
+    responses=responses(401, 404, 409, 422, 415),
 )
-async def delete_database(db_id: str, store: StoreDep) -> Response:
-    """Delete a database (409 while it is being built)."""
-    info = store.database_info(db_id)
+async def delete_database(db_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
+    """Delete your database (409 while it is being built, or while unfinished jobs use it). The data
+    goes when no other principal holds the same database."""
+    info = database_for(store, principal, db_id)
     if info.status in (DatabaseStatus.queued, DatabaseStatus.building) and _usable(store, info):
         raise conflict("database_building", f"database {db_id} is {info.status.value}; delete it once built")
-    store.delete_database(db_id)
+    users = [
+        j.id
+        for j in store.list_jobs()
+        if j.database == db_id and j.id != info.build_job and not j.status.finished
+    ]
+    if users:
+        raise conflict(
+            "database_in_use",
+            f"{len(users)} unfinished job(s) use database {db_id}; cancel them or wait for them to end",
+            {"jobs": users[:20]},
+        )
+    if principal.admin or not store.remove_owner("databases", db_id, principal.name):
+        store.delete_database(db_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)

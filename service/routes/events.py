@@ -24,9 +24,10 @@ from schemas import EventType, JobEvent
 from workers.backend import JobBackend
 from workers.store import NotFoundError
 
-from ..deps import BackendDep, MetricsDep, SettingsDep, bearer_token, token_problem
-from ..errors import error_response, responses
+from ..deps import BackendDep, MetricsDep, PrincipalDep, SettingsDep, websocket_principal
+from ..errors import ApiError, error_response, responses
 from ..metrics import Metrics
+from ..owners import job_for
 from ..streaming import EventQueue, pump
 
 log = logging.getLogger("segue.service.events")
@@ -55,22 +56,31 @@ async def collect_events(backend: JobBackend, job_id: str, after: int, wait: flo
     return out
 
 
-@router.get("/{job_id}/events", response_model=list[JobEvent], responses=responses(404, 422))
+@router.get("/{job_id}/events", response_model=list[JobEvent], responses=responses(401, 404, 422))
 async def list_events(
     job_id: str,
     backend: BackendDep,
+    principal: PrincipalDep,
     after: After = 0,
     wait: Annotated[float, Query(ge=0, le=60, description="long-poll: seconds to wait for a new event")] = 0,
 ) -> list[JobEvent]:
     """The job's events after ``after`` (no streaming; poll with the last id, or use the WebSocket)."""
-    await backend.status(job_id)  # 404 for unknown jobs
+    job_for(principal, await backend.status(job_id))  # 404 for unknown jobs and other principals' jobs
     return await collect_events(backend, job_id, after, wait)
 
 
-async def _refuse(websocket: WebSocket, status: int, code: str, message: str, ws_code: int) -> None:
+async def _refuse(
+    websocket: WebSocket,
+    status: int,
+    code: str,
+    message: str,
+    ws_code: int,
+    headers: dict[str, str] | None = None,
+) -> None:
     """Refuse a handshake: an HTTP response when the server supports it, else accept and close."""
     if "websocket.http.response" in websocket.scope.get("extensions", {}):
-        headers = {"WWW-Authenticate": "Bearer"} if status == 401 else None
+        if headers is None and status == 401:
+            headers = {"WWW-Authenticate": "Bearer"}
         await websocket.send_denial_response(error_response(status, code, message, headers=headers))
         return
     await websocket.accept()
@@ -125,12 +135,12 @@ async def stream_events(
     token: Annotated[str | None, Query(description="bearer token (or the Authorization header)")] = None,
 ) -> None:
     """Stream a job's events as JSON text messages, ending with the terminal event (see module doc)."""
-    problem = token_problem(settings, bearer_token(websocket, token))
-    if problem is not None:
-        await _refuse(websocket, 401, problem.code, problem.message, 4401)
+    principal = websocket_principal(websocket, settings, token)
+    if isinstance(principal, ApiError):
+        await _refuse(websocket, 401, principal.code, principal.message, 4401)
         return
     try:
-        await backend.status(job_id)
+        job_for(principal, await backend.status(job_id))
     except NotFoundError as exc:
         await websocket.accept()
         await websocket.close(code=4404, reason=str(exc)[:120])

@@ -15,8 +15,10 @@ from starlette.concurrency import run_in_threadpool
 from schemas.files import FileInfo
 from workers.store import NotFoundError
 
-from ..deps import AuthDep, SettingsDep, StoreDep
+from ..deps import PrincipalDep, SettingsDep, StoreDep
 from ..errors import responses
+from ..jsonbody import JsonIntent
+from ..owners import file_for, visible
 from ..uploads import read_upload, upload_body
 
 router = APIRouter(prefix="/v1/files", tags=["files"])
@@ -31,7 +33,6 @@ _UPLOAD_BODY = upload_body(
     "",
     status_code=status.HTTP_201_CREATED,
     response_model=FileInfo,
-    dependencies=[AuthDep],
     openapi_extra=_UPLOAD_BODY,
     responses=responses(
         400,
@@ -46,6 +47,7 @@ async def upload_file(
     response: Response,
     store: StoreDep,
     settings: SettingsDep,
+    principal: PrincipalDep,
     name: Annotated[str | None, Query(max_length=255, description="file name (raw-body uploads)")] = None,
 ) -> FileInfo:
     """Upload an input file, stored once per content hash (201 new, 200 already there). Its content
@@ -55,19 +57,36 @@ async def upload_file(
         existing: FileInfo | None = store.file_info(hashlib.sha256(data).hexdigest())
     except NotFoundError:
         existing = None
-    if existing is not None:
+    if existing is None:
+        existing = await run_in_threadpool(store.put_file, file_name, data)
+    if not store.add_owner("files", existing.id, principal.name):
         response.status_code = status.HTTP_200_OK
-        return existing
-    return await run_in_threadpool(store.put_file, file_name, data)
+    return existing
 
 
-@router.get("", response_model=list[FileInfo])
-async def list_files(store: StoreDep) -> list[FileInfo]:
-    """Every uploaded file, oldest first."""
-    return store.list_files()
+@router.get("", response_model=list[FileInfo], responses=responses(401))
+async def list_files(store: StoreDep, principal: PrincipalDep) -> list[FileInfo]:
+    """Your uploaded files, oldest first."""
+    mine = visible(store, principal, "files")
+    return [f for f in await run_in_threadpool(store.list_files) if mine(f.id)]
 
 
-@router.get("/{file_id}", response_model=FileInfo, responses=responses(404, 422))
-async def get_file(file_id: str, store: StoreDep) -> FileInfo:
-    """One file by id."""
-    return store.file_info(file_id)
+@router.get("/{file_id}", response_model=FileInfo, responses=responses(401, 404, 422))
+async def get_file(file_id: str, store: StoreDep, principal: PrincipalDep) -> FileInfo:
+    """One of your files by id."""
+    return file_for(store, principal, file_id)
+
+
+@router.delete(
+    "/{file_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    dependencies=[JsonIntent],
+    responses=responses(401, 404, 422, 415),
+)
+async def delete_file(file_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
+    """Delete your file (jobs already submitted with it fail if they still need it). The bytes go when
+    no other principal holds the same file."""
+    info = file_for(store, principal, file_id)
+    if principal.admin or not store.remove_owner("files", info.id, principal.name):
+        store.delete_file(info.id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)

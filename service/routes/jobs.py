@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
+import anyio
+import numpy as np
 from fastapi import APIRouter, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
@@ -13,13 +15,15 @@ from motion.resample import resample
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
 from schemas.jobs import JobKind, JobStatus
 from workers.backend import JobBackend
-from workers.inputs import InputError, resolve_inputs
+from workers.budget import DatabaseFacts, check_work, database_facts, estimate_work
+from workers.inputs import InputError, attach_from_store, resolve_inputs
 
-from ..deps import AuthDep, BackendDep, MetricsDep, SettingsDep, StoreDep
+from ..deps import BackendDep, MetricsDep, Principal, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, conflict, responses
 from ..exports import MEDIA_TYPES, ExportTarget, ResultFormat, export_bytes
 from ..jobs_common import submit_job
-from ..uploads import read_body
+from ..jsonbody import JsonIntent, parse_limiter, read_json
+from ..owners import database_for, job_for, visible
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 
@@ -40,20 +44,27 @@ ResultQuery = Annotated[str | None, Query(description="result id (default: the j
     "",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=JobInfo,
-    dependencies=[AuthDep],
     openapi_extra=JOB_REQUEST_BODY,
-    responses=responses(401, 404, 409, 413, 422),
+    responses=responses(400, 401, 404, 409, 413, 415, 422, 429, 503),
 )
 async def submit(
-    request: Request, store: StoreDep, backend: BackendDep, metrics: MetricsDep, settings: SettingsDep
+    request: Request,
+    store: StoreDep,
+    backend: BackendDep,
+    metrics: MetricsDep,
+    settings: SettingsDep,
+    principal: PrincipalDep,
 ) -> JobInfo:
-    """Submit a synthesis job against a ready database; follow it with ``/v1/jobs/{id}/events``."""
-    body = await read_body(request, settings.max_upload_bytes)
-    job_request = parse_job_request(body)
+    """Submit a synthesis job against a ready database; follow it with ``/v1/jobs/{id}/events``.
+
+    The request's work (output frames x characters x joints, memory, time) is checked against the
+    server's limits first: 413 ``over_budget`` names each number over its limit."""
+    body = await read_json(request, settings)
+    job_request = await run_in_threadpool(parse_job_request, body)
     engine: str = job_request.engine  # type: ignore[attr-defined]
     if job_request.database is None:
         raise ApiError(422, "invalid_request", "the request names no database ('database': <database id>)")
-    db = store.database_info(job_request.database)
+    db = database_for(store, principal, job_request.database)
     if db.status != DatabaseStatus.ready:
         detail = f" ({db.error})" if db.error else ""
         raise conflict(
@@ -69,50 +80,101 @@ async def submit(
             f"engine {engine!r} needs a {engine_cls.kind!r} database; database {db.id} is {db.kind!r}",
         )
     try:
-        job_request.inputs = await run_in_threadpool(resolve_inputs, store, job_request)
+        mine = visible(store, principal, "clips", "files")
+        job_request.inputs = await run_in_threadpool(resolve_inputs, store, job_request, mine)
+        await run_in_threadpool(attach_from_store, store, job_request)
     except InputError as exc:
         raise ApiError(422, "input_not_found", str(exc), {"inputs": job_request.input_files()}) from None
+    await _check_budget(request, settings, store, job_request)
+    request.app.state.job_quota.check(principal.name)
     payload = {"request": job_request.model_dump(mode="json")}
-    return await submit_job(store, backend, metrics, JobKind.synth, payload, engine=engine, database=db.id)
+    info = await submit_job(
+        store, backend, metrics, JobKind.synth, payload, engine=engine, database=db.id, owner=principal.name
+    )
+    request.app.state.job_quota.add(principal.name, info.id)
+    return info
 
 
-@router.get("", response_model=list[JobInfo], responses=responses(422))
+async def _check_budget(request: Request, settings: SettingsDep, store: StoreDep, job_request: Any) -> None:
+    """413 ``over_budget`` when the request asks for more work than the server's limits allow."""
+    facts = await run_in_threadpool(
+        database_facts_cached, request.app.state, store, str(job_request.database)
+    )
+    work = await anyio.to_thread.run_sync(
+        estimate_work,
+        job_request,
+        facts.fps,
+        facts.joints,
+        facts.clip_frames,
+        limiter=parse_limiter(request, settings),
+    )
+    problems = check_work(work, settings.work_limits)
+    if problems:
+        raise ApiError(
+            413,
+            "over_budget",
+            "the request asks for more work than this server allows: " + "; ".join(problems),
+            {"estimate": work.as_dict(), "limits": settings.work_limits_dict(), "problems": problems},
+        )
+
+
+def database_facts_cached(state: Any, store: StoreDep, db_id: str) -> DatabaseFacts:
+    """The budget facts of a ready database (read once per process, the database never changes)."""
+    cache: dict[str, DatabaseFacts] | None = getattr(state, "database_facts", None)
+    if cache is None:
+        cache = state.database_facts = {}
+    facts = cache.get(db_id)
+    if facts is None:
+        facts = cache[db_id] = database_facts(str(store.db_dir(db_id) / "data.npz"))
+        while len(cache) > 256:
+            cache.pop(next(iter(cache)))
+    return facts
+
+
+@router.get("", response_model=list[JobInfo], responses=responses(401, 422))
 async def list_jobs(
     store: StoreDep,
+    principal: PrincipalDep,
     status_filter: Annotated[
         JobStatus | None, Query(alias="status", description="only jobs in this state")
     ] = None,
     limit: Annotated[int, Query(ge=1, le=1000, description="at most this many, newest first")] = 100,
 ) -> list[JobInfo]:
-    """Jobs, newest first (status as last recorded in the store)."""
-    jobs = await run_in_threadpool(store.list_jobs)
+    """Your jobs, newest first (status as last recorded in the store)."""
+    jobs = [j for j in await run_in_threadpool(store.list_jobs) if principal.may(j.owner)]
     if status_filter is not None:
         jobs = [j for j in jobs if j.status == status_filter]
     return jobs[::-1][:limit]
 
 
-@router.get("/{job_id}", response_model=JobInfo, responses=responses(404, 422))
-async def get_job(job_id: str, backend: BackendDep) -> JobInfo:
+async def owned_job(backend: JobBackend, principal: Principal, job_id: str) -> JobInfo:
+    """A job's status when the principal owns it (404 otherwise)."""
+    return job_for(principal, await backend.status(job_id))
+
+
+@router.get("/{job_id}", response_model=JobInfo, responses=responses(401, 404, 422))
+async def get_job(job_id: str, backend: BackendDep, principal: PrincipalDep) -> JobInfo:
     """A job's status, best result so far and newest event id."""
-    return await backend.status(job_id)
+    return await owned_job(backend, principal, job_id)
 
 
 @router.post(
     "/{job_id}/cancel",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=JobInfo,
-    dependencies=[AuthDep],
-    responses=responses(401, 404, 422),
+    dependencies=[JsonIntent],
+    responses=responses(401, 404, 415, 422, 503),
 )
-async def cancel(job_id: str, backend: BackendDep) -> JobInfo:
+async def cancel(job_id: str, backend: BackendDep, principal: PrincipalDep) -> JobInfo:
     """Ask a job to stop; it ends with a ``cancelled`` event carrying its best result so far."""
+    await owned_job(backend, principal, job_id)
     return await backend.cancel(job_id)
 
 
-async def _result_id(backend: JobBackend, job_id: str, result: str | None) -> str:
+async def _result_id(backend: JobBackend, principal: Principal, job_id: str, result: str | None) -> str:
+    info = await owned_job(backend, principal, job_id)
     if result is not None:
         return result
-    info = await backend.status(job_id)
     if info.result is None:
         state = "has finished without a result" if info.status.finished else "has no result yet"
         raise ApiError(404, "not_found", f"job {job_id} {state} (status {info.status.value})")
@@ -137,24 +199,44 @@ async def download_result(
     job_id: str,
     store: StoreDep,
     backend: BackendDep,
+    principal: PrincipalDep,
+    settings: SettingsDep,
     format: Annotated[ResultFormat, Query(description="bvh, glb, json frames or npz")] = ResultFormat.bvh,
     result: ResultQuery = None,
     target: Annotated[
         ExportTarget, Query(description="axis/unit convention (not for glb)")
     ] = ExportTarget.gltf,
     fps: Annotated[
-        float | None, Query(gt=0, le=1000, description="resample to this frame rate (default: as computed)")
+        float | None,
+        Query(ge=0.5, le=1000, description="resample to this frame rate (default: as computed)"),
     ] = None,
     max_fps: Annotated[
-        float | None, Query(gt=0, le=1000, description="resample down to this rate only if faster (previews)")
+        float | None,
+        Query(ge=0.5, le=1000, description="resample down to this rate only if faster (previews)"),
     ] = None,
 ) -> Response:
     """Download a result motion (default: the job's best result so far), optionally resampled."""
-    rid = await _result_id(backend, job_id, result)
-    motion = store.result_motion(job_id, rid)
+    rid = await _result_id(backend, principal, job_id, result)
+    motion = await run_in_threadpool(store.result_motion, job_id, rid)
+    finite = await run_in_threadpool(
+        lambda: bool(np.isfinite(motion.root_positions).all() and np.isfinite(motion.rotations).all())
+    )
+    if not finite:
+        raise ApiError(
+            422, "export_failed", f"result {rid} holds numbers that are not finite; it cannot be exported"
+        )
     try:
         if fps is None and max_fps is not None and motion.fps > max_fps:
             fps = max_fps
+        if fps is not None and motion.num_frames * fps / motion.fps > 4 * max(
+            settings.max_output_frames, motion.num_frames
+        ):
+            raise ApiError(
+                413,
+                "too_large",
+                f"resampling result {rid} ({motion.num_frames} frames at {motion.fps:g} fps) to {fps:g} fps "
+                f"would give over {4 * max(settings.max_output_frames, motion.num_frames)} frames",
+            )
         if fps is not None and abs(fps - motion.fps) > 1e-9:
             motion = await run_in_threadpool(resample, motion, fps)
         data = await run_in_threadpool(export_bytes, motion, format, target)
@@ -168,7 +250,9 @@ async def download_result(
     )
 
 
-@router.get("/{job_id}/report", response_model=Report, responses=responses(404, 422))
-async def report(job_id: str, store: StoreDep, backend: BackendDep, result: ResultQuery = None) -> Report:
+@router.get("/{job_id}/report", response_model=Report, responses=responses(401, 404, 422))
+async def report(
+    job_id: str, store: StoreDep, backend: BackendDep, principal: PrincipalDep, result: ResultQuery = None
+) -> Report:
     """A result's report: score terms, constraint errors, metrics and per-frame provenance."""
-    return store.result_report(job_id, await _result_id(backend, job_id, result))
+    return store.result_report(job_id, await _result_id(backend, principal, job_id, result))

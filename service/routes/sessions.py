@@ -14,7 +14,10 @@ Protocol (JSON text messages):
   frame), so latency is at most one beat; ``{"type": "error", "message"}`` for a bad message (the
   session goes on); ``{"type": "end", "frames", "beats"}`` after ``stop``, then close 1000.
 
-Close codes: 4401 bad token, 4404 unknown database, 4400 not a ready rhythm database. Synthesis
+Close codes: 4401 bad token, 4404 unknown database, 4400 not a ready rhythm database, 4429 (or an
+HTTP 429 refusal) too many live sessions of this principal (``SEGUE_MAX_SESSIONS``), 1009 a message
+over 4096 characters. The inbox of client messages holds ``SEGUE_SESSION_INBOX`` messages; a client
+sending faster than its beats are rendered is read no faster (backpressure). Synthesis
 runs in a worker thread, never in the event loop.
 """
 
@@ -38,7 +41,9 @@ from engines.rhythm.session import LiveDancer
 from schemas.rhythm import SessionBeat, SessionBpm, SessionDirection, SessionMessage, SessionStop
 from workers.store import NotFoundError, Store, load_npz
 
-from ..deps import SettingsDep, StoreDep, bearer_token, token_problem
+from ..deps import SettingsDep, StoreDep, websocket_principal
+from ..errors import ApiError
+from ..owners import database_for
 from .events import _refuse
 
 router = APIRouter(prefix="/v1/sessions", tags=["sessions"])
@@ -47,6 +52,8 @@ _MESSAGES: TypeAdapter[Any] = TypeAdapter(SessionMessage)
 _CACHE: OrderedDict[tuple[str, str], RhythmEngine] = OrderedDict()
 _CACHE_LOCK = threading.Lock()
 _CACHE_SIZE = 4
+MAX_MESSAGE_CHARS = 4096
+"""Longest client message (every valid one is well under 200 characters)."""
 
 
 def _load_engine(store: Store, db_id: str) -> RhythmEngine:
@@ -66,10 +73,16 @@ def _load_engine(store: Store, db_id: str) -> RhythmEngine:
     return engine
 
 
-async def _reader(websocket: WebSocket, inbox: asyncio.Queue[str | None]) -> None:
+async def _reader(websocket: WebSocket, inbox: asyncio.Queue[str | None], limit: int) -> None:
+    """Client messages into the bounded inbox; a text over ``limit`` bytes ends the session."""
     with contextlib.suppress(WebSocketDisconnect, RuntimeError):
         while True:
-            await inbox.put(await websocket.receive_text())
+            text = await websocket.receive_text()
+            if len(text) > limit:
+                with contextlib.suppress(RuntimeError):
+                    await websocket.close(code=1009, reason="message too big")
+                break
+            await inbox.put(text)  # waits while the inbox is full: the client is read no faster
     await inbox.put(None)
 
 
@@ -85,31 +98,40 @@ async def rhythm_session(
     token: Annotated[str | None, Query(description="bearer token (or the Authorization header)")] = None,
 ) -> None:
     """Dance to beats sent live (see the module doc for the message format)."""
-    problem = token_problem(settings, bearer_token(websocket, token))
-    if problem is not None:
-        await _refuse(websocket, 401, problem.code, problem.message, 4401)
+    principal = websocket_principal(websocket, settings, token)
+    if isinstance(principal, ApiError):
+        await _refuse(websocket, 401, principal.code, principal.message, 4401)
         return
     try:
-        info = store.database_info(database)
+        info = database_for(store, principal, database)
     except NotFoundError as exc:
         await websocket.accept()
         await websocket.close(code=4404, reason=str(exc)[:120])
         return
-    await websocket.accept()
-    if info.kind != "rhythm" or info.status.value != "ready":
-        await websocket.close(code=4400, reason=f"database {database} is not a ready rhythm database"[:120])
+    quota = websocket.app.state.session_quota
+    refusal = quota.refusal(principal.name)
+    if refusal is not None:
+        await _refuse(websocket, 429, refusal.code, refusal.message, 4429, refusal.headers)
         return
-    engine = await anyio.to_thread.run_sync(_load_engine, store, database)
-    dancer = LiveDancer(engine, seed=seed, fps=fps, accent=accent)
-    await websocket.send_json(dancer.skeleton_message())
-    await _Session(websocket, dancer).run()
+    with quota.hold(principal.name):
+        await websocket.accept()
+        if info.kind != "rhythm" or info.status.value != "ready":
+            await websocket.close(
+                code=4400, reason=f"database {database} is not a ready rhythm database"[:120]
+            )
+            return
+        engine = await anyio.to_thread.run_sync(_load_engine, store, database)
+        dancer = LiveDancer(engine, seed=seed, fps=fps, accent=accent)
+        await websocket.send_json(dancer.skeleton_message())
+        await _Session(websocket, dancer, settings.session_inbox).run()
 
 
 class _Session:
     """The beat clock and message loop of one socket."""
 
-    def __init__(self, websocket: WebSocket, dancer: LiveDancer) -> None:
+    def __init__(self, websocket: WebSocket, dancer: LiveDancer, inbox_size: int = 64) -> None:
         self.websocket, self.dancer = websocket, dancer
+        self.inbox_size = inbox_size
         self.period = dancer.tables.period_s
         self.auto_next: float | None = None  # loop time of the next generated beat (bpm mode)
         self.last_beat: float | None = None
@@ -124,8 +146,8 @@ class _Session:
 
     async def run(self) -> None:
         loop = asyncio.get_running_loop()
-        inbox: asyncio.Queue[str | None] = asyncio.Queue()
-        reader = asyncio.create_task(_reader(self.websocket, inbox))
+        inbox: asyncio.Queue[str | None] = asyncio.Queue(self.inbox_size)
+        reader = asyncio.create_task(_reader(self.websocket, inbox, MAX_MESSAGE_CHARS))
         try:
             while True:
                 timeout = None if self.auto_next is None else max(0.0, self.auto_next - loop.time())

@@ -27,7 +27,12 @@ WALK_CLIP = "07_01_walk_daz"  # its name in databases (file name without .bvh.gz
 @pytest.fixture(scope="session")
 def api_settings(tmp_path_factory: pytest.TempPathFactory) -> Settings:
     """Settings of the session's app: a fresh data dir, one worker, the scripted engine."""
-    return Settings(data_dir=tmp_path_factory.mktemp("segue-data"), workers=1, engine_plugins=PLUGINS)
+    return Settings(
+        data_dir=tmp_path_factory.mktemp("segue-data"),
+        workers=1,
+        engine_plugins=PLUGINS,
+        allowed_hosts=("localhost", "testserver"),  # TestClient WebSockets use ws://testserver
+    )
 
 
 @pytest.fixture(scope="session")
@@ -41,7 +46,7 @@ def client(app: FastAPI) -> Iterator[TestClient]:
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
         mp.setenv("SEGUE_ENGINE_PLUGINS", PLUGINS)
-        with TestClient(app) as test_client:
+        with TestClient(app, base_url="http://localhost") as test_client:
             yield test_client
 
 

@@ -26,6 +26,9 @@ from workers.store import Store, now
 
 from .conftest import WALK, WALK_CLIP, wait_events
 
+JSON = {"Content-Type": "application/json"}
+"""What bodyless writes (cancel, delete) declare."""
+
 BAD_BVH = (
     "HIERARCHY\nROOT a\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xrotation Yrotation Zrotation\n}\n"
     "MOTION\nFrames: 2\nFrame Time: 0.1\n1 2 3\n1 x 3\n"
@@ -61,9 +64,9 @@ def test_upload_list_get_delete(client: TestClient) -> None:
     assert clip["id"] in [c["id"] for c in client.get("/v1/clips").json()]
     assert client.get(f"/v1/clips/{clip['id']}").json() == clip
     assert client.get(f"/v1/clips/{path.name}").json()["id"] == clip["id"]  # by file name
-    assert client.delete(f"/v1/clips/{clip['id']}").status_code == 204
+    assert client.delete(f"/v1/clips/{clip['id']}", headers=JSON).status_code == 204
     error_of(client.get(f"/v1/clips/{clip['id']}"), 404, "not_found")
-    error_of(client.delete(f"/v1/clips/{clip['id']}"), 404, "not_found")
+    error_of(client.delete(f"/v1/clips/{clip['id']}", headers=JSON), 404, "not_found")
 
 
 def test_plain_bvh_raw_upload(client: TestClient) -> None:
@@ -141,7 +144,7 @@ def test_first_post_is_202_and_build_can_be_followed(client: TestClient, walk_cl
     assert [e["type"] for e in events][:2] == ["queued", "started"] and events[-1]["type"] == "done"
     assert client.get(f"/v1/databases/{db['id']}").json()["status"] == "ready"
     assert client.post("/v1/databases", json=spec).status_code == 200
-    assert client.delete(f"/v1/databases/{db['id']}").status_code == 204
+    assert client.delete(f"/v1/databases/{db['id']}", headers=JSON).status_code == 204
     error_of(client.get(f"/v1/databases/{db['id']}"), 404, "not_found")
 
 
@@ -192,7 +195,7 @@ def test_job_before_ready_is_409_and_building_database_cannot_be_deleted(
     db_id = _fake_database(store, DatabaseStatus.building, build_job=job.id)
     err = error_of(client.post("/v1/jobs", json={"engine": "clip", "database": db_id, "clip": "x"}), 409)
     assert err["code"] == "database_not_ready" and "building" in err["message"]
-    error_of(client.delete(f"/v1/databases/{db_id}"), 409, "database_building")
+    error_of(client.delete(f"/v1/databases/{db_id}", headers=JSON), 409, "database_building")
 
 
 @pytest.mark.parametrize(
@@ -284,7 +287,7 @@ def test_result_errors(client: TestClient, walk_db: dict[str, Any]) -> None:
     error_of(client.get(f"/v1/jobs/{job_id}/report", params={"result": "../x"}), 404, "not_found")
     error_of(client.get("/v1/jobs/nope/result"), 404, "not_found")
     error_of(client.get("/v1/jobs/nope"), 404, "not_found")
-    error_of(client.post("/v1/jobs/nope/cancel"), 404, "not_found")
+    error_of(client.post("/v1/jobs/nope/cancel", headers=JSON), 404, "not_found")
     error_of(client.get("/v1/nothing-here"), 404, "http_404")
 
 
@@ -296,7 +299,7 @@ def test_cancel_mid_search_keeps_best_so_far(client: TestClient, walk_db: dict[s
             event = ws.receive_json()
             seen.append(event)
             if event["type"] == "solution" and event["data"]["result"] == "r2":
-                r = client.post(f"/v1/jobs/{job['id']}/cancel")
+                r = client.post(f"/v1/jobs/{job['id']}/cancel", headers=JSON)
                 assert r.status_code == 202 and r.json()["id"] == job["id"]
             if event["type"] in ("done", "failed", "cancelled"):
                 break
@@ -310,7 +313,9 @@ def test_cancel_mid_search_keeps_best_so_far(client: TestClient, walk_db: dict[s
     assert info["status"] == "cancelled" and info["result"] == best
     bvh = client.get(f"/v1/jobs/{job['id']}/result", params={"format": "bvh"})
     assert bvh.status_code == 200 and parse_bvh(bvh.content).num_frames > 0
-    assert client.post(f"/v1/jobs/{job['id']}/cancel").json()["status"] == "cancelled"  # idempotent
+    assert (
+        client.post(f"/v1/jobs/{job['id']}/cancel", headers=JSON).json()["status"] == "cancelled"
+    )  # idempotent
 
 
 def test_failed_job_ends_stream_with_failed(client: TestClient, walk_db: dict[str, Any]) -> None:
@@ -359,7 +364,7 @@ def test_unexpected_error_is_500_json(app: FastAPI) -> None:
 
     app.dependency_overrides[app_store] = BrokenStore
     try:
-        r = TestClient(app, raise_server_exceptions=False).get("/v1/clips")
+        r = TestClient(app, raise_server_exceptions=False, base_url="http://localhost").get("/v1/clips")
     finally:
         app.dependency_overrides.pop(app_store)
     err = error_of(r, 500, "internal")
@@ -376,39 +381,59 @@ def test_ws_unknown_job_closes_4404(client: TestClient) -> None:
 
 
 # -- auth -----------------------------------------------------------------------------------------
-def test_auth_on_writes_and_websockets(
-    client: TestClient, walk_db: dict[str, Any], override_settings: Callable[..., Settings]
+def test_tokens_name_principals_that_see_and_change_only_their_own(
+    client: TestClient, override_settings: Callable[..., Settings]
 ) -> None:
-    override_settings(api_tokens=("s3cret", "other"))
-    request = {"engine": "clip", "database": walk_db["id"], "clip": WALK_CLIP, "end": 10}
-    r = client.post("/v1/jobs", json=request)
-    error_of(r, 401, "unauthorized")
-    assert r.headers["www-authenticate"] == "Bearer"
-    r = client.post("/v1/jobs", json=request, headers={"Authorization": "Bearer wrong"})
-    error_of(r, 401, "invalid_token")
-    assert "invalid_token" in r.headers["www-authenticate"]
-    error_of(client.post("/v1/clips", params={"name": "a.bvh"}, content=b"x"), 401)
-    error_of(client.delete(f"/v1/databases/{walk_db['id']}"), 401)
-    error_of(client.post(f"/v1/jobs/{walk_db['build_job']}/cancel"), 401)
-    # reads stay open
-    assert client.get("/v1/clips").status_code == 200
-    assert client.get(f"/v1/databases/{walk_db['id']}").status_code == 200
-    job = client.post("/v1/jobs", json=request, headers={"Authorization": "Bearer s3cret"})
-    assert job.status_code == 202
+    override_settings(api_tokens=("alice:ta", "bob:tb", "root:tr"), admins=("root",))
+    alice, bob, root = ({"Authorization": f"Bearer {t}"} for t in ("ta", "tb", "tr"))
+    # every /v1 request needs a token now, reads too
+    error_of(client.get("/v1/clips"), 401, "unauthorized")
+    error_of(client.get("/v1/jobs", headers={"Authorization": "Bearer wrong"}), 401, "invalid_token")
+    error_of(client.post("/v1/jobs?token=ta", json={}), 401, "unauthorized")  # ?token= is for WebSockets
+    assert client.get("/openapi.json").status_code == 200  # the document stays open
+    clip = client.post("/v1/clips", files={"file": (WALK.name, WALK.read_bytes())}, headers=alice).json()
+    spec = {"kind": "clips", "clips": [{"clip": clip["id"]}], "fps": 30}
+    db = client.post("/v1/databases", json=spec, headers=alice).json()
+    if db["status"] != "ready":
+        with client.websocket_connect(f"/v1/jobs/{db['build_job']}/events?token=ta") as ws:
+            while ws.receive_json()["type"] not in ("done", "failed", "cancelled"):
+                pass
+    request = {"engine": "clip", "database": db["id"], "clip": WALK_CLIP, "end": 10}
+    job = client.post("/v1/jobs", json=request, headers=alice)
+    assert job.status_code == 202 and job.json()["owner"] == "alice"
     job_id = job.json()["id"]
+    # bob sees none of it: 404 as for things that do not exist, and empty lists
+    for path in (f"/v1/clips/{clip['id']}", f"/v1/databases/{db['id']}", f"/v1/jobs/{job_id}",
+                 f"/v1/jobs/{job_id}/events", f"/v1/jobs/{job_id}/report"):  # fmt: skip
+        error_of(client.get(path, headers=bob), 404, "not_found")
+    assert all(j["id"] != job_id for j in client.get("/v1/jobs", headers=bob).json())
+    assert client.get("/v1/clips", headers=bob).json() == []
+    error_of(client.post(f"/v1/jobs/{job_id}/cancel", headers=bob | JSON), 404)
+    error_of(client.delete(f"/v1/databases/{db['id']}", headers=bob | JSON), 404)
+    error_of(client.post("/v1/jobs", json=request, headers=bob), 404)  # not bob's database
     with (
         pytest.raises(WebSocketDenialResponse) as denied,
         client.websocket_connect(f"/v1/jobs/{job_id}/events"),
     ):
         pass
-    assert denied.value.status_code == 401 and denied.value.json()["error"]["code"] == "unauthorized"
-    with client.websocket_connect(f"/v1/jobs/{job_id}/events?token=other") as ws:
+    assert denied.value.status_code == 401
+    with (
+        pytest.raises(WebSocketDisconnect) as closed,
+        client.websocket_connect(f"/v1/jobs/{job_id}/events?token=tb") as ws,
+    ):
+        ws.receive_json()
+    assert closed.value.code == 4404
+    # alice and the admin see it
+    with client.websocket_connect(f"/v1/jobs/{job_id}/events?token=ta") as ws:
         assert ws.receive_json()["type"] == "queued"
-    headers = {"Authorization": "Bearer s3cret"}
-    with client.websocket_connect(f"/v1/jobs/{job_id}/events", headers=headers) as ws:
-        types: list[str] = []
-        while not types or types[-1] != "done":
-            types.append(ws.receive_json()["type"])
+    assert client.get(f"/v1/jobs/{job_id}", headers=root).status_code == 200
+    assert client.get(f"/v1/clips/{clip['id']}", headers=alice).status_code == 200
+    # the same bytes uploaded by bob are bob's own hold: deleting it leaves alice's clip alone
+    again = client.post("/v1/clips", files={"file": (WALK.name, WALK.read_bytes())}, headers=bob)
+    assert again.status_code == 201 and again.json()["id"] == clip["id"]
+    assert client.delete(f"/v1/clips/{clip['id']}", headers=bob | JSON).status_code == 204
+    assert client.get(f"/v1/clips/{clip['id']}", headers=alice).status_code == 200
+    error_of(client.get(f"/v1/clips/{clip['id']}", headers=bob), 404)
 
 
 def test_auth_off_by_default(client: TestClient) -> None:
@@ -445,6 +470,10 @@ def test_openapi_comes_from_the_schemas(client: TestClient) -> None:
     assert "HTTPValidationError" not in components
     body = doc["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["application/json"]["schema"]
     assert body == {"$ref": "#/components/schemas/JobRequest"} and "JobRequest" in components
-    spec_body = json.dumps(doc["paths"]["/v1/databases"]["post"]["requestBody"])
-    assert "ClipsDatabaseSpec" in spec_body and "RhythmDatabaseSpec" in spec_body
+    spec_body = doc["paths"]["/v1/databases"]["post"]["requestBody"]["content"]["application/json"]["schema"]
+    assert spec_body == {"$ref": "#/components/schemas/DatabaseSpec"}
+    assert "ClipsDatabaseSpec" in json.dumps(components["DatabaseSpec"])
+    assert "RhythmDatabaseSpec" in json.dumps(components["DatabaseSpec"])
+    links = doc["paths"]["/v1/jobs"]["post"]["responses"]["202"]["links"]
+    assert links["GetJob"]["parameters"] == {"job_id": "$response.body#/id"}
     assert "multipart/form-data" in doc["paths"]["/v1/clips"]["post"]["requestBody"]["content"]

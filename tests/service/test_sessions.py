@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
+from starlette.testclient import WebSocketDenialResponse
 from starlette.websockets import WebSocketDisconnect
 
 from engines.library import library_to_arrays
@@ -22,6 +23,7 @@ from schemas.databases import DatabaseInfo
 from schemas.rhythm import RhythmDatabaseSpec
 from service.app import create_app
 from service.errors import install_error_handlers
+from service.limits import SessionQuota
 from service.routes import sessions
 from service.settings import Settings
 from tests.engines.rhythm_synthetic import library
@@ -60,11 +62,12 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     store.put_database_arrays(DB, npz_bytes(arrays))
     store.put_database_info(info.model_copy(update={"id": "notready", "status": DatabaseStatus.building}))
     app = FastAPI()
-    app.state.settings = Settings(data_dir=data)
+    app.state.settings = Settings(data_dir=data, allowed_hosts=("localhost", "testserver"))
     app.state.store = store
+    app.state.session_quota = SessionQuota(2)
     install_error_handlers(app)
     app.include_router(sessions.router)
-    with TestClient(app) as c:
+    with TestClient(app, base_url="http://localhost") as c:
         yield c
 
 
@@ -115,6 +118,27 @@ def test_session_refuses_unknown_or_unready_databases(client: TestClient, db: st
     assert closed.value.code == code
 
 
+def test_live_sessions_per_principal_are_limited(client: TestClient) -> None:
+    """The fixture's app allows 2 live sessions per principal: the third is refused with 429."""
+    url = f"/v1/sessions/rhythm?database={DB}"
+    with client.websocket_connect(url) as first, client.websocket_connect(url) as second:
+        assert first.receive_json()["type"] == second.receive_json()["type"] == "skeleton"
+        with pytest.raises(WebSocketDenialResponse) as refused, client.websocket_connect(url):
+            pass
+        assert refused.value.status_code == 429 and refused.value.headers["retry-after"]
+    with client.websocket_connect(url) as again:  # the held ones were released
+        assert again.receive_json()["type"] == "skeleton"
+
+
+def test_a_message_over_the_size_limit_ends_the_session(client: TestClient) -> None:
+    with client.websocket_connect(f"/v1/sessions/rhythm?database={DB}") as ws:
+        assert ws.receive_json()["type"] == "skeleton"
+        ws.send_text("x" * 10_000)
+        with pytest.raises(WebSocketDisconnect) as closed:
+            ws.receive_json()
+        assert closed.value.code == 1009
+
+
 def test_app_registers_the_session_route(tmp_path: Path) -> None:
-    app = create_app(Settings(data_dir=tmp_path))
+    app = create_app(Settings(data_dir=tmp_path, allowed_hosts=("localhost", "testserver")))
     assert app.url_path_for("rhythm_session") == "/v1/sessions/rhythm"

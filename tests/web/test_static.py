@@ -67,7 +67,9 @@ def test_every_module_import_resolves() -> None:
 @pytest.fixture(scope="module")
 def client(tmp_path_factory: pytest.TempPathFactory) -> TestClient:
     """The app without its lifespan (no backend): enough for static files and routing."""
-    return TestClient(create_app(Settings(data_dir=tmp_path_factory.mktemp("static-data"))))
+    return TestClient(
+        create_app(Settings(data_dir=tmp_path_factory.mktemp("static-data"))), base_url="http://localhost"
+    )
 
 
 def test_root_serves_the_page_and_api_routes_come_first(client: TestClient) -> None:

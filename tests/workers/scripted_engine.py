@@ -1,8 +1,9 @@
 """A scripted anytime engine for runtime tests (loaded with SEGUE_ENGINE_PLUGINS).
 
-It improves its score ``steps`` times, ``step_s`` seconds apart, polling ``should_stop`` between
-steps, so tests can observe solutions arriving, cancel mid-search, or kill a worker mid-job. Each
-solution is a real excerpt of the database's first clip (10 + i frames), so results download.
+It optionally keeps the CPU busy for ``spin_s`` first (an engine that ignores cancels), then improves
+its score ``steps`` times, ``step_s`` seconds apart, polling ``should_stop`` between steps, so tests
+can observe solutions arriving, cancel mid-search, or kill a worker mid-job. Each solution is a real
+excerpt of the database's first clip (10 + i frames), so results download.
 """
 
 from __future__ import annotations
@@ -23,6 +24,12 @@ class ScriptedRequest(JobRequestBase):
     step_s: float = Field(default=0.1, ge=0, le=60)
     fail_at: int | None = Field(default=None, description="raise an engine error at this step")
     input: str | None = Field(default=None, description="an input file; its size becomes a score term")
+    frames: int | None = Field(
+        default=None, ge=1, le=100_000, description="frames asked for (each solution has 10 + i frames)"
+    )
+    spin_s: float = Field(
+        default=0.0, ge=0, le=60, description="busy the CPU (holding the GIL, not polling should_stop) first"
+    )
 
     def input_files(self) -> list[str]:
         return [self.input] if self.input else []
@@ -38,6 +45,10 @@ class ScriptedEngine(Engine):
         name = self.library.names[0]
         t0 = time.monotonic()
         extra = {"input_bytes": float(len(request.input_bytes(request.input)))} if request.input else {}
+        spin_until = time.monotonic() + request.spin_s
+        while time.monotonic() < spin_until:
+            sum(range(10_000))  # an engine busy in Python: ignores cancels and holds the GIL
+        t0 = time.monotonic()
         for i in range(request.steps):
             if should_stop() or time.monotonic() - t0 > budget_s:
                 return

@@ -136,12 +136,30 @@ def test_events_survive_a_restart(tmp_path: Path) -> None:
     assert [e.type for e in replay] == ["queued", "started", "solution", "done"]
 
 
-def test_jobs_left_running_by_a_dead_server_fail_at_start(tmp_path: Path) -> None:
-    store = Store(tmp_path)
-    stale = JobInfo(id="stale1", kind=JobKind.synth, status=JobStatus.running, created_at=now())
-    store.put_job(stale, {"kind": "synth", "payload": {"request": {}}})
+def test_jobs_left_unfinished_by_a_dead_server_run_again_at_start(tmp_path: Path) -> None:
+    """The store is the truth: a job a dead server left ``running`` is queued again by the next one,
+    its events continuing where the old ones stopped (clients resume with ``after=``)."""
 
-    async def scenario() -> list[JobEvent]:
+    async def first() -> str:
+        backend = EmbeddedBackend(Store(tmp_path), workers=1)
+        await backend.start()
+        try:
+            return await _database(backend, Store(tmp_path))
+        finally:
+            await backend.close()
+
+    db = asyncio.run(asyncio.wait_for(first(), 120))
+    store = Store(tmp_path)
+    payload = {"request": {"engine": "scripted", "database": db, "steps": 2, "step_s": 0.01}}
+    stale = JobInfo(id="stale1", kind=JobKind.synth, status=JobStatus.running, created_at=now(), last_event=2)
+    store.put_job(stale, {"kind": "synth", "payload": payload})
+    lines = [
+        JobEvent(id=1, job="stale1", type=EventType.queued, time=1.0).model_dump_json(),
+        JobEvent(id=2, job="stale1", type=EventType.started, time=2.0).model_dump_json(),
+    ]
+    (store.job_dir("stale1") / "events.jsonl").write_text("\n".join(lines) + "\n")
+
+    async def second() -> list[JobEvent]:
         backend = EmbeddedBackend(store, workers=1)
         await backend.start()
         try:
@@ -149,7 +167,64 @@ def test_jobs_left_running_by_a_dead_server_fail_at_start(tmp_path: Path) -> Non
         finally:
             await backend.close()
 
-    events = asyncio.run(asyncio.wait_for(scenario(), 60))
-    assert events[-1].type == EventType.failed
-    assert events[-1].data["error"]["code"] == "server_restarted"
-    assert store.job_info("stale1").status == JobStatus.failed
+    events = asyncio.run(asyncio.wait_for(second(), 60))
+    assert [e.id for e in events] == list(range(1, len(events) + 1))
+    assert [e.type for e in events][:3] == ["queued", "started", "started"]
+    assert events[2].data["attempt"] == 2
+    assert events[-1].type == EventType.done
+    assert store.job_info("stale1").status == JobStatus.done
+
+
+def test_a_killed_engine_process_is_replaced_and_its_job_run_again(tmp_path: Path) -> None:
+    """SIGKILL of an engine process (as the OOM killer would): the job runs again on a fresh process
+    and ends ``done``, later jobs run, and health stays truthful."""
+    import signal
+
+    async def scenario() -> tuple[list[JobEvent], list[JobEvent], dict[str, Any]]:
+        store = Store(tmp_path)
+        backend = EmbeddedBackend(store, workers=1)
+        await backend.start()
+        try:
+            db = await _database(backend, store)
+            slow = {"request": {"engine": "scripted", "database": db, "steps": 30, "step_s": 0.05}}
+            job = await _submit(backend, store, "synth", slow)
+            while store.job_info(job).status != JobStatus.running:
+                await asyncio.sleep(0.02)
+            pid = backend._processes[0].pid
+            assert pid is not None
+            os.kill(pid, signal.SIGKILL)
+            quick = {"request": {"engine": "scripted", "database": db, "steps": 1, "step_s": 0.0}}
+            later = await _submit(backend, store, "synth", quick)
+            first_events = await _collect(backend, job)
+            later_events = await _collect(backend, later)
+            return first_events, later_events, await backend.health()
+        finally:
+            await backend.close()
+
+    first_events, later_events, health = asyncio.run(asyncio.wait_for(scenario(), 120))
+    assert first_events[-1].type == EventType.done
+    assert [e.data.get("attempt") for e in first_events if e.type == EventType.started] == [1, 2]
+    assert [e.id for e in first_events] == list(range(1, len(first_events) + 1))
+    assert later_events[-1].type == EventType.done
+    assert health["restarts"] == 1 and health["workers_ready"] == 1 and "error" not in health
+
+
+def test_a_result_shorter_than_asked_says_so(tmp_path: Path) -> None:
+    async def scenario() -> list[JobEvent]:
+        store = Store(tmp_path)
+        backend = EmbeddedBackend(store, workers=1)
+        await backend.start()
+        try:
+            db = await _database(backend, store)
+            short = {"request": {"engine": "scripted", "database": db, "steps": 1, "frames": 100}}
+            full = {"request": {"engine": "scripted", "database": db, "steps": 1, "frames": 10}}
+            a = await _collect(backend, await _submit(backend, store, "synth", short))
+            b = await _collect(backend, await _submit(backend, store, "synth", full))
+            return [a[-1], b[-1]]
+        finally:
+            await backend.close()
+
+    short_done, full_done = asyncio.run(asyncio.wait_for(scenario(), 120))
+    assert short_done.type == full_done.type == EventType.done
+    assert short_done.data["short"] == {"frames": 10, "requested_frames": 100}
+    assert "short" not in full_done.data

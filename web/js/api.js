@@ -62,6 +62,10 @@ export async function request(method, path, { json, body, query } = {}) {
     if ([...q].length) url += `?${q}`;
   }
   const init = { method, headers: headers() };
+  if (method !== 'GET' && json === undefined && body === undefined) {
+    // bodyless writes (cancel, delete) declare JSON: the server refuses writes a page could forge
+    init.headers = headers({ 'Content-Type': 'application/json' });
+  }
   if (json !== undefined) {
     init.headers = headers({ 'Content-Type': 'application/json' });
     init.body = JSON.stringify(json);

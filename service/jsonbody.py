@@ -1,0 +1,142 @@
+"""JSON request bodies: one reader for every JSON route.
+
+Every JSON route reads its body through :func:`read_json`, which
+
+* refuses a body that does not declare ``Content-Type: application/json`` (or ``application/*+json``)
+  with 415: a web page can send ``text/plain``, form and multipart bodies to any server without a
+  CORS preflight, but not JSON, so this is the first CSRF defence (``service.guard`` checks Host and
+  Origin as well);
+* refuses more than ``SEGUE_MAX_JSON_BYTES`` (default 1 MiB) with 413, while reading;
+* parses off the event loop (a worker thread), at most ``SEGUE_MAX_PARSES`` bodies at once, with
+  ``pydantic_core.from_json`` (the Rust ``jiter`` parser pydantic uses): ``NaN``/``Infinity`` literals
+  are refused and nesting deeper than its recursion limit (200) is an error, never a
+  ``RecursionError``; numbers that overflow a double (``1e999``) are refused too.
+
+Every refusal is a 4xx :class:`~service.errors.ApiError` naming the problem.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import anyio
+import pydantic_core
+from fastapi import Depends
+from pydantic import TypeAdapter
+from starlette.requests import Request
+
+from .errors import ApiError
+from .settings import Settings
+from .uploads import read_body
+
+
+def parse_limiter(request: Request, settings: Settings) -> anyio.CapacityLimiter:
+    """The app's bound on concurrent body parses (created on first use, one per app)."""
+    limiter: anyio.CapacityLimiter | None = getattr(request.app.state, "parse_limiter", None)
+    if limiter is None:
+        limiter = anyio.CapacityLimiter(settings.max_parses)
+        request.app.state.parse_limiter = limiter
+    return limiter
+
+
+def is_json_type(content_type: str) -> bool:
+    """True for ``application/json`` and ``application/<anything>+json`` (parameters ignored)."""
+    media = content_type.split(";", 1)[0].strip().lower()
+    return media == "application/json" or (media.startswith("application/") and media.endswith("+json"))
+
+
+def _non_finite(value: Any) -> bool:
+    """True when a parsed JSON value holds an infinite float anywhere (iterative: no recursion)."""
+    stack = [value]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, float):
+            if not math.isfinite(item):
+                return True
+        elif isinstance(item, dict):
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)
+    return False
+
+
+def parse_json_bytes(data: bytes) -> Any:
+    """Parse JSON text strictly (see the module docstring); raises :class:`ApiError` (422)."""
+    if not data.strip():
+        raise ApiError(422, "invalid_request", "the request body is empty; send a JSON document")
+    try:
+        value = pydantic_core.from_json(data, allow_inf_nan=False, cache_strings=False)
+    except ValueError as exc:
+        message = str(exc)
+        if "recursion limit" in message:
+            raise ApiError(
+                422, "invalid_request", f"the JSON document is nested too deeply ({message})"
+            ) from None
+        raise ApiError(
+            422,
+            "invalid_request",
+            f"the request is not valid JSON ({message}; NaN and Infinity are not JSON)",
+        ) from None
+    if b"\\u0000" in data.lower():
+        raise ApiError(
+            422, "invalid_request", "the request holds a NUL character (\\u0000), which no name may hold"
+        )
+    if _non_finite(value):
+        raise ApiError(
+            422, "invalid_request", "the request holds a number too large for a double (e.g. 1e999)"
+        )
+    return value
+
+
+async def read_json(request: Request, settings: Settings) -> Any:
+    """The request's JSON body, parsed off the event loop (see the module docstring)."""
+    content_type = request.headers.get("content-type", "")
+    if not is_json_type(content_type):
+        raise ApiError(
+            415,
+            "unsupported_media_type",
+            f"this route takes a JSON body sent as 'Content-Type: application/json', not {content_type!r}",
+            {"content_type": content_type},
+        )
+    data = await read_body(request, settings.max_json_bytes)
+    return await anyio.to_thread.run_sync(parse_json_bytes, data, limiter=parse_limiter(request, settings))
+
+
+async def validate_off_loop(
+    adapter: TypeAdapter[Any], value: Any, request: Request, settings: Settings
+) -> Any:
+    """``adapter.validate_python(value)`` in a worker thread (validation of a large body takes time)."""
+    return await anyio.to_thread.run_sync(
+        adapter.validate_python, value, limiter=parse_limiter(request, settings)
+    )
+
+
+def json_body_doc(schema_ref: str, description: str) -> dict[str, Any]:
+    """OpenAPI ``requestBody`` for a route that reads its body with :func:`read_json`."""
+    return {
+        "requestBody": {
+            "required": True,
+            "description": description,
+            "content": {"application/json": {"schema": {"$ref": f"#/components/schemas/{schema_ref}"}}},
+        }
+    }
+
+
+async def require_json_intent(request: Request) -> None:
+    """Bodyless writes (``DELETE``, ``POST .../cancel``) must declare ``Content-Type:
+    application/json`` too (415 otherwise): a web page cannot send that cross-site without a CORS
+    preflight, so a forged form or a stray request cannot delete or cancel anything."""
+    content_type = request.headers.get("content-type", "")
+    if not is_json_type(content_type):
+        raise ApiError(
+            415,
+            "unsupported_media_type",
+            f"send this {request.method} with 'Content-Type: application/json' (the server refuses writes "
+            f"that a web page could forge), not {content_type or 'no content type'!r}",
+            {"content_type": content_type},
+        )
+
+
+JsonIntent = Depends(require_json_intent)
+"""Add to a bodyless write route: ``dependencies=[JsonIntent]``."""

@@ -1,0 +1,53 @@
+"""Schemathesis over the whole OpenAPI document of a real, populated server (a clip, a database and a
+job exist): no server error, and only documented status codes. Its stateful phase follows the
+document's links (``service.links``) from uploads, database builds and job submissions to reading
+them back, so the fuzz reaches real resources, not only 404s. (The coverage phase, ~3,600 boundary
+cases and 25 s, runs in the acceptance check ``robust.py``; this test keeps to the quick phases.)"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+
+from motion.samples import sample_path
+from tests.live_server import live_server
+
+SCHEMATHESIS = shutil.which("schemathesis", path=str(Path(sys.executable).parent)) or shutil.which(
+    "schemathesis"
+)
+
+
+def _populate(url: str) -> None:
+    walk = sample_path("walk")
+    with httpx.Client(base_url=url, timeout=30) as http:
+        clip = http.post("/v1/clips", files={"file": (walk.name, walk.read_bytes())}).json()
+        db = http.post(
+            "/v1/databases", json={"kind": "clips", "clips": [{"clip": clip["id"]}], "fps": 30}
+        ).json()
+        deadline = time.monotonic() + 60
+        while http.get(f"/v1/databases/{db['id']}").json()["status"] != "ready":
+            assert time.monotonic() < deadline, "the database did not build"
+            time.sleep(0.1)
+        job = {"engine": "clip", "database": db["id"], "clip": "07_01_walk_daz", "end": 20}
+        assert http.post("/v1/jobs", json=job).status_code == 202
+
+
+def test_schemathesis_finds_no_server_error_and_no_undocumented_status(tmp_path: Path) -> None:
+    assert SCHEMATHESIS, "schemathesis is a dev dependency (pip install -e '.[dev]')"
+    with live_server(tmp_path, workers=1) as url:
+        _populate(url)
+        run = subprocess.run(
+            [SCHEMATHESIS, "run", f"{url}/openapi.json",
+             "--checks", "not_a_server_error,status_code_conformance", "--max-examples", "4",
+             "--seed", "7", "--request-timeout", "20", "--workers", "1",
+             "--phases", "examples,fuzzing,stateful", "--suppress-health-check", "all"],
+            capture_output=True, text=True, timeout=600, cwd=tmp_path,
+        )  # fmt: skip
+    summary = [line for line in run.stdout.splitlines() if "generated" in line or "Stateful" in line]
+    assert run.returncode == 0, run.stdout[-4000:]
+    assert summary, run.stdout[-2000:]

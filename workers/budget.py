@@ -1,0 +1,207 @@
+"""Work budgets: what a synthesis request will cost, estimated before it is queued.
+
+:func:`estimate_work` reads a validated request and facts of its database (rate, joints) and gives
+the output length (frames per character), the number of characters, ``joint_frames`` = characters x
+frames x joints (what every engine's output arrays and most of its working arrays scale with), a
+memory estimate and a compute-time estimate. :func:`check_work` compares them with
+:class:`WorkLimits` (the API's ``SEGUE_MAX_*`` settings) and returns the problems, each naming the
+number and its limit, so the API refuses the request at submission (413) instead of a worker
+running out of memory or time.
+
+The per-joint-frame constants are measured on this project's engines (CMU salsa, 120 fps, 38
+joints: a rhythm crowd of 40 characters x 20 s peaks at 1.1 GB and takes 11 s on one core; a
+single 1000-s dance 1.8 GB and 18 s) and rounded up; :func:`expected_frames` is also what a
+worker compares the result with, so a result shorter than asked is flagged instead of silently
+``done``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+BASE_MEMORY_BYTES = 300 * 1024 * 1024
+"""A worker process with the engines loaded (numpy, scipy, scikit-learn) and a database."""
+BYTES_PER_JOINT_FRAME = {"rhythm": 400, "control": 300, "graph": 300, "annotations": 300, "clip": 200}
+"""Peak working memory per output joint-frame, by engine (others: the largest)."""
+SECONDS_PER_JOINT_FRAME = 4e-6
+"""Compute per output joint-frame after the search budget (assembly, blending, foot clean-up)."""
+
+
+@dataclass(frozen=True, slots=True)
+class WorkLimits:
+    """The most one job may ask for (``None``: no limit on that quantity)."""
+
+    max_output_frames: int | None = 36_000
+    max_joint_frames: int | None = 10_000_000
+    max_memory_bytes: int | None = 4 << 30
+    max_budget_s: float | None = 600.0
+
+
+@dataclass(frozen=True, slots=True)
+class WorkEstimate:
+    """What a request will cost. ``frames`` is per character at the output rate (None: unknown);
+    ``characters`` counts every output motion (dancers, both partners of a couple, alternatives)."""
+
+    frames: int | None
+    characters: int
+    joints: int
+    fps: float
+    joint_frames: int | None
+    memory_bytes: int | None
+    seconds: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _music_seconds(request: Any) -> float | None:
+    music = request.music
+    if music.bpm is not None:
+        return float(music.duration_s)
+    length: float | None = None
+    if music.beats_s is not None:
+        length = float(music.beats_s[-1])
+    elif music.midi is not None:
+        try:
+            from engines.rhythm.music import parse_midi
+
+            tempo = parse_midi(request.input_bytes(music.midi))
+            length = float(tempo.tick_to_seconds([tempo.end_tick])[0])
+        except Exception:  # an unreadable file fails in the engine, with its own message
+            length = None
+    if music.duration_s is not None:
+        length = float(music.duration_s) if length is None else min(length, float(music.duration_s))
+    return length
+
+
+def expected_frames(request: Any, db_fps: float, clip_frames: dict[str, int] | None = None) -> int | None:
+    """Output frames per character that ``request`` asks for at the output rate (None: unknown).
+
+    ``clip_frames``: frames of the database's clips at the database rate, by name (for ``clip``)."""
+    engine = getattr(request, "engine", None)
+    fps = float(getattr(request, "fps", None) or db_fps)
+    if engine == "graph":
+        return int(request.frames) if request.frames is not None else round(float(request.seconds) * fps)
+    if engine == "annotations":
+        return int(request.frames)
+    if engine == "rhythm":
+        seconds = _music_seconds(request)
+        return None if seconds is None else round(seconds * fps)
+    if engine == "control":
+        trajectory = request.control.trajectory
+        if trajectory is not None:
+            return round((len(trajectory.points) - 1) / float(trajectory.fps) * fps) + 1
+        return None  # a control clip: its length is checked by the upload limits
+    if engine == "clip":
+        total = (clip_frames or {}).get(request.clip)
+        end = request.end if request.end is not None else total
+        return None if end is None else max(0, min(end, total or end) - request.start)
+    frames = getattr(request, "frames", None)
+    return int(frames) if isinstance(frames, int) else None
+
+
+def estimate_work(
+    request: Any, db_fps: float, joints: int, clip_frames: dict[str, int] | None = None
+) -> WorkEstimate:
+    """The cost of a validated request against a database of rate ``db_fps`` and ``joints`` joints."""
+    engine = str(getattr(request, "engine", ""))
+    characters = int(getattr(request, "characters", 1) or 1) * (
+        2 if getattr(request, "couples", False) else 1
+    )
+    fps = float(getattr(request, "fps", None) or db_fps)
+    frames = expected_frames(request, db_fps, clip_frames)
+    budget = float(getattr(request, "budget_s", 0.0))
+    if frames is None:
+        return WorkEstimate(None, characters, joints, fps, None, None, budget)
+    joint_frames = characters * frames * max(joints, 1)
+    per = BYTES_PER_JOINT_FRAME.get(engine, max(BYTES_PER_JOINT_FRAME.values()))
+    memory = BASE_MEMORY_BYTES + joint_frames * per
+    seconds = budget + joint_frames * SECONDS_PER_JOINT_FRAME
+    return WorkEstimate(frames, characters, joints, fps, joint_frames, memory, round(seconds, 3))
+
+
+def check_work(work: WorkEstimate, limits: WorkLimits) -> list[str]:
+    """Every limit ``work`` exceeds, as a sentence naming the number and the limit."""
+    problems = []
+    if limits.max_budget_s is not None and work.seconds > limits.max_budget_s:
+        problems.append(
+            f"the job would take about {work.seconds:.0f} s (budget_s plus assembly), over the "
+            f"{limits.max_budget_s:g}-s limit (SEGUE_MAX_JOB_SECONDS)"
+        )
+    if (
+        work.frames is not None
+        and limits.max_output_frames is not None
+        and work.frames > limits.max_output_frames
+    ):
+        problems.append(
+            f"{work.frames} output frames per character at {work.fps:g} fps is over the limit of "
+            f"{limits.max_output_frames} (SEGUE_MAX_OUTPUT_FRAMES)"
+        )
+    jf, max_jf = work.joint_frames, limits.max_joint_frames
+    if jf is not None and max_jf is not None and jf > max_jf:
+        problems.append(
+            f"{work.characters} character(s) x {work.frames} frames x {work.joints} joints = "
+            f"{jf} joint-frames is over the limit of {max_jf} (SEGUE_MAX_JOINT_FRAMES)"
+        )
+    memory, max_memory = work.memory_bytes, limits.max_memory_bytes
+    if memory is not None and max_memory is not None and memory > max_memory:
+        problems.append(
+            f"the job would need about {memory / 2**20:.0f} MiB, over the "
+            f"{max_memory / 2**20:.0f}-MiB limit (SEGUE_MAX_JOB_MEMORY_MB)"
+        )
+    return problems
+
+
+@dataclass(frozen=True, slots=True)
+class DatabaseFacts:
+    """What a budget needs of a built database: rate, joints and clip lengths (database frames)."""
+
+    fps: float
+    joints: int
+    clip_frames: dict[str, int]
+
+
+def database_facts(npz_path: str) -> DatabaseFacts:
+    """Read the facts from a database's ``data.npz`` (only the small arrays are loaded)."""
+    import numpy as np
+
+    with np.load(npz_path, allow_pickle=False) as z:
+        names = [str(n) for n in z["library.names"]]
+        counts = [int(c) for c in z["library.frame_counts"]]
+        fps = float(z["library.fps"])
+        joints = int(z["library.offsets"].shape[1])
+    return DatabaseFacts(fps, joints, dict(zip(names, counts, strict=True)))
+
+
+SHORT_FRACTION = 0.95
+"""A result with fewer than this fraction of the frames asked for is flagged as short."""
+
+
+def shortfall(store: Any, job_id: str, payload: dict[str, Any], result: str | None) -> dict[str, Any] | None:
+    """``{"frames", "requested_frames"}`` when a synthesis job's result is shorter than asked
+    (below :data:`SHORT_FRACTION`), else None. Read by the owner of a job before it relays ``done``,
+    so a short result says so in its terminal event."""
+    request_data = payload.get("request")
+    if result is None or not isinstance(request_data, dict):
+        return None
+    try:
+        from schemas.jobs import parse_job_request
+
+        request = parse_job_request(request_data)
+        if request.database is None:
+            return None
+        facts = database_facts(str(store.db_dir(request.database) / "data.npz"))
+        wanted = expected_frames(request, facts.fps, facts.clip_frames)
+        got = store.result_report(job_id, result).frames
+    except Exception:  # a flag is a courtesy: never fail a finished job over it
+        return None
+    if wanted is None or got is None or got >= SHORT_FRACTION * wanted:
+        return None
+    return {"frames": int(got), "requested_frames": int(wanted)}
+
+
+def database_frames(clips: list[tuple[int, float]], fps: float | None) -> int:
+    """Frames of a database at its rate: ``clips`` are (frames, fps) of its clips; ``fps`` the rate
+    the spec resamples them to (None: each keeps its own)."""
+    return sum(round(frames * (fps / clip_fps if fps else 1.0)) for frames, clip_fps in clips)

@@ -1,0 +1,457 @@
+"""Engines run in a child process that a thread of the worker watches: liveness a busy engine cannot
+starve, and budgets, cancels and memory enforced from outside the engine.
+
+An :class:`EngineProcess` is one long-lived child process (``spawn``) that runs one job at a time
+with :func:`workers.execute.execute_job` and sends its events back over a pipe; it keeps its
+:class:`~workers.execute.EngineCache` between jobs. The owner (the embedded backend in the API
+process, or a ``segue worker``) gives it a :class:`Task`; a watch thread of the owner relays the
+child's events (``on_event``) and calls ``on_end`` once per task with an :data:`Outcome`:
+
+* ``finished`` — the child reported the job over (it published the terminal event itself);
+* ``crashed`` — the child died (SIGKILL, the OOM killer, a segfault): the owner re-runs the job;
+* ``cancel_timeout`` — a cancel was asked and the job had not ended ``cancel_grace_s`` later;
+* ``time_limit`` — the job ran past its hard time limit (``budget_s`` + room for assembly);
+* ``memory_limit`` — the child's resident memory passed ``max_rss_bytes``.
+
+In the last three cases the supervisor kills the child (SIGKILL); the owner publishes the terminal
+event (:func:`terminal_after_kill`). Every dead child is replaced at once. Because the owner's threads
+do no engine work, the owner's heartbeats (Redis pending-entry refreshes) keep their pace however
+busy the engine is. The child polls its parent and exits when the parent is gone.
+
+Hand-written because ``concurrent.futures.ProcessPoolExecutor`` breaks for good when one process
+dies (``BrokenProcessPool``) and cannot kill the process running a given job.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing as mp
+import os
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from typing import Any, Literal
+
+from schemas import EventType
+
+log = logging.getLogger("segue.supervisor")
+
+Outcome = Literal["finished", "crashed", "cancel_timeout", "time_limit", "memory_limit"]
+
+PAGE_SIZE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+
+
+@dataclass(slots=True)
+class ChildConfig:
+    """What a child process needs to run jobs (picklable)."""
+
+    store_root: str
+    plugins: list[str] = field(default_factory=list)
+    engine_cache: int = 4
+    cache_url: str | None = None
+    prefix: str = "segue:"
+    chunk_size: int = 4 << 20
+
+
+@dataclass(slots=True)
+class Task:
+    """One run of a job in a child process."""
+
+    job_id: str
+    kind: str
+    payload: dict[str, Any]
+    attempt: int = 1
+    time_limit_s: float | None = None
+    seq: int = 0
+    started: float = 0.0
+    cancel_asked: float | None = None
+    best: str | None = None
+    terminal: bool = False
+    context: Any = None
+
+
+def time_limit(kind: str, payload: dict[str, Any], grace_s: float, build_timeout_s: float) -> float:
+    """Hard time limit of a job, seconds: builds ``build_timeout_s``; syntheses their ``budget_s``
+    plus ``grace_s`` (database loading and the assembly after the search; the work budget checked at
+    submission keeps that bounded)."""
+    if kind == "build":
+        return build_timeout_s
+    request = payload.get("request")
+    budget = request.get("budget_s", 10.0) if isinstance(request, dict) else 10.0
+    budget = float(budget) if isinstance(budget, int | float) else 10.0
+    return budget + grace_s
+
+
+def terminal_after_kill(outcome: Outcome, task: Task, detail: str) -> tuple[EventType, dict[str, Any]]:
+    """The terminal event the owner publishes after the supervisor stopped a job."""
+    if outcome == "cancel_timeout":
+        return EventType.cancelled, {"result": task.best, "stopped": "killed after the cancel grace"}
+    if outcome == "time_limit" and task.best is not None:
+        return EventType.done, {"result": task.best, "stopped": "time_limit", "message": detail}
+    code = "time_limit" if outcome == "time_limit" else "memory_limit"
+    return EventType.failed, {"error": {"code": code, "message": detail}, "result": task.best}
+
+
+def rss_bytes(pid: int) -> int:
+    """Resident memory of a process (Linux ``/proc``; 0 when unknown)."""
+    try:
+        with open(f"/proc/{pid}/statm", "rb") as fh:
+            return int(fh.read().split()[1]) * PAGE_SIZE
+    except (OSError, IndexError, ValueError):
+        return 0
+
+
+# -- the child --------------------------------------------------------------------------------------
+def _watch_parent(parent: int) -> None:
+    while True:
+        time.sleep(0.5)
+        if os.getppid() != parent:
+            os._exit(0)  # the worker is gone: nobody will read our events
+
+
+def _child_main(tasks: Connection, events: Connection, cancel: Any, config: ChildConfig, parent: int) -> None:
+    import importlib
+
+    from engines.registry import load_plugins
+    from motion.allocator import tune_process
+
+    from .execute import EngineCache, execute_job
+    from .store import Store
+
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="segue-parent-watch").start()
+    tune_process()
+    load_plugins()
+    for module in config.plugins:
+        importlib.import_module(module)
+    store = Store(config.store_root)
+    cache = EngineCache(config.engine_cache)
+    load = save = None
+    if config.cache_url:
+        import redis
+
+        from .redis_cache import DatabaseCache
+        from .redis_keys import RedisKeys
+
+        db_cache = DatabaseCache(
+            redis.Redis.from_url(config.cache_url),
+            store,
+            RedisKeys(config.prefix),
+            chunk_size=config.chunk_size,
+        )
+        load, save = db_cache.load, db_cache.save
+    events.send(("ready", os.getpid()))
+    while True:
+        try:
+            message = tasks.recv()
+        except (EOFError, OSError):
+            return
+        if message is None:
+            return
+        seq, job_id, kind, payload, attempt = message
+
+        def publish(type_: EventType, data: dict[str, Any], seq: int = seq) -> None:
+            events.send(("event", seq, type_.value, data, time.time()))
+
+        def should_stop(seq: int = seq) -> bool:
+            return bool(cancel.value == seq)
+
+        execute_job(
+            store,
+            job_id,
+            kind,
+            payload,
+            publish,
+            should_stop,
+            cache,
+            load_database_bytes=load,
+            save_database_bytes=save,
+            attempt=attempt,
+        )
+        events.send(("end", seq))
+
+
+# -- the supervisor -----------------------------------------------------------------------------------
+OnEvent = Callable[[Task, EventType, dict[str, Any], float], None]
+OnEnd = Callable[[Task, Outcome, str], None]
+
+
+class EngineProcess:
+    """One supervised child process running one job at a time (see the module docstring)."""
+
+    def __init__(
+        self,
+        name: str,
+        config: ChildConfig,
+        on_event: OnEvent,
+        on_end: OnEnd,
+        *,
+        cancel_grace_s: float = 2.0,
+        max_rss_bytes: int | None = None,
+        poll_s: float = 0.05,
+        on_ready: Callable[[], None] | None = None,
+        spawner: Callable[[Callable[[], None]], None] | None = None,
+    ) -> None:
+        self.name, self.config = name, config
+        self.on_ready = on_ready
+        self.spawner = spawner
+        """Runs ``process.start`` (e.g. on the owner's main thread, so the children are children of
+        that thread in ``/proc/<pid>/task/<pid>/children``); default: the watch thread."""
+        self.on_event, self.on_end = on_event, on_end
+        self.cancel_grace_s, self.max_rss_bytes, self.poll_s = cancel_grace_s, max_rss_bytes, poll_s
+        self._ctx = mp.get_context("spawn")
+        self._lock = threading.Lock()
+        self._task: Task | None = None
+        self._seq = 0
+        self._closing = False
+        self._process: Any = None
+        self._tasks: Connection | None = None
+        self._events: Connection | None = None
+        self._cancel: Any = None
+        self._thread: threading.Thread | None = None
+        self.ready = threading.Event()
+        self.restarts = 0
+        self.failed_starts = 0
+        self.pid: int | None = None
+
+    # -- owner side ---------------------------------------------------------------------------
+    def start(self) -> None:
+        """Start the child and the watch thread (returns at once; ``ready`` is set once it runs)."""
+        self._thread = threading.Thread(target=self._watch, name=f"segue-supervisor-{self.name}", daemon=True)
+        self._thread.start()
+
+    @property
+    def busy(self) -> bool:
+        return self._task is not None
+
+    @property
+    def idle(self) -> bool:
+        """Ready for a task (alive, started and not running one)."""
+        return self.ready.is_set() and self._task is None and not self._closing
+
+    @property
+    def task(self) -> Task | None:
+        return self._task
+
+    def run(self, task: Task) -> bool:
+        """Hand ``task`` to the child; False when it is busy or not ready (try another)."""
+        with self._lock:
+            if not self.idle or self._tasks is None:
+                return False
+            self._seq += 1
+            task.seq, task.started = self._seq, time.monotonic()
+            self._task = task
+            try:
+                self._tasks.send((task.seq, task.job_id, task.kind, task.payload, task.attempt))
+            except (OSError, ValueError):
+                self._task = None
+                return False
+            return True
+
+    def cancel(self, job_id: str) -> bool:
+        """Ask the running job to stop (it has ``cancel_grace_s`` to end by itself); False when this
+        process does not run ``job_id``."""
+        with self._lock:
+            task = self._task
+            if task is None or task.job_id != job_id:
+                return False
+            if task.cancel_asked is None:
+                task.cancel_asked = time.monotonic()
+                if self._cancel is not None:
+                    self._cancel.value = task.seq
+            return True
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Stop the child (killed if it does not stop) and the watch thread."""
+        self._closing = True
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            if self._tasks is not None:
+                self._tasks.send(None)
+        process = self._process
+        if process is not None:
+            process.join(timeout if self._task is None else 0.5)
+            if process.is_alive():
+                process.kill()
+                process.join(5)
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout)
+
+    # -- watch thread ---------------------------------------------------------------------------
+    def _spawn(self) -> bool:
+        parent_tasks, child_tasks = self._ctx.Pipe(duplex=False)  # (receive end, send end)
+        parent_events, child_events = self._ctx.Pipe(duplex=False)
+        cancel = self._ctx.RawValue("q", 0)
+        process = self._ctx.Process(
+            target=_child_main,
+            args=(parent_tasks, child_events, cancel, self.config, os.getpid()),
+            name=f"segue-engine-{self.name}",
+            daemon=True,
+        )
+        try:
+            if self.spawner is not None:
+                self.spawner(process.start)
+            else:
+                process.start()
+        except Exception:
+            log.exception("engine process %s could not start", self.name)
+            return False
+        parent_tasks.close()
+        child_events.close()
+        self._process, self._tasks, self._events, self._cancel = process, child_tasks, parent_events, cancel
+        self.pid = process.pid
+        return True
+
+    def _watch(self) -> None:
+        backoff = 0.2
+        while not self._closing:
+            if not self._spawn():
+                self.failed_starts += 1
+                time.sleep(backoff)
+                backoff = min(backoff * 2, 10.0)
+                continue
+            outcome = self._supervise()
+            self.ready.clear()
+            if self._closing:
+                break
+            self.restarts += 1
+            if outcome == "start_failed":
+                self.failed_starts += 1
+                time.sleep(backoff)
+                backoff = min(backoff * 2, 10.0)
+            else:
+                backoff = 0.2
+        self._cleanup()
+
+    def _cleanup(self) -> None:
+        for conn in (self._tasks, self._events):
+            with contextlib.suppress(OSError):
+                if conn is not None:
+                    conn.close()
+
+    def _supervise(self) -> str:
+        """Relay events until the child dies (or is killed); returns why it ended."""
+        process, events = self._process, self._events
+        assert events is not None
+        next_rss = 0.0
+        while True:
+            try:
+                has_message = events.poll(self.poll_s)
+            except (OSError, EOFError):
+                has_message = False
+            if has_message:
+                try:
+                    message = events.recv()
+                except (EOFError, OSError):
+                    return self._died(process, "crashed", "the engine process died")
+                self._handle(message)
+                continue
+            if not process.is_alive():
+                self._drain(events)
+                return self._died(
+                    process, "crashed", f"the engine process died (exit code {process.exitcode})"
+                )
+            if self._closing:
+                return "closing"
+            task = self._task
+            if task is None:
+                continue
+            now = time.monotonic()
+            if task.cancel_asked is not None and now - task.cancel_asked > self.cancel_grace_s:
+                return self._kill(
+                    process,
+                    "cancel_timeout",
+                    f"the job did not stop {self.cancel_grace_s:g} s after its cancel",
+                )
+            if task.time_limit_s is not None and now - task.started > task.time_limit_s:
+                return self._kill(
+                    process, "time_limit", f"the job ran past its {task.time_limit_s:g}-s time limit"
+                )
+            if self.max_rss_bytes and now >= next_rss:
+                next_rss = now + 0.25
+                rss = rss_bytes(process.pid)
+                if rss > self.max_rss_bytes:
+                    return self._kill(
+                        process,
+                        "memory_limit",
+                        f"the job used {rss / 2**20:.0f} MiB, over the "
+                        f"{self.max_rss_bytes / 2**20:.0f}-MiB limit",
+                    )
+
+    def _handle(self, message: tuple[Any, ...]) -> None:
+        kind = message[0]
+        if kind == "ready":
+            self.failed_starts = 0
+            self.ready.set()
+            if self.on_ready is not None:
+                try:
+                    self.on_ready()
+                except Exception:
+                    log.exception("engine process %s: the ready callback failed", self.name)
+            return
+        task = self._task
+        if task is None or message[1] != task.seq:
+            return  # a late message of a task already given up
+        if kind == "event":
+            _, _, type_value, data, when = message
+            type_ = EventType(type_value)
+            if type_ == EventType.solution and isinstance(data.get("result"), str):
+                task.best = data["result"]
+            if type_.terminal:
+                task.terminal = True
+            try:
+                self.on_event(task, type_, data, when)
+            except Exception:
+                log.exception("job %s: relaying a %s event failed", task.job_id, type_.value)
+        elif kind == "end":
+            self._finish(task, "finished", "")
+
+    def _finish(self, task: Task, outcome: Outcome, detail: str) -> None:
+        with self._lock:
+            self._task = None
+            if self._cancel is not None:
+                self._cancel.value = 0
+        try:
+            self.on_end(task, outcome, detail)
+        except Exception:
+            log.exception("job %s: ending it (%s) failed", task.job_id, outcome)
+
+    def _drain(self, events: Connection) -> None:
+        """Relay what the child sent before it died."""
+        with contextlib.suppress(EOFError, OSError):
+            while events.poll(0):
+                self._handle(events.recv())
+
+    def _kill(self, process: Any, outcome: Outcome, detail: str) -> str:
+        task = self._task
+        log.warning(
+            "engine process %s (job %s): %s; killing it", self.name, task.job_id if task else None, detail
+        )
+        process.kill()
+        process.join(5)
+        return self._died(process, outcome, detail)
+
+    def _died(self, process: Any, outcome: Outcome, detail: str) -> str:
+        process.join(1)
+        if self._events is not None:
+            self._drain(self._events)
+        was_ready = self.ready.is_set()
+        self.ready.clear()
+        task = self._task
+        if task is not None:
+            self._finish(task, outcome, detail)
+        elif not was_ready and not self._closing:
+            log.error("engine process %s died while starting (exit code %s)", self.name, process.exitcode)
+            return "start_failed"
+        if outcome == "crashed":
+            log.warning("engine process %s: %s", self.name, detail)
+        return outcome
+
+
+def engine_plugins() -> list[str]:
+    """Modules of the engines registered in this process that are not built in (the children
+    import them too, so an engine registered by the owner runs in its children)."""
+    from engines.registry import ENGINES
+
+    return sorted({cls.__module__ for cls in ENGINES.values() if not cls.__module__.startswith("engines.")})
