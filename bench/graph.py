@@ -6,12 +6,14 @@ Builds a graph database from dataset-2 walks, turns and runs at 30 fps, then sea
 
 ``{"frames_db", "clips", "leaf_edges", "root_edges", "build_s", "first_solution_ms",
 "within_5pct_s", "score_at_1s", "final_score", "position_error_cm", "heading_error_deg",
-"length_frames", "foot_slip_m_s", "foot_slip_sources_m_s", "solutions"}``
+"length_frames", "foot_slip_m_s", "foot_slip_sources_m_s", "solutions", "search_s", "ok", "reasons"}``
 
 ``within_5pct_s`` is the time of the first solution whose score is within 5% of the final best
 (the score at the end of the budget); ``score_at_1s`` the best score emitted within 1 s.
 ``foot_slip_m_s`` is :func:`motion.metrics.foot_slip` of the output (contacts detected on it);
-``foot_slip_sources_m_s`` the same metric on the database clips (frame-weighted mean), for scale.
+``foot_slip_sources_m_s`` the same metric on the database clips (frame-weighted mean), for scale;
+``search_s`` when the last solution was emitted (the search stops once it converges); ``ok`` and
+``reasons`` the best result's quality report.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import CollectingEmitter  # noqa: E402
+from engines.base import CollectingEmitter, foot_floor_arrays  # noqa: E402
 from engines.graph.build import build_graph  # noqa: E402
 from engines.graph.engine import GraphEngine  # noqa: E402
 from engines.library import ClipInput, build_library  # noqa: E402
@@ -66,6 +68,9 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     library = build_library([ClipInput(Path(f).stem, Path(f).read_bytes()) for f in files], spec.fps)
     arrays = build_graph(spec, library, CollectingEmitter(), lambda: False)
+    # what a database build stores beside the graph: the examples' quality reference and foot heights
+    arrays.update(GraphEngine.quality_reference_of(library, arrays).to_arrays())
+    arrays.update(foot_floor_arrays(library, GraphEngine.example_clips(library, arrays)))
     build_s = time.perf_counter() - t0
     report: dict[str, Any] = json.loads(str(arrays["graph.report"]))
     engine = GraphEngine(library, arrays)
@@ -113,6 +118,9 @@ def main(argv: list[str] | None = None) -> int:
         "foot_slip_m_s": round(foot_slip(motion, pos), 4),
         "foot_slip_sources_m_s": round(sources, 4),
         "solutions": len(events),
+        "search_s": round(events[-1][0], 3),
+        "ok": None if best.quality is None else best.quality.ok,
+        "reasons": [] if best.quality is None else best.quality.reasons,
     }
     print(json.dumps(out))
     return 0

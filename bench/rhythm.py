@@ -68,6 +68,34 @@ def _quality(sol: Solution, tag: str) -> dict[str, Any]:
     }
 
 
+def _sweep(engine: RhythmEngine, bpms: list[float]) -> list[dict[str, Any]]:
+    """The 20 s dance at each tempo, seeds 1-3, default accent and none: beat alignment in both
+    conventions (mean over seeds) and how many results are ``ok``."""
+    out = []
+    for bpm in bpms:
+        row: dict[str, Any] = {"bpm": bpm}
+        for tag, accent in (("default_accent", None), ("accent_0", 0.0)):
+            mint, bail, ok = [], [], 0
+            for seed in (1, 2, 3):
+                body: dict[str, Any] = {"music": {"bpm": bpm, "duration_s": 20}, "seed": seed}
+                if accent is not None:
+                    body["accent"] = accent
+                keep = CollectingEmitter()
+                engine.search(RhythmRequest.model_validate(body), 10.0, keep, lambda: False)
+                assert keep.latest is not None and keep.latest.quality is not None
+                q = keep.latest.quality
+                mint.append(q.metrics["beat_align_mint"])
+                bail.append(q.metrics["beat_align_bailando"])
+                ok += int(q.ok)
+            row[tag] = {
+                "mint": round(float(np.mean(mint)), 3),
+                "bailando": round(float(np.mean(bail)), 3),
+                "ok": f"{ok}/3",
+            }
+        out.append(row)
+    return out
+
+
 def _crowd_rate(engine: RhythmEngine, count: int, seconds: float, avoid: bool) -> float:
     """Seconds of music synthesized per second of compute for ``count`` dancers at 30 fps."""
     t = engine.tables
@@ -110,6 +138,11 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=60.0, help="music length for one character")
     ap.add_argument("--crowd-seconds", type=float, default=4.0, help="music length per crowd trial")
     ap.add_argument("--bpm", type=float, default=110.0)
+    ap.add_argument(
+        "--sweep",
+        default="",
+        help="comma-separated BPMs: only the 20 s dance at each (seeds 1-3), with and without the accent",
+    )
     args = ap.parse_args()
     lib, spec_fields, source = _library(args.clips.split(","))
     spec = RhythmDatabaseSpec.model_validate({"kind": "rhythm", "beats_per_movement": 4, **spec_fields})
@@ -143,6 +176,14 @@ def main() -> None:
     engine.search(req.model_copy(update={"accent": 0.0}), 10.0, plain, lambda: False)
     assert plain.latest is not None
 
+    if args.sweep:
+        print(
+            json.dumps(
+                {"source": source, "sweep": _sweep(engine, [float(b) for b in args.sweep.split(",")])},
+                indent=1,
+            )
+        )
+        return
     free_n, free_trials = _largest_crowd(engine, args.crowd_seconds, avoid=False)
     steer_n, steer_trials = _largest_crowd(engine, args.crowd_seconds, avoid=True)
     out = {
