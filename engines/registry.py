@@ -68,7 +68,25 @@ class UnavailableError(LookupError):
     """A kind or engine that exists in the contract but not (yet) in this installation."""
 
 
+def engine_kind(name: str) -> str:
+    """The database kind engine ``name`` needs, without importing a built-in engine (the API checks
+    a request against its database with it). Raises :class:`UnavailableError`."""
+    if name in ENGINES:
+        return ENGINES[name].kind
+    if name in _BUILT_IN:
+        return _BUILT_IN[name][2]
+    return engine_class(name).kind  # raises UnavailableError naming the engines there are
+
+
+def require_kind(kind: str) -> None:
+    """Raise :class:`UnavailableError` unless this installation can build databases of ``kind``
+    (built-in kinds are not imported to say so)."""
+    if kind not in KIND_ENGINES and not any(t[2] == kind for t in _BUILT_IN.values()):
+        kind_class(kind)
+
+
 def engine_class(name: str) -> type[Engine]:
+    """The engine class of a request's ``engine`` (imported on first use)."""
     _load_built_in(name)
     try:
         return ENGINES[name]
@@ -80,6 +98,7 @@ def engine_class(name: str) -> type[Engine]:
 
 
 def kind_class(kind: str) -> type[Engine]:
+    """The engine class that builds and loads databases of ``kind`` (imported on first use)."""
     _load_built_in(_engine_of_kind(kind))
     try:
         return KIND_ENGINES[kind]

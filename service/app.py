@@ -28,6 +28,7 @@ from schemas import DatabaseSpec
 from schemas.jobs import JobRequest
 from workers.backend import JobBackend
 from workers.embedded import EmbeddedBackend
+from workers.execute import EngineCache
 from workers.store import Store
 
 from .errors import install_error_handlers
@@ -35,7 +36,8 @@ from .guard import CatchAll, HostOriginGuard
 from .limits import JobQuota, SessionQuota
 from .links import add_links
 from .metrics import HttpMetricsMiddleware, Metrics, observe_terminal_events
-from .routes import annotations, clips, databases, events, files, health, jobs, sessions
+from .routes import annotations as annotation_routes
+from .routes import clips, databases, events, files, health, jobs, sessions
 from .routes.annotations import Corrections
 from .settings import Settings, get_settings
 from .web import mount_web
@@ -132,8 +134,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.metrics = Metrics()
     app.state.backend = None
     app.state.session_quota = SessionQuota(settings.max_sessions)
+    app.state.engines = EngineCache(capacity=4)  # live sessions' engines (the only ones loaded here)
     install_error_handlers(app)
-    for module in (clips, files, databases, annotations, jobs, events, health, sessions):
+    for module in (clips, files, databases, annotation_routes, jobs, events, health, sessions):
         app.include_router(module.router)
     # innermost first: CatchAll turns a bug into the contract's 500 (keeping the connection), metrics
     # count it, the guard refuses foreign hosts and origins before anything else runs, and CORS (only

@@ -186,9 +186,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f"sample {SAMPLE_PREFIX}salsa-leader: {info['frames']} frames at {info['fps']:g} fps, "
         f"{len(info['joints'])} joints, height {info['height_m']:.2f} m ({info['units']})"
     )
-    for name, kwargs in (("salsa-leader.glb", {}), ("salsa-leader.json", {}), ("salsa-leader.npz", {})):
+    for name in ("salsa-leader.glb", "salsa-leader.json", "salsa-leader.npz"):
         t0 = time.perf_counter()
-        save_motion(motion, out / name, **kwargs)
+        save_motion(motion, out / name)
         size_mb = (out / name).stat().st_size / 1e6
         print(f"  wrote {out / name} ({size_mb:.1f} MB, {time.perf_counter() - t0:.2f} s)")
     if not args.no_synth:

@@ -15,14 +15,17 @@ import hmac
 from dataclasses import dataclass
 from typing import Annotated
 
+import anyio
 from fastapi import Depends
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.requests import HTTPConnection
 
 from workers.backend import JobBackend
+from workers.execute import EngineCache
 from workers.store import Store
 
 from .errors import ApiError, unauthorized
+from .limits import JobQuota, SessionQuota
 from .metrics import Metrics
 from .settings import Settings
 
@@ -55,10 +58,48 @@ def app_metrics(conn: HTTPConnection) -> Metrics:
     return metrics
 
 
+def app_job_quota(conn: HTTPConnection) -> JobQuota:
+    """Unfinished jobs per principal (``SEGUE_MAX_QUEUED_JOBS``)."""
+    quota: JobQuota = conn.app.state.job_quota
+    return quota
+
+
+def app_session_quota(conn: HTTPConnection) -> SessionQuota:
+    """Live sessions per principal (``SEGUE_MAX_SESSIONS``)."""
+    quota: SessionQuota = conn.app.state.session_quota
+    return quota
+
+
+def parse_limiter(conn: HTTPConnection, settings: Settings) -> anyio.CapacityLimiter:
+    """The app's bound on concurrent body parses (``SEGUE_MAX_PARSES``; made on first use, one per
+    app, since it belongs to the running event loop)."""
+    limiter: anyio.CapacityLimiter | None = getattr(conn.app.state, "parse_limiter", None)
+    if limiter is None:
+        limiter = anyio.CapacityLimiter(settings.max_parses)
+        conn.app.state.parse_limiter = limiter
+    return limiter
+
+
+def app_parse_limiter(conn: HTTPConnection, settings: SettingsDep) -> anyio.CapacityLimiter:
+    """:func:`parse_limiter` as a dependency."""
+    return parse_limiter(conn, settings)
+
+
+def app_engines(conn: HTTPConnection) -> EngineCache:
+    """The engines this process has loaded for live sessions (the only engine work it does itself,
+    in worker threads)."""
+    engines: EngineCache = conn.app.state.engines
+    return engines
+
+
 SettingsDep = Annotated[Settings, Depends(app_settings)]
 StoreDep = Annotated[Store, Depends(app_store)]
 BackendDep = Annotated[JobBackend, Depends(app_backend)]
 MetricsDep = Annotated[Metrics, Depends(app_metrics)]
+JobQuotaDep = Annotated[JobQuota, Depends(app_job_quota)]
+SessionQuotaDep = Annotated[SessionQuota, Depends(app_session_quota)]
+EnginesDep = Annotated[EngineCache, Depends(app_engines)]
+ParseLimiterDep = Annotated[anyio.CapacityLimiter, Depends(app_parse_limiter)]
 
 _bearer = HTTPBearer(auto_error=False, description="required on every /v1 route when SEGUE_API_TOKENS is set")
 
@@ -79,7 +120,7 @@ class Principal:
             return True
         if isinstance(owners, str):
             return owners == self.name
-        return bool(owners) and self.name in owners  # type: ignore[operator]
+        return owners is not None and self.name in owners
 
 
 def principal_of_token(entry: str) -> tuple[str, str]:

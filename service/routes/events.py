@@ -69,7 +69,7 @@ async def list_events(
     return await collect_events(backend, job_id, after, wait)
 
 
-async def _refuse(
+async def refuse_handshake(
     websocket: WebSocket,
     status: int,
     code: str,
@@ -137,7 +137,7 @@ async def stream_events(
     """Stream a job's events as JSON text messages, ending with the terminal event (see module doc)."""
     principal = websocket_principal(websocket, settings, token)
     if isinstance(principal, ApiError):
-        await _refuse(websocket, 401, principal.code, principal.message, 4401)
+        await refuse_handshake(websocket, 401, principal.code, principal.message, 4401)
         return
     try:
         job_for(principal, await backend.status(job_id))
