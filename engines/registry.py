@@ -7,7 +7,6 @@ refused with a clear message instead of being half-built.
 from __future__ import annotations
 
 import importlib
-import os
 
 from .base import Engine
 from .clip import ClipEngine
@@ -42,11 +41,6 @@ def _engine_of_kind(kind: str) -> str:
     return next((name for name, t in _BUILT_IN.items() if t[2] == kind), kind)
 
 
-PLUGINS_ENV = "SEGUE_ENGINE_PLUGINS"
-"""Comma-separated modules imported at start-up that call :func:`register` (extra engines, e.g. the
-test suite's scripted engine). Every process that runs jobs must see the same value."""
-
-
 def register(engine: type[Engine]) -> type[Engine]:
     """Add an engine (usable as a class decorator)."""
     ENGINES[engine.name] = engine
@@ -54,9 +48,11 @@ def register(engine: type[Engine]) -> type[Engine]:
     return engine
 
 
-def load_plugins(spec: str | None = None) -> list[str]:
-    """Import the plugin modules named in ``spec`` (default: the environment variable)."""
-    names = [n.strip() for n in (spec if spec is not None else os.environ.get(PLUGINS_ENV, "")).split(",")]
+def load_plugins(spec: str | None) -> list[str]:
+    """Import the plugin modules named in ``spec``, comma-separated (``SEGUE_ENGINE_PLUGINS``: modules
+    that call :func:`register`, e.g. the test suite's scripted engine); returns their names. Every
+    process that runs jobs gets the same list from its settings."""
+    names = [n.strip() for n in (spec or "").split(",")]
     loaded = []
     for name in filter(None, names):
         importlib.import_module(name)

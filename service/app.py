@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import os
 import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -23,7 +22,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.utils import get_openapi
 from pydantic import TypeAdapter
 
-from engines.registry import PLUGINS_ENV, load_plugins
+from engines.registry import load_plugins
 from schemas import DatabaseSpec
 from schemas.jobs import JobRequest
 from workers.backend import JobBackend
@@ -61,24 +60,16 @@ def make_backend(settings: Settings, store: Store) -> JobBackend:
     if settings.redis_url:
         from workers.redis_backend import RedisBackend
 
-        backend: JobBackend = RedisBackend(store, settings.redis_url)
+        backend: JobBackend = RedisBackend(store, settings.redis_url, prefix=settings.redis_prefix)
         return backend
-    return EmbeddedBackend(
-        store,
-        settings.workers,
-        cancel_grace_s=settings.cancel_grace_s,
-        time_grace_s=settings.job_grace_s,
-        max_rss_bytes=settings.max_job_memory_mb << 20,
-    )
+    return EmbeddedBackend.from_settings(store, settings)
 
 
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     """Start the store and the backend; stop the backend at shutdown."""
     settings: Settings = app.state.settings
-    if settings.engine_plugins is not None:
-        os.environ[PLUGINS_ENV] = settings.engine_plugins  # worker processes load the same plugins
-    load_plugins(settings.engine_plugins)
+    load_plugins(settings.engine_plugins)  # the engine processes get them from the settings too
     store = Store(settings.data_dir)
     backend = make_backend(settings, store)
     observe_terminal_events(backend.hub, app.state.metrics, since=time.time())

@@ -43,6 +43,7 @@ from motion.units import METRES_PER_UNIT
 from schemas import EventType, JobEvent, Report
 from schemas.jobs import RequestError
 from workers.execute import JobFailure
+from workers.settings import get_settings, with_options
 
 SAMPLE_PREFIX = "sample:"
 
@@ -310,20 +311,12 @@ class _events_sink:  # noqa: N801 - a tiny context manager used like a function
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    import os
-
     import uvicorn
 
-    if args.data:
-        os.environ["SEGUE_DATA_DIR"] = args.data
-    if args.redis:
-        os.environ["SEGUE_REDIS_URL"] = args.redis
-    if args.workers is not None:
-        os.environ["SEGUE_WORKERS"] = str(args.workers)
     from service.app import create_app
-    from service.settings import get_settings
 
-    if not is_loopback(args.host) and not get_settings().auth_enabled:
+    settings = with_options(get_settings(), data_dir=args.data, redis_url=args.redis, workers=args.workers)
+    if not is_loopback(args.host) and not settings.auth_enabled:
         print(
             f"segue: error: --host {args.host} would open the API to the network without tokens; set "
             "SEGUE_API_TOKENS (and SEGUE_ALLOWED_HOSTS) first: without tokens Segue is a single-user tool "
@@ -331,7 +324,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
-    uvicorn.run(create_app(), host=args.host, port=args.port, log_level=args.log_level)
+    uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level)
     return 0
 
 
@@ -348,14 +341,11 @@ def is_loopback(host: str) -> bool:
 
 
 def cmd_worker(args: argparse.Namespace) -> int:
-    from workers.redis_worker import main as worker_main
+    from workers.redis_worker import serve
 
-    argv = ["--redis", args.redis]
-    if args.data:
-        argv += ["--data", args.data]
-    if args.name:
-        argv += ["--name", args.name]
-    return int(worker_main(argv) or 0)
+    return serve(
+        with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name)
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -461,7 +451,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     tune_process()
     parser = build_parser()
     args = parser.parse_args(argv)
-    load_plugins()
+    try:
+        settings = get_settings()
+    except ValidationError as exc:
+        print(f"segue: error: invalid SEGUE_* setting: {_validation_message(exc)}", file=sys.stderr)
+        return 2
+    load_plugins(settings.engine_plugins)
     try:
         return int(args.func(args))
     except ValidationError as exc:

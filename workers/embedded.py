@@ -35,6 +35,7 @@ from schemas.jobs import JobKind
 from .backend import BackendUnavailable, EventHub
 from .budget import shortfall
 from .execute import apply_event
+from .settings import Settings
 from .store import NotFoundError, Store
 from .supervisor import (
     ChildConfig,
@@ -52,6 +53,20 @@ log = logging.getLogger("segue.embedded")
 class EmbeddedBackend:
     """Jobs in local supervised engine processes (see the module docstring)."""
 
+    @classmethod
+    def from_settings(cls, store: Store, settings: Settings) -> EmbeddedBackend:
+        """The backend ``segue serve`` runs: ``workers`` processes with the settings' job limits."""
+        return cls(
+            store,
+            settings.workers,
+            cancel_grace_s=settings.cancel_grace_s,
+            time_grace_s=settings.job_grace_s,
+            build_timeout_s=settings.build_timeout_s,
+            max_rss_bytes=settings.max_rss_bytes,
+            plugins=settings.engine_plugins,
+            engine_cache=settings.engine_cache,
+        )
+
     def __init__(
         self,
         store: Store,
@@ -62,8 +77,11 @@ class EmbeddedBackend:
         time_grace_s: float = 30.0,
         build_timeout_s: float = 3600.0,
         max_rss_bytes: int | None = None,
+        plugins: str | None = None,
+        engine_cache: int = 4,
     ) -> None:
         self.store = store
+        self.plugins, self.engine_cache = plugins, engine_cache
         self.workers = max(1, workers)
         self.max_attempts = max_attempts
         self.cancel_grace_s, self.time_grace_s = cancel_grace_s, time_grace_s
@@ -79,7 +97,11 @@ class EmbeddedBackend:
     # -- lifecycle ------------------------------------------------------------------------------
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
-        config = ChildConfig(store_root=str(self.store.root), plugins=engine_plugins())
+        config = ChildConfig(
+            store_root=str(self.store.root),
+            plugins=engine_plugins(self.plugins),
+            engine_cache=self.engine_cache,
+        )
         for i in range(self.workers):
             process = EngineProcess(
                 f"embedded-{i}",
