@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, TypeVar
 
 import anyio
 from fastapi import Depends
@@ -29,17 +30,32 @@ from .limits import JobQuota, SessionQuota
 from .metrics import Metrics
 from .settings import Settings
 
-
-def app_settings(conn: HTTPConnection) -> Settings:
-    """The settings the app was created with."""
-    settings: Settings = conn.app.state.settings
-    return settings
+State = TypeVar("State")
 
 
-def app_store(conn: HTTPConnection) -> Store:
-    """The durable store."""
-    store: Store = conn.app.state.store
-    return store
+def from_state(name: str, kind: type[State]) -> Callable[[HTTPConnection], State]:
+    """A dependency giving ``app.state.<name>`` (set by :func:`service.app.create_app`) as a ``kind``."""
+
+    def dependency(conn: HTTPConnection) -> State:
+        value: State = getattr(conn.app.state, name)
+        return value
+
+    dependency.__name__ = dependency.__qualname__ = f"app_{name}"
+    dependency.__doc__ = f"The app's {name} (``app.state.{name}``)."
+    return dependency
+
+
+app_settings = from_state("settings", Settings)
+"""The settings the app was created with (tests override this dependency)."""
+app_store = from_state("store", Store)
+app_metrics = from_state("metrics", Metrics)
+app_job_quota = from_state("job_quota", JobQuota)
+"""Unfinished jobs per principal (``SEGUE_MAX_QUEUED_JOBS``)."""
+app_session_quota = from_state("session_quota", SessionQuota)
+"""Live sessions per principal (``SEGUE_MAX_SESSIONS``)."""
+app_engines = from_state("engines", EngineCache)
+"""The engines this process has loaded for live sessions (the only engine work it does itself, in
+worker threads)."""
 
 
 def app_backend(conn: HTTPConnection) -> JobBackend:
@@ -52,24 +68,6 @@ def app_backend(conn: HTTPConnection) -> JobBackend:
     return backend
 
 
-def app_metrics(conn: HTTPConnection) -> Metrics:
-    """The process's metrics."""
-    metrics: Metrics = conn.app.state.metrics
-    return metrics
-
-
-def app_job_quota(conn: HTTPConnection) -> JobQuota:
-    """Unfinished jobs per principal (``SEGUE_MAX_QUEUED_JOBS``)."""
-    quota: JobQuota = conn.app.state.job_quota
-    return quota
-
-
-def app_session_quota(conn: HTTPConnection) -> SessionQuota:
-    """Live sessions per principal (``SEGUE_MAX_SESSIONS``)."""
-    quota: SessionQuota = conn.app.state.session_quota
-    return quota
-
-
 def parse_limiter(conn: HTTPConnection, settings: Settings) -> anyio.CapacityLimiter:
     """The app's bound on concurrent body parses (``SEGUE_MAX_PARSES``; made on first use, one per
     app, since it belongs to the running event loop)."""
@@ -80,16 +78,11 @@ def parse_limiter(conn: HTTPConnection, settings: Settings) -> anyio.CapacityLim
     return limiter
 
 
-def app_parse_limiter(conn: HTTPConnection, settings: SettingsDep) -> anyio.CapacityLimiter:
+def app_parse_limiter(
+    conn: HTTPConnection, settings: Annotated[Settings, Depends(app_settings)]
+) -> anyio.CapacityLimiter:
     """:func:`parse_limiter` as a dependency."""
     return parse_limiter(conn, settings)
-
-
-def app_engines(conn: HTTPConnection) -> EngineCache:
-    """The engines this process has loaded for live sessions (the only engine work it does itself,
-    in worker threads)."""
-    engines: EngineCache = conn.app.state.engines
-    return engines
 
 
 SettingsDep = Annotated[Settings, Depends(app_settings)]
