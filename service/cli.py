@@ -348,24 +348,22 @@ def cmd_worker(args: argparse.Namespace) -> int:
     )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
-        prog="segue", description="Segue: motion synthesis by example from motion capture."
+def _add_limits(p: argparse.ArgumentParser) -> None:
+    """The BVH reader's limits (``--max-joints``, ``--max-frames``)."""
+    p.add_argument(
+        "--max-joints", type=int, default=1024, help="refuse files with more joints (default 1024)"
     )
-    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    p.add_argument("--max-frames", type=int, default=2_000_000, help="refuse files with more frames")
 
-    def limits(p: argparse.ArgumentParser) -> None:
-        p.add_argument(
-            "--max-joints", type=int, default=1024, help="refuse files with more joints (default 1024)"
-        )
-        p.add_argument("--max-frames", type=int, default=2_000_000, help="refuse files with more frames")
 
+def _add_file_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The commands on one motion file: ``inspect``, ``beats``, ``convert``."""
     units = sorted(METRES_PER_UNIT)
     p = sub.add_parser("inspect", help="frames, fps, joints, height and units guess of a BVH file")
     p.add_argument("file", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--units", choices=units, help="declare the file's length unit instead of guessing")
-    limits(p)
+    _add_limits(p)
     p.set_defaults(func=cmd_inspect)
 
     p = sub.add_parser("beats", help="motion beats of a BVH file: tempo and beat times (Kim et al. 2003)")
@@ -380,7 +378,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--tempo", default="40:200", help="tempo range LOW:HIGH in beats per minute (default 40:200)"
     )
-    limits(p)
+    _add_limits(p)
     p.set_defaults(func=cmd_beats)
 
     p = sub.add_parser("convert", help="convert a BVH file by output extension: " + " ".join(OUTPUT_SUFFIXES))
@@ -399,9 +397,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--ground-root", action="store_true", help="add the explicit ground root joint (always in .glb)"
     )
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
-    limits(p)
+    _add_limits(p)
     p.set_defaults(func=cmd_convert)
 
+
+def _add_sample_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The bundled samples: ``samples`` and the ``demo``."""
     p = sub.add_parser("samples", help="list the bundled sample clips")
     p.set_defaults(func=cmd_samples)
 
@@ -413,6 +414,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-synth", action="store_true", help="only convert the clip (no database, no dance)")
     p.set_defaults(func=cmd_demo)
 
+
+def _add_job_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Jobs in this process, on files: ``build`` and ``synth`` (the API's JSON)."""
     p = sub.add_parser("build", help="build a database from a spec file (clip paths relative to it)")
     p.add_argument("spec", help='database spec JSON, e.g. {"kind": "clips", "clips": [{"bvh": "a.bvh"}]}')
     p.add_argument("--out", required=True, help="database directory to write")
@@ -430,6 +434,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", "-q", action="store_true")
     p.set_defaults(func=cmd_synth)
 
+
+def _add_server_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The runtime: ``serve`` (the API) and ``worker`` (a Redis worker)."""
     p = sub.add_parser("serve", help="run the HTTP/WebSocket API (embedded workers unless --redis)")
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, default=8000)
@@ -444,6 +451,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data", help="data directory shared with the API (default $SEGUE_DATA_DIR)")
     p.add_argument("--name", help="worker name (default host-pid)")
     p.set_defaults(func=cmd_worker)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``segue``'s parser: one sub-command per job a user has."""
+    ap = argparse.ArgumentParser(
+        prog="segue", description="Segue: motion synthesis by example from motion capture."
+    )
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_file_commands(sub)
+    _add_sample_commands(sub)
+    _add_job_commands(sub)
+    _add_server_commands(sub)
     return ap
 
 
