@@ -27,7 +27,7 @@ from fastapi import Depends
 from starlette.requests import Request
 
 from .deps import SettingsDep, parse_limiter
-from .errors import ApiError
+from .errors import ApiError, responses
 from .settings import Settings
 from .uploads import read_body
 
@@ -138,3 +138,13 @@ async def require_json_intent(request: Request) -> None:
 
 JsonIntent = Depends(require_json_intent)
 """Add to a bodyless write route: ``dependencies=[JsonIntent]``."""
+
+
+def delete_route(*statuses: int) -> dict[str, Any]:
+    """The options of a ``DELETE`` route: 204, the JSON-intent guard, and its error responses
+    (401, 404, 415, 422 and ``statuses``): ``@router.delete("/{id}", **delete_route())``."""
+    return {
+        "status_code": 204,
+        "dependencies": [JsonIntent],
+        "responses": responses(*sorted({401, 404, 415, 422, *statuses})),
+    }

@@ -14,7 +14,7 @@ from schemas import ClipInfo
 
 from ..deps import ParseLimiterDep, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, responses
-from ..jsonbody import JsonIntent
+from ..jsonbody import delete_route
 from ..owners import clip_for, hold, only_visible, release
 from ..uploads import read_upload, stored, upload_body
 
@@ -95,12 +95,7 @@ def get_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> ClipInfo
     return clip_for(store, principal, clip_id)
 
 
-@router.delete(
-    "/{clip_id}",
-    status_code=status.HTTP_204_NO_CONTENT,
-    dependencies=[JsonIntent],
-    responses=responses(401, 404, 422, 415),
-)
+@router.delete("/{clip_id}", **delete_route())
 def delete_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
     """Delete your clip (databases already built from it keep their data). The bytes go when no
     other principal holds the same clip."""

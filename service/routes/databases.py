@@ -24,7 +24,7 @@ from workers.store import NotFoundError, Store, now
 from ..deps import BackendDep, JobQuotaDep, MetricsDep, Principal, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, conflict, responses
 from ..jobs_common import new_job_id, submit_job
-from ..jsonbody import JsonIntent, json_body, json_body_doc
+from ..jsonbody import delete_route, json_body, json_body_doc
 from ..metrics import Metrics
 from ..owners import database_for, only_visible, release, visible
 
@@ -225,12 +225,7 @@ def get_database(db_id: str, store: StoreDep, principal: PrincipalDep) -> Databa
     return database_for(store, principal, db_id)
 
 
-@router.delete(
-    "/{db_id}",
-    status_code=status.HTTP_204_NO_CONTENT,
-    dependencies=[JsonIntent],
-    responses=responses(401, 404, 409, 422, 415),
-)
+@router.delete("/{db_id}", **delete_route(409))
 def delete_database(db_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
     """Delete your database (409 while it is being built, or while unfinished jobs use it). The data
     goes when no other principal holds the same database."""

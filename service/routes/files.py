@@ -15,7 +15,7 @@ from schemas.files import FileInfo
 
 from ..deps import PrincipalDep, SettingsDep, StoreDep
 from ..errors import responses
-from ..jsonbody import JsonIntent
+from ..jsonbody import delete_route
 from ..owners import file_for, hold, only_visible, release
 from ..uploads import read_upload, stored, upload_body
 
@@ -70,12 +70,7 @@ def get_file(file_id: str, store: StoreDep, principal: PrincipalDep) -> FileInfo
     return file_for(store, principal, file_id)
 
 
-@router.delete(
-    "/{file_id}",
-    status_code=status.HTTP_204_NO_CONTENT,
-    dependencies=[JsonIntent],
-    responses=responses(401, 404, 422, 415),
-)
+@router.delete("/{file_id}", **delete_route())
 def delete_file(file_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
     """Delete your file (jobs already submitted with it fail if they still need it). The bytes go when
     no other principal holds the same file."""

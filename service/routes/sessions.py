@@ -35,14 +35,14 @@ from pydantic import TypeAdapter, ValidationError
 
 from engines.base import LiveSession
 from engines.registry import kind_class
+from schemas import DatabaseInfo
 from schemas.rhythm import SessionBeat, SessionBpm, SessionDirection, SessionMessage, SessionStop
 from workers.execute import EngineCache
-from workers.store import NotFoundError, Store
+from workers.store import Store
 
-from ..deps import EnginesDep, SessionQuotaDep, SettingsDep, StoreDep, websocket_principal
-from ..errors import ApiError
+from ..deps import EnginesDep, Principal, SessionQuotaDep, SettingsDep, StoreDep
 from ..owners import database_for
-from .events import refuse_handshake
+from .events import WebSocketToken, refuse_handshake, websocket_owned
 
 router = APIRouter(prefix="/v1/sessions", tags=["sessions"])
 
@@ -84,19 +84,17 @@ async def rhythm_session(
     seed: Annotated[int, Query(ge=0, le=2**32 - 1)] = 0,
     fps: Annotated[float | None, Query(gt=0, le=240)] = None,
     accent: Annotated[float, Query(ge=0, le=0.9)] = 0.6,
-    token: Annotated[str | None, Query(description="bearer token (or the Authorization header)")] = None,
+    token: WebSocketToken = None,
 ) -> None:
     """Dance to beats sent live (see the module doc for the message format)."""
-    principal = websocket_principal(websocket, settings, token)
-    if isinstance(principal, ApiError):
-        await refuse_handshake(websocket, 401, principal.code, principal.message, 4401)
+
+    async def find(principal: Principal) -> DatabaseInfo:
+        return await anyio.to_thread.run_sync(database_for, store, principal, database)
+
+    owned = await websocket_owned(websocket, settings, token, find)
+    if owned is None:
         return
-    try:
-        info = await anyio.to_thread.run_sync(database_for, store, principal, database)
-    except NotFoundError as exc:
-        await websocket.accept()
-        await websocket.close(code=4404, reason=str(exc)[:120])
-        return
+    principal, info = owned
     refusal = quota.refusal(principal.name)
     if refusal is not None:
         await refuse_handshake(websocket, 429, refusal.code, refusal.message, 4429, refusal.headers)
