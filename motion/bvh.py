@@ -502,24 +502,23 @@ def _is_float(tok: bytes) -> bool:
     return True
 
 
-def _motion_from_channels(skeleton: Skeleton, table: Array, fps: float, name: str, source: str) -> Motion:
-    n_frames = table.shape[0]
+RotationGroups = dict[str, tuple[list[int], list[list[int]]]]
+"""Rotation channels by Euler order: ``{order: (joints, their channel columns)}``."""
+
+
+def _channel_layout(skeleton: Skeleton) -> tuple[list[tuple[int, int, int]], RotationGroups]:
+    """Where a skeleton's channels sit in a BVH frame row: ``(joint, axis, column)`` of every
+    position channel, and the rotation channels grouped by Euler order (one vectorised
+    conversion per order)."""
+    positions: list[tuple[int, int, int]] = []
+    groups: RotationGroups = {}
     col = 0
-    root_pos = np.broadcast_to(skeleton.offsets[0], (n_frames, 3)).copy()
-    translated = skeleton.translated_joints
-    jt = np.broadcast_to(skeleton.offsets[translated], (n_frames, translated.size, 3)).copy()
-    slot = {int(j): k for k, j in enumerate(translated)}
-    groups: dict[str, tuple[list[int], list[list[int]]]] = {}
     for j, chans in enumerate(skeleton.channels):
         rot_cols: list[int] = []
         order = ""
         for c in chans:
             if c.endswith("position"):
-                axis = "XYZ".index(c[0])
-                if j == 0:
-                    root_pos[:, axis] = table[:, col]
-                else:
-                    jt[:, slot[j], axis] = table[:, col]
+                positions.append((j, "XYZ".index(c[0]), col))
             else:
                 rot_cols.append(col)
                 order += c[0]
@@ -528,6 +527,21 @@ def _motion_from_channels(skeleton: Skeleton, table: Array, fps: float, name: st
             joints, cols = groups.setdefault(order, ([], []))
             joints.append(j)
             cols.append(rot_cols)
+    return positions, groups
+
+
+def _motion_from_channels(skeleton: Skeleton, table: Array, fps: float, name: str, source: str) -> Motion:
+    n_frames = table.shape[0]
+    root_pos = np.broadcast_to(skeleton.offsets[0], (n_frames, 3)).copy()
+    translated = skeleton.translated_joints
+    jt = np.broadcast_to(skeleton.offsets[translated], (n_frames, translated.size, 3)).copy()
+    slot = {int(j): k for k, j in enumerate(translated)}
+    positions, groups = _channel_layout(skeleton)
+    for j, axis, col in positions:
+        if j == 0:
+            root_pos[:, axis] = table[:, col]
+        else:
+            jt[:, slot[j], axis] = table[:, col]
     # Quaternions are written in a (4, J, F) layout, frame block by frame block (small, cached
     # temporaries); the motion keeps the (F, J, 4) transposed view, which FK reads for free.
     q_soa = np.zeros((4, skeleton.num_joints, n_frames))
@@ -558,25 +572,13 @@ def channel_table(motion: Motion) -> Array:
     n_frames = motion.num_frames
     table = np.empty((n_frames, sk.num_channels))
     slot = {int(j): k for k, j in enumerate(sk.translated_joints)}
-    groups: dict[str, tuple[list[int], list[list[int]]]] = {}
-    col = 0
-    for j, chans in enumerate(sk.channels):
-        rot_cols: list[int] = []
-        order = ""
-        for c in chans:
-            if c.endswith("position"):
-                axis = "XYZ".index(c[0])
-                src = motion.root_positions if j == 0 else motion.joint_translations[:, slot[j]]
-                table[:, col] = src[:, axis]
-            else:
-                rot_cols.append(col)
-                order += c[0]
-            col += 1
-        if order:
-            joints, cols = groups.setdefault(order, ([], []))
-            joints.append(j)
-            cols.append(rot_cols)
-        elif np.any(rot.angle_between(motion.rotations[:, j], rot.IDENTITY) > 1e-6):
+    positions, groups = _channel_layout(sk)
+    for j, axis, col in positions:
+        src = motion.root_positions if j == 0 else motion.joint_translations[:, slot[j]]
+        table[:, col] = src[:, axis]
+    rotated = {j for joints, _ in groups.values() for j in joints}
+    for j in range(sk.num_joints):
+        if j not in rotated and np.any(rot.angle_between(motion.rotations[:, j], rot.IDENTITY) > 1e-6):
             raise ExportError(f"joint {sk.names[j]!r} rotates but has no rotation channels")
     for order, (joints, cols) in groups.items():
         angles = rot.to_euler(order, motion.rotations[:, joints])
