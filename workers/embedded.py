@@ -288,13 +288,13 @@ class EmbeddedBackend:
         await self._record(info.id, EventType.queued, {}, time.time())
         self._queue.append(self._task(info.id, kind, payload, 1))
         self._dispatch()
-        return self.store.job_info(info.id)
+        return await self.status(info.id)
 
     async def status(self, job_id: str) -> JobInfo:
-        return self.store.job_info(job_id)
+        return await asyncio.to_thread(self.store.job_info, job_id)  # a file read: off the event loop
 
     async def cancel(self, job_id: str) -> JobInfo:
-        info = self.store.job_info(job_id)
+        info = await self.status(job_id)
         if info.status.finished:
             return info
         queued = next((t for t in self._queue if t.job_id == job_id), None)
@@ -305,20 +305,27 @@ class EmbeddedBackend:
             for process in self._processes:
                 if process.cancel(job_id):
                     break
-        return self.store.job_info(job_id)
+        return await self.status(job_id)
 
     async def _replay_from_disk(self, job_id: str) -> None:
-        path = self.store.job_dir(job_id) / "events.jsonl"
-        if self.hub.has(job_id) or not path.exists():
+        """The events a previous server process archived (read in a worker thread; a concurrent
+        replay's duplicates are ignored by the hub)."""
+        if self.hub.has(job_id):
             return
-        for line in path.read_text(encoding="utf-8").splitlines():
-            if line.strip():
-                await self.hub.append(JobEvent.model_validate(json.loads(line)))
+        for event in await asyncio.to_thread(self._archived, job_id):
+            await self.hub.append(event)
+
+    def _archived(self, job_id: str) -> list[JobEvent]:
+        path = self.store.job_dir(job_id) / "events.jsonl"
+        if not path.exists():
+            return []
+        lines = path.read_text(encoding="utf-8").splitlines()
+        return [JobEvent.model_validate(json.loads(line)) for line in lines if line.strip()]
 
     async def events(self, job_id: str, after: int = 0) -> AsyncIterator[JobEvent]:
-        self.store.job_info(job_id)  # NotFoundError for unknown jobs
+        await self.status(job_id)  # NotFoundError for unknown jobs
         await self._replay_from_disk(job_id)
-        info = self.store.job_info(job_id)
+        info = await self.status(job_id)
         if info.status.finished and not self.hub.log(job_id).terminal:
             return  # finished before this process kept its log and left none on disk
         async for event in self.hub.follow(job_id, after):
