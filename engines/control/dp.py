@@ -284,7 +284,6 @@ def interpretation(
     if rigid:
         return _rigid_interpretation(x, inst, cell_inst, cell_dur, rate, context)
     t_len, p, _ = x.shape
-    c2 = 2 * context
     x = pad_edges(x, context)
     cells = cell_inst.shape[0]
     # written once below: the first d columns of a duration-d row (no window yet) and rows longer
@@ -293,20 +292,13 @@ def interpretation(
     Cc = np.empty((cells, t_len + 1))
     Ss = np.empty((cells, t_len + 1))
     sum_a = np.zeros((cells, 2))
-    n_pts_c = ((cell_dur + c2) * p).astype(np.float64)
-    xx, xz, xy = x[..., 0], x[..., 2], x[..., 1]
-    zero = np.zeros(1)
-    cs_x = np.concatenate((zero, np.cumsum(xx.sum(1))))
-    cs_z = np.concatenate((zero, np.cumsum(xz.sum(1))))
-    cs_sq = np.concatenate((zero, np.cumsum((xx**2 + xz**2 + xy**2).sum(1))))
-    # every term is scaled by 1 / (P rate) up front, so D comes out in m^2 s without another pass
-    scale = 1.0 / (p * rate)
+    n_pts_c = ((cell_dur + 2 * context) * p).astype(np.float64)
+    sums = _WindowSums.of(x)
     for d in np.unique(cell_dur):
         d = int(d)
         rows = np.flatnonzero(cell_dur == d)
-        n = rows.size
         # cells sorted by duration: the rows of one duration are a contiguous block (basic slices)
-        blk = slice(int(rows[0]), int(rows[-1]) + 1) if rows[-1] - rows[0] + 1 == n else rows
+        blk = slice(int(rows[0]), int(rows[-1]) + 1) if rows[-1] - rows[0] + 1 == rows.size else rows
         head = min(d, t_len + 1)
         D[blk, :head] = np.inf
         Cc[blk, :head] = 0.0
@@ -314,48 +306,90 @@ def interpretation(
         if d > t_len:
             continue
         a = stretched_templates(inst, cell_inst[rows], d, rate, context)  # (n, d + 2c, P, 3)
-        n_pts = (d + c2) * p
-        a = a.reshape(n, n_pts, 3)
-        sa = a.sum(1)  # (n, 3)
-        # templates centred on the floor: their cross-correlation with any window is the centred one
-        centred = a[..., [0, 2]] - (sa[:, [0, 2]] / n_pts)[:, None, :]  # (n, N, 2)
-        # windows (nw, N, 3) flattened like the templates: frame-major, then point
-        win = np.lib.stride_tricks.sliding_window_view(x, d + c2, axis=0)  # (nw, P, 3, L)
-        win = win.transpose(0, 3, 1, 2).reshape(win.shape[0], n_pts, 3)
-        nw = win.shape[0]
-        ends = np.arange(d, t_len + 1)
-        e2 = ends + c2
-        sx, sz = cs_x[e2] - cs_x[ends - d], cs_z[e2] - cs_z[ends - d]
-        # one product gives the four planar cross terms: rows [ax; az], columns [wx | wz]
-        lhs = centred.transpose(2, 0, 1).reshape(2 * n, n_pts) * scale
-        rhs = win[..., [0, 2]].transpose(2, 0, 1).reshape(2 * nw, n_pts)
-        g = lhs @ rhs.T  # (2n, 2nw)
-        c_out, s_out = Cc[blk, d:], Ss[blk, d:]
-        np.add(g[:n, :nw], g[n:, nw:], out=c_out)  # ax.wx + az.wz
-        np.subtract(g[n:, :nw], g[:n, nw:], out=s_out)  # az.wx - ax.wz
-        # the rest of the residual in one more product: -2 ay.wy + the template's and the
-        # window's own centred sums of squares (extra columns of ones)
-        own_a = (centred**2).sum((1, 2)) + (a[..., 1] ** 2).sum(1)
-        own_w = cs_sq[e2] - cs_sq[ends - d] - (sx**2 + sz**2) / n_pts
-        lhs_y = np.empty((n, n_pts + 2))
-        lhs_y[:, :n_pts] = a[..., 1] * (-2.0 * scale)
-        lhs_y[:, n_pts] = own_a * scale
-        lhs_y[:, n_pts + 1] = scale
-        rhs_y = np.empty((nw, n_pts + 2))
-        rhs_y[:, :n_pts] = win[..., 1]
-        rhs_y[:, n_pts] = 1.0
-        rhs_y[:, n_pts + 1] = own_w
-        res = c_out * c_out
-        res += s_out * s_out
-        np.sqrt(res, out=res)  # |(c, s)| (np.hypot is several times slower)
-        res *= -2.0
-        res += lhs_y @ rhs_y.T
-        np.maximum(res, 0.0, out=res)
-        D[blk, d:] = res
-        sum_a[blk] = sa[:, [0, 2]]
+        D[blk, d:], sum_a[blk] = _duration_block(
+            x, sums, a, d, t_len, rate, context, Cc[blk, d:], Ss[blk, d:]
+        )
     return Interpretation(
-        D, Cc, Ss, sum_a, n_pts_c, cell_dur.astype(np.intp), context, np.stack((cs_x, cs_z), -1)
+        D, Cc, Ss, sum_a, n_pts_c, cell_dur.astype(np.intp), context, np.stack((sums.x, sums.z), -1)
     )
+
+
+@dataclass(frozen=True, slots=True)
+class _WindowSums:
+    """Cumulative sums over the frames of an input cloud ``(T, P, 3)`` (``(T + 1,)`` each, 0 first):
+    of its points' ``x``, of their ``z`` and of their squared norms; any window's sums in O(1)."""
+
+    x: Array
+    z: Array
+    sq: Array
+
+    @classmethod
+    def of(cls, x: Array) -> _WindowSums:
+        zero = np.zeros(1)
+        xx, xz, xy = x[..., 0], x[..., 2], x[..., 1]
+        return cls(
+            np.concatenate((zero, np.cumsum(xx.sum(1)))),
+            np.concatenate((zero, np.cumsum(xz.sum(1)))),
+            np.concatenate((zero, np.cumsum((xx**2 + xz**2 + xy**2).sum(1)))),
+        )
+
+
+def _duration_block(
+    x: Array,
+    sums: _WindowSums,
+    a: Array,
+    d: int,
+    t_len: int,
+    rate: float,
+    context: int,
+    c_out: Array,
+    s_out: Array,
+) -> tuple[Array, Array]:
+    """Eq. 1-2 for the ``n`` cells of duration ``d`` (templates ``a (n, d + 2c, P, 3)``) against every
+    window of the padded input ``x``: the distances ``(n, T + 1 - d)`` (m²·s) after the best
+    rotation about +Y and floor translation, whose cross-correlations go into ``c_out`` and
+    ``s_out``; and the templates' floor sums ``(n, 2)``."""
+    n, p = a.shape[0], x.shape[1]
+    c2 = 2 * context
+    n_pts = (d + c2) * p
+    # every term is scaled by 1 / (P rate) up front, so D comes out in m^2 s without another pass
+    scale = 1.0 / (p * rate)
+    a = a.reshape(n, n_pts, 3)
+    sa = a.sum(1)  # (n, 3)
+    # templates centred on the floor: their cross-correlation with any window is the centred one
+    centred = a[..., [0, 2]] - (sa[:, [0, 2]] / n_pts)[:, None, :]  # (n, N, 2)
+    # windows (nw, N, 3) flattened like the templates: frame-major, then point
+    win = np.lib.stride_tricks.sliding_window_view(x, d + c2, axis=0)  # (nw, P, 3, L)
+    win = win.transpose(0, 3, 1, 2).reshape(win.shape[0], n_pts, 3)
+    nw = win.shape[0]
+    ends = np.arange(d, t_len + 1)
+    e2 = ends + c2
+    sx, sz = sums.x[e2] - sums.x[ends - d], sums.z[e2] - sums.z[ends - d]
+    # one product gives the four planar cross terms: rows [ax; az], columns [wx | wz]
+    lhs = centred.transpose(2, 0, 1).reshape(2 * n, n_pts) * scale
+    rhs = win[..., [0, 2]].transpose(2, 0, 1).reshape(2 * nw, n_pts)
+    g = lhs @ rhs.T  # (2n, 2nw)
+    np.add(g[:n, :nw], g[n:, nw:], out=c_out)  # ax.wx + az.wz
+    np.subtract(g[n:, :nw], g[:n, nw:], out=s_out)  # az.wx - ax.wz
+    # the rest of the residual in one more product: -2 ay.wy + the template's and the
+    # window's own centred sums of squares (extra columns of ones)
+    own_a = (centred**2).sum((1, 2)) + (a[..., 1] ** 2).sum(1)
+    own_w = sums.sq[e2] - sums.sq[ends - d] - (sx**2 + sz**2) / n_pts
+    lhs_y = np.empty((n, n_pts + 2))
+    lhs_y[:, :n_pts] = a[..., 1] * (-2.0 * scale)
+    lhs_y[:, n_pts] = own_a * scale
+    lhs_y[:, n_pts + 1] = scale
+    rhs_y = np.empty((nw, n_pts + 2))
+    rhs_y[:, :n_pts] = win[..., 1]
+    rhs_y[:, n_pts] = 1.0
+    rhs_y[:, n_pts + 1] = own_w
+    res = c_out * c_out
+    res += s_out * s_out
+    np.sqrt(res, out=res)  # |(c, s)| (np.hypot is several times slower)
+    res *= -2.0
+    res += lhs_y @ rhs_y.T
+    np.maximum(res, 0.0, out=res)
+    return res, sa[:, [0, 2]]
 
 
 def _rigid_interpretation(
