@@ -43,6 +43,7 @@ from motion.units import METRES_PER_UNIT
 from schemas import EventType, JobEvent, Report
 from schemas.jobs import RequestError
 from workers.execute import JobFailure
+from workers.settings import get_settings, with_options
 
 SAMPLE_PREFIX = "sample:"
 
@@ -186,9 +187,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f"sample {SAMPLE_PREFIX}salsa-leader: {info['frames']} frames at {info['fps']:g} fps, "
         f"{len(info['joints'])} joints, height {info['height_m']:.2f} m ({info['units']})"
     )
-    for name, kwargs in (("salsa-leader.glb", {}), ("salsa-leader.json", {}), ("salsa-leader.npz", {})):
+    for name in ("salsa-leader.glb", "salsa-leader.json", "salsa-leader.npz"):
         t0 = time.perf_counter()
-        save_motion(motion, out / name, **kwargs)
+        save_motion(motion, out / name)
         size_mb = (out / name).stat().st_size / 1e6
         print(f"  wrote {out / name} ({size_mb:.1f} MB, {time.perf_counter() - t0:.2f} s)")
     if not args.no_synth:
@@ -310,20 +311,12 @@ class _events_sink:  # noqa: N801 - a tiny context manager used like a function
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    import os
-
     import uvicorn
 
-    if args.data:
-        os.environ["SEGUE_DATA_DIR"] = args.data
-    if args.redis:
-        os.environ["SEGUE_REDIS_URL"] = args.redis
-    if args.workers is not None:
-        os.environ["SEGUE_WORKERS"] = str(args.workers)
     from service.app import create_app
-    from service.settings import get_settings
 
-    if not is_loopback(args.host) and not get_settings().auth_enabled:
+    settings = with_options(get_settings(), data_dir=args.data, redis_url=args.redis, workers=args.workers)
+    if not is_loopback(args.host) and not settings.auth_enabled:
         print(
             f"segue: error: --host {args.host} would open the API to the network without tokens; set "
             "SEGUE_API_TOKENS (and SEGUE_ALLOWED_HOSTS) first: without tokens Segue is a single-user tool "
@@ -331,7 +324,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
-    uvicorn.run(create_app(), host=args.host, port=args.port, log_level=args.log_level)
+    uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level)
     return 0
 
 
@@ -348,34 +341,29 @@ def is_loopback(host: str) -> bool:
 
 
 def cmd_worker(args: argparse.Namespace) -> int:
-    from workers.redis_worker import main as worker_main
+    from workers.redis_worker import serve
 
-    argv = ["--redis", args.redis]
-    if args.data:
-        argv += ["--data", args.data]
-    if args.name:
-        argv += ["--name", args.name]
-    return int(worker_main(argv) or 0)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
-        prog="segue", description="Segue: motion synthesis by example from motion capture."
+    return serve(
+        with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name)
     )
-    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    def limits(p: argparse.ArgumentParser) -> None:
-        p.add_argument(
-            "--max-joints", type=int, default=1024, help="refuse files with more joints (default 1024)"
-        )
-        p.add_argument("--max-frames", type=int, default=2_000_000, help="refuse files with more frames")
 
+def _add_limits(p: argparse.ArgumentParser) -> None:
+    """The BVH reader's limits (``--max-joints``, ``--max-frames``)."""
+    p.add_argument(
+        "--max-joints", type=int, default=1024, help="refuse files with more joints (default 1024)"
+    )
+    p.add_argument("--max-frames", type=int, default=2_000_000, help="refuse files with more frames")
+
+
+def _add_file_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The commands on one motion file: ``inspect``, ``beats``, ``convert``."""
     units = sorted(METRES_PER_UNIT)
     p = sub.add_parser("inspect", help="frames, fps, joints, height and units guess of a BVH file")
     p.add_argument("file", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--units", choices=units, help="declare the file's length unit instead of guessing")
-    limits(p)
+    _add_limits(p)
     p.set_defaults(func=cmd_inspect)
 
     p = sub.add_parser("beats", help="motion beats of a BVH file: tempo and beat times (Kim et al. 2003)")
@@ -390,7 +378,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--tempo", default="40:200", help="tempo range LOW:HIGH in beats per minute (default 40:200)"
     )
-    limits(p)
+    _add_limits(p)
     p.set_defaults(func=cmd_beats)
 
     p = sub.add_parser("convert", help="convert a BVH file by output extension: " + " ".join(OUTPUT_SUFFIXES))
@@ -409,9 +397,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--ground-root", action="store_true", help="add the explicit ground root joint (always in .glb)"
     )
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
-    limits(p)
+    _add_limits(p)
     p.set_defaults(func=cmd_convert)
 
+
+def _add_sample_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The bundled samples: ``samples`` and the ``demo``."""
     p = sub.add_parser("samples", help="list the bundled sample clips")
     p.set_defaults(func=cmd_samples)
 
@@ -423,6 +414,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-synth", action="store_true", help="only convert the clip (no database, no dance)")
     p.set_defaults(func=cmd_demo)
 
+
+def _add_job_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Jobs in this process, on files: ``build`` and ``synth`` (the API's JSON)."""
     p = sub.add_parser("build", help="build a database from a spec file (clip paths relative to it)")
     p.add_argument("spec", help='database spec JSON, e.g. {"kind": "clips", "clips": [{"bvh": "a.bvh"}]}')
     p.add_argument("--out", required=True, help="database directory to write")
@@ -440,6 +434,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", "-q", action="store_true")
     p.set_defaults(func=cmd_synth)
 
+
+def _add_server_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The runtime: ``serve`` (the API) and ``worker`` (a Redis worker)."""
     p = sub.add_parser("serve", help="run the HTTP/WebSocket API (embedded workers unless --redis)")
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, default=8000)
@@ -454,6 +451,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data", help="data directory shared with the API (default $SEGUE_DATA_DIR)")
     p.add_argument("--name", help="worker name (default host-pid)")
     p.set_defaults(func=cmd_worker)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``segue``'s parser: one sub-command per job a user has."""
+    ap = argparse.ArgumentParser(
+        prog="segue", description="Segue: motion synthesis by example from motion capture."
+    )
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_file_commands(sub)
+    _add_sample_commands(sub)
+    _add_job_commands(sub)
+    _add_server_commands(sub)
     return ap
 
 
@@ -461,7 +470,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     tune_process()
     parser = build_parser()
     args = parser.parse_args(argv)
-    load_plugins()
+    try:
+        settings = get_settings()
+    except ValidationError as exc:
+        print(f"segue: error: invalid SEGUE_* setting: {_validation_message(exc)}", file=sys.stderr)
+        return 2
+    load_plugins(settings.engine_plugins)
     try:
         return int(args.func(args))
     except ValidationError as exc:

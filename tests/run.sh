@@ -19,5 +19,5 @@ if [ ! -x /usr/bin/chromium ]; then apt_install chromium || echo "tests/run.sh: 
 "$PY" -m pip install --quiet --disable-pip-version-check -e '.[dev,web]'
 "$PY" -m ruff check .
 "$PY" -m ruff format --check .
-"$PY" -m mypy
+"$PY" -m mypy --strict motion engines schemas service workers
 "$PY" -m pytest -q "$@"
