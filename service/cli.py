@@ -18,47 +18,47 @@ exits with status 2 and a one-line message naming the problem.
 
 from __future__ import annotations
 
+# Only the standard library at module level: ``segue --help`` and argument errors answer before
+# numpy, scipy, pydantic or any engine is imported (each command imports what it needs).
 import argparse
 import json
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pydantic import ValidationError
-
-from engines.base import EngineError
-from engines.registry import UnavailableError, load_plugins
-from motion import Motion, MotionError
-from motion.allocator import tune_process
-from motion.beats import detect_beats
-from motion.bvh import BvhLimits, detect_units
-from motion.export.targets import TARGETS
-from motion.ground import add_ground_root
-from motion.io import OUTPUT_SUFFIXES, load_motion, save_motion
-from motion.resample import resample
-from motion.samples import SAMPLES, sample_path
-from motion.units import METRES_PER_UNIT
-from schemas import EventType, JobEvent, Report
-from schemas.jobs import RequestError
-from workers.execute import JobFailure
+if TYPE_CHECKING:
+    from motion import Motion
+    from motion.bvh import BvhLimits
+    from schemas import JobEvent, Report
 
 SAMPLE_PREFIX = "sample:"
 
+UNITS = ("cm", "cmu", "ft", "in", "m", "mm")
+"""Length units the options accept (:data:`motion.units.METRES_PER_UNIT`; a test keeps them equal)."""
+TARGETS = ("gltf", "godot", "unity", "unreal")
+"""Export conventions (:data:`motion.export.targets.TARGETS`)."""
+OUTPUT_SUFFIXES = (".bvh", ".bvh.gz", ".glb", ".json", ".npz")
+"""Output formats by extension (:data:`motion.io.OUTPUT_SUFFIXES`)."""
+
 
 def _resolve(path: str) -> Path:
-    if path.startswith(SAMPLE_PREFIX):
-        return sample_path(path[len(SAMPLE_PREFIX) :])
-    return Path(path)
+    from motion.samples import resolve_path
+
+    return resolve_path(path)
 
 
 def _limits(args: argparse.Namespace) -> BvhLimits:
+    from motion.bvh import BvhLimits
+
     return BvhLimits(max_joints=args.max_joints, max_frames=args.max_frames)
 
 
 def inspect_summary(path: Path, motion: Motion, declared: str | None) -> dict[str, Any]:
     """The facts ``segue inspect`` reports, JSON-ready."""
+    from motion.bvh import detect_units
+
     guess = detect_units(motion)
     mpu = motion.metres_per_unit
     return {
@@ -84,6 +84,8 @@ def inspect_summary(path: Path, motion: Motion, declared: str | None) -> dict[st
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
+    from motion.io import load_motion
+
     path = _resolve(args.file)
     motion = load_motion(path, units=args.units, limits=_limits(args))
     info = inspect_summary(path, motion, args.units)
@@ -105,6 +107,8 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 
 
 def _tempo_range(text: str) -> tuple[float, float]:
+    from motion import MotionError
+
     lo, sep, hi = text.partition(":")
     try:
         if not sep:
@@ -115,6 +119,9 @@ def _tempo_range(text: str) -> tuple[float, float]:
 
 
 def cmd_beats(args: argparse.Namespace) -> int:
+    from motion.beats import detect_beats
+    from motion.io import load_motion
+
     path = _resolve(args.file)
     motion = load_motion(path, limits=_limits(args))
     joints: list[str | int] | None = None
@@ -146,6 +153,11 @@ def cmd_beats(args: argparse.Namespace) -> int:
 
 
 def cmd_convert(args: argparse.Namespace) -> int:
+    from motion import MotionError
+    from motion.ground import add_ground_root
+    from motion.io import load_motion, save_motion
+    from motion.resample import resample
+
     src = _resolve(args.input)
     motion = load_motion(src, units=args.in_units, limits=_limits(args))
     if args.frames:
@@ -171,61 +183,30 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_samples(args: argparse.Namespace) -> int:
+    from motion.samples import SAMPLES, sample_path
+
     for name in SAMPLES:
         print(f"{SAMPLE_PREFIX}{name}\t{sample_path(name)}")
     return 0
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    from .demos import DEMOS, run_classic, run_demo
+
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    path = sample_path("salsa-leader")
-    motion = load_motion(path)
-    info = inspect_summary(path, motion, None)
-    print(
-        f"sample {SAMPLE_PREFIX}salsa-leader: {info['frames']} frames at {info['fps']:g} fps, "
-        f"{len(info['joints'])} joints, height {info['height_m']:.2f} m ({info['units']})"
-    )
-    for name, kwargs in (("salsa-leader.glb", {}), ("salsa-leader.json", {}), ("salsa-leader.npz", {})):
-        t0 = time.perf_counter()
-        save_motion(motion, out / name, **kwargs)
-        size_mb = (out / name).stat().st_size / 1e6
-        print(f"  wrote {out / name} ({size_mb:.1f} MB, {time.perf_counter() - t0:.2f} s)")
-    if not args.no_synth:
-        _demo_dance(out)
-    print("open the .glb files in any glTF viewer (Blender, the three.js editor, ...) or run `segue serve`")
+    if args.engine is None:
+        run_classic(out, synth=not args.no_synth)
+        return 0
+    names = list(DEMOS) if args.engine == "all" else [args.engine]
+    results = [run_demo(name, out) for name in names]
+    if len(results) > 1:
+        done = [f"{r.name} {'ok' if r.ok else 'NOT ok'} {r.total_s:.1f} s" for r in results]
+        print("demos: " + ", ".join(done))
     return 0
 
 
-def _demo_dance(out: Path) -> None:
-    """The rhythm engine end to end on the bundled leader: a database, then a dance to 120 BPM."""
-    from workers.local import EventWriter, build_to_dir, synth_from_dir, write_result
-
-    spec = {"kind": "rhythm", "clips": [{"bvh": str(sample_path("salsa-leader"))}], "beats_per_movement": 4}
-    request = {"engine": "rhythm", "music": {"bpm": 120, "duration_s": 12}, "seed": 1, "budget_s": 30}
-    (out / "dance-db.json").write_text(json.dumps(spec, indent=2), encoding="utf-8")
-    (out / "dance-request.json").write_text(json.dumps(request, indent=2), encoding="utf-8")
-    t0 = time.perf_counter()
-    db = build_to_dir(out / "dance-db.json", out / "dance-db", EventWriter("build"))
-    print(
-        f"  built a rhythm database from the leader ({db.frames} frames) in {time.perf_counter() - t0:.1f} s"
-    )
-    t0 = time.perf_counter()
-    result = synth_from_dir(out / "dance-request.json", out / "dance-db", EventWriter("synth"))
-    if result is None:
-        raise MotionError("the demo dance failed")
-    dance, report = result
-    write_result(dance, report, out / "salsa-dance.glb", out / "salsa-dance-report.json")
-    write_result(dance, report, out / "salsa-dance.bvh", None)
-    beats = report.annotations.get("music_beats_s", [])
-    align = report.metrics.get("beat_align_mint", float("nan"))
-    print(
-        f"  synthesized a {dance.num_frames / dance.fps:.0f} s dance to {len(beats)} beats at 120 BPM in "
-        f"{time.perf_counter() - t0:.1f} s (beat alignment {align:.2f}): {out / 'salsa-dance.glb'}, .bvh"
-    )
-
-
-def _validation_message(exc: ValidationError) -> str:
+def _validation_message(exc: Any) -> str:
+    """A pydantic ``ValidationError`` in one line (its first five problems)."""
     parts = []
     for err in exc.errors()[:5]:
         where = ".".join(str(p) for p in err["loc"]) or "(top level)"
@@ -235,6 +216,8 @@ def _validation_message(exc: ValidationError) -> str:
 
 
 def _echo(event: JobEvent) -> None:
+    from schemas import EventType
+
     if event.type == EventType.progress:
         print(
             f"  {100 * event.data.get('fraction', 0):5.1f}%  {event.data.get('message', '')}", file=sys.stderr
@@ -251,7 +234,10 @@ def _echo(event: JobEvent) -> None:
 
 
 def cmd_build(args: argparse.Namespace) -> int:
+    from engines.registry import load_plugins
     from workers.local import EventWriter, build_to_dir
+
+    load_plugins()
 
     spec_path = Path(args.spec)
     with _events_sink(args.events) as sink:
@@ -267,7 +253,12 @@ def cmd_build(args: argparse.Namespace) -> int:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
+    from engines.registry import load_plugins
+    from motion import MotionError
+    from schemas import EventType
     from workers.local import EventWriter, synth_from_dir, write_result
+
+    load_plugins()
 
     with _events_sink(args.events) as sink:
         writer = EventWriter("local", sink, None if args.quiet else _echo)
@@ -370,7 +361,9 @@ def build_parser() -> argparse.ArgumentParser:
         )
         p.add_argument("--max-frames", type=int, default=2_000_000, help="refuse files with more frames")
 
-    units = sorted(METRES_PER_UNIT)
+    from .demos import DEMOS
+
+    units = sorted(UNITS)
     p = sub.add_parser("inspect", help="frames, fps, joints, height and units guess of a BVH file")
     p.add_argument("file", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -417,10 +410,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "demo",
-        help="convert a bundled salsa clip to GLB, JSON and NPZ, and dance it to 120 BPM (rhythm engine)",
+        help="without ENGINE: convert a bundled salsa clip to GLB, JSON and NPZ and dance it to 120 BPM; "
+        "with ENGINE: that engine end to end on bundled clips, into DIR/ENGINE/",
     )
-    p.add_argument("--out", default="segue-demo", help="output directory (default ./segue-demo)")
-    p.add_argument("--no-synth", action="store_true", help="only convert the clip (no database, no dance)")
+    p.add_argument(
+        "engine",
+        nargs="?",
+        choices=[*DEMOS, "all"],
+        metavar="ENGINE",
+        help=f"one of {', '.join(DEMOS)} or all: BVH, GLB and the report in DIR/ENGINE/",
+    )
+    p.add_argument("--out", default="segue-demo", help="output directory DIR (default ./segue-demo)")
+    p.add_argument("--no-synth", action="store_true", help="without ENGINE: only convert the clip (no dance)")
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("build", help="build a database from a spec file (clip paths relative to it)")
@@ -457,27 +458,42 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _user_error(exc: Exception) -> str | None:
+    """The one-line message for an error caused by the input (a bad file, JSON, option value or
+    request), None for a bug. Only modules already imported are consulted (an error of a module
+    never imported cannot have been raised)."""
+    mods = sys.modules
+    if isinstance(exc, json.JSONDecodeError):
+        return f"invalid JSON: {exc}"
+    if "pydantic" in mods and isinstance(exc, mods["pydantic"].ValidationError):
+        return f"invalid JSON: {_validation_message(exc)}"
+    if "workers.execute" in mods and isinstance(exc, mods["workers.execute"].JobFailure):
+        return str(exc.message)  # type: ignore[attr-defined]
+    known: list[type] = [OSError]
+    for module, name in (
+        ("motion.errors", "MotionError"),
+        ("schemas.jobs", "RequestError"),
+        ("engines.registry", "UnavailableError"),
+        ("engines.base", "EngineError"),
+    ):
+        if module in mods:
+            known.append(getattr(mods[module], name))
+    return str(exc) if isinstance(exc, tuple(known)) else None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    tune_process()
     parser = build_parser()
     args = parser.parse_args(argv)
-    load_plugins()
+    from motion.allocator import tune_process
+
+    tune_process()
     try:
         return int(args.func(args))
-    except ValidationError as exc:
-        print(f"segue: error: invalid JSON: {_validation_message(exc)}", file=sys.stderr)
-        return 2
-    except JobFailure as exc:
-        print(f"segue: error: {exc.message}", file=sys.stderr)
-        return 2
-    except (MotionError, RequestError, UnavailableError, EngineError) as exc:
-        print(f"segue: error: {exc}", file=sys.stderr)
-        return 2
-    except json.JSONDecodeError as exc:
-        print(f"segue: error: invalid JSON: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"segue: error: {exc}", file=sys.stderr)
+    except Exception as exc:
+        message = _user_error(exc)
+        if message is None:
+            raise
+        print(f"segue: error: {message}", file=sys.stderr)
         return 2
 
 
