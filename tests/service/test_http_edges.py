@@ -3,6 +3,7 @@ clip's end, bundled samples named in specs and requests, a database's summary, a
 
 from __future__ import annotations
 
+import gzip
 import time
 from typing import Any
 
@@ -10,6 +11,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from motion.samples import sample_path
+from tests.motion.bvh_helpers import under_static_root
 
 from .conftest import WALK_CLIP, wait_events
 from .test_api import JSON, error_of, submit
@@ -148,3 +150,15 @@ def test_a_clip_downloads_as_uploaded(client: TestClient, sample: str) -> None:
     assert r.status_code == 200 and r.content == path.read_bytes()
     assert path.name in r.headers["content-disposition"]
     error_of(client.get("/v1/clips/" + "0" * 64 + "/bvh"), 404, "not_found")
+
+
+def test_summary_names_the_hips_of_a_rig_with_a_static_root(client: TestClient) -> None:
+    """A Bandai-Namco-like rig (joint 0 a static ground node): the summary's hips are the joint
+    that carries the body, not joint 0."""
+    text = under_static_root(gzip.decompress(sample_path("run-09-04").read_bytes()).decode())
+    r = client.post("/v1/clips", files={"file": ("static-root.bvh", text.encode())})
+    assert r.status_code in (200, 201), r.text
+    db = _ready(client, {"kind": "clips", "clips": [{"bvh": "static-root.bvh"}], "fps": 30})
+    skeleton = db["summary"]["skeleton"]
+    assert skeleton["joints"][:2] == ["joint_Root", "hip"]
+    assert skeleton["static_root"] is True and skeleton["hips"] == "hip"
