@@ -23,6 +23,8 @@ from tests.motion.bvh_helpers import under_static_root
 
 from .conftest import ARTIFACTS, screenshot
 
+pytestmark = pytest.mark.slow  # tests/run.sh runs these with CI=true or SEGUE_SLOW=1
+
 FIRST_SOLUTION_MS = 1000.0
 PAGE_WORK_MS = 400.0
 WALK = "07_01_walk_daz"
