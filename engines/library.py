@@ -18,6 +18,7 @@ from motion import Motion, MotionError
 from motion.bvh import BvhLimits, parse_bvh
 from motion.resample import resample
 from motion.serialize import skeleton_from_arrays, skeleton_to_arrays
+from schemas.clips import ClipSource, labels_past_clip_end
 
 Arrays = dict[str, npt.NDArray[Any]]
 
@@ -65,8 +66,8 @@ def build_library(
 ) -> MotionLibrary:
     """Parse, resample (to ``fps`` or the first clip's rate) and convert clips to metres.
 
-    Raises :class:`MotionError` (naming the clip) for unreadable clips, duplicate names or
-    differing hierarchies.
+    Raises :class:`MotionError` (naming the clip) for unreadable clips, duplicate names, differing
+    hierarchies or label ranges past a clip's end.
     """
     if not clips:
         raise MotionError("a database needs at least one clip")
@@ -92,6 +93,10 @@ def build_library(
             )
         m = resample(m.to_units("m") if m.units != "unknown" else m.with_units("m"), rate)
         out.append(replace(m, name=c.name))
+    sources = [ClipSource.model_validate({"bvh": c.name, "name": c.name, "labels": c.labels}) for c in clips]
+    past_end = labels_past_clip_end(sources, [m.num_frames for m in out], rate)
+    if past_end:
+        raise MotionError("; ".join(past_end))
     return MotionLibrary(tuple(names), tuple(out), tuple(tuple(c.labels) for c in clips))
 
 

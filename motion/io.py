@@ -12,6 +12,7 @@ from .errors import ExportError, MotionError
 from .export.arrays import write_json, write_npz
 from .export.targets import get_target, to_target
 from .motion import Motion
+from .samples import resolve_path
 
 INPUT_SUFFIXES = (".bvh", ".bvh.gz")
 OUTPUT_SUFFIXES = (".bvh", ".bvh.gz", ".glb", ".json", ".npz")
@@ -26,8 +27,9 @@ def _suffix(path: Path, allowed: tuple[str, ...]) -> str:
 
 
 def load_motion(path: str | Path, *, units: str | None = None, limits: BvhLimits | None = None) -> Motion:
-    """Read a motion file (BVH, optionally gzip-compressed); see :func:`motion.bvh.read_bvh`."""
-    p = Path(path)
+    """Read a motion file (BVH, optionally gzip-compressed; ``sample:NAME`` for a bundled sample);
+    see :func:`motion.bvh.read_bvh`."""
+    p = resolve_path(path)
     _suffix(p, INPUT_SUFFIXES)
     return read_bvh(p, units=units, limits=limits)
 

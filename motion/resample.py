@@ -39,6 +39,15 @@ def sample_at(motion: Motion, frames: Array) -> Motion:
     return replace(motion, root_positions=root, rotations=q, joint_translations=jt)
 
 
+def resampled_frames(num_frames: int, fps: float, new_fps: float) -> int:
+    """Frame count of a ``num_frames`` motion at ``fps`` resampled to ``new_fps`` by :func:`resample`:
+    ``floor(duration * new_fps + 1e-9) + 1`` over the same duration (``num_frames`` when the rates
+    are equal)."""
+    if new_fps == fps:
+        return num_frames
+    return int(np.floor(max(num_frames - 1, 0) / fps * new_fps + 1e-9)) + 1
+
+
 def resample(motion: Motion, fps: float) -> Motion:
     """The motion at ``fps`` frames per second over the same duration.
 
@@ -48,6 +57,6 @@ def resample(motion: Motion, fps: float) -> Motion:
         raise MotionError(f"fps must be in (0, 10000], got {fps}")
     if fps == motion.fps:
         return motion
-    n_new = int(np.floor(motion.duration_s * fps + 1e-9)) + 1
+    n_new = resampled_frames(motion.num_frames, motion.fps, fps)
     frames = np.minimum(np.arange(n_new) * (motion.fps / fps), motion.num_frames - 1)
     return replace(sample_at(motion, frames), fps=float(fps))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from datetime import datetime
 
 from pydantic import Field, field_validator, model_validator
@@ -30,8 +31,9 @@ class ClipSource(Strict):
     """A clip inside a database spec.
 
     ``bvh`` names the motion: in a spec file for the CLI, a path relative to the spec file; through the
-    API, the file name of an uploaded clip (or ``clip`` gives an uploaded clip's id). ``name`` is how
-    reports refer to the clip (default: the file name without ``.bvh``).
+    API, the file name of an uploaded clip (or ``clip`` gives an uploaded clip's id); anywhere,
+    ``sample:NAME`` for a bundled sample (``segue samples``). ``name`` is how reports refer to the clip
+    (default: the file name without ``.bvh``, or the sample's NAME).
     """
 
     bvh: str | None = Field(default=None, min_length=1, max_length=1024, examples=["60_01_scaled.bvh"])
@@ -61,9 +63,24 @@ class ClipSource(Strict):
         if self.name:
             return self.name
         base = (self.bvh or self.clip or "clip").replace("\\", "/").rsplit("/", 1)[-1]
+        base = base.removeprefix("sample:")
         for suffix in (".gz", ".bvh"):
             base = base.removesuffix(suffix)
         return base
+
+
+def labels_past_clip_end(clips: Sequence[ClipSource], frames: Sequence[int], fps: float) -> list[str]:
+    """One message per label range that ends after its clip's last frame: ``frames`` are the clips'
+    frame counts at the database rate ``fps`` (label ranges are in those frames)."""
+    problems = []
+    for i, (clip, count) in enumerate(zip(clips, frames, strict=True)):
+        for k, lb in enumerate(clip.labels):
+            if lb.end > count:
+                problems.append(
+                    f"clips[{i}] ({clip.display_name()}): labels[{k}] {lb.label!r} [{lb.start}, {lb.end}) "
+                    f"ends after the clip, which has {count} frames at {fps:g} fps (frames 0-{count - 1})"
+                )
+    return problems
 
 
 class ClipInfo(Strict):

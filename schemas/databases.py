@@ -11,6 +11,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, TypeAdapter
 
 from .bases import DatabaseSpecBase
+from .clips import LabelRange
 from .common import SCHEMA_VERSION, Strict
 
 
@@ -64,11 +65,14 @@ def parse_database_spec(data: Any) -> DatabaseSpecBase:
 
 def database_id(spec: DatabaseSpecBase, clip_hashes: list[str]) -> str:
     """Content address of a database: sha256 of the clips' content hashes (in spec order), the
-    canonical spec JSON (sorted keys, clip file references replaced by hashes) and the schema version."""
+    canonical spec JSON (sorted keys, clip file references replaced by hashes, every clip named as
+    reports name it) and the schema version. ``segue build`` and ``POST /v1/databases`` give the
+    same id to the same clips and spec."""
     canonical = spec.model_dump(mode="json", exclude={"name"})
-    for entry, digest in zip(canonical["clips"], clip_hashes, strict=True):
+    for entry, source, digest in zip(canonical["clips"], spec.clips, clip_hashes, strict=True):
         entry.pop("bvh", None)
         entry["clip"] = digest
+        entry["name"] = source.display_name()
     payload = json.dumps({"schema": SCHEMA_VERSION, "spec": canonical}, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(payload.encode()).hexdigest()
 
@@ -78,6 +82,52 @@ class DatabaseStatus(StrEnum):
     building = "building"
     ready = "ready"
     failed = "failed"
+
+
+class SkeletonSummary(Strict):
+    """The joint hierarchy every clip of a database shares (offsets may differ per performer)."""
+
+    joints: list[str]
+    parents: list[int] = Field(description="parent index of each joint (-1 for the root)")
+    hips: str = Field(
+        description="the joint that carries the body (floor position and root motion): the hips, "
+        "which is not joint 0 on rigs whose root is a static ground node (Bandai-Namco's joint_Root)"
+    )
+    static_root: bool = Field(description="joint 0 stays put on the floor in every clip")
+
+
+class ClipSummary(Strict):
+    """One clip of a database as the engines see it."""
+
+    name: str = Field(description="the clip's name in requests and reports")
+    frames: int = Field(description="frames at the database rate")
+    source_units: str | None = Field(
+        default=None, description="length unit of the file (declared or guessed; the database is metres)"
+    )
+    labels: list[LabelRange] = Field(default_factory=list, description="label ranges (database frames)")
+    role: Literal["control", "target", "leader", "follower"] | None = Field(
+        default=None, description="its part in a control pair or a couple"
+    )
+
+
+class DatabaseSummary(Strict):
+    """What a ready database holds, for clients that did not build it: its kind, clips, label
+    vocabulary, skeleton and units."""
+
+    kind: str
+    fps: float
+    units: Literal["m"] = Field(default="m", description="every length of the database and its results")
+    clips: list[ClipSummary]
+    labels: list[str] = Field(description="the label vocabulary (annotated databases), sorted")
+    skeleton: SkeletonSummary
+    control: Literal["motion", "path"] | None = Field(
+        default=None,
+        description="control databases: driven by a control motion (a dance leader: pairs with a "
+        "control clip) or by a floor path (walks: controls derived from the targets)",
+    )
+    couples: bool = Field(
+        default=False, description="rhythm databases with partners (requests may ask couples)"
+    )
 
 
 class DatabaseInfo(Strict):
@@ -91,3 +141,6 @@ class DatabaseInfo(Strict):
     build_job: str | None = Field(default=None, description="the job building it (events show progress)")
     error: str | None = None
     created_at: datetime
+    summary: DatabaseSummary | None = Field(
+        default=None, description="ready databases: clips, labels, skeleton and units (GET only)"
+    )

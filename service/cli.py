@@ -18,48 +18,47 @@ exits with status 2 and a one-line message naming the problem.
 
 from __future__ import annotations
 
+# Only the standard library at module level: ``segue --help`` and argument errors answer before
+# numpy, scipy, pydantic or any engine is imported (each command imports what it needs).
 import argparse
 import json
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pydantic import ValidationError
-
-from engines.base import EngineError
-from engines.registry import UnavailableError, load_plugins
-from motion import Motion, MotionError
-from motion.allocator import tune_process
-from motion.beats import detect_beats
-from motion.bvh import BvhLimits, detect_units
-from motion.export.targets import TARGETS
-from motion.ground import add_ground_root
-from motion.io import OUTPUT_SUFFIXES, load_motion, save_motion
-from motion.resample import resample
-from motion.samples import SAMPLES, sample_path
-from motion.units import METRES_PER_UNIT
-from schemas import EventType, JobEvent, Report
-from schemas.jobs import RequestError
-from workers.execute import JobFailure
-from workers.settings import get_settings, with_options
+if TYPE_CHECKING:
+    from motion import Motion
+    from motion.bvh import BvhLimits
+    from schemas import JobEvent, Report
 
 SAMPLE_PREFIX = "sample:"
 
+UNITS = ("cm", "cmu", "ft", "in", "m", "mm")
+"""Length units the options accept (:data:`motion.units.METRES_PER_UNIT`; a test keeps them equal)."""
+TARGETS = ("gltf", "godot", "unity", "unreal")
+"""Export conventions (:data:`motion.export.targets.TARGETS`)."""
+OUTPUT_SUFFIXES = (".bvh", ".bvh.gz", ".glb", ".json", ".npz")
+"""Output formats by extension (:data:`motion.io.OUTPUT_SUFFIXES`)."""
+
 
 def _resolve(path: str) -> Path:
-    if path.startswith(SAMPLE_PREFIX):
-        return sample_path(path[len(SAMPLE_PREFIX) :])
-    return Path(path)
+    from motion.samples import resolve_path
+
+    return resolve_path(path)
 
 
 def _limits(args: argparse.Namespace) -> BvhLimits:
+    from motion.bvh import BvhLimits
+
     return BvhLimits(max_joints=args.max_joints, max_frames=args.max_frames)
 
 
 def inspect_summary(path: Path, motion: Motion, declared: str | None) -> dict[str, Any]:
     """The facts ``segue inspect`` reports, JSON-ready."""
+    from motion.bvh import detect_units
+
     guess = detect_units(motion)
     mpu = motion.metres_per_unit
     return {
@@ -85,6 +84,8 @@ def inspect_summary(path: Path, motion: Motion, declared: str | None) -> dict[st
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
+    from motion.io import load_motion
+
     path = _resolve(args.file)
     motion = load_motion(path, units=args.units, limits=_limits(args))
     info = inspect_summary(path, motion, args.units)
@@ -106,6 +107,8 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 
 
 def _tempo_range(text: str) -> tuple[float, float]:
+    from motion import MotionError
+
     lo, sep, hi = text.partition(":")
     try:
         if not sep:
@@ -116,6 +119,9 @@ def _tempo_range(text: str) -> tuple[float, float]:
 
 
 def cmd_beats(args: argparse.Namespace) -> int:
+    from motion.beats import detect_beats
+    from motion.io import load_motion
+
     path = _resolve(args.file)
     motion = load_motion(path, limits=_limits(args))
     joints: list[str | int] | None = None
@@ -147,6 +153,11 @@ def cmd_beats(args: argparse.Namespace) -> int:
 
 
 def cmd_convert(args: argparse.Namespace) -> int:
+    from motion import MotionError
+    from motion.ground import add_ground_root
+    from motion.io import load_motion, save_motion
+    from motion.resample import resample
+
     src = _resolve(args.input)
     motion = load_motion(src, units=args.in_units, limits=_limits(args))
     if args.frames:
@@ -172,61 +183,30 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_samples(args: argparse.Namespace) -> int:
+    from motion.samples import SAMPLES, sample_path
+
     for name in SAMPLES:
         print(f"{SAMPLE_PREFIX}{name}\t{sample_path(name)}")
     return 0
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    from .demos import DEMOS, run_classic, run_demo
+
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    path = sample_path("salsa-leader")
-    motion = load_motion(path)
-    info = inspect_summary(path, motion, None)
-    print(
-        f"sample {SAMPLE_PREFIX}salsa-leader: {info['frames']} frames at {info['fps']:g} fps, "
-        f"{len(info['joints'])} joints, height {info['height_m']:.2f} m ({info['units']})"
-    )
-    for name in ("salsa-leader.glb", "salsa-leader.json", "salsa-leader.npz"):
-        t0 = time.perf_counter()
-        save_motion(motion, out / name)
-        size_mb = (out / name).stat().st_size / 1e6
-        print(f"  wrote {out / name} ({size_mb:.1f} MB, {time.perf_counter() - t0:.2f} s)")
-    if not args.no_synth:
-        _demo_dance(out)
-    print("open the .glb files in any glTF viewer (Blender, the three.js editor, ...) or run `segue serve`")
+    if args.engine is None:
+        run_classic(out, synth=not args.no_synth)
+        return 0
+    names = list(DEMOS) if args.engine == "all" else [args.engine]
+    results = [run_demo(name, out) for name in names]
+    if len(results) > 1:
+        done = [f"{r.name} {'ok' if r.ok else 'NOT ok'} {r.total_s:.1f} s" for r in results]
+        print("demos: " + ", ".join(done))
     return 0
 
 
-def _demo_dance(out: Path) -> None:
-    """The rhythm engine end to end on the bundled leader: a database, then a dance to 120 BPM."""
-    from workers.local import EventWriter, build_to_dir, synth_from_dir, write_result
-
-    spec = {"kind": "rhythm", "clips": [{"bvh": str(sample_path("salsa-leader"))}], "beats_per_movement": 4}
-    request = {"engine": "rhythm", "music": {"bpm": 120, "duration_s": 12}, "seed": 1, "budget_s": 30}
-    (out / "dance-db.json").write_text(json.dumps(spec, indent=2), encoding="utf-8")
-    (out / "dance-request.json").write_text(json.dumps(request, indent=2), encoding="utf-8")
-    t0 = time.perf_counter()
-    db = build_to_dir(out / "dance-db.json", out / "dance-db", EventWriter("build"))
-    print(
-        f"  built a rhythm database from the leader ({db.frames} frames) in {time.perf_counter() - t0:.1f} s"
-    )
-    t0 = time.perf_counter()
-    result = synth_from_dir(out / "dance-request.json", out / "dance-db", EventWriter("synth"))
-    if result is None:
-        raise MotionError("the demo dance failed")
-    dance, report = result
-    write_result(dance, report, out / "salsa-dance.glb", out / "salsa-dance-report.json")
-    write_result(dance, report, out / "salsa-dance.bvh", None)
-    beats = report.annotations.get("music_beats_s", [])
-    align = report.metrics.get("beat_align_mint", float("nan"))
-    print(
-        f"  synthesized a {dance.num_frames / dance.fps:.0f} s dance to {len(beats)} beats at 120 BPM in "
-        f"{time.perf_counter() - t0:.1f} s (beat alignment {align:.2f}): {out / 'salsa-dance.glb'}, .bvh"
-    )
-
-
-def _validation_message(exc: ValidationError) -> str:
+def _validation_message(exc: Any) -> str:
+    """A pydantic ``ValidationError`` in one line (its first five problems)."""
     parts = []
     for err in exc.errors()[:5]:
         where = ".".join(str(p) for p in err["loc"]) or "(top level)"
@@ -236,6 +216,8 @@ def _validation_message(exc: ValidationError) -> str:
 
 
 def _echo(event: JobEvent) -> None:
+    from schemas import EventType
+
     if event.type == EventType.progress:
         print(
             f"  {100 * event.data.get('fraction', 0):5.1f}%  {event.data.get('message', '')}", file=sys.stderr
@@ -251,8 +233,18 @@ def _echo(event: JobEvent) -> None:
         print(f"  failed: {event.data['error']['message']}", file=sys.stderr)
 
 
+def _load_plugins() -> None:
+    """The engine plugins named by the settings (``SEGUE_ENGINE_PLUGINS``)."""
+    from engines.registry import load_plugins
+    from workers.settings import get_settings
+
+    load_plugins(get_settings().engine_plugins)
+
+
 def cmd_build(args: argparse.Namespace) -> int:
     from workers.local import EventWriter, build_to_dir
+
+    _load_plugins()
 
     spec_path = Path(args.spec)
     with _events_sink(args.events) as sink:
@@ -268,7 +260,11 @@ def cmd_build(args: argparse.Namespace) -> int:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
+    from motion import MotionError
+    from schemas import EventType
     from workers.local import EventWriter, synth_from_dir, write_result
+
+    _load_plugins()
 
     with _events_sink(args.events) as sink:
         writer = EventWriter("local", sink, None if args.quiet else _echo)
@@ -314,6 +310,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from service.app import create_app
+    from workers.settings import get_settings, with_options
 
     settings = with_options(get_settings(), data_dir=args.data, redis_url=args.redis, workers=args.workers)
     if not is_loopback(args.host) and not settings.auth_enabled:
@@ -342,28 +339,33 @@ def is_loopback(host: str) -> bool:
 
 def cmd_worker(args: argparse.Namespace) -> int:
     from workers.redis_worker import serve
+    from workers.settings import get_settings, with_options
 
     return serve(
         with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name)
     )
 
 
-def _add_limits(p: argparse.ArgumentParser) -> None:
-    """The BVH reader's limits (``--max-joints``, ``--max-frames``)."""
-    p.add_argument(
-        "--max-joints", type=int, default=1024, help="refuse files with more joints (default 1024)"
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="segue", description="Segue: motion synthesis by example from motion capture."
     )
-    p.add_argument("--max-frames", type=int, default=2_000_000, help="refuse files with more frames")
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
+    def limits(p: argparse.ArgumentParser) -> None:
+        p.add_argument(
+            "--max-joints", type=int, default=1024, help="refuse files with more joints (default 1024)"
+        )
+        p.add_argument("--max-frames", type=int, default=2_000_000, help="refuse files with more frames")
 
-def _add_file_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """The commands on one motion file: ``inspect``, ``beats``, ``convert``."""
-    units = sorted(METRES_PER_UNIT)
+    from .demos import DEMOS
+
+    units = sorted(UNITS)
     p = sub.add_parser("inspect", help="frames, fps, joints, height and units guess of a BVH file")
     p.add_argument("file", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--units", choices=units, help="declare the file's length unit instead of guessing")
-    _add_limits(p)
+    limits(p)
     p.set_defaults(func=cmd_inspect)
 
     p = sub.add_parser("beats", help="motion beats of a BVH file: tempo and beat times (Kim et al. 2003)")
@@ -378,7 +380,7 @@ def _add_file_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser])
     p.add_argument(
         "--tempo", default="40:200", help="tempo range LOW:HIGH in beats per minute (default 40:200)"
     )
-    _add_limits(p)
+    limits(p)
     p.set_defaults(func=cmd_beats)
 
     p = sub.add_parser("convert", help="convert a BVH file by output extension: " + " ".join(OUTPUT_SUFFIXES))
@@ -397,26 +399,28 @@ def _add_file_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser])
         "--ground-root", action="store_true", help="add the explicit ground root joint (always in .glb)"
     )
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
-    _add_limits(p)
+    limits(p)
     p.set_defaults(func=cmd_convert)
 
-
-def _add_sample_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """The bundled samples: ``samples`` and the ``demo``."""
     p = sub.add_parser("samples", help="list the bundled sample clips")
     p.set_defaults(func=cmd_samples)
 
     p = sub.add_parser(
         "demo",
-        help="convert a bundled salsa clip to GLB, JSON and NPZ, and dance it to 120 BPM (rhythm engine)",
+        help="without ENGINE: convert a bundled salsa clip to GLB, JSON and NPZ and dance it to 120 BPM; "
+        "with ENGINE: that engine end to end on bundled clips, into DIR/ENGINE/",
     )
-    p.add_argument("--out", default="segue-demo", help="output directory (default ./segue-demo)")
-    p.add_argument("--no-synth", action="store_true", help="only convert the clip (no database, no dance)")
+    p.add_argument(
+        "engine",
+        nargs="?",
+        choices=[*DEMOS, "all"],
+        metavar="ENGINE",
+        help=f"one of {', '.join(DEMOS)} or all: BVH, GLB and the report in DIR/ENGINE/",
+    )
+    p.add_argument("--out", default="segue-demo", help="output directory DIR (default ./segue-demo)")
+    p.add_argument("--no-synth", action="store_true", help="without ENGINE: only convert the clip (no dance)")
     p.set_defaults(func=cmd_demo)
 
-
-def _add_job_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Jobs in this process, on files: ``build`` and ``synth`` (the API's JSON)."""
     p = sub.add_parser("build", help="build a database from a spec file (clip paths relative to it)")
     p.add_argument("spec", help='database spec JSON, e.g. {"kind": "clips", "clips": [{"bvh": "a.bvh"}]}')
     p.add_argument("--out", required=True, help="database directory to write")
@@ -434,9 +438,6 @@ def _add_job_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--quiet", "-q", action="store_true")
     p.set_defaults(func=cmd_synth)
 
-
-def _add_server_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """The runtime: ``serve`` (the API) and ``worker`` (a Redis worker)."""
     p = sub.add_parser("serve", help="run the HTTP/WebSocket API (embedded workers unless --redis)")
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, default=8000)
@@ -451,47 +452,45 @@ def _add_server_commands(sub: argparse._SubParsersAction[argparse.ArgumentParser
     p.add_argument("--data", help="data directory shared with the API (default $SEGUE_DATA_DIR)")
     p.add_argument("--name", help="worker name (default host-pid)")
     p.set_defaults(func=cmd_worker)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """``segue``'s parser: one sub-command per job a user has."""
-    ap = argparse.ArgumentParser(
-        prog="segue", description="Segue: motion synthesis by example from motion capture."
-    )
-    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    _add_file_commands(sub)
-    _add_sample_commands(sub)
-    _add_job_commands(sub)
-    _add_server_commands(sub)
     return ap
 
 
+def _user_error(exc: Exception) -> str | None:
+    """The one-line message for an error caused by the input (a bad file, JSON, option value or
+    request), None for a bug. Only modules already imported are consulted (an error of a module
+    never imported cannot have been raised)."""
+    mods = sys.modules
+    if isinstance(exc, json.JSONDecodeError):
+        return f"invalid JSON: {exc}"
+    if "pydantic" in mods and isinstance(exc, mods["pydantic"].ValidationError):
+        return f"invalid JSON: {_validation_message(exc)}"
+    if "workers.execute" in mods and isinstance(exc, mods["workers.execute"].JobFailure):
+        return str(exc.message)  # type: ignore[attr-defined]
+    known: list[type] = [OSError]
+    for module, name in (
+        ("motion.errors", "MotionError"),
+        ("schemas.jobs", "RequestError"),
+        ("engines.registry", "UnavailableError"),
+        ("engines.base", "EngineError"),
+    ):
+        if module in mods:
+            known.append(getattr(mods[module], name))
+    return str(exc) if isinstance(exc, tuple(known)) else None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    tune_process()
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        settings = get_settings()
-    except ValidationError as exc:
-        print(f"segue: error: invalid SEGUE_* setting: {_validation_message(exc)}", file=sys.stderr)
-        return 2
-    load_plugins(settings.engine_plugins)
+    from motion.allocator import tune_process
+
+    tune_process()
     try:
         return int(args.func(args))
-    except ValidationError as exc:
-        print(f"segue: error: invalid JSON: {_validation_message(exc)}", file=sys.stderr)
-        return 2
-    except JobFailure as exc:
-        print(f"segue: error: {exc.message}", file=sys.stderr)
-        return 2
-    except (MotionError, RequestError, UnavailableError, EngineError) as exc:
-        print(f"segue: error: {exc}", file=sys.stderr)
-        return 2
-    except json.JSONDecodeError as exc:
-        print(f"segue: error: invalid JSON: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"segue: error: {exc}", file=sys.stderr)
+    except Exception as exc:
+        message = _user_error(exc)
+        if message is None:
+            raise
+        print(f"segue: error: {message}", file=sys.stderr)
         return 2
 
 

@@ -15,6 +15,7 @@ Example
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -52,6 +53,9 @@ def _error_from(status: int, body: bytes) -> SegueError:
 
 _WS_CLOSE_STATUS = {4401: 401, 4404: 404}
 
+DEFAULT_URL = "http://127.0.0.1:8000"
+"""Where ``segue serve`` listens by default."""
+
 
 class SegueClient:
     """The API of one Segue server.
@@ -59,15 +63,15 @@ class SegueClient:
     Parameters
     ----------
     base_url:
-        e.g. ``"http://127.0.0.1:8000"``.
+        e.g. ``"http://127.0.0.1:8000"``; default: ``$SEGUE_URL``, else :data:`DEFAULT_URL`.
     token:
         Bearer token for servers with ``SEGUE_API_TOKENS`` (writes and WebSockets).
     timeout:
         Seconds for each HTTP request.
     """
 
-    def __init__(self, base_url: str, token: str | None = None, timeout: float = 60.0) -> None:
-        self.base_url = base_url.rstrip("/")
+    def __init__(self, base_url: str | None = None, token: str | None = None, timeout: float = 60.0) -> None:
+        self.base_url = (base_url or os.environ.get("SEGUE_URL") or DEFAULT_URL).rstrip("/")
         self.token = token
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         self.http = httpx.Client(base_url=self.base_url, headers=headers, timeout=timeout)

@@ -15,7 +15,7 @@ from starlette.staticfiles import StaticFiles
 from starlette.types import Receive, Scope, Send
 
 import web
-from motion.samples import SAMPLES, sample_path
+from motion.samples import SAMPLES, is_clip_sample, sample_path
 
 from .errors import ApiError
 
@@ -42,8 +42,9 @@ class WebFiles(StaticFiles):
 
 
 def sample_files() -> dict[str, str]:
-    """The bundled sample clips: file name (``*.bvh.gz``) -> sample name (:data:`motion.samples.SAMPLES`)."""
-    return {file: name for name, file in SAMPLES.items()}
+    """The bundled sample clips: file name (``*.bvh.gz``) -> sample name (:data:`motion.samples.SAMPLES`;
+    the MIDI song is not a clip, and requests name it ``sample:song``)."""
+    return {file: name for name, file in SAMPLES.items() if is_clip_sample(name)}
 
 
 def mount_web(app: FastAPI) -> None:

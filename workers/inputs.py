@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from motion import MotionError
+from motion.samples import resolve_path
 from schemas.bases import JobRequestBase
 
 from .store import NotFoundError, Store, Visible
@@ -24,11 +26,21 @@ class InputError(ValueError):
 
 def resolve_inputs(store: Store, request: JobRequestBase, visible: Visible | None = None) -> dict[str, str]:
     """Reference -> upload id for every input file of ``request`` (ids given in ``inputs`` are
-    checked, the others looked up by id or name, among the uploads ``visible`` accepts). Raises
+    checked, ``sample:NAME`` stores the bundled sample, the others are looked up by id or name
+    among the uploads ``visible`` accepts). Raises
     :class:`InputError` naming a missing one."""
+    from .samples import store_sample
+
     resolved: dict[str, str] = {}
     for ref in request.input_files():
         given = request.inputs.get(ref, ref)
+        try:
+            sample = store_sample(store, given)
+        except MotionError as exc:
+            raise InputError(f"input file {ref!r}: {exc}") from None
+        if sample is not None:
+            resolved[ref] = sample[0]
+            continue
         try:
             resolved[ref] = store.find_input(given, visible)
         except NotFoundError as exc:
@@ -50,10 +62,13 @@ def attach_from_store(store: Store, request: JobRequestBase) -> None:
 
 def attach_from_dir(request: JobRequestBase, base: Path) -> None:
     """Attach the bytes of every input file from paths relative to ``base`` (the request file's
-    folder; absolute paths are used as they are)."""
+    folder; absolute paths are used as they are, ``sample:NAME`` names a bundled sample)."""
     files = {}
     for ref in request.input_files():
-        path = Path(ref) if Path(ref).is_absolute() else base / ref
+        try:
+            path = resolve_path(ref, base)
+        except MotionError as exc:
+            raise InputError(f"input file {ref!r}: {exc}") from None
         try:
             size = path.stat().st_size
             if size > MAX_INPUT_BYTES:

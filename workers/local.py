@@ -22,8 +22,9 @@ from typing import Any, TextIO
 
 from engines.library import ClipInput
 from engines.registry import engine_class
-from motion import Motion
+from motion import Motion, MotionError
 from motion.io import save_motion
+from motion.samples import resolve_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobEvent, Report
 from schemas.bases import DatabaseSpecBase
 from schemas.databases import database_id, parse_database_spec
@@ -58,17 +59,17 @@ class EventWriter:
 
 
 def load_spec_file(path: Path) -> tuple[DatabaseSpecBase, list[ClipInput], list[str]]:
-    """A spec file and its clips (paths relative to the spec file), with each clip's sha256."""
+    """A spec file and its clips (paths relative to the spec file, or ``sample:NAME``), with each
+    clip's sha256."""
     spec = parse_database_spec(path.read_bytes())
     clips, digests = [], []
     for source in spec.clips:
         if source.bvh is None:
             raise JobFailure("invalid_request", 'in a spec file, clips are given as {"bvh": "path"}')
-        clip_path = Path(source.bvh)
-        if not clip_path.is_absolute():
-            clip_path = path.parent / clip_path
         try:
-            data = clip_path.read_bytes()
+            data = resolve_path(source.bvh, path.parent).read_bytes()
+        except MotionError as exc:
+            raise JobFailure("invalid_request", f"clip {source.bvh!r}: {exc}") from None
         except OSError as exc:
             raise JobFailure("invalid_request", f"clip {source.bvh!r}: {exc.strerror or exc}") from None
         digests.append(hashlib.sha256(data).hexdigest())

@@ -95,6 +95,33 @@ def get_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> ClipInfo
     return clip_for(store, principal, clip_id)
 
 
+@router.get(
+    "/{clip_id}/bvh",
+    response_class=Response,
+    responses=responses(
+        401,
+        404,
+        422,
+        extra={200: {"description": "the uploaded file", "content": {"application/octet-stream": {}}}},
+    ),
+)
+async def download_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
+    """The bytes of one of your clips as uploaded (BVH text, or gzip-compressed BVH when it was
+    uploaded so), e.g. for a page to draw a leader beside the follower a job made for it."""
+    info = clip_for(store, principal, clip_id)
+    data = await run_in_threadpool(store.clip_bytes, info.id)
+    return Response(
+        data,
+        media_type="application/octet-stream",
+        headers={"Content-Disposition": f'attachment; filename="{info.id[:16]}-{_ascii(info.name)}"'},
+    )
+
+
+def _ascii(name: str) -> str:
+    """A file name safe in a quoted header value."""
+    return "".join(c if c.isascii() and c.isprintable() and c not in '"\\' else "_" for c in name)
+
+
 @router.delete("/{clip_id}", **delete_route())
 def delete_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
     """Delete your clip (databases already built from it keep their data). The bytes go when no

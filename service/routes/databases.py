@@ -13,13 +13,18 @@ from pydantic import TypeAdapter
 from starlette.concurrency import run_in_threadpool
 
 from engines.registry import require_kind
+from motion import MotionError
+from motion.resample import resampled_frames
 from schemas import ClipSource, DatabaseInfo, DatabaseSpec, DatabaseStatus
 from schemas.bases import DatabaseSpecBase
-from schemas.databases import database_id, parse_database_spec
+from schemas.clips import labels_past_clip_end
+from schemas.databases import DatabaseSummary, database_id, parse_database_spec
 from schemas.jobs import JobKind
 from workers.backend import JobBackend
 from workers.budget import database_frames
+from workers.samples import store_sample
 from workers.store import NotFoundError, Store, now
+from workers.summary import database_summary
 
 from ..deps import BackendDep, JobQuotaDep, MetricsDep, Principal, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, conflict, responses
@@ -48,8 +53,9 @@ def resolve_clips(
 ) -> tuple[DatabaseSpecBase, list[str]]:
     """The spec with every clip given by id (names kept), and the clips' content hashes.
 
-    ``bvh`` is the file name of an uploaded clip, ``clip`` an uploaded clip's id (or file name), among
-    the principal's clips and the ``shared`` ids (the clips of a database it holds, for corrections).
+    ``bvh`` is the file name of an uploaded clip or ``sample:NAME`` (a bundled sample, stored and
+    held by the principal on first use), ``clip`` an uploaded clip's id (or file name), among the
+    principal's clips and the ``shared`` ids (the clips of a database it holds, for corrections).
     Raises :class:`~service.errors.ApiError`: 404 naming a missing clip, 422 for repeated names.
     """
     resolved: list[ClipSource] = []
@@ -61,7 +67,15 @@ def resolve_clips(
     for i, source in enumerate(spec.clips):
         ref = source.clip or source.bvh or ""  # ClipSource guarantees exactly one of them
         try:
-            info = store.find_clip(ref, allowed)
+            sample = store_sample(store, source.bvh) if source.bvh is not None else None
+        except MotionError as exc:
+            raise ApiError(404, "not_found", f"clips[{i}]: {exc}", {"index": i, "bvh": ref}) from None
+        try:
+            if sample is not None and sample[1] is not None:
+                info = sample[1]
+                store.add_owner("clips", info.id, principal.name)
+            else:
+                info = store.find_clip(ref, allowed)
         except NotFoundError:
             field = "clip" if source.clip is not None else "bvh"
             raise ApiError(
@@ -136,7 +150,7 @@ async def create_database(
     )
     if info.build_job and response.status_code == status.HTTP_202_ACCEPTED:
         quota.add(principal.name, info.build_job)
-    return info
+    return await run_in_threadpool(with_summary, request.app.state, store, info)
 
 
 def check_database_size(store: Store, spec: DatabaseSpecBase, hashes: list[str], limit: int | None) -> None:
@@ -155,6 +169,19 @@ def check_database_size(store: Store, spec: DatabaseSpecBase, hashes: list[str],
         )
 
 
+def check_label_ranges(store: Store, spec: DatabaseSpecBase, hashes: list[str]) -> None:
+    """422 ``invalid_request`` naming every label range that ends after its clip (ranges are frames
+    at the database rate: the spec's ``fps``, else the first clip's)."""
+    if not any(c.labels for c in spec.clips):
+        return
+    infos = [store.clip_info(h) for h in hashes]
+    rate = spec.fps or infos[0].fps
+    frames = [resampled_frames(info.frames, info.fps, rate) for info in infos]
+    problems = labels_past_clip_end(spec.clips, frames, rate)
+    if problems:
+        raise ApiError(422, "invalid_request", "; ".join(problems), {"problems": problems})
+
+
 async def create_from_spec(
     spec: DatabaseSpecBase,
     response: Response,
@@ -169,6 +196,7 @@ async def create_from_spec(
     require_kind(spec.kind)  # 422 unavailable for kinds whose engine has not landed
     resolved, hashes = await run_in_threadpool(resolve_clips, store, spec, principal, shared)
     await run_in_threadpool(check_database_size, store, resolved, hashes, max_frames)
+    await run_in_threadpool(check_label_ranges, store, resolved, hashes)
     db_id = database_id(resolved, hashes)
     # No await between this check and the job being stored (in submit_job, before the backend is
     # awaited), so concurrent posts of one spec in this process start one build.
@@ -213,16 +241,42 @@ async def create_from_spec(
     return store.database_info(db_id)
 
 
+def with_summary(state: Any, store: Store, info: DatabaseInfo) -> DatabaseInfo:
+    """``info`` with the summary of a ready database (computed once per process: a ready database
+    never changes)."""
+    if info.status != DatabaseStatus.ready:
+        return info
+    cache: dict[str, DatabaseSummary] | None = getattr(state, "database_summaries", None)
+    if cache is None:
+        cache = state.database_summaries = {}
+    summary = cache.get(info.id)
+    if summary is None:
+        try:
+            summary = cache[info.id] = database_summary(store, info.id)
+        except (NotFoundError, KeyError, ValueError, OSError):  # deleted meanwhile, or older arrays
+            return info
+        while len(cache) > 1024:
+            cache.pop(next(iter(cache)))
+    return info.model_copy(update={"summary": summary})
+
+
 @router.get("", response_model=list[DatabaseInfo], responses=responses(401))
-def list_databases(store: StoreDep, principal: PrincipalDep) -> list[DatabaseInfo]:
-    """Your databases, oldest first."""
-    return only_visible(store, principal, "databases", store.list_databases())
+async def list_databases(request: Request, store: StoreDep, principal: PrincipalDep) -> list[DatabaseInfo]:
+    """Your databases, oldest first (ready ones with their ``summary``)."""
+    mine = visible(store, principal, "databases")
+    found = [d for d in store.list_databases() if mine(d.id)]
+    return await run_in_threadpool(lambda: [with_summary(request.app.state, store, d) for d in found])
 
 
 @router.get("/{db_id}", response_model=DatabaseInfo, responses=responses(401, 404, 422))
-def get_database(db_id: str, store: StoreDep, principal: PrincipalDep) -> DatabaseInfo:
-    """One of your databases: its status (``queued``, ``building``, ``ready``, ``failed``) and facts."""
-    return database_for(store, principal, db_id)
+async def get_database(
+    db_id: str, request: Request, store: StoreDep, principal: PrincipalDep
+) -> DatabaseInfo:
+    """One of your databases: its status (``queued``, ``building``, ``ready``, ``failed``) and facts;
+    a ready one with its ``summary`` (kind, clips with their labels, label vocabulary, skeleton,
+    units), so any client can use a database it did not build."""
+    info = database_for(store, principal, db_id)
+    return await run_in_threadpool(with_summary, request.app.state, store, info)
 
 
 @router.delete("/{db_id}", **delete_route(409))

@@ -42,22 +42,34 @@ After = Annotated[int, Query(ge=0, description="resume: only events with a large
 
 
 async def collect_events(backend: JobBackend, job_id: str, after: int, wait: float) -> list[JobEvent]:
-    """The events after ``after`` available now, waiting up to ``wait`` seconds for the first one."""
+    """The events after ``after``: those there now, and with ``wait`` > 0 every event until the
+    job's terminal one or until ``wait`` seconds have passed, whichever comes first (a long poll:
+    a client that asks again with the last id misses nothing and is not answered empty at once
+    while the job runs)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + wait
     events = backend.events(job_id, after)
     out: list[JobEvent] = []
-    timeout = max(wait, 0.05)
     try:
         while True:
+            left = deadline - loop.time()
+            # past the deadline: only what is already there (a short grace per event)
+            timeout = left if left > 0 else (0.05 if not out else 0.02)
             try:
                 event = await asyncio.wait_for(anext(events), timeout)
             except (StopAsyncIteration, TimeoutError):
                 break
             out.append(event)
-            timeout = 0.02  # the rest of what is already there
+            if event.type.terminal or (left <= 0 and loop.time() > deadline + DRAIN_S):
+                break
     finally:
         with contextlib.suppress(RuntimeError):
             await events.aclose()  # type: ignore[attr-defined]
     return out
+
+
+DRAIN_S = 0.5
+"""Past the wait, events still arriving back to back are taken for at most this long."""
 
 
 @router.get("/{job_id}/events", response_model=list[JobEvent], responses=responses(401, 404, 422))
@@ -66,9 +78,15 @@ async def list_events(
     backend: BackendDep,
     principal: PrincipalDep,
     after: After = 0,
-    wait: Annotated[float, Query(ge=0, le=60, description="long-poll: seconds to wait for a new event")] = 0,
+    wait: Annotated[
+        float,
+        Query(ge=0, le=60, description="long poll: wait up to this many seconds for the job to end"),
+    ] = 0,
 ) -> list[JobEvent]:
-    """The job's events after ``after`` (no streaming; poll with the last id, or use the WebSocket)."""
+    """The job's events after ``after`` (no streaming: poll with the last id, or use the WebSocket).
+
+    Without ``wait`` the answer is what there is now; with ``wait=S`` it comes when the job ends
+    (the terminal event is the last one) or after ``S`` seconds, holding every event in between."""
     job_for(principal, await backend.status(job_id))  # 404 for unknown jobs and other principals' jobs
     return await collect_events(backend, job_id, after, wait)
 

@@ -168,15 +168,26 @@ async def _result_id(backend: JobBackend, principal: Principal, job_id: str, res
     if result is not None:
         return result
     if info.result is None:
-        state = "has finished without a result" if info.status.finished else "has no result yet"
-        raise ApiError(404, "not_found", f"job {job_id} {state} (status {info.status.value})")
+        if not info.status.finished:
+            raise conflict(
+                "result_not_ready",
+                f"job {job_id} has no result yet (status {info.status.value}); follow "
+                f"/v1/jobs/{job_id}/events for its first solution",
+                {"job": job_id, "status": info.status.value},
+            )
+        raise ApiError(
+            404, "not_found", f"job {job_id} has finished without a result (status {info.status.value})"
+        )
     return info.result
 
 
 @router.get(
     "/{job_id}/result",
     responses=responses(
+        401,
         404,
+        409,
+        413,
         422,
         extra={
             200: {
@@ -207,7 +218,8 @@ async def download_result(
         Query(ge=0.5, le=1000, description="resample down to this rate only if faster (previews)"),
     ] = None,
 ) -> Response:
-    """Download a result motion (default: the job's best result so far), optionally resampled."""
+    """Download a result motion (default: the job's best result so far), optionally resampled; 409
+    ``result_not_ready`` while the job has none yet."""
     rid = await _result_id(backend, principal, job_id, result)
     motion = await run_in_threadpool(store.result_motion, job_id, rid)
     finite = await run_in_threadpool(
@@ -242,11 +254,12 @@ async def download_result(
     )
 
 
-@router.get("/{job_id}/report", response_model=Report, responses=responses(401, 404, 422))
+@router.get("/{job_id}/report", response_model=Report, responses=responses(401, 404, 409, 422))
 async def report(
     job_id: str, store: StoreDep, backend: BackendDep, principal: PrincipalDep, result: ResultQuery = None
 ) -> Report:
-    """A result's report: score terms, constraint errors, metrics and per-frame provenance."""
+    """A result's report: score terms, constraint errors, metrics and per-frame provenance (409
+    ``result_not_ready`` before the job's first solution)."""
     return await run_in_threadpool(
         store.result_report, job_id, await _result_id(backend, principal, job_id, result)
     )

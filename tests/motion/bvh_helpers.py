@@ -309,3 +309,21 @@ def reference_height(positions: Array) -> float:
     """Median over frames of the vertical (Y) extent of the points ``(F, P, 3)``."""
     y = positions[..., 1]
     return float(np.median(y.max(axis=-1) - y.min(axis=-1)))
+
+
+def under_static_root(bvh: str, root: str = "joint_Root") -> str:
+    """The same motion under a static ground node, as Bandai-Namco rigs have it: a new ROOT
+    ``root`` with six channels that stay zero, and the old root as its child joint."""
+    head, motion = bvh.split("MOTION", 1)
+    body = head.split("ROOT", 1)[1]
+    indented = "\n".join(
+        "  " + line if line.strip() else line for line in ("JOINT" + body).rstrip().splitlines()
+    )
+    hierarchy = (
+        f"HIERARCHY\nROOT {root}\n{{\n  OFFSET 0 0 0\n"
+        "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+        f"{indented}\n}}\n"
+    )
+    lines = motion.strip("\n").splitlines()
+    frames = [("0 0 0 0 0 0 " + line) for line in lines[2:] if line.strip()]
+    return hierarchy + "MOTION\n" + lines[0] + "\n" + lines[1] + "\n" + "\n".join(frames) + "\n"

@@ -27,6 +27,8 @@ FILES = sorted(DATA.rglob("*.bvh")) if DATA.is_dir() else []
 if not FILES:
     pytest.skip(f"shared motion data not found under {DATA} (no *.bvh files)", allow_module_level=True)
 
+pytestmark = pytest.mark.slow  # 734 files: tests/run.sh runs them with CI=true or SEGUE_SLOW=1
+
 FK_TOL = 1e-6  # x standing height, library FK vs independent FK
 ROUND_TRIP_TOL = 1e-5  # x standing height, positions after write -> read
 FRAME_STEP = 1  # check the independent FK on every FRAME_STEP-th frame (1 = all frames)

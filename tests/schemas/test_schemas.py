@@ -44,6 +44,12 @@ def test_content_address_ignores_file_names_but_not_settings() -> None:
     assert database_id(a, ["h1"]) == database_id(b, ["h1"])
     assert database_id(a, ["h1"]) != database_id(a, ["h2"])
     assert database_id(a, ["h1"]) != database_id(c, ["h1"])
+    # a clip named by default is named as reports name it: what the CLI builds from a spec file (no
+    # names) has the id the API computes (names filled in)
+    d = parse_database_spec({"kind": "clips", "clips": [{"bvh": "elsewhere/a.bvh.gz"}], "fps": 30})
+    assert database_id(d, ["h1"]) == database_id(a, ["h1"])
+    e = parse_database_spec({"kind": "clips", "clips": [{"bvh": "sample:a"}], "fps": 30})
+    assert database_id(e, ["h1"]) == database_id(a, ["h1"])
 
 
 def test_job_requests() -> None:

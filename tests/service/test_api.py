@@ -5,7 +5,6 @@ from __future__ import annotations
 import gzip
 import io
 import json
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -346,15 +345,6 @@ def test_ws_resume_replays_only_later_events(client: TestClient, walk_db: dict[s
     with client.websocket_connect(f"/v1/jobs/{job['id']}/events?after={ids[-1]}") as ws:
         message = ws.receive()
         assert message["type"] == "websocket.close" and message["code"] == 1000
-
-
-def test_http_events_long_poll(client: TestClient, walk_db: dict[str, Any]) -> None:
-    job = submit(client, {"engine": "scripted", "database": walk_db["id"], "steps": 2, "step_s": 0.3})
-    assert [e["type"] for e in client.get(f"/v1/jobs/{job['id']}/events").json()][:1] == ["queued"]
-    t0 = time.perf_counter()
-    got = client.get(f"/v1/jobs/{job['id']}/events", params={"after": 2, "wait": 10}).json()
-    assert 0.1 < time.perf_counter() - t0 < 5 and got[0]["type"] == "solution" and got[0]["id"] == 3
-    assert wait_events(client, job["id"], after=3)[-1]["type"] == "done"
 
 
 def test_unexpected_error_is_500_json(app: FastAPI) -> None:

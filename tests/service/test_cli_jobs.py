@@ -129,3 +129,27 @@ def test_synth_errors(spec_dir: Path, capsys: pytest.CaptureFixture[str]) -> Non
         == 2
     )
     assert "not a database directory" in capsys.readouterr().err
+
+
+def test_spec_files_name_samples_and_label_ranges_stay_inside_clips(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``sample:NAME`` works in spec files (from any folder); a label range past its clip's end
+    stops the build with a message naming it (it was clamped silently before)."""
+    spec = {"kind": "clips", "clips": [{"bvh": "sample:run-09-03"}], "fps": 30}
+    (tmp_path / "db.json").write_text(json.dumps(spec))
+    assert main(["build", str(tmp_path / "db.json"), "--out", str(tmp_path / "db"), "-q"]) == 0
+    info = json.loads((tmp_path / "db" / "info.json").read_text())
+    assert info["clips"] == ["run-09-03"] and info["frames"] == 33
+    spec = {
+        "kind": "annotated",
+        "clips": [
+            {"bvh": "sample:run-09-03", "labels": [{"label": "run", "start": 0, "end": 33}]},
+            {"bvh": "sample:run-09-04", "labels": [{"label": "run", "start": 5, "end": 40}]},
+        ],
+    }
+    (tmp_path / "bad.json").write_text(json.dumps(spec))
+    assert main(["build", str(tmp_path / "bad.json"), "--out", str(tmp_path / "bad"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "clips[1] (run-09-04): labels[0] 'run' [5, 40) ends after the clip, which has 35 frames" in err
+    assert "clips[0]" not in err  # [0, 33) of a 33-frame clip is fine

@@ -8,8 +8,8 @@ tests/web/artifacts/. The bar: the first solution is drawn within 1 s of pressin
 
 from __future__ import annotations
 
+import gzip
 import json
-import time
 from typing import Any
 
 import numpy as np
@@ -18,14 +18,18 @@ import pytest
 from engines.registry import UnavailableError, engine_class
 from motion.samples import sample_path
 from service.client import SegueClient
+from service.demos import DEMOS
+from tests.motion.bvh_helpers import under_static_root
 
 from .conftest import ARTIFACTS, screenshot
+
+pytestmark = pytest.mark.slow  # tests/run.sh runs these with CI=true or SEGUE_SLOW=1
 
 FIRST_SOLUTION_MS = 1000.0
 PAGE_WORK_MS = 400.0
 WALK = "07_01_walk_daz"
 LEADER = "60_01_salsa_leader"
-FOLLOWER = "61_01_salsa_follower"
+LEADER12 = "60_12_salsa_leader_30fps"  # the leader no couple of the demo's database danced with
 
 
 def needs_engine(name: str) -> None:
@@ -62,10 +66,11 @@ def wait(page: Any, condition: str, timeout_ms: float = 15_000) -> None:
 
 
 def upload_samples(page: Any, *files: str) -> None:
-    """Upload bundled samples with the library's sample buttons."""
+    """Upload bundled samples with the library's sample picker."""
     for file in files:
         before = len(state(page, ".loaded"))
-        page.click(f"button[data-sample='{file}.bvh.gz']")
+        page.select_option("#sample-select", f"{file}.bvh.gz")
+        page.click("#sample-upload")
         wait(page, f"s.loaded.length > {before} || s.loaded.includes('{file}')")
 
 
@@ -175,7 +180,17 @@ def test_load_clip_and_play(page: Any) -> None:
     page.select_option("#speed", "2")
     page.click("#play")
     wait(page, "s.viewer.playing")
+    assert state(page, ".viewer.roots") == {"clip": "hip"}
     screenshot(page, "viewer")
+
+    # a rig whose joint 0 is a static ground node (as Bandai-Namco's): the ring and the trail
+    # follow the hips, not the node at the origin
+    static = under_static_root(gzip.decompress(sample_path("run-09-04").read_bytes()).decode())
+    page.set_input_files(
+        "#clip-file", files=[{"name": "static-root.bvh", "mimeType": "text/plain", "buffer": static.encode()}]
+    )
+    wait(page, "s.loaded.includes('static-root')")
+    assert state(page, ".viewer.roots") == {"clip": "hip"}
 
     page.set_input_files(
         "#clip-file",
@@ -197,9 +212,10 @@ def test_load_clip_and_play(page: Any) -> None:
 
 
 def test_constraints_build_and_alternatives(page: Any, segue: SegueClient) -> None:
-    """Library: upload two samples, build a graph database with progress; Constraints: place two
-    body arrows with the mouse and a length, receive alternatives, pick one, download BVH and GLB;
-    the quality badge says what the result's report says."""
+    """Library: upload two samples, build a graph database with progress. Constraints, on the
+    database `segue demo graph` builds (its spec posted to the API): place two body arrows with the
+    mouse and a length, receive alternatives, pick one, download BVH and GLB; the quality badge says
+    what the result's report says."""
     needs_engine("graph")
     upload_samples(page, WALK, LEADER)
     page.select_option("#db-kind", "graph")
@@ -212,19 +228,25 @@ def test_constraints_build_and_alternatives(page: Any, segue: SegueClient) -> No
     db = next(d for d in state(page, ".databases") if d["id"] == build["database"])
     assert db["kind"] == "graph" and db["status"] == "ready" and sorted(db["clips"]) == sorted([WALK, LEADER])
     assert page.locator(f"#db-list li[data-db='{db['id']}'] .status-ready").count() == 1
+    label = page.text_content(f"#db-list li[data-db='{db['id']}'] .grow")
+    assert label == "walk+salsa graph · graph", label
 
+    demo = segue.build_database(DEMOS["graph"].spec).id  # the database `segue demo graph` builds
+    reload_databases(page)
     page.click("#tabs button[data-tool='constraints']")
-    select_database(page, "cons-db", db["id"])
+    select_database(page, "cons-db", demo)
+    option = page.eval_on_selector(f"#cons-db option[value='{demo}']", "o => o.textContent")
+    assert option.startswith("walk +3 · graph"), option  # named by its clips: the CLI gave no name
     drag(page, "#cons-pad", [(0.5, 0.5), (0.5, 0.6)])  # at the origin, facing +Z
-    drag(page, "#cons-pad", [(0.6, 0.8), (0.7, 0.8)])  # 1 m right, 3 m ahead, facing +X
+    drag(page, "#cons-pad", [(0.52, 0.9), (0.52, 0.95)])  # 0.2 m right, 4 m ahead, facing +Z
     drag(page, "#cons-pad", [(0.3, 0.3), (0.3, 0.2)])  # a third arrow, removed with a right click
     box = page.locator("#cons-pad").bounding_box()
     page.mouse.click(box["x"] + 0.31 * box["width"], box["y"] + 0.3 * box["height"], button="right")
     arrows = state(page, ".constraints")
     assert len(arrows) == 2
     assert arrows[0]["position"] == pytest.approx([0, 0], abs=0.05) and abs(arrows[0]["heading_deg"]) < 1
-    assert arrows[1]["position"] == pytest.approx([1, 3], abs=0.05)
-    assert abs(arrows[1]["heading_deg"] - 90) < 1
+    assert arrows[1]["position"] == pytest.approx([0.2, 4], abs=0.05)
+    assert abs(arrows[1]["heading_deg"]) < 1
     page.fill("#cons-length", "4")
     page.fill("#cons-alts", "3")
     page.fill("#cons-budget", "1")
@@ -237,11 +259,10 @@ def test_constraints_build_and_alternatives(page: Any, segue: SegueClient) -> No
     best = min(s["solutions"], key=lambda sol: sol["score"])
     assert s["current"]["result"] == best["result"]
     assert all(not sol["alternative"] for sol in s["solutions"] if sol["result"] == best["result"])
-    # the drawn motion ends as far from the last arrow as its report says (a walk clip of 2.6 s and a
-    # salsa dance cannot turn 90 degrees and travel 3 m in 4 s: the report says so, not a drag)
+    # the drawn motion ends as far from the last arrow as its report says
     report = segue.report(s["job"]["id"], best["result"])
     said = report.constraint_errors["body[1]"]
-    drawn = float(np.linalg.norm(np.subtract(s["current"]["root"][-1], [1, 3]))) * 100
+    drawn = float(np.linalg.norm(np.subtract(s["current"]["root"][-1], [0.2, 4]))) * 100
     assert said["position_cm"] == pytest.approx(drawn, abs=3.0)
     assert s["quality"] == {"result": best["result"], "ok": report.ok, "reasons": report.reasons}
     badge = page.text_content("#sol-quality")
@@ -286,34 +307,21 @@ def test_constraints_build_and_alternatives(page: Any, segue: SegueClient) -> No
 # ------------------------------------------------------------------------------ engines as they land
 
 
-def _database(segue: SegueClient, spec: dict[str, Any], *samples: str) -> str:
-    for name in samples:
-        segue.upload_clip(sample_path(name))
-    return segue.build_database(spec, timeout=120).id
-
-
 def test_path_walk(page: Any, segue: SegueClient) -> None:
     """Perform a path with the mouse (sampled at 30 Hz) and receive a walk along it."""
     needs_engine("control")
-    spec = {
-        "kind": "control",
-        "name": "walks",
-        "fps": 30,
-        "pairs": [{"control": None, "target": f"{WALK}.bvh.gz"}],
-        "segmentation": {"method": "footplants"},
-    }
-    db = _database(segue, spec, "walk")
+    db = segue.build_database(DEMOS["walk"].spec).id  # the database `segue demo walk` builds
     reload_databases(page)
     select_database(page, "path-db", db)
     # an L-shaped path at about 1.2 m/s: 2.4 m ahead (+Z) then 1.2 m right, in about 3 s
     pts = [(0.5, 0.5 + 0.024 * i) for i in range(11)] + [(0.5 + 0.024 * i, 0.74) for i in range(1, 6)]
-    t0 = time.monotonic()
     drag(page, "#path-pad", pts, step_ms=180)
-    took = time.monotonic() - t0
     path = state(page, ".path")
-    # sampled at 30 Hz over the time the mouse was down (press to release, give or take an event)
-    assert path["fps"] == 30 and abs(len(path["points"]) - 30 * took) <= 6, (len(path["points"]), took)
+    # sampled at exactly 30 Hz over the time the button was held, as the page timed it (no clock of
+    # this process: its view of the page's timing includes the IPC in between)
+    assert path["fps"] == 30 and len(path["points"]) == int(path["held_ms"] / 1000 * 30) + 1, path
     assert path["points"][0] == pytest.approx([0, 0], abs=0.05)
+    assert path["points"][-1] == pytest.approx([1.2, 2.4], abs=0.1)  # the release point
     page.fill("#path-budget", "2")
     page.click("#path-go")
     wait(page, "s.current && s.current.tool === 'path'", 10_000)
@@ -321,68 +329,70 @@ def test_path_walk(page: Any, segue: SegueClient) -> None:
     s = first_solution(page, "path", warm=False)
     end = s["current"]["root"][-1]
     assert end == pytest.approx(path["points"][-1], abs=0.6)
+    assert s["current"]["rootJoint"] == "hip" and s["viewer"]["roots"]["result"] == "hip"
     screenshot(page, "path")
     press_again(page, "#path-go", "path")
 
 
 def test_partner_follower(page: Any, segue: SegueClient) -> None:
-    """Pick a leader clip: the generated follower dances with the leader (two characters)."""
+    """Pick a leader clip uploaded through the API (not from this page): the generated follower
+    dances with the leader, both drawn. The database picker offers partner databases only."""
     needs_engine("control")
-    db = _database(
-        segue,
-        {"kind": "control", "name": "salsa", "fps": 30,
-         "pairs": [{"control": f"{LEADER}.bvh.gz", "target": f"{FOLLOWER}.bvh.gz"}]},
-        "salsa-leader", "salsa-follower",
-    )  # fmt: skip
+    db = segue.build_database(DEMOS["control"].spec).id  # the database `segue demo control` builds
+    segue.upload_clip(sample_path("salsa-leader-12"))
+    walk_spec = {"kind": "control", "pairs": [{"target": "sample:walk-10-04"}]}
+    walks = segue.build_database(walk_spec | {"segmentation": {"method": "footplants"}}).id
     reload_databases(page)
     page.click("#tabs button[data-tool='partner']")
+    offered = page.eval_on_selector_all("#partner-db option", "os => os.map(o => o.value)")
+    assert db in offered and walks not in offered  # a walk database cannot dance with a leader
+    assert walks in page.eval_on_selector_all("#path-db option", "os => os.map(o => o.value)")
+    label = page.eval_on_selector(f"#partner-db option[value='{db}']", "o => o.textContent")
+    assert label.startswith("salsa-follower +7 · control (partner)"), label
     select_database(page, "partner-db", db)
-    page.select_option("#partner-clip", LEADER)
+    assert LEADER12 not in state(page, ".loaded")  # uploaded by the API client, never parsed here
+    page.select_option("#partner-clip", LEADER12)
     page.fill("#partner-budget", "2")
     page.click("#partner-go")
     wait(page, "s.current && s.current.tool === 'partner'", 10_000)
     wait(page, f"['done', 'cancelled'].includes(s.job.status) && {BEST_DRAWN}", 30_000)
     s = first_solution(page, "partner", warm=False)
     assert sorted(s["viewer"]["characters"]) == ["leader", "result"]
-    assert s["current"]["frames"] / s["current"]["fps"] == pytest.approx(2241 / 120, abs=0.5)
+    assert page.text_content("#err-partner") == ""
+    assert s["current"]["frames"] / s["current"]["fps"] == pytest.approx(422 / 30, abs=0.5)
     screenshot(page, "partner")
-    # The viewer previews the 120 fps result at 30 fps (max_fps): 561 frames to export and draw.
     press_again(page, "#partner-go", "partner")
+
+    # another tool does not show this one's result
+    page.click("#tabs button[data-tool='music']")
+    s = state(page)
+    assert s["current"] is None and s["viewer"]["characters"] == [] and s["solutions"] == []
+    assert page.text_content("#sol-info") == "no result yet"
 
 
 def test_timeline_paint(page: Any, segue: SegueClient) -> None:
-    """Paint do / don't labels on two tracks and receive a motion."""
+    """On an annotated database built through the API (no spec in this page), the label tracks come
+    from its summary; paint do / don't labels on two tracks and receive a motion; correct a clip's
+    labels (the server rebuilds with them)."""
     needs_engine("annotations")
-    spec = {
-        "kind": "annotated",
-        "name": "walk+dance",
-        "fps": 30,
-        "gammas": [1.0],  # one SVM per label, no cross-validated grid: a quick build
-        "clips": [
-            {"bvh": f"{WALK}.bvh.gz", "labels": [{"label": "walk", "start": 0, "end": 317}]},
-            {"bvh": f"{LEADER}.bvh.gz", "labels": [{"label": "dance", "start": 0, "end": 1200}]},
-        ],
-    }
-    upload_samples(page, WALK, LEADER)
-    page.select_option("#db-kind", "annotated")
-    page.fill("#db-spec", json.dumps({k: v for k, v in spec.items() if k != "kind"}))
-    page.click("#db-build")
-    wait(page, "s.builds.length && s.builds[s.builds.length - 1].status === 'ready'", 90_000)
-    db = state(page, ".builds")[-1]["database"]
+    db = segue.build_database(DEMOS["annotations"].spec).id  # what `segue demo annotations` builds
+    reload_databases(page)
     page.click("#tabs button[data-tool='timeline']")
     select_database(page, "tl-db", db)
     page.dispatch_event("#tl-db", "change")
-    wait(page, "s.timeline.tracks.length === 2")
+    wait(page, "s.timeline.tracks.length === 3")
+    assert [t["label"] for t in state(page, ".timeline.tracks")] == ["jump", "run", "walk"]  # its vocabulary
     page.fill("#tl-frames", "240")
     page.dispatch_event("#tl-frames", "input")
-    # dance (row 2) over the first half, walk (row 1) over the second; don't dance at the end
-    drag(page, "#tl-canvas", [(0.2, 0.45), (0.6, 0.45)])
-    drag(page, "#tl-canvas", [(0.62, 0.15), (0.99, 0.15)])
+    # rows of 24 px in an 88-px canvas: walk (row 3) over the first 60 %, run (row 2) after it,
+    # and never jump (row 1, painted with shift: don't)
+    drag(page, "#tl-canvas", [(0.2, 0.68), (0.6, 0.68)])
+    drag(page, "#tl-canvas", [(0.62, 0.41), (0.99, 0.41)])
     page.keyboard.down("Shift")
-    drag(page, "#tl-canvas", [(0.75, 0.45), (0.99, 0.45)])
+    drag(page, "#tl-canvas", [(0.2, 0.14), (0.99, 0.14)])
     page.keyboard.up("Shift")
     entries = page.evaluate("window.__segue.timeline.entries()")
-    assert {(e["label"], e["value"]) for e in entries} == {("walk", 1), ("dance", 1), ("dance", -1)}
+    assert {(e["label"], e["value"]) for e in entries} == {("walk", 1), ("run", 1), ("jump", -1)}
     page.fill("#tl-budget", "1.5")
     page.click("#tl-go")
     wait(page, "s.current && s.current.tool === 'timeline'", 10_000)
@@ -392,27 +402,29 @@ def test_timeline_paint(page: Any, segue: SegueClient) -> None:
     screenshot(page, "timeline")
     press_again(page, "#tl-go", "timeline")
 
-    # the correction loop: the walk clip's first second does not dance; the database is rebuilt
+    # the correction loop over the API: the first 60 frames of an unlabelled walk do not run; the
+    # server builds the corrected database, whose summary holds the correction
     page.click("#tool-timeline summary")
-    page.select_option("#corr-clip", WALK)
-    page.fill("#corr-label", "dance")
+    clips = page.eval_on_selector_all("#corr-clip option", "os => os.map(o => o.value)")
+    assert clips == [c["bvh"].removeprefix("sample:") for c in DEMOS["annotations"].spec["clips"]]
+    page.select_option("#corr-clip", "walk-10-04")
+    page.fill("#corr-label", "run")
     page.fill("#corr-start", "0")
-    page.fill("#corr-end", "120")
+    page.fill("#corr-end", "60")
     page.select_option("#corr-value", "-1")
     builds = len(state(page, ".builds"))
     page.click("#corr-go")
     wait(page, f"s.builds.length > {builds} && s.builds[s.builds.length - 1].status === 'ready'", 90_000)
     corrected = state(page, ".builds")[-1]["database"]
     assert corrected != db and page.input_value("#tl-db") == corrected
-    labels = page.evaluate(f"JSON.parse(localStorage.getItem('segue.specs'))['{corrected}'].clips[0].labels")
-    assert {"label": "dance", "start": 0, "end": 120, "value": -1} in labels
+    walk_labels = segue.database(corrected).summary.clips[5].labels
+    assert {"label": "run", "start": 0, "end": 60, "value": -1} in [lb.model_dump() for lb in walk_labels]
 
 
 @pytest.fixture
 def rhythm_db(segue: SegueClient) -> str:
     needs_engine("rhythm")
-    spec = {"kind": "rhythm", "name": "salsa", "clips": [{"bvh": f"{LEADER}.bvh.gz"}]}
-    return _database(segue, spec, "salsa-leader")
+    return segue.build_database(DEMOS["rhythm"].spec).id  # the database `segue demo rhythm` builds
 
 
 def _steer(page: Any, x: float, y: float) -> None:

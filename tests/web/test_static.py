@@ -88,7 +88,8 @@ def test_root_serves_the_page_and_api_routes_come_first(client: TestClient) -> N
 
 def test_samples_are_listed_and_served(client: TestClient) -> None:
     samples = client.get("/samples").json()
-    assert samples["07_01_walk_daz.bvh.gz"] == "walk" and len(samples) == 4
+    assert samples["07_01_walk_daz.bvh.gz"] == "walk" and len(samples) == 20  # the clips, not the song
+    assert all(f.endswith(".bvh.gz") for f in samples)
     data = client.get("/samples/07_01_walk_daz.bvh.gz")
     assert data.status_code == 200 and data.content[:2] == b"\x1f\x8b"
     bad = client.get("/samples/__init__.py")

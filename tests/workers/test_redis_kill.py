@@ -9,6 +9,7 @@ import asyncio
 import signal
 import time
 
+import pytest
 import redis
 
 from schemas import EventType, JobEvent, JobStatus
@@ -17,6 +18,8 @@ from workers.redis_keys import RedisKeys
 from workers.store import Store
 
 from .conftest import add_database, run, synth, wait_for, worker_processes
+
+pytestmark = pytest.mark.slow  # tests/run.sh runs these with CI=true or SEGUE_SLOW=1
 
 KEYS = RedisKeys()
 

@@ -18,6 +18,8 @@ from motion import parse_bvh
 from motion.samples import sample_path
 from service.client import SegueClient
 
+pytestmark = pytest.mark.slow  # real processes: tests/run.sh runs it with CI=true or SEGUE_SLOW=1
+
 REPO = Path(__file__).resolve().parents[2]
 
 

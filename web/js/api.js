@@ -93,6 +93,8 @@ export const api = {
     return (await request('POST', '/v1/clips', { body: form })).json();
   },
   clips: async () => (await request('GET', '/v1/clips')).json(),
+  // a clip's bytes as uploaded (BVH or gzip BVH): draw clips this page did not upload
+  clipBytes: async (id) => (await request('GET', `/v1/clips/${encodeURIComponent(id)}/bvh`)).arrayBuffer(),
 
   uploadFile: async (name, bytes) => {
     const form = new FormData();
@@ -103,6 +105,9 @@ export const api = {
   buildDatabase: async (spec) => (await request('POST', '/v1/databases', { json: spec })).json(),
   databases: async () => (await request('GET', '/v1/databases')).json(),
   database: async (id) => (await request('GET', `/v1/databases/${id}`)).json(),
+  // the annotation engine's correction loop: a new database with the corrected labels
+  correct: async (id, corrections) =>
+    (await request('POST', `/v1/databases/${id}/corrections`, { json: corrections })).json(),
 
   submit: async (job) => (await request('POST', '/v1/jobs', { json: job })).json(),
   job: async (id) => (await request('GET', `/v1/jobs/${id}`)).json(),
@@ -149,7 +154,8 @@ export function followJob(jobId, onEvent, { retries = 5 } = {}) {
       while (!stopped) {
         let events;
         try {
-          events = await api.eventsAfter(jobId, last, 10);
+          // a long poll answers at the job's end or after 1 s, whichever comes first
+          events = await api.eventsAfter(jobId, last, 1);
         } catch (exc) {
           reject(exc);
           return;

@@ -3,7 +3,7 @@
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { api, ApiError, followJob, getToken, setToken } from './api.js';
 import { bvhText, METRES_PER_UNIT, parseBvh, parseBvhText } from './bvh.js';
-import { Viewer } from './viewer.js';
+import { placeJoint, Viewer } from './viewer.js';
 import { FloorPad, headingDeg } from './pad.js';
 import { setupMusic } from './music.js';
 
@@ -46,7 +46,10 @@ const viewer = new Viewer($('viewer'));
 let music = null; // the Music tool (set up below)
 let timeline = null; // the Timeline tool (set up below)
 const clipMotions = new Map(); // clip name -> parsed motion (metres)
-const dbSpecs = JSON.parse(localStorage.getItem('segue.specs') || '{}'); // database id -> spec (labels)
+// What a database holds (labels, clips, skeleton, what drives it) comes from the API
+// (GET /v1/databases: each ready database's `summary`), so every tool works on any database,
+// whoever built it (this page, the CLI's spec over HTTP, another client).
+const summaryOf = (id) => (state.databases.find((d) => d.id === id) || {}).summary || null;
 
 // ---------------------------------------------------------------- errors
 export function showError(where, exc) {
@@ -79,7 +82,8 @@ function fmt(t) {
 }
 viewer.onChange((v) => {
   const d = v.duration;
-  state.viewer = { playing: v.playing, time: v.time, duration: d, characters: [...v.characters.keys()], frames: { ...(v.frames || {}) } };
+  state.viewer = { playing: v.playing, time: v.time, duration: d, characters: [...v.characters.keys()], frames: { ...(v.frames || {}) },
+    roots: Object.fromEntries([...v.characters].map(([k, c]) => [k, c.motion.joints ? c.motion.joints[c.root] : c.root])) };
   $('play').textContent = v.playing ? 'Pause' : 'Play';
   if (!scrubbing) $('scrub').value = d > 0 ? String(v.time / d) : '0';
   $('time').textContent = `${fmt(v.time)} / ${fmt(d)} s`;
@@ -104,19 +108,18 @@ function sampleLabel(file) {
   return state.samples[file] || file;
 }
 
+// the bundled CMU clips, offered for upload (specs may also name them sample:NAME)
 async function loadSamples() {
   state.samples = await api.samples();
-  const box = $('sample-buttons');
-  box.textContent = '';
-  for (const file of Object.keys(state.samples)) {
-    const b = document.createElement('button');
-    b.textContent = sampleLabel(file);
-    b.dataset.sample = file;
-    b.title = `upload the bundled CMU clip ${file}`;
-    b.onclick = () => guarded('upload', async () => uploadClip(file, await api.sampleBytes(file)));
-    box.appendChild(b);
-  }
+  const sel = $('sample-select');
+  sel.textContent = '';
+  for (const file of Object.keys(state.samples)) sel.add(new Option(sampleLabel(file), file));
 }
+$('sample-upload').onclick = () =>
+  guarded('upload', async () => {
+    const file = $('sample-select').value;
+    if (file) await uploadClip(file, await api.sampleBytes(file));
+  });
 
 async function uploadClip(name, bytes) {
   const info = await api.uploadClip(name, bytes);
@@ -191,13 +194,28 @@ async function refreshClips() {
   }
 }
 
+// how a database is named in lists and pickers: its name, else its clips; its kind, and what drives
+// a control database (a leader's motion: Partner; a floor path: Path)
+export function dbLabel(d) {
+  const clips = d.clips || [];
+  const name = d.name || (clips.length ? `${clips[0]}${clips.length > 1 ? ` +${clips.length - 1}` : ''}` : d.id.slice(0, 8));
+  const drive = d.summary && d.summary.control ? ` (${d.summary.control === 'path' ? 'walks from a path' : 'partner'})` : '';
+  return `${name} · ${d.kind}${drive}`;
+}
+
+// whether a database fits a picker: its kind, and for control databases what drives them
+function fits(d, sel) {
+  if (d.kind !== sel.dataset.kind || d.status !== 'ready') return false;
+  return !sel.dataset.control || (d.summary && d.summary.control === sel.dataset.control);
+}
+
 let dbListSeq = 0;
 let dbListSignature = '';
 async function refreshDatabases() {
   const seq = ++dbListSeq;
   const databases = await api.databases();
   if (seq !== dbListSeq) return; // a newer refresh is on its way
-  const signature = JSON.stringify(databases.map((d) => [d.id, d.status, d.frames]));
+  const signature = JSON.stringify(databases.map((d) => [d.id, d.status, d.frames, Boolean(d.summary)]));
   state.databases = databases;
   if (signature === dbListSignature) return; // nothing changed: leave the lists (and open menus) alone
   dbListSignature = signature;
@@ -207,7 +225,7 @@ async function refreshDatabases() {
     const li = document.createElement('li');
     li.dataset.db = d.id;
     li.innerHTML = '<span class="grow"></span><span></span><span class="muted mono"></span>';
-    li.children[0].textContent = `${d.name || d.id.slice(0, 8)} · ${d.kind}`;
+    li.children[0].textContent = dbLabel(d);
     li.children[0].title = `${d.id}\nclips: ${d.clips.join(', ')}${d.error ? `\n${d.error}` : ''}`;
     li.children[1].textContent = d.status;
     li.children[1].className = `status-${d.status}`;
@@ -217,9 +235,9 @@ async function refreshDatabases() {
   for (const sel of document.querySelectorAll('.db-select')) {
     const keep = sel.value;
     sel.textContent = '';
-    const ready = state.databases.filter((d) => d.kind === sel.dataset.kind && d.status === 'ready');
-    if (!ready.length) sel.add(new Option(`(build a ${sel.dataset.kind} database)`, ''));
-    for (const d of ready.slice().reverse()) sel.add(new Option(`${d.name || d.id.slice(0, 8)} (${d.clips.length} clips)`, d.id));
+    const ready = state.databases.filter((d) => fits(d, sel));
+    if (!ready.length) sel.add(new Option(sel.dataset.hint || `(build a ${sel.dataset.kind} database)`, ''));
+    for (const d of ready.slice().reverse()) sel.add(new Option(`${dbLabel(d)} · ${d.clips.length} clips`, d.id));
     if (keep && ready.some((d) => d.id === keep)) sel.value = keep;
   }
   timeline.refreshTracks();
@@ -279,20 +297,23 @@ export function composeSpec(kind, name, selected, text) {
 }
 
 export async function buildDatabase(spec) {
+  return trackBuild(spec.kind, () => api.buildDatabase(spec));
+}
+
+// Start a build (`start()` posts it: a spec, or corrections) and follow it with progress to ready
+async function trackBuild(kind, start) {
   const t0 = performance.now();
-  const build = { kind: spec.kind, status: 'submitting', fraction: 0, message: '' };
+  const build = { kind, status: 'submitting', fraction: 0, message: '' };
   state.builds.push(build);
   let info;
   try {
-    info = await api.buildDatabase(spec);
+    info = await start();
   } catch (exc) {
     build.status = 'refused';
     throw exc;
   }
   build.database = info.id;
   build.status = info.status === 'ready' ? 'found' : info.status;
-  dbSpecs[info.id] = spec;
-  localStorage.setItem('segue.specs', JSON.stringify(dbSpecs));
   $('db-status').textContent = `${info.status}`;
   if (info.status === 'ready') {
     await refreshDatabases();
@@ -385,7 +406,7 @@ export async function runJob(tool, request) {
   state.job = { id: info.id, tool, status: info.status, submitted_ms: performance.now() - t0, events: [], reconnects: 0 };
   $('cancel-job').disabled = false;
   let best = Infinity;
-  const run = { tool, t0, jobId: info.id };
+  const run = { tool, t0, jobId: info.id, db: request.database };
   run.handle = followJob(info.id, (ev) => {
     state.job.events.push(ev.id);
     state.job.reconnects = run.handle ? run.handle.reconnects : 0;
@@ -429,9 +450,13 @@ async function drawSolution(run, sol) {
   const motion = parseBvhText(await bvhText(bytes), `${run.tool} ${sol.result}`);
   const tDraw = performance.now();
   const first = !state.current;
-  viewer.set('result', motion); // framed: each better solution may go elsewhere
+  // the ring and trail follow the body: the hips the database's summary names (not a static root)
+  const summary = summaryOf(run.db);
+  const root = placeJoint(motion, summary && summary.skeleton.hips);
+  viewer.set('result', motion, undefined, { root }); // framed: each better solution may go elsewhere
   const drawn = performance.now() - run.t0;
-  state.current = { tool: run.tool, job: sol.job, result: sol.result, score: sol.score, frames: motion.frames, fps: motion.fps, joints: motion.joints.length, drawn_ms: drawn, root: rootPath(motion),
+  state.current = { tool: run.tool, job: sol.job, result: sol.result, score: sol.score, frames: motion.frames, fps: motion.fps, joints: motion.joints.length, drawn_ms: drawn, root: rootPath(motion, root),
+    rootJoint: motion.joints[root],
     // where the time went: the event's arrival, the download, parsing, drawing (ms)
     event_ms: sol.at_ms, download_ms: tParse - tFetch, parse_ms: tDraw - tParse, draw_ms: performance.now() - tDraw };
   if (state.timings[run.tool] === undefined || first) {
@@ -443,7 +468,7 @@ async function drawSolution(run, sol) {
   showQuality(sol);
   for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = false;
   if (first) { viewer.seek(0); viewer.play(); }
-  tools[run.tool]?.onResult?.(motion);
+  tools[run.tool]?.onResult?.(motion, root);
 }
 
 // The result's quality report in one badge: "ok", or "not ok" with the first reason (all on hover).
@@ -457,10 +482,11 @@ function showQuality(sol) {
   state.quality = { result: sol.result, ok: sol.ok, reasons: sol.reasons };
 }
 
-function rootPath(motion) {
+// the floor path [[x, z], ...] of a motion's place joint (the hips; see viewer.placeJoint)
+function rootPath(motion, root = placeJoint(motion)) {
   const J = motion.joints.length;
   const out = [];
-  for (let f = 0; f < motion.frames; f++) out.push([motion.positions[f * J * 3], motion.positions[f * J * 3 + 2]]);
+  for (let f = 0; f < motion.frames; f++) out.push([motion.positions[(f * J + root) * 3], motion.positions[(f * J + root) * 3 + 2]]);
   return out;
 }
 
@@ -504,7 +530,29 @@ const tools = {};
 for (const b of document.querySelectorAll('#tabs button')) {
   b.onclick = () => selectTool(b.dataset.tool);
 }
+// Each tool shows only its own results: switching tools stops following another tool's job (and
+// cancels it when it still runs) and clears its drawing, its solutions and its quality badge.
+function clearResults() {
+  if (active) {
+    active.handle.stop();
+    if (state.job && !['done', 'failed', 'cancelled'].includes(state.job.status)) api.cancel(state.job.id).catch(() => {});
+    active = null;
+  }
+  pending = null;
+  viewer.clear();
+  state.current = null;
+  state.solutions = [];
+  state.quality = null;
+  $('sol-quality').hidden = true;
+  $('alternatives').textContent = '';
+  for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = true;
+  $('cancel-job').disabled = true;
+  $('sol-info').textContent = 'no result yet';
+  for (const t of Object.values(tools)) t.clearResult?.();
+}
+
 export function selectTool(name) {
+  if (name !== state.tool && state.current && state.current.tool !== 'library' && state.current.tool !== name) clearResults();
   state.tool = name;
   for (const b of document.querySelectorAll('#tabs button')) b.classList.toggle('active', b.dataset.tool === name);
   for (const t of document.querySelectorAll('.tool')) t.classList.toggle('active', t.id === `tool-${name}`);
@@ -592,7 +640,9 @@ tools.path = (() => {
     if (!timer) return;
     clearInterval(timer);
     timer = null;
-    state.path.points = resample(performance.now());
+    const until = performance.now();
+    state.path.points = resample(until);
+    state.path.held_ms = until - raw[0][0]; // how long the button was held, as the page timed it
     redraw();
   };
   canvas.addEventListener('pointerup', stop);
@@ -614,7 +664,7 @@ tools.path = (() => {
       });
     });
   redraw();
-  return { redraw, onResult: (motion) => { result = rootPath(motion); redraw(); } };
+  return { redraw, onResult: (motion, root) => { result = rootPath(motion, root); redraw(); }, clearResult: () => { result = []; redraw(); } };
 })();
 
 // -- Partner: a leader clip -> the follower (control engine with the leader as the control motion)
@@ -627,19 +677,18 @@ tools.partner = (() => {
       viewer.clear();
       const info = state.clips.find((c) => clipName(c) === leader);
       const job = runJob('partner', { engine: 'control', database: db, budget_s: numberOf('partner-budget', 'budget', 0.1, 600), control: { bvh: info ? info.name : leader } });
-      // the leader is drawn beside the follower: parsed in this page when it was uploaded here, or a
-      // bundled sample fetched again (the API does not serve clip files back)
+      // the leader is drawn beside the follower: parsed in this page when it was uploaded here, else
+      // its bytes from the API (GET /v1/clips/{id}/bvh: clips uploaded by any client), in metres
       let motion = clipMotions.get(leader);
-      const file = Object.keys(state.samples).find((f) => f.startsWith(leader));
-      if (!motion && file) {
-        const scale = METRES_PER_UNIT[info && info.units] || 1;
-        motion = parseBvhText(await bvhText(await api.sampleBytes(file)), leader, scale);
+      if (!motion && info) {
+        const scale = METRES_PER_UNIT[info.units] || 1;
+        motion = parseBvhText(await bvhText(await api.clipBytes(info.id)), leader, scale);
       }
       if (motion) {
         clipMotions.set(leader, motion);
         viewer.set('leader', motion, undefined, { frame: !viewer.has('result') });
       } else {
-        $('err-partner').textContent = `(the leader ${leader} is not drawn: upload it from this page to see it)`;
+        $('err-partner').textContent = `(the leader ${leader} is not an uploaded clip: it is not drawn)`;
       }
       await job;
     });
@@ -737,7 +786,7 @@ tools.constraints = (() => {
       });
     });
   redraw();
-  return { redraw, onResult: (motion) => { result = rootPath(motion); redraw(); } };
+  return { redraw, onResult: (motion, root) => { result = rootPath(motion, root); redraw(); }, clearResult: () => { result = []; redraw(); } };
 })();
 
 // -- Timeline: paint do / don't per label track -> annotation synthesis; label corrections
@@ -825,12 +874,22 @@ timeline = tools.timeline = (() => {
   $('tl-add').onclick = () => { addTrack($('tl-new').value.trim()); $('tl-new').value = ''; };
   $('tl-frames').oninput = redraw;
   $('tl-clear').onclick = () => { for (const t of tl.tracks) t.values.fill(0); redraw(); };
-  // tracks: the labels of the chosen database's spec (when it was built from this browser)
+  // tracks: the chosen database's label vocabulary (its summary from the API, whoever built it);
+  // painted values of labels it shares with the previous database are kept
   const refreshTracks = () => {
-    const spec = dbSpecs[$('tl-db').value];
-    const labels = new Set();
-    for (const c of (spec && spec.clips) || []) for (const l of c.labels || []) labels.add(l.label);
-    for (const l of labels) addTrack(l);
+    const summary = summaryOf($('tl-db').value);
+    if (!summary) return redraw();
+    const old = new Map(tl.tracks.map((t) => [t.label, t]));
+    tl.tracks = summary.labels.map((label) => old.get(label) || { label, values: new Int8Array(nFrames()) });
+    const vocab = $('tl-vocab');
+    vocab.textContent = '';
+    for (const label of summary.labels) vocab.appendChild(new Option(label));
+    // the correction loop names the database's own clips
+    const sel = $('corr-clip');
+    const keep = sel.value;
+    sel.textContent = '';
+    for (const c of summary.clips) sel.add(new Option(`${c.name} (${c.frames} frames)`, c.name));
+    if (keep && summary.clips.some((c) => c.name === keep)) sel.value = keep;
     redraw();
   };
   $('tl-db').onchange = refreshTracks;
@@ -857,31 +916,19 @@ timeline = tools.timeline = (() => {
       viewer.clear();
       await runJob('timeline', { engine: 'annotations', database: db, frames: nFrames(), budget_s: numberOf('tl-budget', 'budget', 0.1, 600), timeline: timelineEntries });
     });
-  // the correction loop: set a label on a clip range in the spec and rebuild
+  // the correction loop: set a label on a clip's frame range (POST /v1/databases/{id}/corrections:
+  // the server writes the corrected spec and builds it; the SVMs retrain)
   $('corr-go').onclick = () =>
     guarded('correct', async () => {
-      const id = $('tl-db').value;
-      const spec = dbSpecs[id];
-      if (!spec) throw new ApiError(0, 'unknown_spec', 'this database was not built from this browser: rebuild it here to correct its labels');
+      const id = dbOf('tl-db');
       const clip = $('corr-clip').value;
       const label = $('corr-label').value.trim();
       const start = Math.round(Number($('corr-start').value));
       const end = Math.round(Number($('corr-end').value));
+      if (!clip) throw new ApiError(0, 'invalid_input', 'choose one of the database\'s clips');
       if (!label) throw new ApiError(0, 'invalid_input', 'name the label to correct');
-      const next = JSON.parse(JSON.stringify(spec));
-      const entry = next.clips.find((c) => (c.name || (c.bvh || '').replace(/\.gz$/, '').replace(/\.bvh$/, '')) === clip);
-      if (!entry) throw new ApiError(0, 'invalid_input', `clip ${clip} is not in this database`);
-      // as engines/annotations/corrections.py's "set": the label's ranges are cut out of
-      // [start, end) and the new range added
-      const labels = [];
-      for (const l of entry.labels || []) {
-        if (l.label !== label || l.end <= start || l.start >= end) { labels.push(l); continue; }
-        if (l.start < start) labels.push({ ...l, end: start });
-        if (l.end > end) labels.push({ ...l, start: end });
-      }
-      labels.push({ label, start, end, value: Number($('corr-value').value) });
-      entry.labels = labels.sort((a, b) => a.start - b.start || a.label.localeCompare(b.label));
-      const info = await buildDatabase(next);
+      const correction = { clip, start, end, label, value: Number($('corr-value').value) };
+      const info = await trackBuild('annotated', () => api.correct(id, [correction]));
       $('tl-db').value = info.id;
       refreshTracks();
     });

@@ -6,12 +6,42 @@ import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 
 export const COLORS = { result: 0xf0a030, leader: 0x4aa3ff, follower: 0xf0a030, clip: 0x7ccf7c };
 
+const STATIC_M = 1e-3; // a joint moving less than this on the floor over a whole motion stays put
+
+// The joint whose floor projection is the character's place: joint 0, unless joint 0 is a static
+// ground node (Bandai-Namco's joint_Root, the world root of several dancers): then the first joint
+// that moves (the hips). `named`: the hips by name, when the database summary gives them.
+export function placeJoint(motion, named) {
+  const { joints, parents, frames, positions } = motion;
+  const J = parents.length;
+  if (named && joints) {
+    const j = joints.indexOf(named);
+    if (j >= 0) return j;
+  }
+  const travel = (j) => {
+    let lo = [Infinity, Infinity];
+    let hi = [-Infinity, -Infinity];
+    for (let f = 0; f < frames; f++) {
+      const x = positions[(f * J + j) * 3];
+      const z = positions[(f * J + j) * 3 + 2];
+      lo = [Math.min(lo[0], x), Math.min(lo[1], z)];
+      hi = [Math.max(hi[0], x), Math.max(hi[1], z)];
+    }
+    return Math.max(hi[0] - lo[0], hi[1] - lo[1]);
+  };
+  if (frames < 2 || travel(0) >= STATIC_M) return 0;
+  for (let j = 1; j < J; j++) if (travel(j) >= STATIC_M) return j;
+  return 0;
+}
+
 class Character {
-  constructor(scene, motion, color) {
+  constructor(scene, motion, color, root) {
     this.motion = motion;
     const { parents, frames, positions } = motion;
     const J = parents.length;
     this.J = J;
+    this.root = root === undefined ? placeJoint(motion) : root;
+    const r = this.root;
     this.bones = [];
     parents.forEach((p, j) => { if (p >= 0) this.bones.push([p, j]); });
     this.group = new THREE.Group();
@@ -22,12 +52,12 @@ class Character {
     pointGeo.setAttribute('position', new THREE.BufferAttribute(new Float32Array(J * 3), 3));
     this.points = new THREE.Points(pointGeo, new THREE.PointsMaterial({ color, size: 0.035 }));
     for (const o of [this.lines, this.points]) o.frustumCulled = false;
-    // root trail: the first joint projected on the floor, every frame
+    // root trail: the place joint (the hips) projected on the floor, every frame
     const trail = new Float32Array(frames * 3);
     for (let f = 0; f < frames; f++) {
-      trail[f * 3] = positions[f * J * 3];
+      trail[f * 3] = positions[(f * J + r) * 3];
       trail[f * 3 + 1] = 0.005;
-      trail[f * 3 + 2] = positions[f * J * 3 + 2];
+      trail[f * 3 + 2] = positions[(f * J + r) * 3 + 2];
     }
     const trailGeo = new THREE.BufferGeometry();
     trailGeo.setAttribute('position', new THREE.BufferAttribute(trail, 3));
@@ -61,13 +91,13 @@ class Character {
     const pts = this.points.geometry.attributes.position;
     pts.array.set(positions.subarray(base, base + this.J * 3));
     pts.needsUpdate = true;
-    this.marker.position.set(positions[base], 0.006, positions[base + 2]);
+    this.marker.position.set(positions[base + this.root * 3], 0.006, positions[base + this.root * 3 + 2]);
     return f;
   }
 
   bounds(box) {
     const { positions } = this.motion;
-    for (let i = 0; i < positions.length; i += 3 * this.J) box.expandByPoint(new THREE.Vector3(positions[i], positions[i + 1], positions[i + 2]));
+    for (let i = this.root * 3; i < positions.length; i += 3 * this.J) box.expandByPoint(new THREE.Vector3(positions[i], positions[i + 1], positions[i + 2]));
     return box;
   }
 
@@ -118,9 +148,10 @@ export class Viewer {
     return d;
   }
 
-  set(key, motion, color = COLORS[key] || 0xdddddd, { frame = true } = {}) {
+  // `root`: the joint the ring and trail follow (default: placeJoint(motion))
+  set(key, motion, color = COLORS[key] || 0xdddddd, { frame = true, root } = {}) {
     this.remove(key, false);
-    this.characters.set(key, new Character(this.scene, motion, color));
+    this.characters.set(key, new Character(this.scene, motion, color, root));
     if (frame) this.frameAll();
     this.seek(Math.min(this.time, this.duration));
     this.emit();
@@ -168,7 +199,7 @@ export class Viewer {
   // keep a character in view: glide the orbit target (and the camera with it) towards its root
   followCharacter(c) {
     if (!c) return;
-    const base = c.frameAt(this.time) * c.J * 3;
+    const base = (c.frameAt(this.time) * c.J + c.root) * 3;
     const dx = (c.motion.positions[base] - this.controls.target.x) * 0.08;
     const dz = (c.motion.positions[base + 2] - this.controls.target.z) * 0.08;
     this.controls.target.x += dx;
