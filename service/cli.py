@@ -465,7 +465,7 @@ def _user_error(exc: Exception) -> str | None:
     if "pydantic" in mods and isinstance(exc, mods["pydantic"].ValidationError):
         return f"invalid JSON: {_validation_message(exc)}"
     if "workers.execute" in mods and isinstance(exc, mods["workers.execute"].JobFailure):
-        return str(exc.message)  # type: ignore[attr-defined]
+        return str(exc.message)
     known: list[type] = [OSError]
     for module, name in (
         ("motion.errors", "MotionError"),

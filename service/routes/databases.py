@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Response, status
+from fastapi import APIRouter, Depends, Request, Response, status
 from pydantic import TypeAdapter
 from starlette.concurrency import run_in_threadpool
 
@@ -31,7 +31,7 @@ from ..errors import ApiError, conflict, responses
 from ..jobs_common import new_job_id, submit_job
 from ..jsonbody import delete_route, json_body, json_body_doc
 from ..metrics import Metrics
-from ..owners import database_for, only_visible, release, visible
+from ..owners import database_for, release, visible
 
 SPEC_ADAPTER: TypeAdapter[Any] = TypeAdapter(DatabaseSpec)
 SPEC_BODY = json_body_doc("DatabaseSpec", "A database spec: the clips (uploaded) and the kind's settings.")
@@ -141,6 +141,7 @@ async def create_database(
     quota: JobQuotaDep,
     principal: PrincipalDep,
     spec: SpecBody,
+    request: Request,
 ) -> DatabaseInfo:
     """Build a database from uploaded clips (202 with ``build_job``; follow its events), or return
     the existing one with the same content address (200)."""
