@@ -159,37 +159,19 @@ def cases(budget: float) -> list[dict[str, Any]]:
         return goals
 
     ann_db = {"kind": "annotated", "clips": ann_clips}
-    out += [
-        {
-            "engine": "annotations",
-            "case": "walk then run",
-            "db": ann_db,
-            "examples": ann_files,
-            "goals": ann_goals,
-            "request": {
+    ann_req = {"engine": "annotations", "frames": 300, "seed": 4, "budget_s": budget, "timeline": tl}
+    far_end = {"end": {"position": [40.0, 0.0], "heading_deg": 90.0}}
+    for name, extra in (("walk then run", {}), ("walk then run, end 40 m away (unreachable)", far_end)):
+        out.append(
+            {
                 "engine": "annotations",
-                "frames": 300,
-                "seed": 4,
-                "budget_s": budget,
-                "timeline": tl,
-            },
-        },
-        {
-            "engine": "annotations",
-            "case": "walk then run, end 40 m away (unreachable)",
-            "db": ann_db,
-            "examples": ann_files,
-            "goals": ann_goals,
-            "request": {
-                "engine": "annotations",
-                "frames": 300,
-                "seed": 4,
-                "budget_s": budget,
-                "timeline": tl,
-                "end": {"position": [40.0, 0.0], "heading_deg": 90.0},
-            },
-        },
-    ]
+                "case": name,
+                "db": ann_db,
+                "examples": ann_files,
+                "goals": ann_goals,
+                "request": {**ann_req, **extra},
+            }
+        )
     leaders = [str(SALSA / f"60_{t}_scaled.bvh") for t in ("02", "04", "06", "10", "11", "12")]
     rh_db = {"kind": "rhythm", "clips": [{"bvh": f} for f in leaders], "beats_per_movement": 4}
 

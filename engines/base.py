@@ -5,14 +5,22 @@ library (:mod:`engines.library`) and stored as arrays; a loaded engine then answ
 ``search(request, budget_s, emit, should_stop)``, calling ``emit.solution`` every time its best
 score improves (anytime) and polling ``should_stop`` (cancel). Engines never import the service,
 the workers or Redis.
+
+This module, :mod:`engines.registry` and the package itself are all the service may import of the
+engines (``tests/test_layering.py``): what a route needs of a database beyond running jobs goes
+through the small query API of :class:`Engine` -- :meth:`Engine.clip_labels` and
+:meth:`Engine.corrected_spec` read a few arrays of a lazily opened database file
+(:func:`open_database`), and :meth:`Engine.live_session` starts a :class:`LiveSession`.
 """
 
 from __future__ import annotations
 
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
 import numpy as np
@@ -21,15 +29,62 @@ import numpy.typing as npt
 from motion import Motion, MotionError, Skeleton
 from motion.plausibility import Reference, reference_from_positions
 from motion.quality import QualityInputs, QualityReport, assess
+from schemas.annotations import ClipLabels, LabelCorrection
+from schemas.bases import DatabaseSpecBase
 
-from .library import MotionLibrary
+from .library import MotionLibrary, library_from_arrays
 
 Arrays = dict[str, npt.NDArray[Any]]
 ShouldStop = Callable[[], bool]
+DatabaseArrays = Mapping[str, npt.NDArray[Any]]
+"""A database's arrays by name, possibly read lazily (:func:`open_database`)."""
+
+
+@contextmanager
+def open_database(path: str | Path) -> Iterator[DatabaseArrays]:
+    """The arrays of a database file (``data.npz``), each read from the file only when indexed.
+
+    An ``.npz`` is a zip of ``.npy`` members, so a query that needs a few small arrays (clip names,
+    frame counts, labels) reads those and leaves the motion and the engine's tables on disk.
+    Raises ``OSError`` when the file cannot be read.
+    """
+    with np.load(Path(path), allow_pickle=False) as arrays:
+        yield arrays
+
+
+class LiveSession(Protocol):
+    """A character an engine animates as events arrive (the rhythm engine's live dancer): one
+    batch of frames per beat, steered between beats."""
+
+    frame: int
+    """Frames sent so far."""
+    beats: int
+    """Beats danced so far."""
+
+    @property
+    def period_s(self) -> float:
+        """The examples' beat period, seconds (the beat clock's default)."""
+        ...
+
+    def skeleton_message(self) -> dict[str, Any]:
+        """The first message of a session: the skeleton and the rate of the frames to come."""
+        ...
+
+    def steer(self, heading_deg: float | None, speed: float | None) -> None:
+        """Steer from the next movement (``None``: dance freely)."""
+        ...
+
+    def beat(self, period_s: float) -> dict[str, Any]:
+        """The frames of the beat that starts now, lasting ``period_s`` seconds."""
+        ...
 
 
 class EngineError(ValueError):
     """A request an engine cannot serve (bad clip name, impossible constraint...): a client error."""
+
+
+class UnknownClipError(EngineError):
+    """A clip name the database does not have (the message names the clips it has)."""
 
 
 @dataclass(slots=True)
@@ -126,6 +181,11 @@ class Engine(ABC):
         self._floors: dict[tuple[str, ...], dict[int, tuple[float, float]]] = {}
 
     @classmethod
+    def load(cls, arrays: Arrays) -> Engine:
+        """The engine loaded from a built database's arrays (the motion library and the kind's)."""
+        return cls(library_from_arrays(arrays), arrays)
+
+    @classmethod
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         """Kind-specific database arrays computed from the library (default: none)."""
         return {}
@@ -175,6 +235,30 @@ class Engine(ABC):
                 got = foot_floor_of(self.library, self.example_clips(self.library, self.arrays), skeleton)
             self._floors[key] = got
         return got
+
+    # -- the query API (what the service may ask of a database besides jobs) ---------------------
+    @classmethod
+    def clip_labels(
+        cls, arrays: DatabaseArrays, clip: str, start: int = 0, end: int | None = None
+    ) -> ClipLabels:
+        """The labels of frames ``[start, end)`` of ``clip`` (database frames), reading only the
+        arrays they need. Engines whose databases carry labels override it; raises
+        :class:`EngineError` (unknown clip, empty range, no labels)."""
+        raise EngineError(f"{cls.kind!r} databases carry no labels; 'annotated' databases do")
+
+    @classmethod
+    def corrected_spec(
+        cls, spec: DatabaseSpecBase, corrections: Sequence[LabelCorrection], arrays: DatabaseArrays | None
+    ) -> DatabaseSpecBase:
+        """The spec of the database with corrected labels (build it to retrain); ``arrays`` of the
+        built database, needed when a correction accepts its propagated labels. Raises
+        :class:`EngineError`."""
+        raise EngineError(f"{cls.kind!r} databases carry no labels to correct; 'annotated' databases do")
+
+    def live_session(self, *, seed: int = 0, fps: float | None = None, accent: float = 0.6) -> LiveSession:
+        """A character driven live by events (``seed`` of its random choices, output ``fps``,
+        beat ``accent``); raises :class:`EngineError` for engines without live sessions."""
+        raise EngineError(f"engine {self.name!r} has no live sessions; the 'rhythm' engine has")
 
     def finish(self, solution: Solution, inputs: QualityInputs | None = None) -> Solution:
         """``solution`` with its quality report against this database's examples

@@ -7,7 +7,6 @@ refused with a clear message instead of being half-built.
 from __future__ import annotations
 
 import importlib
-import os
 
 from .base import Engine
 from .clip import ClipEngine
@@ -42,11 +41,6 @@ def _engine_of_kind(kind: str) -> str:
     return next((name for name, t in _BUILT_IN.items() if t[2] == kind), kind)
 
 
-PLUGINS_ENV = "SEGUE_ENGINE_PLUGINS"
-"""Comma-separated modules imported at start-up that call :func:`register` (extra engines, e.g. the
-test suite's scripted engine). Every process that runs jobs must see the same value."""
-
-
 def register(engine: type[Engine]) -> type[Engine]:
     """Add an engine (usable as a class decorator)."""
     ENGINES[engine.name] = engine
@@ -54,9 +48,11 @@ def register(engine: type[Engine]) -> type[Engine]:
     return engine
 
 
-def load_plugins(spec: str | None = None) -> list[str]:
-    """Import the plugin modules named in ``spec`` (default: the environment variable)."""
-    names = [n.strip() for n in (spec if spec is not None else os.environ.get(PLUGINS_ENV, "")).split(",")]
+def load_plugins(spec: str | None) -> list[str]:
+    """Import the plugin modules named in ``spec``, comma-separated (``SEGUE_ENGINE_PLUGINS``: modules
+    that call :func:`register`, e.g. the test suite's scripted engine); returns their names. Every
+    process that runs jobs gets the same list from its settings."""
+    names = [n.strip() for n in (spec or "").split(",")]
     loaded = []
     for name in filter(None, names):
         importlib.import_module(name)
@@ -68,7 +64,25 @@ class UnavailableError(LookupError):
     """A kind or engine that exists in the contract but not (yet) in this installation."""
 
 
+def engine_kind(name: str) -> str:
+    """The database kind engine ``name`` needs, without importing a built-in engine (the API checks
+    a request against its database with it). Raises :class:`UnavailableError`."""
+    if name in ENGINES:
+        return ENGINES[name].kind
+    if name in _BUILT_IN:
+        return _BUILT_IN[name][2]
+    return engine_class(name).kind  # raises UnavailableError naming the engines there are
+
+
+def require_kind(kind: str) -> None:
+    """Raise :class:`UnavailableError` unless this installation can build databases of ``kind``
+    (built-in kinds are not imported to say so)."""
+    if kind not in KIND_ENGINES and not any(t[2] == kind for t in _BUILT_IN.values()):
+        kind_class(kind)
+
+
 def engine_class(name: str) -> type[Engine]:
+    """The engine class of a request's ``engine`` (imported on first use)."""
     _load_built_in(name)
     try:
         return ENGINES[name]
@@ -80,6 +94,7 @@ def engine_class(name: str) -> type[Engine]:
 
 
 def kind_class(kind: str) -> type[Engine]:
+    """The engine class that builds and loads databases of ``kind`` (imported on first use)."""
     _load_built_in(_engine_of_kind(kind))
     try:
         return KIND_ENGINES[kind]

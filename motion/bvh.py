@@ -217,135 +217,187 @@ def _parse_float(tok: str, lineno: int, what: str, source: str) -> float:
 
 
 def _parse_hierarchy(text: str, lim: BvhLimits, source: str) -> Skeleton:
-    names: list[str] = []
-    parents: list[int] = []
-    offsets: list[list[float] | None] = []
-    channels: list[tuple[str, ...] | None] = []
-    es_parents: list[int] = []
-    es_offsets: list[list[float]] = []
-    # stack entries: joint index, or -2 for an End Site block
-    stack: list[int] = []
-    pending: tuple[str, int | None, int] | None = None  # (kind, joint index, line) awaiting '{'
-    seen_hierarchy = False
-    end_site_offset: list[float] | None = None
-    it = _tokens(text)
-    last_line = 1
-    for tok, lineno, rest in it:
-        last_line = lineno
+    """The skeleton of a BVH file's HIERARCHY section (:class:`BvhError` naming the line)."""
+    return _HierarchyParser(lim, source).parse(text)
+
+
+END_SITE = -2
+"""What an End Site block's entry on the block stack is (joint blocks push their joint index)."""
+
+
+class _HierarchyParser:
+    """HIERARCHY as a token stream: ``ROOT``/``JOINT name`` and ``End Site`` open a pending block
+    that the next ``{`` pushes on a stack, ``OFFSET`` and ``CHANNELS`` fill the block on top, ``}``
+    closes it after checking it is complete."""
+
+    def __init__(self, lim: BvhLimits, source: str) -> None:
+        self.lim, self.source = lim, source
+        self.names: list[str] = []
+        self.parents: list[int] = []
+        self.offsets: list[list[float] | None] = []
+        self.channels: list[tuple[str, ...] | None] = []
+        self.es_parents: list[int] = []
+        self.es_offsets: list[list[float]] = []
+        self.stack: list[int] = []  # joint index, or END_SITE
+        self.pending: tuple[str, int | None, int] | None = None  # (kind, joint index, line) awaiting '{'
+        self.end_site_offset: list[float] | None = None
+        self.it: Iterator[tuple[str, int, list[str]]] = iter(())
+
+    def error(self, message: str, lineno: int | None) -> BvhError:
+        return BvhError(message, lineno, self.source)
+
+    def parse(self, text: str) -> Skeleton:
+        self.it = _tokens(text)
+        seen_hierarchy = False
+        last_line = 1
+        for tok, lineno, rest in self.it:
+            last_line = lineno
+            if not seen_hierarchy:
+                if tok != "HIERARCHY":
+                    raise self.error(f"expected HIERARCHY, found {tok!r}", lineno)
+                seen_hierarchy = True
+                continue
+            if self.pending is not None and tok != "{":
+                raise self.error(f"expected '{{' after {self.pending[0]}, found {tok!r}", lineno)
+            if tok in ("ROOT", "JOINT"):
+                self.joint(tok, lineno, rest)
+            elif tok == "End":
+                self.end_site(lineno, rest)
+            elif tok == "{":
+                self.open_block(lineno)
+            elif tok == "}":
+                self.close_block(lineno)
+            elif tok == "OFFSET":
+                self.offset(lineno, rest)
+            elif tok == "CHANNELS":
+                self.channel_list(lineno, rest)
+            else:
+                raise self.error(f"unexpected {tok!r} in HIERARCHY", lineno)
         if not seen_hierarchy:
-            if tok != "HIERARCHY":
-                raise BvhError(f"expected HIERARCHY, found {tok!r}", lineno, source)
-            seen_hierarchy = True
-            continue
-        if pending is not None and tok != "{":
-            raise BvhError(f"expected '{{' after {pending[0]}, found {tok!r}", lineno, source)
-        if tok in ("ROOT", "JOINT"):
-            if tok == "ROOT" and (names or stack):
-                raise BvhError("only one ROOT per file is supported", lineno, source)
-            if tok == "JOINT" and (not stack or stack[-1] < 0):
-                raise BvhError("JOINT outside a joint block", lineno, source)
-            words = list(takewhile(lambda w: w != "{", rest))
-            if not words:
-                raise BvhError(f"{tok} without a name", lineno, source)
-            name = " ".join(words)
-            if name in names:
-                raise BvhError(f"duplicate joint name {name!r}", lineno, source)
-            if len(names) >= lim.max_joints:
-                raise BvhError(f"more than the {lim.max_joints}-joint limit", lineno, source)
-            names.append(name)
-            parents.append(stack[-1] if stack else -1)
-            offsets.append(None)
-            channels.append(None)
-            pending = (tok, len(names) - 1, lineno)
-            _skip(it, len(words))
-        elif tok == "End":
-            if not stack or stack[-1] < 0:
-                raise BvhError("End Site outside a joint block", lineno, source)
-            pending = ("End Site", None, lineno)
-            end_site_offset = None
-            _skip(it, len(list(takewhile(lambda w: w != "{", rest))))
-        elif tok == "{":
-            if pending is None:
-                raise BvhError("unexpected '{'", lineno, source)
-            stack.append(pending[1] if pending[1] is not None else -2)
-            pending = None
-        elif tok == "}":
-            if not stack:
-                raise BvhError("unbalanced '}'", lineno, source)
-            top = stack.pop()
-            if top == -2:
-                if end_site_offset is None:
-                    raise BvhError("End Site without OFFSET", lineno, source)
-                es_parents.append(stack[-1])
-                es_offsets.append(end_site_offset)
-            else:
-                if offsets[top] is None:
-                    raise BvhError(f"joint {names[top]!r} has no OFFSET", lineno, source)
-                if channels[top] is None:
-                    raise BvhError(f"joint {names[top]!r} has no CHANNELS", lineno, source)
-        elif tok == "OFFSET":
-            if not stack:
-                raise BvhError("OFFSET outside a joint block", lineno, source)
-            if len(rest) < 3:
-                raise BvhError(f"OFFSET needs 3 numbers, found {len(rest)}", lineno, source)
-            vals = [_parse_float(t, lineno, "OFFSET", source) for t in rest[:3]]
-            if stack[-1] == -2:
-                end_site_offset = vals
-            else:
-                if offsets[stack[-1]] is not None:
-                    raise BvhError(f"second OFFSET for joint {names[stack[-1]]!r}", lineno, source)
-                offsets[stack[-1]] = vals
-            _skip(it, 3)
-        elif tok == "CHANNELS":
-            if not stack or stack[-1] < 0:
-                raise BvhError("CHANNELS outside a joint block", lineno, source)
-            j = stack[-1]
-            if not rest:
-                raise BvhError("CHANNELS without a count", lineno, source)
-            try:
-                count = int(rest[0])
-            except ValueError:
-                raise BvhError(f"CHANNELS count {rest[0]!r} is not an integer", lineno, source) from None
-            if not 0 <= count <= 6:
-                raise BvhError(f"CHANNELS count {count} is outside 0..6", lineno, source)
-            chans = rest[1 : 1 + count]
-            listed = len(list(takewhile(lambda t: t in VALID_CHANNELS, rest[1:])))
-            if listed > count:
-                raise BvhError(f"CHANNELS declares {count} channels but lists {listed}", lineno, source)
-            if len(chans) != count:
-                raise BvhError(f"CHANNELS declares {count} channels but lists {len(chans)}", lineno, source)
-            bad = [c for c in chans if c not in VALID_CHANNELS]
-            if bad:
-                raise BvhError(
-                    f"unknown channel {bad[0]!r} (expected X/Y/Z position/rotation)", lineno, source
-                )
-            if len(set(chans)) != len(chans):
-                raise BvhError("a channel is listed twice", lineno, source)
-            if channels[j] is not None:
-                raise BvhError(f"second CHANNELS for joint {names[j]!r}", lineno, source)
-            channels[j] = tuple(chans)
-            _skip(it, 1 + count)
+            raise self.error("missing HIERARCHY", 1)
+        if self.pending is not None or self.stack:
+            raise self.error("HIERARCHY ends inside an open block (missing '}')", last_line)
+        if not self.names:
+            raise self.error("HIERARCHY has no ROOT", last_line)
+        return self.skeleton()
+
+    def joint(self, tok: str, lineno: int, rest: list[str]) -> None:
+        """``ROOT name`` / ``JOINT name``: a new joint, child of the block on top."""
+        if tok == "ROOT" and (self.names or self.stack):
+            raise self.error("only one ROOT per file is supported", lineno)
+        if tok == "JOINT" and (not self.stack or self.stack[-1] < 0):
+            raise self.error("JOINT outside a joint block", lineno)
+        words = list(takewhile(lambda w: w != "{", rest))
+        if not words:
+            raise self.error(f"{tok} without a name", lineno)
+        name = " ".join(words)
+        if name in self.names:
+            raise self.error(f"duplicate joint name {name!r}", lineno)
+        if len(self.names) >= self.lim.max_joints:
+            raise self.error(f"more than the {self.lim.max_joints}-joint limit", lineno)
+        self.names.append(name)
+        self.parents.append(self.stack[-1] if self.stack else -1)
+        self.offsets.append(None)
+        self.channels.append(None)
+        self.pending = (tok, len(self.names) - 1, lineno)
+        _skip(self.it, len(words))
+
+    def end_site(self, lineno: int, rest: list[str]) -> None:
+        """``End Site``: a leaf of the joint block on top."""
+        if not self.stack or self.stack[-1] < 0:
+            raise self.error("End Site outside a joint block", lineno)
+        self.pending = ("End Site", None, lineno)
+        self.end_site_offset = None
+        _skip(self.it, len(list(takewhile(lambda w: w != "{", rest))))
+
+    def open_block(self, lineno: int) -> None:
+        if self.pending is None:
+            raise self.error("unexpected '{'", lineno)
+        self.stack.append(self.pending[1] if self.pending[1] is not None else END_SITE)
+        self.pending = None
+
+    def close_block(self, lineno: int) -> None:
+        """``}``: the block on top is complete (an OFFSET, and CHANNELS for a joint)."""
+        if not self.stack:
+            raise self.error("unbalanced '}'", lineno)
+        top = self.stack.pop()
+        if top == END_SITE:
+            if self.end_site_offset is None:
+                raise self.error("End Site without OFFSET", lineno)
+            self.es_parents.append(self.stack[-1])
+            self.es_offsets.append(self.end_site_offset)
+            return
+        if self.offsets[top] is None:
+            raise self.error(f"joint {self.names[top]!r} has no OFFSET", lineno)
+        if self.channels[top] is None:
+            raise self.error(f"joint {self.names[top]!r} has no CHANNELS", lineno)
+
+    def offset(self, lineno: int, rest: list[str]) -> None:
+        """``OFFSET x y z`` of the block on top (file units)."""
+        if not self.stack:
+            raise self.error("OFFSET outside a joint block", lineno)
+        if len(rest) < 3:
+            raise self.error(f"OFFSET needs 3 numbers, found {len(rest)}", lineno)
+        vals = [_parse_float(t, lineno, "OFFSET", self.source) for t in rest[:3]]
+        top = self.stack[-1]
+        if top == END_SITE:
+            self.end_site_offset = vals
         else:
-            raise BvhError(f"unexpected {tok!r} in HIERARCHY", lineno, source)
-    if not seen_hierarchy:
-        raise BvhError("missing HIERARCHY", 1, source)
-    if pending is not None or stack:
-        raise BvhError("HIERARCHY ends inside an open block (missing '}')", last_line, source)
-    if not names:
-        raise BvhError("HIERARCHY has no ROOT", last_line, source)
-    # End Sites by parent joint (stable), the order the writer emits them in
-    es_order = np.argsort(np.array(es_parents, dtype=np.intp), kind="stable")
+            if self.offsets[top] is not None:
+                raise self.error(f"second OFFSET for joint {self.names[top]!r}", lineno)
+            self.offsets[top] = vals
+        _skip(self.it, 3)
+
+    def channel_list(self, lineno: int, rest: list[str]) -> None:
+        """``CHANNELS n name...`` of the joint block on top."""
+        if not self.stack or self.stack[-1] < 0:
+            raise self.error("CHANNELS outside a joint block", lineno)
+        j = self.stack[-1]
+        chans = _channel_names(rest, lineno, self.source)
+        if self.channels[j] is not None:
+            raise self.error(f"second CHANNELS for joint {self.names[j]!r}", lineno)
+        self.channels[j] = chans
+        _skip(self.it, 1 + len(chans))
+
+    def skeleton(self) -> Skeleton:
+        """The parsed skeleton, End Sites by parent joint (stable: the order the writer emits them in)."""
+        es_order = np.argsort(np.array(self.es_parents, dtype=np.intp), kind="stable")
+        try:
+            return Skeleton(
+                tuple(self.names),
+                np.array(self.parents, dtype=np.intp),
+                np.array(self.offsets, dtype=np.float64),
+                tuple(c or () for c in self.channels),
+                np.array(self.es_parents, dtype=np.intp)[es_order],
+                np.array(self.es_offsets, dtype=np.float64).reshape(-1, 3)[es_order],
+            )
+        except MotionError as exc:
+            raise self.error(str(exc), None) from None
+
+
+def _channel_names(rest: list[str], lineno: int, source: str) -> tuple[str, ...]:
+    """The channels of a ``CHANNELS`` line after the keyword: a count 0..6, then that many distinct
+    valid channel names."""
+    if not rest:
+        raise BvhError("CHANNELS without a count", lineno, source)
     try:
-        return Skeleton(
-            tuple(names),
-            np.array(parents, dtype=np.intp),
-            np.array(offsets, dtype=np.float64),
-            tuple(c or () for c in channels),
-            np.array(es_parents, dtype=np.intp)[es_order],
-            np.array(es_offsets, dtype=np.float64).reshape(-1, 3)[es_order],
-        )
-    except MotionError as exc:
-        raise BvhError(str(exc), None, source) from None
+        count = int(rest[0])
+    except ValueError:
+        raise BvhError(f"CHANNELS count {rest[0]!r} is not an integer", lineno, source) from None
+    if not 0 <= count <= 6:
+        raise BvhError(f"CHANNELS count {count} is outside 0..6", lineno, source)
+    chans = rest[1 : 1 + count]
+    listed = len(list(takewhile(lambda t: t in VALID_CHANNELS, rest[1:])))
+    if listed > count:
+        raise BvhError(f"CHANNELS declares {count} channels but lists {listed}", lineno, source)
+    if len(chans) != count:
+        raise BvhError(f"CHANNELS declares {count} channels but lists {len(chans)}", lineno, source)
+    bad = [c for c in chans if c not in VALID_CHANNELS]
+    if bad:
+        raise BvhError(f"unknown channel {bad[0]!r} (expected X/Y/Z position/rotation)", lineno, source)
+    if len(set(chans)) != len(chans):
+        raise BvhError("a channel is listed twice", lineno, source)
+    return tuple(chans)
 
 
 def _skip(it: Iterator[tuple[str, int, list[str]]], n: int) -> None:
@@ -450,24 +502,23 @@ def _is_float(tok: bytes) -> bool:
     return True
 
 
-def _motion_from_channels(skeleton: Skeleton, table: Array, fps: float, name: str, source: str) -> Motion:
-    n_frames = table.shape[0]
+RotationGroups = dict[str, tuple[list[int], list[list[int]]]]
+"""Rotation channels by Euler order: ``{order: (joints, their channel columns)}``."""
+
+
+def _channel_layout(skeleton: Skeleton) -> tuple[list[tuple[int, int, int]], RotationGroups]:
+    """Where a skeleton's channels sit in a BVH frame row: ``(joint, axis, column)`` of every
+    position channel, and the rotation channels grouped by Euler order (one vectorised
+    conversion per order)."""
+    positions: list[tuple[int, int, int]] = []
+    groups: RotationGroups = {}
     col = 0
-    root_pos = np.broadcast_to(skeleton.offsets[0], (n_frames, 3)).copy()
-    translated = skeleton.translated_joints
-    jt = np.broadcast_to(skeleton.offsets[translated], (n_frames, translated.size, 3)).copy()
-    slot = {int(j): k for k, j in enumerate(translated)}
-    groups: dict[str, tuple[list[int], list[list[int]]]] = {}
     for j, chans in enumerate(skeleton.channels):
         rot_cols: list[int] = []
         order = ""
         for c in chans:
             if c.endswith("position"):
-                axis = "XYZ".index(c[0])
-                if j == 0:
-                    root_pos[:, axis] = table[:, col]
-                else:
-                    jt[:, slot[j], axis] = table[:, col]
+                positions.append((j, "XYZ".index(c[0]), col))
             else:
                 rot_cols.append(col)
                 order += c[0]
@@ -476,6 +527,21 @@ def _motion_from_channels(skeleton: Skeleton, table: Array, fps: float, name: st
             joints, cols = groups.setdefault(order, ([], []))
             joints.append(j)
             cols.append(rot_cols)
+    return positions, groups
+
+
+def _motion_from_channels(skeleton: Skeleton, table: Array, fps: float, name: str, source: str) -> Motion:
+    n_frames = table.shape[0]
+    root_pos = np.broadcast_to(skeleton.offsets[0], (n_frames, 3)).copy()
+    translated = skeleton.translated_joints
+    jt = np.broadcast_to(skeleton.offsets[translated], (n_frames, translated.size, 3)).copy()
+    slot = {int(j): k for k, j in enumerate(translated)}
+    positions, groups = _channel_layout(skeleton)
+    for j, axis, col in positions:
+        if j == 0:
+            root_pos[:, axis] = table[:, col]
+        else:
+            jt[:, slot[j], axis] = table[:, col]
     # Quaternions are written in a (4, J, F) layout, frame block by frame block (small, cached
     # temporaries); the motion keeps the (F, J, 4) transposed view, which FK reads for free.
     q_soa = np.zeros((4, skeleton.num_joints, n_frames))
@@ -506,25 +572,13 @@ def channel_table(motion: Motion) -> Array:
     n_frames = motion.num_frames
     table = np.empty((n_frames, sk.num_channels))
     slot = {int(j): k for k, j in enumerate(sk.translated_joints)}
-    groups: dict[str, tuple[list[int], list[list[int]]]] = {}
-    col = 0
-    for j, chans in enumerate(sk.channels):
-        rot_cols: list[int] = []
-        order = ""
-        for c in chans:
-            if c.endswith("position"):
-                axis = "XYZ".index(c[0])
-                src = motion.root_positions if j == 0 else motion.joint_translations[:, slot[j]]
-                table[:, col] = src[:, axis]
-            else:
-                rot_cols.append(col)
-                order += c[0]
-            col += 1
-        if order:
-            joints, cols = groups.setdefault(order, ([], []))
-            joints.append(j)
-            cols.append(rot_cols)
-        elif np.any(rot.angle_between(motion.rotations[:, j], rot.IDENTITY) > 1e-6):
+    positions, groups = _channel_layout(sk)
+    for j, axis, col in positions:
+        src = motion.root_positions if j == 0 else motion.joint_translations[:, slot[j]]
+        table[:, col] = src[:, axis]
+    rotated = {j for joints, _ in groups.values() for j in joints}
+    for j in range(sk.num_joints):
+        if j not in rotated and np.any(rot.angle_between(motion.rotations[:, j], rot.IDENTITY) > 1e-6):
             raise ExportError(f"joint {sk.names[j]!r} rotates but has no rotation channels")
     for order, (joints, cols) in groups.items():
         angles = rot.to_euler(order, motion.rotations[:, joints])

@@ -132,16 +132,30 @@ def floor_correction(
     for i in order:
         if not 0 <= goals[i].frame < n:
             raise MotionError(f"floor goal at frame {goals[i].frame} is outside the motion (0..{n - 1})")
-    alpha = np.zeros(n)
-    shift = np.zeros((n, 2))
     if not goals:
-        return FloorCorrection(alpha, shift, pos_left, head_left)
+        return FloorCorrection(np.zeros(n), np.zeros((n, 2)), pos_left, head_left)
+    alpha = _turn_corrections(yaw, fps, goals, order, limits, head_left)
+    path = _turned_path(xz, alpha, goals, order)
+    shift = _shift_corrections(path, alpha, fps, goals, order, limits, pos_left)
+    return FloorCorrection(alpha, path + shift - _rotate(alpha, xz), pos_left, head_left)
 
-    # 1. headings: alpha(f), the correction angle of each frame
+
+def _turn_corrections(
+    yaw: Array,
+    fps: float,
+    goals: Sequence[FloorGoal],
+    order: list[int],
+    limits: CorrectionLimits | None,
+    head_left: Array,
+) -> Array:
+    """Step 1, headings: ``(F,)`` the correction angle of every frame (radians). The first heading
+    goal turns the whole motion rigidly; each later one is reached by turning the frames since the
+    previous one within the turn limits. What is left of each goal goes into ``head_left``."""
+    n = yaw.shape[0]
+    alpha = np.zeros(n)
     omega = _smoothed_rate(yaw, fps) if limits is not None else np.zeros(n)
-    heads = [i for i in order if goals[i].heading is not None]
     prev_t: int | None = None
-    for i in heads:
+    for i in (i for i in order if goals[i].heading is not None):
         t = goals[i].frame
         want = float(_wrap(float(goals[i].heading) - yaw[t]))  # type: ignore[arg-type]
         if prev_t is None:
@@ -163,18 +177,39 @@ def floor_correction(
             alpha[t + 1 :] = alpha[t]
             head_left[i] = abs(float(_wrap(want - alpha[t])))
         prev_t = t
+    return alpha
 
-    # 2. positions: the path with turned steps, then per-segment shifts
+
+def _turned_path(xz: Array, alpha: Array, goals: Sequence[FloorGoal], order: list[int]) -> Array:
+    """``(F, 2)`` the body's path (metres) with every step turned by its frame's correction, the
+    first position goal's frame (else the first goal's) turned about the origin."""
+    n = xz.shape[0]
     steps_xz = np.zeros((n, 2))
     steps_xz[1:] = _rotate(alpha[1:], np.diff(xz, axis=0))
     path = np.cumsum(steps_xz, axis=0)
     places = [i for i in order if goals[i].xz is not None]
-    anchor = places[0] if places else order[0]
-    t0 = goals[anchor].frame
+    t0 = goals[places[0] if places else order[0]].frame
     path += _rotate(np.array(alpha[t0]), xz[t0]) - path[t0]  # frame t0 turns about the origin
+    return np.asarray(path)
+
+
+def _shift_corrections(
+    path: Array,
+    alpha: Array,
+    fps: float,
+    goals: Sequence[FloorGoal],
+    order: list[int],
+    limits: CorrectionLimits | None,
+    pos_left: Array,
+) -> Array:
+    """Step 2, positions: ``(F, 2)`` the shift of every frame (metres). The first position goal
+    places the motion rigidly; each later one is reached by speeding the frames since the
+    previous one along the residual within the speed limits. What is left goes into ``pos_left``."""
+    n = path.shape[0]
+    shift = np.zeros((n, 2))
     velocity = _smoothed_rate(path, fps) if limits is not None else np.zeros((n, 2))
-    prev_t = None
-    for i in places:
+    prev_t: int | None = None
+    for i in (i for i in order if goals[i].xz is not None):
         goal = goals[i]
         t = goal.frame
         target = np.asarray(goal.xz, dtype=np.float64)
@@ -205,5 +240,4 @@ def floor_correction(
         else:
             pos_left[i] = 0.0
         prev_t = t
-    goal_path = path + shift
-    return FloorCorrection(alpha, goal_path - _rotate(alpha, xz), pos_left, head_left)
+    return shift

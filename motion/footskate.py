@@ -519,6 +519,34 @@ def solve_foot_skate(
     if not legs:
         return FootSkateResult(motion, legs, np.zeros(flags.shape), no_shift)
     blend = int(round(blend_s * motion.fps))
+    corr, weight = _pin_targets(motion, pos, joints, flags, blend, heights, floor)
+    forward = _forward(motion, pos)
+    local, residual, errors = _solve_all(motion, legs, pos, grot, corr, weight, forward)
+    root_shift = no_shift
+    limit = max_root_shift_m / motion.metres_per_unit
+    if root_adjust and limit > 0 and residual.max() > 1e-6 * limit:
+        root_shift = _root_shift(errors, blend, limit)
+        pos = pos + root_shift[:, None, :]
+        # targets are world positions: the corrections are relative to the shifted pose
+        corr -= weight[:, :, None] * root_shift[:, None, :]
+        local, residual, _ = _solve_all(motion, legs, pos, grot, corr, weight, forward)
+    out = replace(motion, rotations=local, root_positions=motion.root_positions + root_shift)
+    return FootSkateResult(out, legs, residual, root_shift)
+
+
+def _pin_targets(
+    motion: Motion,
+    pos: Array,
+    joints: npt.NDArray[np.intp],
+    flags: npt.NDArray[np.bool_],
+    blend: int,
+    heights: Array | None,
+    floor: Array | None,
+) -> tuple[Array, Array]:
+    """Where each contact joint should be: ``(F, K, 3)`` corrections of its global position
+    (motion units) and their ``(F, K)`` weights, pinned over its contact runs (jumps widened,
+    faded over ``blend`` frames) and lifted above ``floor``."""
+    n = motion.num_frames
     corr = np.zeros((n, joints.size, 3))
     weight = np.zeros((n, joints.size))
     frames_per_unit = motion.fps * motion.metres_per_unit / PIN_TRAVEL_M_S
@@ -531,28 +559,23 @@ def solve_foot_skate(
             lift = np.maximum(float(floor[slot]) - (pos[:, j, 1] + corr[:, slot, 1]), 0.0)
             corr[:, slot, 1] += lift
             weight[:, slot] = np.where(lift > 0, 1.0, weight[:, slot])
-    forward = _forward(motion, pos)
-    local, residual, errors = _solve_all(motion, legs, pos, grot, corr, weight, forward)
-    root_shift = no_shift
-    limit = max_root_shift_m / motion.metres_per_unit
-    if root_adjust and limit > 0 and residual.max() > 1e-6 * limit:
-        # the largest unreached error per frame, smoothed and capped, moves the body towards it
-        mag = np.linalg.norm(errors, axis=-1)
-        worst = errors[np.arange(n), np.argmax(mag, axis=1)]
-        width = max(blend, 1)
-        kernel = _smoothstep(1.0 - np.abs(np.arange(-width, width + 1)) / (width + 1))
-        kernel /= kernel.sum()
-        padded = np.pad(worst, ((width, width), (0, 0)), mode="edge")
-        shift = np.stack([np.convolve(padded[:, c], kernel, mode="valid") for c in range(3)], axis=-1)
-        norm = np.linalg.norm(shift, axis=-1, keepdims=True)
-        shift *= np.minimum(1.0, limit / np.maximum(norm, 1e-300))
-        root_shift = shift
-        pos = pos + shift[:, None, :]
-        # targets are world positions: the corrections are relative to the shifted pose
-        corr -= weight[:, :, None] * shift[:, None, :]
-        local, residual, _ = _solve_all(motion, legs, pos, grot, corr, weight, forward)
-    out = replace(motion, rotations=local, root_positions=motion.root_positions + root_shift)
-    return FootSkateResult(out, legs, residual, root_shift)
+    return corr, weight
+
+
+def _root_shift(errors: Array, blend: int, limit: float) -> Array:
+    """``(F, 3)`` the root translation that moves the body towards the largest unreached error
+    of each frame (``errors (F, K, 3)``), smoothed over ``blend`` frames and at most ``limit``."""
+    n = errors.shape[0]
+    mag = np.linalg.norm(errors, axis=-1)
+    worst = errors[np.arange(n), np.argmax(mag, axis=1)]
+    width = max(blend, 1)
+    kernel = _smoothstep(1.0 - np.abs(np.arange(-width, width + 1)) / (width + 1))
+    kernel /= kernel.sum()
+    padded = np.pad(worst, ((width, width), (0, 0)), mode="edge")
+    shift = np.stack([np.convolve(padded[:, c], kernel, mode="valid") for c in range(3)], axis=-1)
+    norm = np.linalg.norm(shift, axis=-1, keepdims=True)
+    shift *= np.minimum(1.0, limit / np.maximum(norm, 1e-300))
+    return shift
 
 
 def remove_foot_skate(

@@ -184,162 +184,216 @@ def measure(
     ``reachable_m_s`` (the fastest example's speed), an unmet body goal says how far the body
     could have gone."""
     n = positions.shape[0]
-
-    def char(i: int) -> tuple[Array, Skeleton]:
-        if not 0 <= i < len(characters):
-            raise MotionError(f"{goal.name}: character {i} is not in the output")
-        c = characters[i]
-        return positions[:, c.joints], c.skeleton
-
-    if isinstance(goal, LengthGoal):
-        ok = n == goal.frames
-        e: dict[str, Any] = {"frames": abs(n - goal.frames), "asked": goal.frames, "got": n, "satisfied": ok}
-        return e, None if ok else f"length: {n} frames, asked for {goal.frames}"
-
-    if isinstance(goal, (BodyGoal, JointGoal, PoseGoal)) and not 0 <= goal.frame < n:
+    if isinstance(goal, BodyGoal | JointGoal | PoseGoal) and not 0 <= goal.frame < n:
         e = {"frame": goal.frame, "position_cm": None, "missing": True, "satisfied": False}
         return e, f"{goal.name}: frame {goal.frame} is beyond the motion's {n} frames"
-
     if isinstance(goal, BodyGoal):
-        pos, sk = char(goal.character)
-        xz, yaw = body_track(pos, sk)
-        dist = float(np.linalg.norm(xz[goal.frame] - goal.xz))
-        e = {"frame": goal.frame, "position_cm": _r(100 * dist), "tolerance_cm": goal.tolerance_cm}
-        ok = 100 * dist <= goal.tolerance_cm
-        why = [f"{100 * dist:.1f} cm from its goal"] if not ok else []
-        if goal.heading is not None:
-            if yaw is None:
-                raise MotionError(f"{goal.name}: the skeleton has no left/right joints to measure a heading")
-            herr = _deg(float(yaw[goal.frame]) - goal.heading)
-            e.update(heading_deg=_r(herr), tolerance_deg=goal.tolerance_deg)
-            if herr > goal.tolerance_deg:
-                ok = False
-                why.append(f"{herr:.1f} deg off its heading")
-        e["satisfied"] = ok
-        if ok:
-            return e, None
-        reason = f"{goal.name} (frame {goal.frame}): " + " and ".join(why)
-        reason += f" (tolerance {goal.tolerance_cm:g} cm / {goal.tolerance_deg:g} deg)"
-        if reachable_m_s is not None and reachable_m_s > 0:
-            start = xz[0]
-            away = float(np.linalg.norm(goal.xz - start))
-            reach = reachable_m_s * goal.frame / fps
-            if away > reach:
-                reason += f": goal {away:.1f} m away, reachable {reach:.1f} m in {goal.frame + 1} frames"
-                e["reachable_m"] = _r(reach)
-        return e, reason
-
+        return _measure_body(goal, positions, fps, characters, reachable_m_s)
+    if isinstance(goal, LengthGoal):
+        return _measure_length(goal, positions, fps, characters)
     if isinstance(goal, JointGoal):
-        p = positions[goal.frame, goal.joint]
-        dist = 100 * float(np.linalg.norm(p - goal.position))
-        e = {"frame": goal.frame, "position_cm": _r(dist), "tolerance_cm": goal.tolerance_cm}
-        ok = dist <= goal.tolerance_cm
-        why = [f"{dist:.1f} cm from its target"] if not ok else []
-        if goal.velocity is not None:
-            a, b = max(goal.frame - 1, 0), min(goal.frame + 1, n - 1)
-            v = (positions[b, goal.joint] - positions[a, goal.joint]) * fps / max(b - a, 1)
-            verr = 100 * float(np.linalg.norm(v - goal.velocity))
-            e.update(velocity_cm_s=_r(verr), tolerance_cm_s=goal.tolerance_cm_s)
-            if verr > goal.tolerance_cm_s:
-                ok = False
-                why.append(f"velocity {verr:.0f} cm/s off")
-        e["satisfied"] = ok
-        return e, None if ok else f"{goal.name} (frame {goal.frame}): " + " and ".join(why) + (
-            f" (tolerance {goal.tolerance_cm:g} cm)"
-        )
-
+        return _measure_joint(goal, positions, fps, characters)
     if isinstance(goal, PoseGoal):
-        pos, sk = char(goal.character)
-        got = body_pose(pos[goal.frame : goal.frame + 1], sk)[0]
-        err = 100 * float(np.linalg.norm(got - goal.pose, axis=-1).max())
-        ok = err <= goal.tolerance_cm
-        e = {"frame": goal.frame, **dict(goal.extra), "pose_cm": _r(err), "tolerance_cm": goal.tolerance_cm}
-        e["satisfied"] = ok
-        return e, None if ok else (
-            f"{goal.name} (frame {goal.frame}): a joint is {err:.1f} cm from the wanted pose "
-            f"(tolerance {goal.tolerance_cm:g} cm)"
-        )
-
+        return _measure_pose(goal, positions, fps, characters)
     if isinstance(goal, ObstacleGoal):
-        deepest = np.zeros(n)
-        for c in characters:
-            pos = positions[:, c.joints]
-            pts = [pos[:, body_root(c.skeleton)][:, None, [0, 2]]]
-            with contextlib.suppress(MotionError):  # no feet by name: the body root alone
-                pts.append(pos[:, foot_joints(c.skeleton)][:, :, [0, 2]])
-            deepest = np.maximum(deepest, goal.region.depth(np.concatenate(pts, axis=1)).max(axis=1))
-        depth_cm = 100 * float(deepest.max(initial=0.0))
-        inside = int(np.count_nonzero(deepest > goal.tolerance_cm / 100 + 1e-9))
-        ok = inside == 0
-        e = {"frames": inside, "depth_cm": _r(depth_cm), "tolerance_cm": goal.tolerance_cm, "satisfied": ok}
-        return e, None if ok else (
-            f"{goal.name}: the body or a foot is inside for {inside} frames, {depth_cm:.1f} cm deep"
-        )
-
+        return _measure_obstacle(goal, positions, fps, characters)
     if isinstance(goal, LabelGoal):
-        h = np.asarray(goal.honoured, dtype=bool)
-        window = goal.end - goal.start
-        if h.shape != (window,):
-            raise MotionError(f"{goal.name}: {h.shape[0]} honoured flags for a {window}-frame window")
-        core = h[goal.margin : window - goal.margin] if window > 2 * goal.margin else h
-        fraction = float(core.mean()) if core.size else 1.0
-        ok = fraction >= goal.min_fraction
-        e = {
-            "label": goal.label,
-            "value": goal.value,
-            "start": goal.start,
-            "end": goal.end,
-            "frames": int(window - h.sum()),
-            "window": window,
-            "honoured": _r(fraction),
-            "margin": goal.margin,
-            "tolerance": goal.min_fraction,
-            "satisfied": ok,
-        }
-        want = "carry" if goal.value > 0 else "avoid"
-        return e, None if ok else (
-            f"{goal.name}: frames {goal.start}-{goal.end} should {want} {goal.label!r}; "
-            f"{100 * fraction:.0f}% do (at least {100 * goal.min_fraction:.0f}%)"
-        )
-
+        return _measure_label(goal, positions, fps, characters)
     if isinstance(goal, PathGoal):
-        pos, sk = char(goal.character)
-        xz, _ = body_track(pos, sk)
-        f = np.asarray(goal.frames, dtype=np.intp)
-        keep = (f >= 0) & (f < n)
-        d = np.linalg.norm(xz[f[keep]] - goal.xz[keep], axis=-1) * 100
-        rms = float(np.sqrt(np.mean(d**2))) if d.size else 0.0
-        ok = bool(keep.all()) and rms <= goal.tolerance_cm
-        e = {
-            "rms_cm": _r(rms),
-            "max_cm": _r(float(d.max(initial=0.0))),
-            "frames": int(keep.sum()),
-            "tolerance_cm": goal.tolerance_cm,
-            "satisfied": ok,
-        }
-        return e, None if ok else (
-            f"{goal.name}: the body is {rms:.1f} cm (RMS) from the path (tolerance {goal.tolerance_cm:g} cm)"
-        )
-
+        return _measure_path(goal, positions, fps, characters)
     if isinstance(goal, BeatGoal):
-        scores = [beat_align_scores(positions[:, c.joints], fps, goal.beats_s)[:2] for c in characters]
-        mint = [s[0] for s in scores]
-        bail = [s[1] for s in scores]
-        worst = int(np.argmin(np.minimum(mint, bail)))
-        ok = min(mint[worst], bail[worst]) >= goal.min_score
-        e = {
-            "beat_align_mint": _r(mint[worst]),
-            "beat_align_bailando": _r(bail[worst]),
-            "beat_align_mint_mean": _r(float(np.mean(mint))),
-            "beat_align_bailando_mean": _r(float(np.mean(bail))),
-            "beats": int(goal.beats_s.size),
-            "character": worst,
-            "tolerance": goal.min_score,
-            "satisfied": ok,
-        }
-        return e, None if ok else (
-            f"{goal.name}: beat alignment {mint[worst]:.2f} (mint) / {bail[worst]:.2f} (Bailando), "
-            f"at least {goal.min_score:g} asked"
-        )
-
+        return _measure_beats(goal, positions, fps, characters)
     raise MotionError(f"unknown goal {goal!r}")  # pragma: no cover - the union is closed
+
+
+Measured = tuple[dict[str, Any], str | None]
+"""A goal's report entry and, when it is not satisfied, the one-line reason."""
+
+
+def _measure_length(
+    goal: LengthGoal, positions: Array, fps: float, characters: Sequence[Character]
+) -> Measured:
+    """Frames of the output against the asked length."""
+    n = positions.shape[0]
+    ok = n == goal.frames
+    e: dict[str, Any] = {"frames": abs(n - goal.frames), "asked": goal.frames, "got": n, "satisfied": ok}
+    return e, None if ok else f"length: {n} frames, asked for {goal.frames}"
+
+
+def _measure_body(
+    goal: BodyGoal, positions: Array, fps: float, characters: Sequence[Character], reachable_m_s: float | None
+) -> Measured:
+    """Floor position (cm) and heading (degrees) of a character's body at a frame; an unmet goal
+    says how far the body could have gone at ``reachable_m_s``."""
+    pos, sk = _character(goal, positions, characters)
+    xz, yaw = body_track(pos, sk)
+    dist = float(np.linalg.norm(xz[goal.frame] - goal.xz))
+    e = {"frame": goal.frame, "position_cm": _r(100 * dist), "tolerance_cm": goal.tolerance_cm}
+    ok = 100 * dist <= goal.tolerance_cm
+    why = [f"{100 * dist:.1f} cm from its goal"] if not ok else []
+    if goal.heading is not None:
+        if yaw is None:
+            raise MotionError(f"{goal.name}: the skeleton has no left/right joints to measure a heading")
+        herr = _deg(float(yaw[goal.frame]) - goal.heading)
+        e.update(heading_deg=_r(herr), tolerance_deg=goal.tolerance_deg)
+        if herr > goal.tolerance_deg:
+            ok = False
+            why.append(f"{herr:.1f} deg off its heading")
+    e["satisfied"] = ok
+    if ok:
+        return e, None
+    reason = f"{goal.name} (frame {goal.frame}): " + " and ".join(why)
+    reason += f" (tolerance {goal.tolerance_cm:g} cm / {goal.tolerance_deg:g} deg)"
+    if reachable_m_s is not None and reachable_m_s > 0:
+        start = xz[0]
+        away = float(np.linalg.norm(goal.xz - start))
+        reach = reachable_m_s * goal.frame / fps
+        if away > reach:
+            reason += f": goal {away:.1f} m away, reachable {reach:.1f} m in {goal.frame + 1} frames"
+            e["reachable_m"] = _r(reach)
+    return e, reason
+
+
+def _measure_joint(
+    goal: JointGoal, positions: Array, fps: float, characters: Sequence[Character]
+) -> Measured:
+    """A joint's position (cm) and velocity (cm/s) at a frame."""
+    n = positions.shape[0]
+    p = positions[goal.frame, goal.joint]
+    dist = 100 * float(np.linalg.norm(p - goal.position))
+    e = {"frame": goal.frame, "position_cm": _r(dist), "tolerance_cm": goal.tolerance_cm}
+    ok = dist <= goal.tolerance_cm
+    why = [f"{dist:.1f} cm from its target"] if not ok else []
+    if goal.velocity is not None:
+        a, b = max(goal.frame - 1, 0), min(goal.frame + 1, n - 1)
+        v = (positions[b, goal.joint] - positions[a, goal.joint]) * fps / max(b - a, 1)
+        verr = 100 * float(np.linalg.norm(v - goal.velocity))
+        e.update(velocity_cm_s=_r(verr), tolerance_cm_s=goal.tolerance_cm_s)
+        if verr > goal.tolerance_cm_s:
+            ok = False
+            why.append(f"velocity {verr:.0f} cm/s off")
+    e["satisfied"] = ok
+    return e, None if ok else f"{goal.name} (frame {goal.frame}): " + " and ".join(why) + (
+        f" (tolerance {goal.tolerance_cm:g} cm)"
+    )
+
+
+def _measure_pose(goal: PoseGoal, positions: Array, fps: float, characters: Sequence[Character]) -> Measured:
+    """The largest joint distance (cm) from a wanted pose, in the body's ground frame."""
+    pos, sk = _character(goal, positions, characters)
+    got = body_pose(pos[goal.frame : goal.frame + 1], sk)[0]
+    err = 100 * float(np.linalg.norm(got - goal.pose, axis=-1).max())
+    ok = err <= goal.tolerance_cm
+    e = {"frame": goal.frame, **dict(goal.extra), "pose_cm": _r(err), "tolerance_cm": goal.tolerance_cm}
+    e["satisfied"] = ok
+    return e, None if ok else (
+        f"{goal.name} (frame {goal.frame}): a joint is {err:.1f} cm from the wanted pose "
+        f"(tolerance {goal.tolerance_cm:g} cm)"
+    )
+
+
+def _measure_obstacle(
+    goal: ObstacleGoal, positions: Array, fps: float, characters: Sequence[Character]
+) -> Measured:
+    """Frames in which a body root or a foot is inside the region, and how deep (cm)."""
+    n = positions.shape[0]
+    deepest = np.zeros(n)
+    for c in characters:
+        pos = positions[:, c.joints]
+        pts = [pos[:, body_root(c.skeleton)][:, None, [0, 2]]]
+        with contextlib.suppress(MotionError):  # no feet by name: the body root alone
+            pts.append(pos[:, foot_joints(c.skeleton)][:, :, [0, 2]])
+        deepest = np.maximum(deepest, goal.region.depth(np.concatenate(pts, axis=1)).max(axis=1))
+    depth_cm = 100 * float(deepest.max(initial=0.0))
+    inside = int(np.count_nonzero(deepest > goal.tolerance_cm / 100 + 1e-9))
+    ok = inside == 0
+    e = {"frames": inside, "depth_cm": _r(depth_cm), "tolerance_cm": goal.tolerance_cm, "satisfied": ok}
+    return e, None if ok else (
+        f"{goal.name}: the body or a foot is inside for {inside} frames, {depth_cm:.1f} cm deep"
+    )
+
+
+def _measure_label(
+    goal: LabelGoal, positions: Array, fps: float, characters: Sequence[Character]
+) -> Measured:
+    """The fraction of a window's frames (margins left out) that honour a label."""
+    h = np.asarray(goal.honoured, dtype=bool)
+    window = goal.end - goal.start
+    if h.shape != (window,):
+        raise MotionError(f"{goal.name}: {h.shape[0]} honoured flags for a {window}-frame window")
+    core = h[goal.margin : window - goal.margin] if window > 2 * goal.margin else h
+    fraction = float(core.mean()) if core.size else 1.0
+    ok = fraction >= goal.min_fraction
+    e = {
+        "label": goal.label,
+        "value": goal.value,
+        "start": goal.start,
+        "end": goal.end,
+        "frames": int(window - h.sum()),
+        "window": window,
+        "honoured": _r(fraction),
+        "margin": goal.margin,
+        "tolerance": goal.min_fraction,
+        "satisfied": ok,
+    }
+    want = "carry" if goal.value > 0 else "avoid"
+    return e, None if ok else (
+        f"{goal.name}: frames {goal.start}-{goal.end} should {want} {goal.label!r}; "
+        f"{100 * fraction:.0f}% do (at least {100 * goal.min_fraction:.0f}%)"
+    )
+
+
+def _measure_path(goal: PathGoal, positions: Array, fps: float, characters: Sequence[Character]) -> Measured:
+    """RMS and largest distance (cm) of the body from a floor path."""
+    n = positions.shape[0]
+    pos, sk = _character(goal, positions, characters)
+    xz, _ = body_track(pos, sk)
+    f = np.asarray(goal.frames, dtype=np.intp)
+    keep = (f >= 0) & (f < n)
+    d = np.linalg.norm(xz[f[keep]] - goal.xz[keep], axis=-1) * 100
+    rms = float(np.sqrt(np.mean(d**2))) if d.size else 0.0
+    ok = bool(keep.all()) and rms <= goal.tolerance_cm
+    e = {
+        "rms_cm": _r(rms),
+        "max_cm": _r(float(d.max(initial=0.0))),
+        "frames": int(keep.sum()),
+        "tolerance_cm": goal.tolerance_cm,
+        "satisfied": ok,
+    }
+    return e, None if ok else (
+        f"{goal.name}: the body is {rms:.1f} cm (RMS) from the path (tolerance {goal.tolerance_cm:g} cm)"
+    )
+
+
+def _measure_beats(goal: BeatGoal, positions: Array, fps: float, characters: Sequence[Character]) -> Measured:
+    """Beat alignment scores (mint and Bailando) of the worst character."""
+    scores = [beat_align_scores(positions[:, c.joints], fps, goal.beats_s)[:2] for c in characters]
+    mint = [s[0] for s in scores]
+    bail = [s[1] for s in scores]
+    worst = int(np.argmin(np.minimum(mint, bail)))
+    ok = min(mint[worst], bail[worst]) >= goal.min_score
+    e = {
+        "beat_align_mint": _r(mint[worst]),
+        "beat_align_bailando": _r(bail[worst]),
+        "beat_align_mint_mean": _r(float(np.mean(mint))),
+        "beat_align_bailando_mean": _r(float(np.mean(bail))),
+        "beats": int(goal.beats_s.size),
+        "character": worst,
+        "tolerance": goal.min_score,
+        "satisfied": ok,
+    }
+    return e, None if ok else (
+        f"{goal.name}: beat alignment {mint[worst]:.2f} (mint) / {bail[worst]:.2f} (Bailando), "
+        f"at least {goal.min_score:g} asked"
+    )
+
+
+def _character(
+    goal: BodyGoal | PoseGoal | PathGoal, positions: Array, characters: Sequence[Character]
+) -> tuple[Array, Skeleton]:
+    """``(F, J_c, 3)`` positions and the skeleton of the goal's character."""
+    i = goal.character
+    if not 0 <= i < len(characters):
+        raise MotionError(f"{goal.name}: character {i} is not in the output")
+    c = characters[i]
+    return positions[:, c.joints], c.skeleton

@@ -251,32 +251,49 @@ def plausibility_checks(
 
     ``joins`` are output frames where pieces of motion meet (cuts, movement joins); without a
     reference every figure is reported with ``limit`` None (not gated)."""
-    ref = reference
-    out: dict[str, dict[str, Any]] = {}
-
-    def worst(values: list[float]) -> tuple[float, int]:
-        i = int(np.argmax(values)) if values else 0
-        return (float(values[i]) if values else 0.0), i
-
     if not profiles:
-        return out
+        return {}
     fps = profiles[0].fps
-    w = _window(fps, SPEED_WINDOW_S)
+    out: dict[str, dict[str, Any]] = {}
+    out.update(_speed_checks(profiles, reference, fps))
+    out.update(_turn_check(profiles, reference))
+    out.update(_slide_check(profiles, reference))
+    out.update(_floor_check(profiles, reference))
+    out["joint_step"] = _step_check(profiles, reference, fps, joint_names)
+    if joins is not None and joins.size:
+        out["join_spikes"] = _join_check(profiles, reference, fps, joins)
+    v, c = _worst([p.jerk for p in profiles])
+    out["jerk"] = _check(v, None, "m/s^3", None if reference is None else reference.jerk, character=c)
+    return out
 
+
+def _worst(values: list[float]) -> tuple[float, int]:
+    """The largest value and its character (0.0 and 0 for none)."""
+    i = int(np.argmax(values)) if values else 0
+    return (float(values[i]) if values else 0.0), i
+
+
+def _speed_checks(
+    profiles: Sequence[Profile], ref: Reference | None, fps: float
+) -> dict[str, dict[str, Any]]:
+    """Peak and 99th-percentile root speed (m/s) against the fastest example."""
+    w = _window(fps, SPEED_WINDOW_S)
     peak = [_max(p.root_speed) for p in profiles]
-    v, c = worst(peak)
+    v, c = _worst(peak)
     frame = int(np.argmax(profiles[c].root_speed)) + w // 2 if profiles[c].root_speed.size else 0
-    out["root_speed"] = _check(
-        v,
-        None if ref is None else SPEED_MARGIN * ref.root_speed_max,
-        "m/s",
-        None if ref is None else ref.root_speed_max,
-        ratio=None if ref is None or ref.root_speed_max <= 0 else round(v / ref.root_speed_max, 3),
-        character=c,
-        frame=frame,
-    )
+    out = {
+        "root_speed": _check(
+            v,
+            None if ref is None else SPEED_MARGIN * ref.root_speed_max,
+            "m/s",
+            None if ref is None else ref.root_speed_max,
+            ratio=None if ref is None or ref.root_speed_max <= 0 else round(v / ref.root_speed_max, 3),
+            character=c,
+            frame=frame,
+        )
+    }
     p99 = [float(np.percentile(p.root_speed, 99)) if p.root_speed.size else 0.0 for p in profiles]
-    v, c = worst(p99)
+    v, c = _worst(p99)
     out["root_speed_p99"] = _check(
         v,
         None if ref is None else SPEED_P99_MARGIN * ref.root_speed_p99,
@@ -284,31 +301,50 @@ def plausibility_checks(
         None if ref is None else ref.root_speed_p99,
         character=c,
     )
-    if any(p.turn_rate.size for p in profiles):
-        turns = [_max(p.turn_rate) for p in profiles]
-        v, c = worst(turns)
-        out["turn_rate"] = _check(
+    return out
+
+
+def _turn_check(profiles: Sequence[Profile], ref: Reference | None) -> dict[str, dict[str, Any]]:
+    """Peak turn rate (deg/s) against the examples' (none without a heading)."""
+    if not any(p.turn_rate.size for p in profiles):
+        return {}
+    v, c = _worst([_max(p.turn_rate) for p in profiles])
+    return {
+        "turn_rate": _check(
             float(np.degrees(v)),
             None if ref is None else float(np.degrees(TURN_MARGIN * ref.turn_rate_max)),
             "deg/s",
             None if ref is None else float(np.degrees(ref.turn_rate_max)),
             character=c,
         )
-    if any(p.foot_speed.size for p in profiles):
-        slides = [float(np.median(p.foot_speed)) if p.foot_speed.size else 0.0 for p in profiles]
-        v, c = worst(slides)
-        out["foot_slide"] = _check(
+    }
+
+
+def _slide_check(profiles: Sequence[Profile], ref: Reference | None) -> dict[str, dict[str, Any]]:
+    """Median planted-foot speed (m/s) against the examples' (none without feet)."""
+    if not any(p.foot_speed.size for p in profiles):
+        return {}
+    v, c = _worst([float(np.median(p.foot_speed)) if p.foot_speed.size else 0.0 for p in profiles])
+    return {
+        "foot_slide": _check(
             v,
             None if ref is None else SLIDE_MARGIN * ref.planted_slide + SLIDE_FLOOR_M_S,
             "m/s",
             None if ref is None else ref.planted_slide,
             character=c,
         )
-    if ref is not None:
-        depth = [max(ref.floor_y - float(p.lowest.min()), 0.0) for p in profiles]
-        v, c = worst(depth)
-        below = int(np.count_nonzero(profiles[c].lowest < ref.floor_y - ref.floor_depth - FLOOR_MARGIN_M))
-        out["floor_penetration"] = _check(
+    }
+
+
+def _floor_check(profiles: Sequence[Profile], ref: Reference | None) -> dict[str, dict[str, Any]]:
+    """How far (cm) the lowest joint goes below the examples' floor, and for how many frames
+    (needs a reference)."""
+    if ref is None:
+        return {}
+    v, c = _worst([max(ref.floor_y - float(p.lowest.min()), 0.0) for p in profiles])
+    below = int(np.count_nonzero(profiles[c].lowest < ref.floor_y - ref.floor_depth - FLOOR_MARGIN_M))
+    return {
+        "floor_penetration": _check(
             100.0 * v,
             100.0 * (ref.floor_depth + FLOOR_MARGIN_M),
             "cm",
@@ -316,13 +352,22 @@ def plausibility_checks(
             character=c,
             frames=below,
         )
-    steps = [_max(p.joint_speed) / p.fps for p in profiles]
-    v, c = worst(steps)
+    }
+
+
+def _step_check(
+    profiles: Sequence[Profile],
+    ref: Reference | None,
+    fps: float,
+    joint_names: Sequence[Sequence[str]] | None,
+) -> dict[str, Any]:
+    """The largest per-frame jump (m) of any joint, with its frame and joint."""
+    v, c = _worst([_max(p.joint_speed) / p.fps for p in profiles])
     pc = profiles[c]
     f = int(np.argmax(pc.joint_speed)) if pc.joint_speed.size else 0
     joint = int(pc.step_joint[f]) if pc.step_joint.size else 0
     names = joint_names[c] if joint_names is not None else None
-    out["joint_step"] = _check(
+    return _check(
         v,
         None if ref is None else STEP_MARGIN * ref.joint_speed_max / fps + STEP_FLOOR_M,
         "m",
@@ -331,34 +376,35 @@ def plausibility_checks(
         frame=f + 1,
         joint=names[joint] if names is not None else joint,
     )
-    if joins is not None and joins.size:
-        half = _window(fps, JOIN_HALF_WIDTH_S)
-        spikes: list[float] = []
-        where: list[int] = []
-        for p in profiles:
-            n = p.accel.size
-            idx = (np.asarray(joins, dtype=np.intp)[:, None] + np.arange(-half, half + 1)[None, :]).ravel()
-            idx = idx[(idx >= 0) & (idx < n)]
-            a = p.accel[idx]
-            ok = np.isfinite(a)
-            if ok.any():
-                k = int(np.argmax(np.where(ok, a, -np.inf)))
-                spikes.append(float(a[k]))
-                where.append(int(idx[k]))
-            else:
-                spikes.append(0.0)
-                where.append(0)
-        v, c = worst(spikes)
-        out["join_spikes"] = _check(
-            v,
-            None if ref is None else JOIN_MARGIN * ref.accel_p999,
-            "m/s^2",
-            None if ref is None else ref.accel_p999,
-            character=c,
-            frame=where[c],
-            joins=int(joins.size),
-        )
-    jerks = [p.jerk for p in profiles]
-    v, c = worst(jerks)
-    out["jerk"] = _check(v, None, "m/s^3", None if ref is None else ref.jerk, character=c)
-    return out
+
+
+def _join_check(
+    profiles: Sequence[Profile], ref: Reference | None, fps: float, joins: npt.NDArray[np.intp]
+) -> dict[str, Any]:
+    """The largest joint acceleration (m/s^2) near the frames where pieces of motion meet."""
+    half = _window(fps, JOIN_HALF_WIDTH_S)
+    spikes: list[float] = []
+    where: list[int] = []
+    for p in profiles:
+        n = p.accel.size
+        idx = (np.asarray(joins, dtype=np.intp)[:, None] + np.arange(-half, half + 1)[None, :]).ravel()
+        idx = idx[(idx >= 0) & (idx < n)]
+        a = p.accel[idx]
+        ok = np.isfinite(a)
+        if ok.any():
+            k = int(np.argmax(np.where(ok, a, -np.inf)))
+            spikes.append(float(a[k]))
+            where.append(int(idx[k]))
+        else:
+            spikes.append(0.0)
+            where.append(0)
+    v, c = _worst(spikes)
+    return _check(
+        v,
+        None if ref is None else JOIN_MARGIN * ref.accel_p999,
+        "m/s^2",
+        None if ref is None else ref.accel_p999,
+        character=c,
+        frame=where[c],
+        joins=int(joins.size),
+    )

@@ -20,6 +20,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from .bases import DatabaseSpecBase, JobRequestBase
+from .clips import LabelRange
 from .common import Strict
 
 
@@ -224,3 +225,13 @@ class LabelCorrection(Strict):
         if self.action == "set" and self.label is None:
             raise ValueError("a 'set' correction names its 'label'")
         return self
+
+
+class ClipLabels(Strict):
+    """The labels of one clip of an annotated database as ranges (database frames): every
+    vocabulary label, +1 or -1, the user's where given and the SVMs' elsewhere
+    (``GET /v1/databases/{id}/labels``)."""
+
+    clip: str = Field(description="the clip, as asked for")
+    frames: int = Field(ge=0, description="the clip's length, database frames")
+    labels: list[LabelRange]

@@ -21,6 +21,7 @@ class DatabaseSpecBase(Strict):
 class JobRequestBase(Strict):
     """Settings every synthesis request shares."""
 
+    engine: str = Field(description="the engine that answers the request (each model fixes its own)")
     database: str | None = Field(
         default=None, description="database id (API); the CLI's --db directory supplies it otherwise"
     )

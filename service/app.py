@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import os
 import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -23,11 +22,12 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.utils import get_openapi
 from pydantic import TypeAdapter
 
-from engines.registry import PLUGINS_ENV, load_plugins
+from engines.registry import load_plugins
 from schemas import DatabaseSpec
 from schemas.jobs import JobRequest
 from workers.backend import JobBackend
 from workers.embedded import EmbeddedBackend
+from workers.execute import EngineCache
 from workers.store import Store
 
 from .errors import install_error_handlers
@@ -35,7 +35,8 @@ from .guard import CatchAll, HostOriginGuard
 from .limits import JobQuota, SessionQuota
 from .links import add_links
 from .metrics import HttpMetricsMiddleware, Metrics, observe_terminal_events
-from .routes import annotations, clips, databases, events, files, health, jobs, sessions
+from .routes import annotations as annotation_routes
+from .routes import clips, databases, events, files, health, jobs, sessions
 from .routes.annotations import Corrections
 from .settings import Settings, get_settings
 from .web import mount_web
@@ -59,24 +60,16 @@ def make_backend(settings: Settings, store: Store) -> JobBackend:
     if settings.redis_url:
         from workers.redis_backend import RedisBackend
 
-        backend: JobBackend = RedisBackend(store, settings.redis_url)
+        backend: JobBackend = RedisBackend(store, settings.redis_url, prefix=settings.redis_prefix)
         return backend
-    return EmbeddedBackend(
-        store,
-        settings.workers,
-        cancel_grace_s=settings.cancel_grace_s,
-        time_grace_s=settings.job_grace_s,
-        max_rss_bytes=settings.max_job_memory_mb << 20,
-    )
+    return EmbeddedBackend.from_settings(store, settings)
 
 
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     """Start the store and the backend; stop the backend at shutdown."""
     settings: Settings = app.state.settings
-    if settings.engine_plugins is not None:
-        os.environ[PLUGINS_ENV] = settings.engine_plugins  # worker processes load the same plugins
-    load_plugins(settings.engine_plugins)
+    load_plugins(settings.engine_plugins)  # the engine processes get them from the settings too
     store = Store(settings.data_dir)
     backend = make_backend(settings, store)
     observe_terminal_events(backend.hub, app.state.metrics, since=time.time())
@@ -132,8 +125,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.metrics = Metrics()
     app.state.backend = None
     app.state.session_quota = SessionQuota(settings.max_sessions)
+    app.state.engines = EngineCache(capacity=4)  # live sessions' engines (the only ones loaded here)
     install_error_handlers(app)
-    for module in (clips, files, databases, annotations, jobs, events, health, sessions):
+    for module in (clips, files, databases, annotation_routes, jobs, events, health, sessions):
         app.include_router(module.router)
     # innermost first: CatchAll turns a bug into the contract's 500 (keeping the connection), metrics
     # count it, the guard refuses foreign hosts and origins before anything else runs, and CORS (only

@@ -235,11 +235,18 @@ def _echo(event: JobEvent) -> None:
         print(f"  failed: {event.data['error']['message']}", file=sys.stderr)
 
 
-def cmd_build(args: argparse.Namespace) -> int:
+def _load_plugins() -> None:
+    """The engine plugins named by the settings (``SEGUE_ENGINE_PLUGINS``)."""
     from engines.registry import load_plugins
+    from workers.settings import get_settings
+
+    load_plugins(get_settings().engine_plugins)
+
+
+def cmd_build(args: argparse.Namespace) -> int:
     from workers.local import EventWriter, build_to_dir
 
-    load_plugins()
+    _load_plugins()
 
     spec_path = Path(args.spec)
     with _events_sink(args.events) as sink:
@@ -255,12 +262,11 @@ def cmd_build(args: argparse.Namespace) -> int:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
-    from engines.registry import load_plugins
     from motion import MotionError
     from schemas import EventType
     from workers.local import EventWriter, synth_from_dir, write_result
 
-    load_plugins()
+    _load_plugins()
 
     with _events_sink(args.events) as sink:
         writer = EventWriter("local", sink, None if args.quiet else _echo)
@@ -303,20 +309,13 @@ class _events_sink:  # noqa: N801 - a tiny context manager used like a function
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    import os
-
     import uvicorn
 
-    if args.data:
-        os.environ["SEGUE_DATA_DIR"] = args.data
-    if args.redis:
-        os.environ["SEGUE_REDIS_URL"] = args.redis
-    if args.workers is not None:
-        os.environ["SEGUE_WORKERS"] = str(args.workers)
     from service.app import create_app
-    from service.settings import get_settings
+    from workers.settings import get_settings, with_options
 
-    if not is_loopback(args.host) and not get_settings().auth_enabled:
+    settings = with_options(get_settings(), data_dir=args.data, redis_url=args.redis, workers=args.workers)
+    if not is_loopback(args.host) and not settings.auth_enabled:
         print(
             f"segue: error: --host {args.host} would open the API to the network without tokens; set "
             "SEGUE_API_TOKENS (and SEGUE_ALLOWED_HOSTS) first: without tokens Segue is a single-user tool "
@@ -324,7 +323,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
-    uvicorn.run(create_app(), host=args.host, port=args.port, log_level=args.log_level)
+    uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level)
     return 0
 
 
@@ -341,14 +340,12 @@ def is_loopback(host: str) -> bool:
 
 
 def cmd_worker(args: argparse.Namespace) -> int:
-    from workers.redis_worker import main as worker_main
+    from workers.redis_worker import serve
+    from workers.settings import get_settings, with_options
 
-    argv = ["--redis", args.redis]
-    if args.data:
-        argv += ["--data", args.data]
-    if args.name:
-        argv += ["--name", args.name]
-    return int(worker_main(argv) or 0)
+    return serve(
+        with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name)
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -470,7 +467,7 @@ def _user_error(exc: Exception) -> str | None:
     if "pydantic" in mods and isinstance(exc, mods["pydantic"].ValidationError):
         return f"invalid JSON: {_validation_message(exc)}"
     if "workers.execute" in mods and isinstance(exc, mods["workers.execute"].JobFailure):
-        return str(exc.message)  # type: ignore[attr-defined]
+        return str(exc.message)
     known: list[type] = [OSError]
     for module, name in (
         ("motion.errors", "MotionError"),

@@ -12,31 +12,50 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, TypeVar
 
+import anyio
 from fastapi import Depends
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.requests import HTTPConnection
 
 from workers.backend import JobBackend
+from workers.execute import EngineCache
 from workers.store import Store
 
 from .errors import ApiError, unauthorized
+from .limits import JobQuota, SessionQuota
 from .metrics import Metrics
 from .settings import Settings
 
-
-def app_settings(conn: HTTPConnection) -> Settings:
-    """The settings the app was created with."""
-    settings: Settings = conn.app.state.settings
-    return settings
+State = TypeVar("State")
 
 
-def app_store(conn: HTTPConnection) -> Store:
-    """The durable store."""
-    store: Store = conn.app.state.store
-    return store
+def from_state(name: str, kind: type[State]) -> Callable[[HTTPConnection], State]:
+    """A dependency giving ``app.state.<name>`` (set by :func:`service.app.create_app`) as a ``kind``."""
+
+    def dependency(conn: HTTPConnection) -> State:
+        value: State = getattr(conn.app.state, name)
+        return value
+
+    dependency.__name__ = dependency.__qualname__ = f"app_{name}"
+    dependency.__doc__ = f"The app's {name} (``app.state.{name}``)."
+    return dependency
+
+
+app_settings = from_state("settings", Settings)
+"""The settings the app was created with (tests override this dependency)."""
+app_store = from_state("store", Store)
+app_metrics = from_state("metrics", Metrics)
+app_job_quota = from_state("job_quota", JobQuota)
+"""Unfinished jobs per principal (``SEGUE_MAX_QUEUED_JOBS``)."""
+app_session_quota = from_state("session_quota", SessionQuota)
+"""Live sessions per principal (``SEGUE_MAX_SESSIONS``)."""
+app_engines = from_state("engines", EngineCache)
+"""The engines this process has loaded for live sessions (the only engine work it does itself, in
+worker threads)."""
 
 
 def app_backend(conn: HTTPConnection) -> JobBackend:
@@ -49,16 +68,31 @@ def app_backend(conn: HTTPConnection) -> JobBackend:
     return backend
 
 
-def app_metrics(conn: HTTPConnection) -> Metrics:
-    """The process's metrics."""
-    metrics: Metrics = conn.app.state.metrics
-    return metrics
+def parse_limiter(conn: HTTPConnection, settings: Settings) -> anyio.CapacityLimiter:
+    """The app's bound on concurrent body parses (``SEGUE_MAX_PARSES``; made on first use, one per
+    app, since it belongs to the running event loop)."""
+    limiter: anyio.CapacityLimiter | None = getattr(conn.app.state, "parse_limiter", None)
+    if limiter is None:
+        limiter = anyio.CapacityLimiter(settings.max_parses)
+        conn.app.state.parse_limiter = limiter
+    return limiter
+
+
+def app_parse_limiter(
+    conn: HTTPConnection, settings: Annotated[Settings, Depends(app_settings)]
+) -> anyio.CapacityLimiter:
+    """:func:`parse_limiter` as a dependency."""
+    return parse_limiter(conn, settings)
 
 
 SettingsDep = Annotated[Settings, Depends(app_settings)]
 StoreDep = Annotated[Store, Depends(app_store)]
 BackendDep = Annotated[JobBackend, Depends(app_backend)]
 MetricsDep = Annotated[Metrics, Depends(app_metrics)]
+JobQuotaDep = Annotated[JobQuota, Depends(app_job_quota)]
+SessionQuotaDep = Annotated[SessionQuota, Depends(app_session_quota)]
+EnginesDep = Annotated[EngineCache, Depends(app_engines)]
+ParseLimiterDep = Annotated[anyio.CapacityLimiter, Depends(app_parse_limiter)]
 
 _bearer = HTTPBearer(auto_error=False, description="required on every /v1 route when SEGUE_API_TOKENS is set")
 
@@ -79,7 +113,7 @@ class Principal:
             return True
         if isinstance(owners, str):
             return owners == self.name
-        return bool(owners) and self.name in owners  # type: ignore[operator]
+        return owners is not None and self.name in owners
 
 
 def principal_of_token(entry: str) -> tuple[str, str]:

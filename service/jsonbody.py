@@ -18,26 +18,20 @@ Every refusal is a 4xx :class:`~service.errors.ApiError` naming the problem.
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Awaitable, Callable
+from typing import Any, TypeVar
 
 import anyio
 import pydantic_core
 from fastapi import Depends
-from pydantic import TypeAdapter
 from starlette.requests import Request
 
-from .errors import ApiError
+from .deps import SettingsDep, parse_limiter
+from .errors import ApiError, responses
 from .settings import Settings
 from .uploads import read_body
 
-
-def parse_limiter(request: Request, settings: Settings) -> anyio.CapacityLimiter:
-    """The app's bound on concurrent body parses (created on first use, one per app)."""
-    limiter: anyio.CapacityLimiter | None = getattr(request.app.state, "parse_limiter", None)
-    if limiter is None:
-        limiter = anyio.CapacityLimiter(settings.max_parses)
-        request.app.state.parse_limiter = limiter
-    return limiter
+Model = TypeVar("Model")
 
 
 def is_json_type(content_type: str) -> bool:
@@ -103,13 +97,17 @@ async def read_json(request: Request, settings: Settings) -> Any:
     return await anyio.to_thread.run_sync(parse_json_bytes, data, limiter=parse_limiter(request, settings))
 
 
-async def validate_off_loop(
-    adapter: TypeAdapter[Any], value: Any, request: Request, settings: Settings
-) -> Any:
-    """``adapter.validate_python(value)`` in a worker thread (validation of a large body takes time)."""
-    return await anyio.to_thread.run_sync(
-        adapter.validate_python, value, limiter=parse_limiter(request, settings)
-    )
+def json_body(validate: Callable[[Any], Model]) -> Callable[[Request, Settings], Awaitable[Model]]:
+    """A dependency giving a route its JSON body as a model: read with :func:`read_json`, then
+    ``validate(value)`` (a pydantic validator: errors are 422 ``invalid_request``) in a worker
+    thread, since validating a large body takes time. Use it as
+    ``spec: Annotated[Spec, Depends(json_body(parse_spec))]``, after the caller's principal."""
+
+    async def body(request: Request, settings: SettingsDep) -> Model:
+        value = await read_json(request, settings)
+        return await anyio.to_thread.run_sync(validate, value, limiter=parse_limiter(request, settings))
+
+    return body
 
 
 def json_body_doc(schema_ref: str, description: str) -> dict[str, Any]:
@@ -140,3 +138,13 @@ async def require_json_intent(request: Request) -> None:
 
 JsonIntent = Depends(require_json_intent)
 """Add to a bodyless write route: ``dependencies=[JsonIntent]``."""
+
+
+def delete_route(*statuses: int) -> dict[str, Any]:
+    """The options of a ``DELETE`` route: 204, the JSON-intent guard, and its error responses
+    (401, 404, 415, 422 and ``statuses``): ``@router.delete("/{id}", **delete_route())``."""
+    return {
+        "status_code": 204,
+        "dependencies": [JsonIntent],
+        "responses": responses(*sorted({401, 404, 415, 422, *statuses})),
+    }

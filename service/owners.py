@@ -8,6 +8,11 @@ else answers 404 exactly like a thing that does not exist, so ids do not leak.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from typing import Protocol, TypeVar
+
+from fastapi import Response, status
+
 from schemas import ClipInfo, DatabaseInfo, JobInfo
 from schemas.files import FileInfo
 from workers.store import NotFoundError, Owned, Store, Visible
@@ -20,6 +25,37 @@ def visible(store: Store, principal: Principal, *kinds: Owned) -> Visible:
     if principal.admin:
         return lambda _id: True
     return lambda item_id: any(principal.name in store.owners(kind, item_id) for kind in kinds)
+
+
+class HasId(Protocol):
+    @property
+    def id(self) -> str: ...
+
+
+Item = TypeVar("Item", bound=HasId)
+
+
+def only_visible(store: Store, principal: Principal, kind: Owned, items: Sequence[Item]) -> list[Item]:
+    """The ``items`` of ``kind`` the principal holds, in their order."""
+    mine = visible(store, principal, kind)
+    return [item for item in items if mine(item.id)]
+
+
+def hold(store: Store, principal: Principal, kind: Owned, item_id: str, response: Response) -> None:
+    """Record the principal as a holder of a content-addressed upload; the answer is 200 instead
+    of 201 when it held the same bytes already."""
+    if not store.add_owner(kind, item_id, principal.name):
+        response.status_code = status.HTTP_200_OK
+
+
+def release(
+    store: Store, principal: Principal, kind: Owned, item_id: str, delete: Callable[[str], None]
+) -> Response:
+    """Drop the principal's hold; the thing is deleted when no other principal holds it (an admin
+    deletes it outright). Answers 204."""
+    if principal.admin or not store.remove_owner(kind, item_id, principal.name):
+        delete(item_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 def clip_for(store: Store, principal: Principal, ref: str) -> ClipInfo:

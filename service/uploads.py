@@ -6,15 +6,20 @@ so an oversized upload is refused with 413 before it is held in memory.
 
 from __future__ import annotations
 
-from collections.abc import AsyncGenerator
+import hashlib
+from collections.abc import AsyncGenerator, Callable
 from pathlib import PurePosixPath
-from typing import Any
+from typing import Any, TypeVar
 
 from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
 from starlette.requests import Request
 
+from workers.store import NotFoundError
+
 from .errors import ApiError, too_large
+
+Info = TypeVar("Info")
 
 MULTIPART_OVERHEAD = 64 * 1024
 """Room for the multipart envelope (boundaries, part headers, small fields) above the file limit."""
@@ -78,6 +83,15 @@ async def read_upload(request: Request, limit: int, name: str | None) -> tuple[s
             "name the clip: POST the file as multipart field 'file', or the raw bytes with ?name=FILE.bvh",
         )
     return clean_name(name), await read_body(request, limit)
+
+
+def stored(info_of: Callable[[str], Info], data: bytes) -> Info | None:
+    """What the store holds under the content address of ``data`` (``info_of`` is the store's
+    ``clip_info`` or ``file_info``), or None when these bytes are new."""
+    try:
+        return info_of(hashlib.sha256(data).hexdigest())
+    except NotFoundError:
+        return None
 
 
 def upload_body(description: str) -> dict[str, Any]:

@@ -17,8 +17,11 @@ worker compares the result with, so a result shorter than asked is flagged inste
 
 from __future__ import annotations
 
+import threading
 from dataclasses import asdict, dataclass
 from typing import Any
+
+from cachetools import LRUCache, cached
 
 BASE_MEMORY_BYTES = 300 * 1024 * 1024
 """A worker process with the engines loaded (numpy, scipy, scikit-learn) and a database."""
@@ -162,8 +165,10 @@ class DatabaseFacts:
     clip_frames: dict[str, int]
 
 
+@cached(LRUCache(maxsize=256), lock=threading.Lock())
 def database_facts(npz_path: str) -> DatabaseFacts:
-    """Read the facts from a database's ``data.npz`` (only the small arrays are loaded)."""
+    """Read the facts from a database's ``data.npz`` (only the small arrays are loaded; a built
+    database never changes, so the last 256 are kept)."""
     import numpy as np
 
     with np.load(npz_path, allow_pickle=False) as z:

@@ -35,6 +35,7 @@ from schemas.jobs import JobKind
 from .backend import BackendUnavailable, EventHub
 from .budget import shortfall
 from .execute import apply_event
+from .settings import Settings
 from .store import NotFoundError, Store
 from .supervisor import (
     ChildConfig,
@@ -52,6 +53,20 @@ log = logging.getLogger("segue.embedded")
 class EmbeddedBackend:
     """Jobs in local supervised engine processes (see the module docstring)."""
 
+    @classmethod
+    def from_settings(cls, store: Store, settings: Settings) -> EmbeddedBackend:
+        """The backend ``segue serve`` runs: ``workers`` processes with the settings' job limits."""
+        return cls(
+            store,
+            settings.workers,
+            cancel_grace_s=settings.cancel_grace_s,
+            time_grace_s=settings.job_grace_s,
+            build_timeout_s=settings.build_timeout_s,
+            max_rss_bytes=settings.max_rss_bytes,
+            plugins=settings.engine_plugins,
+            engine_cache=settings.engine_cache,
+        )
+
     def __init__(
         self,
         store: Store,
@@ -62,8 +77,11 @@ class EmbeddedBackend:
         time_grace_s: float = 30.0,
         build_timeout_s: float = 3600.0,
         max_rss_bytes: int | None = None,
+        plugins: str | None = None,
+        engine_cache: int = 4,
     ) -> None:
         self.store = store
+        self.plugins, self.engine_cache = plugins, engine_cache
         self.workers = max(1, workers)
         self.max_attempts = max_attempts
         self.cancel_grace_s, self.time_grace_s = cancel_grace_s, time_grace_s
@@ -79,7 +97,11 @@ class EmbeddedBackend:
     # -- lifecycle ------------------------------------------------------------------------------
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
-        config = ChildConfig(store_root=str(self.store.root), plugins=engine_plugins())
+        config = ChildConfig(
+            store_root=str(self.store.root),
+            plugins=engine_plugins(self.plugins),
+            engine_cache=self.engine_cache,
+        )
         for i in range(self.workers):
             process = EngineProcess(
                 f"embedded-{i}",
@@ -266,13 +288,13 @@ class EmbeddedBackend:
         await self._record(info.id, EventType.queued, {}, time.time())
         self._queue.append(self._task(info.id, kind, payload, 1))
         self._dispatch()
-        return self.store.job_info(info.id)
+        return await self.status(info.id)
 
     async def status(self, job_id: str) -> JobInfo:
-        return self.store.job_info(job_id)
+        return await asyncio.to_thread(self.store.job_info, job_id)  # a file read: off the event loop
 
     async def cancel(self, job_id: str) -> JobInfo:
-        info = self.store.job_info(job_id)
+        info = await self.status(job_id)
         if info.status.finished:
             return info
         queued = next((t for t in self._queue if t.job_id == job_id), None)
@@ -283,20 +305,27 @@ class EmbeddedBackend:
             for process in self._processes:
                 if process.cancel(job_id):
                     break
-        return self.store.job_info(job_id)
+        return await self.status(job_id)
 
     async def _replay_from_disk(self, job_id: str) -> None:
-        path = self.store.job_dir(job_id) / "events.jsonl"
-        if self.hub.has(job_id) or not path.exists():
+        """The events a previous server process archived (read in a worker thread; a concurrent
+        replay's duplicates are ignored by the hub)."""
+        if self.hub.has(job_id):
             return
-        for line in path.read_text(encoding="utf-8").splitlines():
-            if line.strip():
-                await self.hub.append(JobEvent.model_validate(json.loads(line)))
+        for event in await asyncio.to_thread(self._archived, job_id):
+            await self.hub.append(event)
+
+    def _archived(self, job_id: str) -> list[JobEvent]:
+        path = self.store.job_dir(job_id) / "events.jsonl"
+        if not path.exists():
+            return []
+        lines = path.read_text(encoding="utf-8").splitlines()
+        return [JobEvent.model_validate(json.loads(line)) for line in lines if line.strip()]
 
     async def events(self, job_id: str, after: int = 0) -> AsyncIterator[JobEvent]:
-        self.store.job_info(job_id)  # NotFoundError for unknown jobs
+        await self.status(job_id)  # NotFoundError for unknown jobs
         await self._replay_from_disk(job_id)
-        info = self.store.job_info(job_id)
+        info = await self.status(job_id)
         if info.status.finished and not self.hub.log(job_id).terminal:
             return  # finished before this process kept its log and left none on disk
         async for event in self.hub.follow(job_id, after):

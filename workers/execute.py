@@ -9,22 +9,24 @@ writes files through the :class:`~workers.store.Store`; job status is a fold ove
 from __future__ import annotations
 
 import logging
+import threading
 import time
-from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
+from cachetools import LRUCache, cachedmethod
 from pydantic import ValidationError
 
 from engines.base import Engine, EngineError, Solution, foot_floor_arrays
-from engines.library import ClipInput, MotionLibrary, build_library, library_from_arrays, library_to_arrays
+from engines.library import ClipInput, MotionLibrary, build_library, library_to_arrays
 from engines.registry import UnavailableError, engine_class, kind_class
 from motion import Motion, MotionError
 from motion.plausibility import Reference
 from motion.quality import assess
 from schemas import DatabaseStatus, EventType, JobInfo, JobStatus, ProvenanceEntry, Report
-from schemas.databases import DatabaseSpecBase, parse_database_spec
-from schemas.jobs import JobRequestBase, parse_job_request
+from schemas.bases import DatabaseSpecBase, JobRequestBase
+from schemas.databases import parse_database_spec
+from schemas.jobs import parse_job_request
 
 from .inputs import InputError, attach_from_store
 from .store import NotFoundError, Store, load_npz, now, npz_bytes
@@ -45,24 +47,27 @@ class JobFailure(Exception):
         self.message = message
 
 
+def _engine_key(
+    cache: EngineCache, db_id: str, engine_cls: type[Engine], load_bytes: LoadDatabaseBytes
+) -> tuple[str, str]:
+    return db_id, engine_cls.name
+
+
 class EngineCache:
-    """Loaded engines by database id, least recently used evicted (per worker process)."""
+    """Loaded engines by database id and engine, the least recently used evicted (one per process:
+    each engine process, and the API process for live sessions).
+
+    ``get`` loads an engine on a miss with ``load_bytes(db_id)`` (the database's ``data.npz`` bytes);
+    it is safe to call from several threads (two misses of one key may both load)."""
 
     def __init__(self, capacity: int = 4) -> None:
         self.capacity = capacity
-        self._items: OrderedDict[str, Engine] = OrderedDict()
+        self._engines: LRUCache[tuple[str, str], Engine] = LRUCache(maxsize=capacity)
+        self._lock = threading.Lock()
 
+    @cachedmethod(lambda self: self._engines, key=_engine_key, lock=lambda self: self._lock)
     def get(self, db_id: str, engine_cls: type[Engine], load_bytes: LoadDatabaseBytes) -> Engine:
-        key = f"{db_id}/{engine_cls.name}"
-        engine = self._items.get(key)
-        if engine is None:
-            arrays = load_npz(load_bytes(db_id))
-            engine = engine_cls(library_from_arrays(arrays), arrays)
-            self._items[key] = engine
-            while len(self._items) > self.capacity:
-                self._items.popitem(last=False)
-        self._items.move_to_end(key)
-        return engine
+        return engine_cls.load(load_npz(load_bytes(db_id)))
 
 
 SaveResult = Callable[[str, Motion, Report], None]
@@ -315,7 +320,7 @@ def _synth(
     info = store.database_info(request.database)
     if info.status != DatabaseStatus.ready:
         raise JobFailure("database_not_ready", f"database {request.database} is {info.status.value}")
-    engine_cls = engine_class(request.engine)  # type: ignore[attr-defined]
+    engine_cls = engine_class(request.engine)
     if engine_cls.kind != info.kind:
         raise JobFailure(
             "invalid_request",

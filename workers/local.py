@@ -20,13 +20,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
-from engines.library import ClipInput, library_from_arrays
+from engines.library import ClipInput
 from engines.registry import engine_class
 from motion import Motion, MotionError
 from motion.io import save_motion
 from motion.samples import resolve_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobEvent, Report
-from schemas.databases import DatabaseSpecBase, database_id, parse_database_spec
+from schemas.bases import DatabaseSpecBase
+from schemas.databases import database_id, parse_database_spec
 from schemas.jobs import parse_job_request
 
 from .execute import JobFailure, build_database_bytes, run_search
@@ -125,13 +126,13 @@ def synth_from_dir(
         raise JobFailure(
             "invalid_request", f"{db_dir} is not a database directory ({exc.strerror or exc})"
         ) from None
-    engine_cls = engine_class(request.engine)  # type: ignore[attr-defined]
+    engine_cls = engine_class(request.engine)
     if engine_cls.kind != info.kind:
         raise JobFailure(
             "invalid_request",
             f"engine {engine_cls.name!r} needs a {engine_cls.kind!r} database, " f"not {info.kind!r}",
         )
-    engine = engine_cls(library_from_arrays(arrays), arrays)
+    engine = engine_cls.load(arrays)
     results: dict[str, tuple[Motion, Report]] = {}
 
     def save(rid: str, motion: Motion, report: Report) -> None:

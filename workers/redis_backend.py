@@ -275,7 +275,7 @@ class RedisBackend:
             raw = None  # Redis is away: the store's record (kept in step at every status change)
         if raw:
             return JobInfo.model_validate_json(raw)
-        return self.store.job_info(job_id)
+        return await asyncio.to_thread(self.store.job_info, job_id)  # a file read: off the event loop
 
     async def cancel(self, job_id: str) -> JobInfo:
         client, publisher = self._redis()

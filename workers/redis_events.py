@@ -28,7 +28,7 @@ import json
 import logging
 import time
 from dataclasses import dataclass
-from typing import Any, cast
+from typing import Any, Generic, TypeVar, cast
 
 import redis
 import redis.asyncio as aredis
@@ -41,6 +41,7 @@ from .store import NotFoundError, Store, _atomic_write
 
 log = logging.getLogger("segue.redis")
 
+Client = TypeVar("Client", redis.Redis, aredis.Redis)
 Entries = list[tuple[str, dict[str, str]]]
 """Stream entries as a ``decode_responses=True`` client returns them: (entry id, fields)."""
 
@@ -150,7 +151,35 @@ def _queue(pipe: Any, keys: RedisKeys, plan: _Plan, maxlen: int, retention_s: in
             pipe.expire(key, retention_s)
 
 
-class EventPublisher:
+class _Publisher(Generic[Client]):
+    """What both publishers share: the keys a publish watches, and the store written after it."""
+
+    def __init__(
+        self,
+        client: Client,
+        store: Store,
+        keys: RedisKeys,
+        maxlen: int = EVENTS_MAXLEN,
+        retention_s: int = RETENTION_S,
+    ) -> None:
+        self.client: Client = client
+        self.store, self.keys = store, keys
+        self.maxlen, self.retention_s = maxlen, retention_s
+
+    def _watched(self, job_id: str) -> list[str]:
+        """The job's event counter, status and terminal marker (a publish is optimistic on them)."""
+        return [self.keys.event_seq(job_id), self.keys.job(job_id), self.keys.terminal(job_id)]
+
+    def _recorded(self, plan: _Plan, entries: Entries | None) -> None:
+        """After the transaction: the store's status when it changed, and the archive of a
+        finished job's events (``entries``, read when the event is terminal)."""
+        if plan.info is not None and plan.event.type in DISK_STATUS_EVENTS:
+            self.store.put_job(plan.info)
+        if entries is not None:
+            archive_events(self.store, plan.event.job, entries)
+
+
+class EventPublisher(_Publisher[redis.Redis]):
     """Publishes events from a worker (synchronous client, ``decode_responses=True``)."""
 
     def __init__(
@@ -161,8 +190,7 @@ class EventPublisher:
         maxlen: int = EVENTS_MAXLEN,
         retention_s: int = RETENTION_S,
     ) -> None:
-        self.client, self.store, self.keys = client, store, keys
-        self.maxlen, self.retention_s = maxlen, retention_s
+        super().__init__(client, store, keys, maxlen, retention_s)
         self._last: dict[str, int] = {}  # last event id published per running job (survives a flush)
 
     def publish(
@@ -170,7 +198,7 @@ class EventPublisher:
     ) -> JobEvent | None:
         """Publish one event; returns it, or None when dropped (the job already has its terminal event)."""
         keys, when = self.keys, when or time.time()
-        watched = [keys.event_seq(job_id), keys.job(job_id), keys.terminal(job_id)]
+        watched = self._watched(job_id)
         with self.client.pipeline() as pipe:
             while True:
                 try:
@@ -193,35 +221,21 @@ class EventPublisher:
                     break
                 except redis.WatchError:
                     continue
-        event = plan.event
-        if plan.info is not None and type_ in DISK_STATUS_EVENTS:
-            self.store.put_job(plan.info)
+        entries = cast(Entries, self.client.xrange(keys.events(job_id))) if type_.terminal else None
+        self._recorded(plan, entries)
         if type_.terminal:
             self._last.pop(job_id, None)
-            entries = cast(Entries, self.client.xrange(keys.events(job_id)))
-            archive_events(self.store, job_id, entries)
         else:
-            self._last[job_id] = event.id
-        return event
+            self._last[job_id] = plan.event.id
+        return plan.event
 
     def forget(self, job_id: str) -> None:
         """Drop what this publisher remembers of a job (its run in this process is over)."""
         self._last.pop(job_id, None)
 
 
-class AsyncEventPublisher:
+class AsyncEventPublisher(_Publisher[aredis.Redis]):
     """Publishes events from the API process (``redis.asyncio`` client, ``decode_responses=True``)."""
-
-    def __init__(
-        self,
-        client: aredis.Redis,
-        store: Store,
-        keys: RedisKeys,
-        maxlen: int = EVENTS_MAXLEN,
-        retention_s: int = RETENTION_S,
-    ) -> None:
-        self.client, self.store, self.keys = client, store, keys
-        self.maxlen, self.retention_s = maxlen, retention_s
 
     async def publish(
         self, job_id: str, type_: EventType, data: dict[str, Any], when: float | None = None, floor: int = 0
@@ -231,7 +245,7 @@ class AsyncEventPublisher:
         ``floor``: the last event id this process knows of (used only if Redis lost the counter).
         """
         keys, when = self.keys, when or time.time()
-        watched = [keys.event_seq(job_id), keys.job(job_id), keys.terminal(job_id)]
+        watched = self._watched(job_id)
         async with self.client.pipeline() as pipe:
             while True:
                 try:
@@ -250,9 +264,6 @@ class AsyncEventPublisher:
                     break
                 except redis.WatchError:
                     continue
-        if plan.info is not None and type_ in DISK_STATUS_EVENTS:
-            self.store.put_job(plan.info)
-        if type_.terminal:
-            entries = cast(Entries, await self.client.xrange(keys.events(job_id)))
-            archive_events(self.store, job_id, entries)
+        entries = cast(Entries, await self.client.xrange(keys.events(job_id))) if type_.terminal else None
+        self._recorded(plan, entries)
         return plan.event

@@ -51,13 +51,15 @@ from types import FrameType
 from typing import Any, cast
 
 import redis
+from pydantic import ValidationError
 
 from schemas import DatabaseStatus, EventType
 
 from .budget import shortfall
 from .redis_cache import DatabaseCache
 from .redis_events import EventPublisher
-from .redis_keys import CHUNK_SIZE, DEAD_MAXLEN, DEFAULT_PREFIX, RedisKeys
+from .redis_keys import DEAD_MAXLEN, RedisKeys
+from .settings import Settings, get_settings, with_options
 from .store import NotFoundError, Store
 from .supervisor import (
     ChildConfig,
@@ -65,15 +67,12 @@ from .supervisor import (
     Outcome,
     Task,
     engine_plugins,
+    request_budget_s,
     terminal_after_kill,
     time_limit,
 )
 
 log = logging.getLogger("segue.redis.worker")
-
-REDIS_URL_ENV = "SEGUE_REDIS_URL"
-CACHE_URL_ENV = "SEGUE_REDIS_CACHE_URL"
-DATA_DIR_ENV = "SEGUE_DATA_DIR"
 
 # Reset the idle time of an entry we still own (so the idle backstop leaves running jobs alone).
 _TOUCH_LUA = """
@@ -97,32 +96,6 @@ Entry = tuple[str, dict[str, str], int]
 
 
 @dataclass(slots=True)
-class WorkerSettings:
-    """How a worker runs (see :func:`run_worker` for the meaning of each field)."""
-
-    redis_url: str
-    data_dir: str
-    name: str
-    heartbeat_s: float = 1.0
-    ttl_s: float = 5.0
-    max_deliveries: int = 3
-    block_ms: int = 1000
-    prefix: str = DEFAULT_PREFIX
-    cache_url: str | None = None
-    chunk_size: int = CHUNK_SIZE
-    reclaim_idle_s: float = 30.0
-    engine_cache: int = 4
-    cancel_poll_s: float = 0.05
-    lock_ttl_s: float = 30.0
-    hang_grace_s: float = 120.0
-    build_timeout_s: float = 3600.0
-    job_grace_s: float = 30.0
-    cancel_grace_s: float = 2.0
-    max_rss_bytes: int | None = None
-    publish_retry_s: float = 300.0
-
-
-@dataclass(slots=True)
 class _Running:
     """The job a worker is running (read by the heartbeat thread)."""
 
@@ -140,31 +113,35 @@ def default_name() -> str:
 class Worker:
     """One worker process's loop (see the module docstring)."""
 
-    def __init__(self, settings: WorkerSettings) -> None:
-        if settings.ttl_s <= settings.heartbeat_s:
-            raise ValueError("ttl_s must be longer than heartbeat_s")
-        if settings.max_deliveries < 1:
-            raise ValueError("max_deliveries must be at least 1")
+    def __init__(self, settings: Settings) -> None:
+        redis_url = settings.redis_url
+        if not redis_url:
+            raise ValueError("a worker needs the queue's Redis: give --redis or set SEGUE_REDIS_URL")
+        if settings.heartbeat_ttl_s <= settings.heartbeat_s:
+            raise ValueError("heartbeat_ttl_s must be longer than heartbeat_s")
         self.settings = s = settings
-        self.name = s.name
-        self.keys = RedisKeys(s.prefix)
+        self.name = s.worker_name or default_name()
+        self.keys = RedisKeys(s.redis_prefix)
         self.store = Store(s.data_dir)
         # blocking reads must end before the socket timeout (redis-py's default is 5 s)
         timeout = s.block_ms / 1000 + 5
-        self.client = redis.Redis.from_url(s.redis_url, decode_responses=True, socket_timeout=timeout)
-        self.cache_client = redis.Redis.from_url(s.cache_url or s.redis_url)
+        self.client = redis.Redis.from_url(redis_url, decode_responses=True, socket_timeout=timeout)
+        cache_url = s.redis_cache_url or redis_url
+        self.cache_client = redis.Redis.from_url(cache_url)
         self.publisher = EventPublisher(self.client, self.store, self.keys)
-        self.db_cache = DatabaseCache(self.cache_client, self.store, self.keys, chunk_size=s.chunk_size)
+        self.db_cache = DatabaseCache(
+            self.cache_client, self.store, self.keys, chunk_size=s.cache_chunk_bytes
+        )
         config = ChildConfig(
             store_root=str(self.store.root),
-            plugins=engine_plugins(),
+            plugins=engine_plugins(s.engine_plugins),
             engine_cache=s.engine_cache,
-            cache_url=s.cache_url or s.redis_url,
-            prefix=s.prefix,
-            chunk_size=s.chunk_size,
+            cache_url=cache_url,
+            prefix=s.redis_prefix,
+            chunk_size=s.cache_chunk_bytes,
         )
         self.engine = EngineProcess(
-            s.name,
+            self.name,
             config,
             self._relay_event,
             self._relay_end,
@@ -195,7 +172,7 @@ class Worker:
             while not self._stop.is_set():  # Redis may come up after the workers (docker compose)
                 try:
                     self._ensure_group()
-                    self.client.set(self.keys.worker(self.name), "{}", px=int(self.settings.ttl_s * 1000))
+                    self._announce("{}")
                     break
                 except (redis.ConnectionError, redis.TimeoutError) as exc:
                     log.warning("waiting for Redis (%s); retrying in %.1f s", exc, backoff)
@@ -276,11 +253,15 @@ class Worker:
         while not beat_stop.wait(self.settings.heartbeat_s):
             self._beat()
 
+    def _announce(self, info: str) -> None:
+        """Set this worker's heartbeat key (alive for ``heartbeat_ttl_s``)."""
+        self.client.set(self.keys.worker(self.name), info, px=int(self.settings.heartbeat_ttl_s * 1000))
+
     def _beat(self) -> None:
         running = self._running
         info = {"pid": os.getpid(), "host": socket.gethostname(), "job": running.job_id if running else None}
         try:
-            self.client.set(self.keys.worker(self.name), json.dumps(info), px=int(self.settings.ttl_s * 1000))
+            self._announce(json.dumps(info))
             if running is None:
                 return
             if time.monotonic() < running.deadline:
@@ -515,12 +496,10 @@ class Worker:
                 backoff = min(backoff * 2, 2.0)
 
     def _time_limit(self, kind: str, payload: dict[str, Any]) -> float:
+        """How long the job's entry is kept fresh (2 x budget_s + ``hang_grace_s``; builds their timeout)."""
         if kind == "build":
             return self.settings.build_timeout_s
-        request = payload.get("request")
-        budget = request.get("budget_s", 10.0) if isinstance(request, dict) else 10.0
-        budget = float(budget) if isinstance(budget, int | float) else 10.0
-        return 2 * budget + self.settings.hang_grace_s
+        return 2 * request_budget_s(payload) + self.settings.hang_grace_s
 
     def _publisher_for(self, job_id: str, attempt: int) -> Callable[[EventType, dict[str, Any]], None]:
         def publish(type_: EventType, data: dict[str, Any]) -> None:
@@ -636,68 +615,23 @@ def _install_signals(stop: threading.Event) -> Callable[[], None]:
     return restore
 
 
-def run_worker(
-    redis_url: str,
-    data_dir: str | os.PathLike[str],
-    name: str | None = None,
-    stop: threading.Event | None = None,
-    heartbeat_s: float = 1.0,
-    ttl_s: float = 5.0,
-    max_deliveries: int = 3,
-    block_ms: int = 1000,
-    *,
-    prefix: str = DEFAULT_PREFIX,
-    cache_url: str | None = None,
-    chunk_size: int = CHUNK_SIZE,
-    reclaim_idle_s: float = 30.0,
-    engine_cache: int = 4,
-    max_rss_bytes: int | None = None,
-) -> int:
-    """Run a worker until ``stop`` is set (or SIGTERM/SIGINT when called from the main thread).
+def run_worker(settings: Settings, stop: threading.Event | None = None) -> int:
+    """Run a worker with ``settings`` until ``stop`` is set (or SIGTERM/SIGINT when called from the
+    main thread); returns the number of jobs processed.
 
-    Parameters
-    ----------
-    redis_url:
-        The queue Redis (``noeviction``).
-    data_dir:
-        The store's root directory, shared with the API.
-    name:
-        Consumer name (default: host-pid-random); must be unique among live workers.
-    heartbeat_s, ttl_s:
-        Heartbeat period and the heartbeat key's lifetime: a worker silent for ``ttl_s`` is dead.
-    max_deliveries:
-        Attempts per job before it is dead-lettered.
-    block_ms:
-        ``XREADGROUP`` block time (also bounds how long a stop request waits when idle).
-    prefix, cache_url, chunk_size:
-        Key prefix; a separate cache Redis (``allkeys-lru``; default: the queue Redis); cache chunk size.
-    reclaim_idle_s:
-        Backstop: entries not refreshed for this long are taken over even if their worker beats.
-    engine_cache:
-        Loaded databases kept in memory (LRU).
-
-    Returns the number of jobs processed.
+    The fields it reads (:class:`~workers.settings.Settings`): ``redis_url`` (the queue Redis,
+    ``noeviction``), ``data_dir`` (shared with the API), ``worker_name`` (default host-pid-random),
+    ``heartbeat_s`` / ``heartbeat_ttl_s`` (a worker silent for the TTL is dead), ``max_deliveries``,
+    ``block_ms``, ``redis_prefix``, ``redis_cache_url`` (a separate ``allkeys-lru`` cache Redis),
+    ``cache_chunk_bytes``, ``reclaim_idle_s`` (the backstop for hung workers), ``engine_cache``,
+    the job limits (``job_grace_s``, ``cancel_grace_s``, ``max_job_memory_mb``) and
+    ``engine_plugins``.
     """
     from engines.registry import load_plugins
     from motion.allocator import tune_process
 
     tune_process()
-    load_plugins()
-    settings = WorkerSettings(
-        redis_url=redis_url,
-        data_dir=os.fspath(data_dir),
-        name=name or default_name(),
-        heartbeat_s=heartbeat_s,
-        ttl_s=ttl_s,
-        max_deliveries=max_deliveries,
-        block_ms=block_ms,
-        prefix=prefix,
-        cache_url=cache_url,
-        chunk_size=chunk_size,
-        reclaim_idle_s=reclaim_idle_s,
-        engine_cache=engine_cache,
-        max_rss_bytes=max_rss_bytes,
-    )
+    load_plugins(settings.engine_plugins)
     stop = stop or threading.Event()
     restore = _install_signals(stop) if threading.current_thread() is threading.main_thread() else None
     try:
@@ -707,64 +641,58 @@ def run_worker(
             restore()
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m workers.redis_worker --redis URL --data DIR [--name N]``."""
+def build_parser() -> argparse.ArgumentParser:
+    """``segue worker``'s options; each overrides the :class:`~workers.settings.Settings` field it
+    names (default: the environment's ``SEGUE_*`` value)."""
     parser = argparse.ArgumentParser(prog="segue worker", description="Run Segue jobs from a Redis queue.")
-    parser.add_argument(
-        "--redis", default=os.environ.get(REDIS_URL_ENV), help=f"queue Redis URL (${REDIS_URL_ENV})"
-    )
-    parser.add_argument(
-        "--cache-redis", default=os.environ.get(CACHE_URL_ENV), help=f"cache Redis (${CACHE_URL_ENV})"
-    )
-    parser.add_argument(
-        "--data",
-        default=os.environ.get(DATA_DIR_ENV, "segue-data"),
-        help=f"data directory shared with the API (${DATA_DIR_ENV}, default ./segue-data as for segue serve)",
-    )
-    parser.add_argument("--name", default=None, help="consumer name (default: host-pid-random)")
-    parser.add_argument("--prefix", default=DEFAULT_PREFIX, help="Redis key prefix")
-    parser.add_argument("--heartbeat", type=float, default=1.0, help="heartbeat period, seconds")
-    parser.add_argument("--ttl", type=float, default=5.0, help="heartbeat lifetime, seconds")
-    parser.add_argument(
-        "--max-deliveries", type=int, default=3, help="attempts before a job is dead-lettered"
-    )
-    parser.add_argument("--block-ms", type=int, default=1000, help="XREADGROUP block time")
-    parser.add_argument("--reclaim-idle", type=float, default=30.0, help="idle backstop for hung workers, s")
-    parser.add_argument("--chunk-size", type=int, default=CHUNK_SIZE, help="database cache chunk size, bytes")
-    parser.add_argument(
+    add = parser.add_argument
+    add("--redis", dest="redis_url", help="queue Redis URL ($SEGUE_REDIS_URL)")
+    add("--cache-redis", dest="redis_cache_url", help="cache Redis ($SEGUE_REDIS_CACHE_URL)")
+    add("--data", dest="data_dir", help="data directory shared with the API ($SEGUE_DATA_DIR, ./segue-data)")
+    add("--name", dest="worker_name", help="consumer name (default: host-pid-random)")
+    add("--prefix", dest="redis_prefix", help="Redis key prefix")
+    add("--heartbeat", dest="heartbeat_s", type=float, help="heartbeat period, seconds")
+    add("--ttl", dest="heartbeat_ttl_s", type=float, help="heartbeat lifetime, seconds")
+    add("--max-deliveries", type=int, help="attempts before a job is dead-lettered")
+    add("--block-ms", type=int, help="XREADGROUP block time")
+    add("--reclaim-idle", dest="reclaim_idle_s", type=float, help="idle backstop for hung workers, s")
+    add("--chunk-size", dest="cache_chunk_bytes", type=int, help="database cache chunk size, bytes")
+    add(
         "--max-memory-mb",
+        dest="max_job_memory_mb",
         type=int,
-        default=int(os.environ.get("SEGUE_MAX_JOB_MEMORY_MB", "4096")),
         help="a job whose engine process passes this resident memory is stopped (0: no limit)",
     )
-    parser.add_argument("--log-level", default=os.environ.get("SEGUE_LOG_LEVEL", "INFO"))
-    args = parser.parse_args(argv)
-    if not args.redis:
-        parser.error(f"give --redis or set {REDIS_URL_ENV}")
+    add("--log-level", help="log level ($SEGUE_LOG_LEVEL, INFO)")
+    return parser
+
+
+def serve(settings: Settings) -> int:
+    """Run a worker as a command: logging set up, exit status 0, 1 (a bad setting, Redis refused)
+    or 130 (interrupted)."""
     logging.basicConfig(
-        level=args.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+        level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
     try:
-        run_worker(
-            args.redis,
-            args.data,
-            name=args.name,
-            heartbeat_s=args.heartbeat,
-            ttl_s=args.ttl,
-            max_deliveries=args.max_deliveries,
-            block_ms=args.block_ms,
-            prefix=args.prefix,
-            cache_url=args.cache_redis,
-            chunk_size=args.chunk_size,
-            reclaim_idle_s=args.reclaim_idle,
-            max_rss_bytes=args.max_memory_mb << 20 if args.max_memory_mb else None,
-        )
+        run_worker(settings)
     except KeyboardInterrupt:
         return 130
     except (ValueError, redis.RedisError) as exc:
         log.error("worker stopped: %s", exc)
         return 1
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m workers.redis_worker --redis URL --data DIR [--name N]``."""
+    parser = build_parser()
+    try:
+        settings = with_options(get_settings(), **vars(parser.parse_args(argv)))
+    except ValidationError as exc:
+        parser.error(str(exc))
+    if not settings.redis_url:
+        parser.error("give --redis or set SEGUE_REDIS_URL")
+    return serve(settings)
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import io
 import zipfile
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -17,6 +17,9 @@ from schemas.clips import LabelRange
 from schemas.databases import ClipSummary, DatabaseSummary, SkeletonSummary
 
 from .store import NotFoundError, Store
+
+Role = Literal["control", "target", "leader", "follower"]
+ControlKind = Literal["motion", "path"]
 
 STATIC_M = 1e-3
 """Joint 0 moving less than this on the floor (metres) over every clip is a static ground node."""
@@ -53,7 +56,7 @@ def summarize(spec: dict[str, Any], npz: bytes, source_units: dict[str, str]) ->
     hips = body_root(skeleton)
     if static and hips == 0:  # no hip names: the first joint under the ground node
         hips = next((j for j, p in enumerate(skeleton.parents) if p == 0), 0)
-    roles: dict[str, str] = {}
+    roles: dict[str, Role] = {}
     for pair in spec.get("pairs") or []:
         roles[pair["target"]] = "target"
         if pair.get("control"):
@@ -68,7 +71,7 @@ def summarize(spec: dict[str, Any], npz: bytes, source_units: dict[str, str]) ->
         clips.append(
             ClipSummary(name=name, frames=count, source_units=units, labels=labels, role=roles.get(name))
         )
-    control = None
+    control: ControlKind | None = None
     if spec["kind"] == "control":
         control = "motion" if any(p.get("control") for p in spec.get("pairs") or []) else "path"
     return DatabaseSummary(

@@ -73,16 +73,20 @@ class Task:
     context: Any = None
 
 
+def request_budget_s(payload: dict[str, Any]) -> float:
+    """A synthesis job's ``budget_s`` (10 s, the request default, when it cannot be read)."""
+    request = payload.get("request")
+    budget = request.get("budget_s", 10.0) if isinstance(request, dict) else 10.0
+    return float(budget) if isinstance(budget, int | float) else 10.0
+
+
 def time_limit(kind: str, payload: dict[str, Any], grace_s: float, build_timeout_s: float) -> float:
     """Hard time limit of a job, seconds: builds ``build_timeout_s``; syntheses their ``budget_s``
     plus ``grace_s`` (database loading and the assembly after the search; the work budget checked at
     submission keeps that bounded)."""
     if kind == "build":
         return build_timeout_s
-    request = payload.get("request")
-    budget = request.get("budget_s", 10.0) if isinstance(request, dict) else 10.0
-    budget = float(budget) if isinstance(budget, int | float) else 10.0
-    return budget + grace_s
+    return request_budget_s(payload) + grace_s
 
 
 def terminal_after_kill(outcome: Outcome, task: Task, detail: str) -> tuple[EventType, dict[str, Any]]:
@@ -115,7 +119,6 @@ def _watch_parent(parent: int) -> None:
 def _child_main(tasks: Connection, events: Connection, cancel: Any, config: ChildConfig, parent: int) -> None:
     import importlib
 
-    from engines.registry import load_plugins
     from motion.allocator import tune_process
 
     from .execute import EngineCache, execute_job
@@ -123,7 +126,6 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
 
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="segue-parent-watch").start()
     tune_process()
-    load_plugins()
     for module in config.plugins:
         importlib.import_module(module)
     store = Store(config.store_root)
@@ -449,9 +451,12 @@ class EngineProcess:
         return outcome
 
 
-def engine_plugins() -> list[str]:
-    """Modules of the engines registered in this process that are not built in (the children
-    import them too, so an engine registered by the owner runs in its children)."""
+def engine_plugins(configured: str | None = None) -> list[str]:
+    """The plugin modules the children import: ``configured`` (``SEGUE_ENGINE_PLUGINS``, comma-separated)
+    and the modules of the engines registered in this process that are not built in, so an engine
+    registered by the owner runs in its children."""
     from engines.registry import ENGINES
 
-    return sorted({cls.__module__ for cls in ENGINES.values() if not cls.__module__.startswith("engines.")})
+    registered = {cls.__module__ for cls in ENGINES.values() if not cls.__module__.startswith("engines.")}
+    named = {name.strip() for name in (configured or "").split(",") if name.strip()}
+    return sorted(registered | named)

@@ -8,9 +8,10 @@ id). The flow:
 
 1. build ``spec`` -> database ``D`` (propagated labels in ``ann.labels``; the build's progress
    messages and ``ann.report`` give each label's cross-validated precision / recall);
-2. look at a clip's propagated labels (:func:`propagated_ranges`), then either *accept* a range
-   (its propagated labels become explicit: every vocabulary label, +1 and -1) or *set* a label
-   on a range (replacing that label's ranges there);
+2. look at a clip's propagated labels (:func:`propagated_ranges` on ``D``'s label table,
+   :class:`~engines.annotations.labels.LabelTable`, read from a few small arrays), then either
+   *accept* a range (its propagated labels become explicit: every vocabulary label, +1 and -1) or
+   *set* a label on a range (replacing that label's ranges there);
 3. ``apply_corrections(spec, corrections, D)`` -> ``spec'``; build ``spec'`` -> ``D'``.
 
 From the command line::
@@ -34,14 +35,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from schemas.annotations import AnnotatedDatabaseSpec, LabelCorrection
 
-from ..base import EngineError
-from .search import Database
+from ..base import EngineError, open_database
+from .labels import LabelTable
 
 
-def _runs(values: np.ndarray, start: int) -> list[tuple[int, int, int]]:
+def _runs(values: npt.NDArray[np.int8], start: int) -> list[tuple[int, int, int]]:
     """``(start, end, value)`` runs of equal values, frames offset by ``start``."""
     change = np.flatnonzero(np.diff(values)) + 1
     edges = np.concatenate(([0], change, [values.size]))
@@ -49,19 +51,18 @@ def _runs(values: np.ndarray, start: int) -> list[tuple[int, int, int]]:
 
 
 def propagated_ranges(
-    db: Database, clip: str, start: int = 0, end: int | None = None
+    table: LabelTable, clip: str, start: int = 0, end: int | None = None
 ) -> list[dict[str, Any]]:
     """The database's labels of frames ``[start, end)`` of ``clip`` as explicit ranges (every
     vocabulary label, value +1 or -1), in database frames."""
-    g0 = db.frame_of(clip, 0)
-    c = int(db.clip_of[g0])
-    n = int(db.counts[c])
+    c = table.clip_index(clip)
+    g0, n = int(table.clip_start[c]), int(table.counts[c])
     end = n if end is None else min(end, n)
     if not 0 <= start < end:
         raise EngineError(f"clip {clip!r}: empty range {start}:{end} (the clip has {n} frames)")
     out = []
-    for j, label in enumerate(db.vocab):
-        for a, b, v in _runs(db.labels[g0 + start : g0 + end, j], start):
+    for j, label in enumerate(table.vocab):
+        for a, b, v in _runs(table.labels[g0 + start : g0 + end, j], start):
             out.append({"label": label, "start": a, "end": b, "value": v})
     return out
 
@@ -84,12 +85,12 @@ def _set_range(
 
 
 def apply_corrections(
-    spec: AnnotatedDatabaseSpec, corrections: list[LabelCorrection], db: Database | None = None
+    spec: AnnotatedDatabaseSpec, corrections: list[LabelCorrection], db: LabelTable | None = None
 ) -> AnnotatedDatabaseSpec:
     """A new spec whose clips carry the corrected label ranges (build it to retrain).
 
-    ``accept`` corrections need the built database ``db`` (its propagated labels); clips are named
-    as in the database (library name or the spec's reference)."""
+    ``accept`` corrections need the built database's label table ``db`` (its propagated labels);
+    clips are named as in the database (library name or the spec's reference)."""
     names = [c.display_name() for c in spec.clips]
     refs = [c.name or c.bvh or c.clip or n for c, n in zip(spec.clips, names, strict=True)]
     clips = [c.model_dump(mode="json", exclude_none=True) for c in spec.clips]
@@ -106,8 +107,9 @@ def apply_corrections(
                 raise EngineError("accepting propagated labels needs the built database")
             for r in propagated_ranges(db, fix.clip, fix.start, fix.end):
                 labels = _set_range(labels, r["label"], r["start"], r["end"], r["value"])
+        elif fix.label is None:
+            raise EngineError(f"the 'set' correction on {fix.clip!r} names no label")
         else:
-            assert fix.label is not None  # checked by the schema
             labels = _set_range(labels, fix.label, fix.start, fix.end, fix.value)
         clips[i]["labels"] = sorted(labels, key=lambda lb: (lb["start"], lb["label"]))
     data = spec.model_dump(mode="json", exclude_none=True)
@@ -117,9 +119,6 @@ def apply_corrections(
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m engines.annotations.corrections SPEC --db DIR --corrections FIXES --out NEW``."""
-    from engines.library import library_from_arrays
-    from workers.store import load_npz
-
     ap = argparse.ArgumentParser(description="Write a corrected annotated database spec.")
     ap.add_argument("spec", type=Path)
     ap.add_argument("--db", type=Path, help="built database directory (needed for 'accept')")
@@ -130,8 +129,8 @@ def main(argv: list[str] | None = None) -> int:
     fixes = [LabelCorrection.model_validate(x) for x in json.loads(args.corrections.read_text())]
     db = None
     if args.db is not None:
-        arrays = load_npz((args.db / "data.npz").read_bytes())
-        db = Database.from_arrays(library_from_arrays(arrays), arrays)
+        with open_database(args.db / "data.npz") as arrays:
+            db = LabelTable.read(arrays)
     new = apply_corrections(spec, fixes, db)
     args.out.write_text(new.model_dump_json(indent=2, exclude_none=True))
     return 0

@@ -19,17 +19,23 @@ Example
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
 from motion.floorfit import CorrectionLimits
+from schemas import LabelRange
+from schemas.annotations import AnnotatedDatabaseSpec, ClipLabels, LabelCorrection
+from schemas.bases import DatabaseSpecBase
 
-from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
+from ..base import Arrays, DatabaseArrays, Emitter, Engine, EngineError, ShouldStop, Solution
 from ..library import MotionLibrary
 from .assemble import Frames, assemble, discontinuity, label_report, quality_inputs
 from .build import BLAS_THREADS, build_annotated
+from .corrections import apply_corrections, propagated_ranges
+from .labels import LabelTable
 from .search import (
     Candidate,
     Database,
@@ -114,6 +120,27 @@ class AnnotationEngine(Engine):
     @classmethod
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         return build_annotated(spec, library, emit, should_stop)
+
+    @classmethod
+    def clip_labels(
+        cls, arrays: DatabaseArrays, clip: str, start: int = 0, end: int | None = None
+    ) -> ClipLabels:
+        """A clip's labels as ranges, from the database's label table alone
+        (:class:`~engines.annotations.labels.LabelTable`)."""
+        table = LabelTable.read(arrays)
+        frames = int(table.counts[table.clip_index(clip)])
+        ranges = [LabelRange(**r) for r in propagated_ranges(table, clip, start, end)]
+        return ClipLabels(clip=clip, frames=frames, labels=ranges)
+
+    @classmethod
+    def corrected_spec(
+        cls, spec: DatabaseSpecBase, corrections: Sequence[LabelCorrection], arrays: DatabaseArrays | None
+    ) -> AnnotatedDatabaseSpec:
+        """:func:`~engines.annotations.corrections.apply_corrections` with the database's label table."""
+        if not isinstance(spec, AnnotatedDatabaseSpec):
+            raise EngineError(f"a {spec.kind!r} spec carries no labels to correct")
+        table = None if arrays is None else LabelTable.read(arrays)
+        return apply_corrections(spec, list(corrections), table)
 
     def solution(self, cand: Candidate, pb: Problem, request: Any, passes: int, elapsed: float) -> Solution:
         """The assembled motion and report of a candidate."""

@@ -606,128 +606,199 @@ def propagate(
         ``pseudo_weight`` (the user's frames weigh 1), the SVMs retrain (same gamma) and the
         frames are labelled again.
     """
-    if isinstance(embedding, SvmEmbedding):
-        fine_emb, reach = embedding.fine, embedding.reach
-        embedding = embedding.combined
-    else:
-        fine_emb, reach = None, 0
-    vocab = vocabulary(labels)
-    values, known = known_labels(labels, counts, vocab)
-    n_frames, n_labels = values.shape
-    decision = values.astype(np.float64)
-    scale = 1.0 / max(float(embedding.var(axis=0).sum()), 1e-12)
-    grid = [g * scale for g in gammas]
-    states = label_states(values, known) if exclusive else None
-    refining = fine_emb is not None and reach > 0 and states is not None
-    fine_scale = 1.0 / max(float(fine_emb.var(axis=0).sum()), 1e-12) if fine_emb is not None else 1.0
-    fine_models: list[SVC | None] = []
-    models: list[LabelModel] = []
-    fitted: list[tuple[SVC, float] | None] = []
+    params = _PropagationParams(
+        c,
+        folds,
+        max_train_frames,
+        cv_frames,
+        smooth_frames,
+        step,
+        switch_cost,
+        pseudo_fraction,
+        pseudo_weight,
+    )
+    p = _Propagator(embedding, clip_of_frame, counts, labels, exclusive, params, progress, should_stop)
     rounds = 1 + max(int(self_training), 0)
-    total_steps = max(n_labels * rounds, 1)
-
-    def finish_step(done: int, message: str) -> None:
-        if progress is not None:
-            progress(done / total_steps, message)
-
-    for j, name in enumerate(vocab):
-        if should_stop is not None and should_stop():
-            raise InterruptedError("stopped")
-        v, k = values[:, j], known[:, j]
-        n_pos, n_neg = int(np.sum(k & (v > 0))), int(np.sum(k & (v < 0)))
-        unknown = np.flatnonzero(~k)
-        if n_pos == 0 or n_neg == 0:
-            status = "no positives" if n_pos == 0 else "no negatives"
-            decision[unknown, j] = -1.0 if n_pos == 0 else 1.0
-            models.append(LabelModel(name, status, n_pos, n_neg))
-            fitted.append(None)
-            fine_models.append(None)
-        else:
-            train = training_frames(v, k, max_train_frames)
-            cv_idx = train[_even_pick(np.arange(train.size), cv_frames)]
-            gamma, cv = cross_validate(embedding[cv_idx], v[cv_idx], clip_of_frame[cv_idx], grid, c, folds)
-            gamma = grid[len(grid) // 2] if gamma is None else gamma
-            model = _fit(embedding, v, train, np.ones(train.size), c, gamma)
-            if refining:
-                assert fine_emb is not None
-                fine_models.append(
-                    _fit(fine_emb, v, train, np.ones(train.size), c, gamma / scale * fine_scale)
-                )
-            if unknown.size:
-                decision[unknown, j] = strided_decision(
-                    model, embedding, clip_of_frame, counts, unknown, step
-                )
-            models.append(
-                LabelModel(
-                    name,
-                    "trained",
-                    n_pos,
-                    n_neg,
-                    int(train.size),
-                    float(gamma / scale),
-                    cv,
-                    int(model.support_.size),
-                )
-            )
-            fitted.append((model, gamma))
-        m = models[-1]
+    p.total_steps = max(len(p.vocab) * rounds, 1)
+    grid = [g * p.scale for g in gammas]
+    for j, name in enumerate(p.vocab):
+        p.check_stop()
+        p.train_label(j, grid)
+        m = p.models[-1]
         cv_txt = (
             f"cv precision {m.cv['precision']:.2f} recall {m.cv['recall']:.2f}"
             if m.cv
             else "cv n/a (needs 2+ labelled clips)"
         )
-        finish_step(j + 1, f"label {name!r}: {m.status}, {cv_txt}")
-
-    fine_decision = np.where(known, values, 0.0)
-    fine_done: BoolArray = np.asarray(known.all(axis=1), dtype=bool)
-
-    def refine(pick: IntArray, penalty: FloatArray) -> IntArray:
-        assert fine_emb is not None and states is not None
-        need = change_windows(pick, counts, reach) & ~fine_done
-        rows = np.flatnonzero(need)
-        if rows.size:
-            for j, fm in enumerate(fine_models):
-                free = rows[~known[rows, j]]
-                if fm is None:
-                    fine_decision[free, j] = decision[free, j]
-                elif free.size:
-                    fine_decision[free, j] = fm.decision_function(fine_emb[free])
-            fine_done[rows] = True
-        fine_score = fine_decision @ states.T.astype(np.float64) - penalty
-        return refine_changes(pick, fine_score, counts, reach)
-
-    def label_frames(raw: FloatArray) -> tuple[Int8Array, FloatArray]:
-        smoothed = smooth_within_clips(raw, counts, smooth_frames) if n_labels else raw
-        smoothed = np.where(known, values, smoothed)
-        return decode(
-            smoothed, values, known, counts, states, switch_cost, refine=refine if refining else None
-        )
-
-    out, conf = label_frames(decision)
+        p.step_done(j + 1, f"label {name!r}: {m.status}, {cv_txt}")
+    out, conf = p.label_frames()
     for r in range(1, rounds):
-        chosen = pseudo_labels(out, conf, known, pseudo_fraction)
+        chosen = pseudo_labels(out, conf, p.known, pseudo_fraction)
         if not chosen.any():
             break
-        for j, name in enumerate(vocab):
-            if should_stop is not None and should_stop():
-                raise InterruptedError("stopped")
-            fit = fitted[j]
-            unknown = np.flatnonzero(~known[:, j])
+        p.self_train_round(r, out, chosen)
+        out, conf = p.label_frames()
+    signed = np.where(p.known, p.values, out * conf).astype(np.float32)
+    return Propagation(p.vocab, out, p.known, signed, p.models)
+
+
+@dataclass(frozen=True, slots=True)
+class _PropagationParams:
+    """The settings of :func:`propagate` the steps share (see its parameters)."""
+
+    c: float
+    folds: int
+    max_train_frames: int
+    cv_frames: int
+    smooth_frames: int
+    step: int
+    switch_cost: float
+    pseudo_fraction: float
+    pseudo_weight: float
+
+
+class _Propagator:
+    """The state of one :func:`propagate`: the user's labels, every label's SVM and the decision
+    values of every frame (Sec. 3.1), refined and decoded into labels."""
+
+    def __init__(
+        self,
+        embedding: FloatArray | SvmEmbedding,
+        clip_of_frame: IntArray,
+        counts: Sequence[int],
+        labels: Sequence[Sequence[dict[str, Any]]],
+        exclusive: bool,
+        params: _PropagationParams,
+        progress: Callable[[float, str], None] | None,
+        should_stop: Callable[[], bool] | None,
+    ) -> None:
+        if isinstance(embedding, SvmEmbedding):
+            self.fine_emb, self.reach = embedding.fine, embedding.reach
+            embedding = embedding.combined
+        else:
+            self.fine_emb, self.reach = None, 0
+        self.embedding, self.clip_of_frame, self.counts = embedding, clip_of_frame, counts
+        self.params, self.progress, self.should_stop = params, progress, should_stop
+        self.vocab = vocabulary(labels)
+        self.values, self.known = known_labels(labels, counts, self.vocab)
+        self.decision = self.values.astype(np.float64)  # (F, L) the SVMs' decision values
+        self.scale = 1.0 / max(float(embedding.var(axis=0).sum()), 1e-12)
+        self.states = label_states(self.values, self.known) if exclusive else None
+        self.refining = self.fine_emb is not None and self.reach > 0 and self.states is not None
+        self.fine_scale = (
+            1.0 / max(float(self.fine_emb.var(axis=0).sum()), 1e-12) if self.fine_emb is not None else 1.0
+        )
+        self.fine_models: list[SVC | None] = []
+        self.models: list[LabelModel] = []
+        self.fitted: list[tuple[SVC, float] | None] = []
+        self.fine_decision = np.where(self.known, self.values, 0.0)
+        self.fine_done: BoolArray = np.asarray(self.known.all(axis=1), dtype=bool)
+        self.total_steps = 1
+
+    def check_stop(self) -> None:
+        if self.should_stop is not None and self.should_stop():
+            raise InterruptedError("stopped")
+
+    def step_done(self, done: int, message: str) -> None:
+        if self.progress is not None:
+            self.progress(done / self.total_steps, message)
+
+    def train_label(self, j: int, grid: list[float]) -> None:
+        """Label ``j``'s SVM: gamma by cross-validation over ``grid``, trained on the user's frames,
+        deciding every other frame (a label without positives or negatives decides them all)."""
+        pr, name = self.params, self.vocab[j]
+        v, k = self.values[:, j], self.known[:, j]
+        n_pos, n_neg = int(np.sum(k & (v > 0))), int(np.sum(k & (v < 0)))
+        unknown = np.flatnonzero(~k)
+        if n_pos == 0 or n_neg == 0:
+            status = "no positives" if n_pos == 0 else "no negatives"
+            self.decision[unknown, j] = -1.0 if n_pos == 0 else 1.0
+            self.models.append(LabelModel(name, status, n_pos, n_neg))
+            self.fitted.append(None)
+            self.fine_models.append(None)
+            return
+        train = training_frames(v, k, pr.max_train_frames)
+        cv_idx = train[_even_pick(np.arange(train.size), pr.cv_frames)]
+        emb = self.embedding
+        gamma, cv = cross_validate(emb[cv_idx], v[cv_idx], self.clip_of_frame[cv_idx], grid, pr.c, pr.folds)
+        gamma = grid[len(grid) // 2] if gamma is None else gamma
+        model = _fit(emb, v, train, np.ones(train.size), pr.c, gamma)
+        if self.refining and self.fine_emb is not None:
+            fine_gamma = gamma / self.scale * self.fine_scale
+            self.fine_models.append(_fit(self.fine_emb, v, train, np.ones(train.size), pr.c, fine_gamma))
+        if unknown.size:
+            self.decision[unknown, j] = strided_decision(
+                model, emb, self.clip_of_frame, self.counts, unknown, pr.step
+            )
+        self.models.append(
+            LabelModel(
+                name,
+                "trained",
+                n_pos,
+                n_neg,
+                int(train.size),
+                float(gamma / self.scale),
+                cv,
+                int(model.support_.size),
+            )
+        )
+        self.fitted.append((model, gamma))
+
+    def refine(self, pick: IntArray, penalty: FloatArray) -> IntArray:
+        """Re-locate every label change of ``pick`` on the fine SVMs' decision values (computed
+        once per frame, near changes only)."""
+        if self.fine_emb is None or self.states is None:
+            raise ValueError("refining needs the fine embedding and the label states")
+        need = change_windows(pick, self.counts, self.reach) & ~self.fine_done
+        rows = np.flatnonzero(need)
+        if rows.size:
+            for j, fm in enumerate(self.fine_models):
+                free = rows[~self.known[rows, j]]
+                if fm is None:
+                    self.fine_decision[free, j] = self.decision[free, j]
+                elif free.size:
+                    self.fine_decision[free, j] = fm.decision_function(self.fine_emb[free])
+            self.fine_done[rows] = True
+        fine_score = self.fine_decision @ self.states.T.astype(np.float64) - penalty
+        return refine_changes(pick, fine_score, self.counts, self.reach)
+
+    def label_frames(self) -> tuple[Int8Array, FloatArray]:
+        """Every frame's labels and their confidence from the smoothed decision values (the user's
+        labels kept)."""
+        raw = self.decision
+        smoothed = smooth_within_clips(raw, self.counts, self.params.smooth_frames) if self.vocab else raw
+        smoothed = np.where(self.known, self.values, smoothed)
+        return decode(
+            smoothed,
+            self.values,
+            self.known,
+            self.counts,
+            self.states,
+            self.params.switch_cost,
+            refine=self.refine if self.refining else None,
+        )
+
+    def self_train_round(self, r: int, out: Int8Array, chosen: BoolArray) -> None:
+        """Round ``r`` of self-training: each trained label's SVM retrains (same gamma) on the
+        user's frames and the ``chosen`` propagated ones (weight ``pseudo_weight``), deciding the
+        unknown frames again."""
+        pr, n_labels = self.params, len(self.vocab)
+        for j, name in enumerate(self.vocab):
+            self.check_stop()
+            fit = self.fitted[j]
+            unknown = np.flatnonzero(~self.known[:, j])
             if fit is not None and unknown.size:
-                v = values[:, j]
-                real = training_frames(v, known[:, j], max_train_frames)
-                extra = training_frames(out[:, j], chosen & ~known[:, j], max_train_frames)
+                v = self.values[:, j]
+                real = training_frames(v, self.known[:, j], pr.max_train_frames)
+                extra = training_frames(out[:, j], chosen & ~self.known[:, j], pr.max_train_frames)
                 frames = np.concatenate((real, extra))
-                y = np.where(known[:, j], v, out[:, j]).astype(np.int8)
-                w = np.concatenate((np.ones(real.size), np.full(extra.size, pseudo_weight)))
+                y = np.where(self.known[:, j], v, out[:, j]).astype(np.int8)
+                w = np.concatenate((np.ones(real.size), np.full(extra.size, pr.pseudo_weight)))
                 if np.unique(y[frames]).size == 2:
-                    model = _fit(embedding, y, frames, w, c, fit[1])
-                    decision[unknown, j] = strided_decision(
-                        model, embedding, clip_of_frame, counts, unknown, step
+                    model = _fit(self.embedding, y, frames, w, pr.c, fit[1])
+                    self.decision[unknown, j] = strided_decision(
+                        model, self.embedding, self.clip_of_frame, self.counts, unknown, pr.step
                     )
-                    models[j].train_frames = int(frames.size)
-                    models[j].support_vectors = int(model.support_.size)
-            finish_step(r * n_labels + j + 1, f"self-training round {r}: label {name!r}")
-        out, conf = label_frames(decision)
-    signed = np.where(known, values, out * conf).astype(np.float32)
-    return Propagation(vocab, out, known, signed, models)
+                    self.models[j].train_frames = int(frames.size)
+                    self.models[j].support_vectors = int(model.support_.size)
+            self.step_done(r * n_labels + j + 1, f"self-training round {r}: label {name!r}")

@@ -59,6 +59,7 @@ from ..base import Arrays, EngineError
 from ..library import MotionLibrary
 from .blocks import next_features
 from .dp import solve_chain
+from .labels import LabelTable, clip_refs, clip_starts
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -114,16 +115,11 @@ class Clustering:
 
 
 @dataclass(slots=True)
-class Database:
-    """The loaded annotated database (see :mod:`engines.annotations.build` for the arrays)."""
+class Database(LabelTable):
+    """The loaded annotated database (see :mod:`engines.annotations.build` for the arrays): the
+    label table plus what the search needs."""
 
-    names: tuple[str, ...]  # library names
-    refs: tuple[str, ...]  # as the spec names the clips (provenance)
-    counts: IntArray
-    clip_start: IntArray  # (C,)
     clip_of: IntArray  # (N,)
-    vocab: list[str]
-    labels: npt.NDArray[np.int8]  # (N, L)
     confidence: npt.NDArray[np.float32]  # (N, L) +-1 where user-given, else decision clipped to [-1, 1]
     features: npt.NDArray[np.float32]  # (N, d)
     fnext: npt.NDArray[np.float32]  # (N, d)
@@ -136,7 +132,7 @@ class Database:
     @classmethod
     def from_arrays(cls, library: MotionLibrary, arrays: Arrays) -> Database:
         counts = np.array([m.num_frames for m in library.motions], dtype=np.intp)
-        starts = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.intp)
+        starts = clip_starts(counts)
         clip_of = np.repeat(np.arange(counts.size, dtype=np.intp), counts)
         feats = np.asarray(arrays["ann.features"], dtype=np.float32)
         xz = np.asarray(arrays["ann.ground_xz"], dtype=np.float64)
@@ -153,10 +149,9 @@ class Database:
         known = np.asarray(arrays["ann.known"], dtype=bool)
         decision = np.asarray(arrays["ann.decision"], dtype=np.float32)
         levels = [Clustering.of(s, np.asarray(arrays[f"ann.clusters.{s}"], dtype=np.int32)) for s in sizes]
-        refs = tuple(str(r) for r in np.asarray(arrays.get("ann.clip_refs", np.array(library.names))))
         return cls(
             names=library.names,
-            refs=refs if len(refs) == len(library.names) else library.names,
+            refs=clip_refs(arrays, library.names),
             counts=counts,
             clip_start=starts,
             clip_of=clip_of,
@@ -175,18 +170,6 @@ class Database:
     @property
     def frames(self) -> int:
         return int(self.clip_of.size)
-
-    def frame_of(self, clip: str, frame: int) -> int:
-        """Database frame of ``frame`` of clip ``clip``; :class:`EngineError` if there is none."""
-        if clip in self.names:
-            c = self.names.index(clip)
-        elif clip in self.refs:
-            c = self.refs.index(clip)
-        else:
-            raise EngineError(f"no clip named {clip!r} in the database; clips: {', '.join(self.names[:20])}")
-        if not 0 <= frame < self.counts[c]:
-            raise EngineError(f"clip {clip!r} has {int(self.counts[c])} frames; frame {frame} is outside it")
-        return int(self.clip_start[c] + frame)
 
 
 @dataclass(slots=True)

@@ -258,7 +258,10 @@ def _hands(names: list[str]) -> list[str]:
 
 
 def build_control_database(spec: Any, library: MotionLibrary, should_stop: ShouldStop) -> ControlDatabase:
-    """Segment, cluster and store the example pairs of a :class:`schemas.control.ControlDatabaseSpec`."""
+    """Segment, cluster and store the example pairs of a :class:`schemas.control.ControlDatabaseSpec`:
+    every pair's control and target clouds, contacts and hand hold (:func:`_example_pair`), its
+    instances (segments) from the spec's segmentation, then the instances clustered on their
+    control segments (:func:`cluster_instances`)."""
     seg = spec.segmentation
     first = library.clip(spec.pairs[0].target).skeleton
     tjoints = list(spec.target_joints) if spec.target_joints else default_joints(first)
@@ -272,85 +275,41 @@ def build_control_database(spec: Any, library: MotionLibrary, should_stop: Shoul
         # the follower stands, and on the CMU salsa couples they add noise to the alignment (mean
         # leave-one-out error 0.172 x height without them, 0.186 with them)
         cjoints = list(spec.control_joints) if spec.control_joints else default_joints(cskel, feet=False)
-    controls, targets, contacts, handhold, inst_rows = [], [], [], [], []
     tempo: tuple[float, float] | None = None
     if seg.method == "beats":
         everyone = [library.clip(p.target) for p in spec.pairs]
         everyone += [library.clip(p.control) for p in spec.pairs if p.control is not None]
         tempo = consensus_tempo(everyone, tuple(seg.tempo_bpm))
-    contact_names: tuple[str, ...] | None = None
-    offsets = [0]
+    examples: list[_ExamplePair] = []
     for k, pair in enumerate(spec.pairs):
         if should_stop():
             raise InterruptedError
-        tm = library.clip(pair.target)
-        cm = library.clip(pair.control) if pair.control is not None else None
-        n = tm.num_frames if cm is None else min(tm.num_frames, cm.num_frames)
-        tm = tm.slice(0, n)
-        tpos = tm.global_positions()
-        tcloud = joint_cloud(tm, tjoints, f"target {pair.target!r}", tpos)
-        if cm is None:
-            ccloud = derived_control(tm, spec.hip_separation_m, tpos)
-            hold = np.full(n, -1, dtype=np.int8)
-        else:
-            cm = cm.slice(0, n)
-            cpos = cm.global_positions()
-            ccloud = joint_cloud(cm, cjoints, f"control {pair.control!r}", cpos)
-            ch = _hands(list(cm.skeleton.names))
-            th = _hands(list(tm.skeleton.names))
-            ch = [h for h in ch if h in default_joints(cm.skeleton)]
-            th = [h for h in th if h in default_joints(tm.skeleton)]
-            if ch and th:
-                a = joint_cloud(cm, ch, "control hands", cpos)
-                b = joint_cloud(tm, th, "target hands", tpos)
-                dist = np.linalg.norm(a[:, :, None] - b[:, None, :], axis=-1).min(axis=(1, 2))
-                hold = (dist < spec.handhold_m).astype(np.int8)
-            else:
-                hold = np.full(n, -1, dtype=np.int8)
-        joints, flags = detect_contacts(tm, positions=tpos)
-        names = tuple(tm.skeleton.names[j] for j in joints)
-        if contact_names is None:
-            contact_names = names
-        elif names != contact_names:
+        example = _example_pair(spec, library, k, pair, tjoints, cjoints, tempo)
+        if examples and example.contact_names != examples[0].contact_names:
             raise EngineError("the targets' foot joints differ between pairs")
-        bounds, units = segment_boundaries(
-            seg.method, control=cm, target=tm, seg=seg, markers_s=list(pair.markers_s), tempo_bpm=tempo
-        )
-        rows = instances_from_boundaries(
-            bounds, units, n, library.fps, seg.min_segment_s, seg.max_segment_s, seg.overlap
-        )
-        inst_rows.append(np.column_stack((np.full(rows.shape[0], k, dtype=np.intp), rows)))
-        controls.append(ccloud)
-        targets.append(tcloud)
-        contacts.append(flags)
-        handhold.append(hold)
-        offsets.append(offsets[-1] + n)
-    instances = np.concatenate(inst_rows) if inst_rows else np.zeros((0, 3), dtype=np.intp)
+        examples.append(example)
+    instances = (
+        np.concatenate([e.instances for e in examples]) if examples else np.zeros((0, 3), dtype=np.intp)
+    )
     if instances.shape[0] == 0:
         raise EngineError(
             f"segmentation {seg.method!r} found no segments between {seg.min_segment_s} and "
             f"{seg.max_segment_s} s; check the clips or choose another method"
         )
-    control = np.concatenate(controls)
-    off = np.asarray(offsets, dtype=np.intp)
-    # clustering on the control segments resampled to a common length (Eq. 1 between instances)
-    length = 8
-    pos = (
-        off[instances[:, 0], None] + instances[:, 1, None] + instances[:, 2, None] * np.linspace(0, 1, length)
-    )
-    clouds = sample_cloud(control, pos)
-    rep = cluster_instances(clouds, spec.cluster_threshold_m, spec.seed)
+    control = np.concatenate([e.control for e in examples])
+    off = np.concatenate(([0], np.cumsum([e.frames for e in examples]))).astype(np.intp)
+    rep = cluster_instances(_segment_clouds(control, off, instances), spec.cluster_threshold_m, spec.seed)
     return ControlDatabase(
         fps=library.fps,
         pairs=tuple((p.control, p.target) for p in spec.pairs),
         offsets=off,
         control=control,
-        target=np.concatenate(targets),
+        target=np.concatenate([e.target for e in examples]),
         instances=instances.astype(np.intp),
         representative=rep,
-        contacts=np.concatenate(contacts),
-        contact_joints=contact_names or (),
-        handhold=np.concatenate(handhold),
+        contacts=np.concatenate([e.contacts for e in examples]),
+        contact_joints=examples[0].contact_names,
+        handhold=np.concatenate([e.handhold for e in examples]),
         meta={
             "derived": derived,
             "control_joints": cjoints,
@@ -360,3 +319,85 @@ def build_control_database(spec: Any, library: MotionLibrary, should_stop: Shoul
             "tempo_bpm": None if tempo is None else [float(tempo[0]), float(tempo[1])],
         },
     )
+
+
+@dataclass(slots=True)
+class _ExamplePair:
+    """One (control, target) example pair, cut to its common length ``frames``."""
+
+    frames: int
+    control: Array  # (F, Pc, 3) control cloud, metres
+    target: Array  # (F, Pt, 3) target cloud, metres
+    contacts: npt.NDArray[np.bool_]  # (F, K) the target's foot contacts
+    contact_names: tuple[str, ...]  # the K foot joints
+    handhold: npt.NDArray[np.int8]  # (F,) 1 hands joined, 0 apart, -1 unknown
+    instances: IntArray  # (S, 3) pair, start frame, length of each segment
+
+
+def _example_pair(
+    spec: Any,
+    library: MotionLibrary,
+    k: int,
+    pair: Any,
+    tjoints: list[str],
+    cjoints: list[str],
+    tempo: tuple[float, float] | None,
+) -> _ExamplePair:
+    """Pair ``k``'s clouds (a walk's control is derived from its target's hips), contacts, hand
+    hold and segments."""
+    seg = spec.segmentation
+    tm = library.clip(pair.target)
+    cm = library.clip(pair.control) if pair.control is not None else None
+    n = tm.num_frames if cm is None else min(tm.num_frames, cm.num_frames)
+    tm = tm.slice(0, n)
+    tpos = tm.global_positions()
+    tcloud = joint_cloud(tm, tjoints, f"target {pair.target!r}", tpos)
+    if cm is None:
+        ccloud = derived_control(tm, spec.hip_separation_m, tpos)
+        hold = np.full(n, -1, dtype=np.int8)
+    else:
+        cm = cm.slice(0, n)
+        cpos = cm.global_positions()
+        ccloud = joint_cloud(cm, cjoints, f"control {pair.control!r}", cpos)
+        hold = _handhold(cm, tm, cpos, tpos, spec.handhold_m)
+    joints, flags = detect_contacts(tm, positions=tpos)
+    bounds, units = segment_boundaries(
+        seg.method, control=cm, target=tm, seg=seg, markers_s=list(pair.markers_s), tempo_bpm=tempo
+    )
+    rows = instances_from_boundaries(
+        bounds, units, n, library.fps, seg.min_segment_s, seg.max_segment_s, seg.overlap
+    )
+    return _ExamplePair(
+        frames=n,
+        control=ccloud,
+        target=tcloud,
+        contacts=flags,
+        contact_names=tuple(tm.skeleton.names[j] for j in joints),
+        handhold=hold,
+        instances=np.column_stack((np.full(rows.shape[0], k, dtype=np.intp), rows)),
+    )
+
+
+def _handhold(cm: Motion, tm: Motion, cpos: Array, tpos: Array, within_m: float) -> npt.NDArray[np.int8]:
+    """``(F,)`` 1 where a hand of the control is within ``within_m`` of a hand of the target, 0
+    where not, -1 throughout when either skeleton has no hand joints."""
+    n = tm.num_frames
+    ch = [h for h in _hands(list(cm.skeleton.names)) if h in default_joints(cm.skeleton)]
+    th = [h for h in _hands(list(tm.skeleton.names)) if h in default_joints(tm.skeleton)]
+    if not (ch and th):
+        return np.full(n, -1, dtype=np.int8)
+    a = joint_cloud(cm, ch, "control hands", cpos)
+    b = joint_cloud(tm, th, "target hands", tpos)
+    dist = np.linalg.norm(a[:, :, None] - b[:, None, :], axis=-1).min(axis=(1, 2))
+    return np.asarray(dist < within_m, dtype=np.int8)
+
+
+def _segment_clouds(control: Array, offsets: IntArray, instances: IntArray, length: int = 8) -> Array:
+    """``(S, length, P, 3)`` each instance's control segment resampled to a common length (what
+    Eq. 1 compares when clustering)."""
+    pos = (
+        offsets[instances[:, 0], None]
+        + instances[:, 1, None]
+        + instances[:, 2, None] * np.linspace(0, 1, length)
+    )
+    return sample_cloud(control, pos)

@@ -284,7 +284,6 @@ def interpretation(
     if rigid:
         return _rigid_interpretation(x, inst, cell_inst, cell_dur, rate, context)
     t_len, p, _ = x.shape
-    c2 = 2 * context
     x = pad_edges(x, context)
     cells = cell_inst.shape[0]
     # written once below: the first d columns of a duration-d row (no window yet) and rows longer
@@ -293,20 +292,13 @@ def interpretation(
     Cc = np.empty((cells, t_len + 1))
     Ss = np.empty((cells, t_len + 1))
     sum_a = np.zeros((cells, 2))
-    n_pts_c = ((cell_dur + c2) * p).astype(np.float64)
-    xx, xz, xy = x[..., 0], x[..., 2], x[..., 1]
-    zero = np.zeros(1)
-    cs_x = np.concatenate((zero, np.cumsum(xx.sum(1))))
-    cs_z = np.concatenate((zero, np.cumsum(xz.sum(1))))
-    cs_sq = np.concatenate((zero, np.cumsum((xx**2 + xz**2 + xy**2).sum(1))))
-    # every term is scaled by 1 / (P rate) up front, so D comes out in m^2 s without another pass
-    scale = 1.0 / (p * rate)
+    n_pts_c = ((cell_dur + 2 * context) * p).astype(np.float64)
+    sums = _WindowSums.of(x)
     for d in np.unique(cell_dur):
         d = int(d)
         rows = np.flatnonzero(cell_dur == d)
-        n = rows.size
         # cells sorted by duration: the rows of one duration are a contiguous block (basic slices)
-        blk = slice(int(rows[0]), int(rows[-1]) + 1) if rows[-1] - rows[0] + 1 == n else rows
+        blk = slice(int(rows[0]), int(rows[-1]) + 1) if rows[-1] - rows[0] + 1 == rows.size else rows
         head = min(d, t_len + 1)
         D[blk, :head] = np.inf
         Cc[blk, :head] = 0.0
@@ -314,48 +306,90 @@ def interpretation(
         if d > t_len:
             continue
         a = stretched_templates(inst, cell_inst[rows], d, rate, context)  # (n, d + 2c, P, 3)
-        n_pts = (d + c2) * p
-        a = a.reshape(n, n_pts, 3)
-        sa = a.sum(1)  # (n, 3)
-        # templates centred on the floor: their cross-correlation with any window is the centred one
-        centred = a[..., [0, 2]] - (sa[:, [0, 2]] / n_pts)[:, None, :]  # (n, N, 2)
-        # windows (nw, N, 3) flattened like the templates: frame-major, then point
-        win = np.lib.stride_tricks.sliding_window_view(x, d + c2, axis=0)  # (nw, P, 3, L)
-        win = win.transpose(0, 3, 1, 2).reshape(win.shape[0], n_pts, 3)
-        nw = win.shape[0]
-        ends = np.arange(d, t_len + 1)
-        e2 = ends + c2
-        sx, sz = cs_x[e2] - cs_x[ends - d], cs_z[e2] - cs_z[ends - d]
-        # one product gives the four planar cross terms: rows [ax; az], columns [wx | wz]
-        lhs = centred.transpose(2, 0, 1).reshape(2 * n, n_pts) * scale
-        rhs = win[..., [0, 2]].transpose(2, 0, 1).reshape(2 * nw, n_pts)
-        g = lhs @ rhs.T  # (2n, 2nw)
-        c_out, s_out = Cc[blk, d:], Ss[blk, d:]
-        np.add(g[:n, :nw], g[n:, nw:], out=c_out)  # ax.wx + az.wz
-        np.subtract(g[n:, :nw], g[:n, nw:], out=s_out)  # az.wx - ax.wz
-        # the rest of the residual in one more product: -2 ay.wy + the template's and the
-        # window's own centred sums of squares (extra columns of ones)
-        own_a = (centred**2).sum((1, 2)) + (a[..., 1] ** 2).sum(1)
-        own_w = cs_sq[e2] - cs_sq[ends - d] - (sx**2 + sz**2) / n_pts
-        lhs_y = np.empty((n, n_pts + 2))
-        lhs_y[:, :n_pts] = a[..., 1] * (-2.0 * scale)
-        lhs_y[:, n_pts] = own_a * scale
-        lhs_y[:, n_pts + 1] = scale
-        rhs_y = np.empty((nw, n_pts + 2))
-        rhs_y[:, :n_pts] = win[..., 1]
-        rhs_y[:, n_pts] = 1.0
-        rhs_y[:, n_pts + 1] = own_w
-        res = c_out * c_out
-        res += s_out * s_out
-        np.sqrt(res, out=res)  # |(c, s)| (np.hypot is several times slower)
-        res *= -2.0
-        res += lhs_y @ rhs_y.T
-        np.maximum(res, 0.0, out=res)
-        D[blk, d:] = res
-        sum_a[blk] = sa[:, [0, 2]]
+        D[blk, d:], sum_a[blk] = _duration_block(
+            x, sums, a, d, t_len, rate, context, Cc[blk, d:], Ss[blk, d:]
+        )
     return Interpretation(
-        D, Cc, Ss, sum_a, n_pts_c, cell_dur.astype(np.intp), context, np.stack((cs_x, cs_z), -1)
+        D, Cc, Ss, sum_a, n_pts_c, cell_dur.astype(np.intp), context, np.stack((sums.x, sums.z), -1)
     )
+
+
+@dataclass(frozen=True, slots=True)
+class _WindowSums:
+    """Cumulative sums over the frames of an input cloud ``(T, P, 3)`` (``(T + 1,)`` each, 0 first):
+    of its points' ``x``, of their ``z`` and of their squared norms; any window's sums in O(1)."""
+
+    x: Array
+    z: Array
+    sq: Array
+
+    @classmethod
+    def of(cls, x: Array) -> _WindowSums:
+        zero = np.zeros(1)
+        xx, xz, xy = x[..., 0], x[..., 2], x[..., 1]
+        return cls(
+            np.concatenate((zero, np.cumsum(xx.sum(1)))),
+            np.concatenate((zero, np.cumsum(xz.sum(1)))),
+            np.concatenate((zero, np.cumsum((xx**2 + xz**2 + xy**2).sum(1)))),
+        )
+
+
+def _duration_block(
+    x: Array,
+    sums: _WindowSums,
+    a: Array,
+    d: int,
+    t_len: int,
+    rate: float,
+    context: int,
+    c_out: Array,
+    s_out: Array,
+) -> tuple[Array, Array]:
+    """Eq. 1-2 for the ``n`` cells of duration ``d`` (templates ``a (n, d + 2c, P, 3)``) against every
+    window of the padded input ``x``: the distances ``(n, T + 1 - d)`` (m²·s) after the best
+    rotation about +Y and floor translation, whose cross-correlations go into ``c_out`` and
+    ``s_out``; and the templates' floor sums ``(n, 2)``."""
+    n, p = a.shape[0], x.shape[1]
+    c2 = 2 * context
+    n_pts = (d + c2) * p
+    # every term is scaled by 1 / (P rate) up front, so D comes out in m^2 s without another pass
+    scale = 1.0 / (p * rate)
+    a = a.reshape(n, n_pts, 3)
+    sa = a.sum(1)  # (n, 3)
+    # templates centred on the floor: their cross-correlation with any window is the centred one
+    centred = a[..., [0, 2]] - (sa[:, [0, 2]] / n_pts)[:, None, :]  # (n, N, 2)
+    # windows (nw, N, 3) flattened like the templates: frame-major, then point
+    win = np.lib.stride_tricks.sliding_window_view(x, d + c2, axis=0)  # (nw, P, 3, L)
+    win = win.transpose(0, 3, 1, 2).reshape(win.shape[0], n_pts, 3)
+    nw = win.shape[0]
+    ends = np.arange(d, t_len + 1)
+    e2 = ends + c2
+    sx, sz = sums.x[e2] - sums.x[ends - d], sums.z[e2] - sums.z[ends - d]
+    # one product gives the four planar cross terms: rows [ax; az], columns [wx | wz]
+    lhs = centred.transpose(2, 0, 1).reshape(2 * n, n_pts) * scale
+    rhs = win[..., [0, 2]].transpose(2, 0, 1).reshape(2 * nw, n_pts)
+    g = lhs @ rhs.T  # (2n, 2nw)
+    np.add(g[:n, :nw], g[n:, nw:], out=c_out)  # ax.wx + az.wz
+    np.subtract(g[n:, :nw], g[:n, nw:], out=s_out)  # az.wx - ax.wz
+    # the rest of the residual in one more product: -2 ay.wy + the template's and the
+    # window's own centred sums of squares (extra columns of ones)
+    own_a = (centred**2).sum((1, 2)) + (a[..., 1] ** 2).sum(1)
+    own_w = sums.sq[e2] - sums.sq[ends - d] - (sx**2 + sz**2) / n_pts
+    lhs_y = np.empty((n, n_pts + 2))
+    lhs_y[:, :n_pts] = a[..., 1] * (-2.0 * scale)
+    lhs_y[:, n_pts] = own_a * scale
+    lhs_y[:, n_pts + 1] = scale
+    rhs_y = np.empty((nw, n_pts + 2))
+    rhs_y[:, :n_pts] = win[..., 1]
+    rhs_y[:, n_pts] = 1.0
+    rhs_y[:, n_pts + 1] = own_w
+    res = c_out * c_out
+    res += s_out * s_out
+    np.sqrt(res, out=res)  # |(c, s)| (np.hypot is several times slower)
+    res *= -2.0
+    res += lhs_y @ rhs_y.T
+    np.maximum(res, 0.0, out=res)
+    return res, sa[:, [0, 2]]
 
 
 def _rigid_interpretation(
@@ -541,7 +575,6 @@ def solve(
     # time-major (T + 1, C): a boundary's cells are one contiguous row
     Q = np.full((t1, cells), np.inf)
     back = np.empty((t1, cells), dtype=np.int32)  # read only where a score was written
-    q_pts = inst.tails.shape[1]
     tails = inst.tails.reshape(inst.count, -1, 3)
     heads = inst.heads.reshape(inst.count, -1, 3)
     ub = np.inf if upper_bound is None else upper_bound * (1 + 1e-9) + 1e-12
@@ -554,13 +587,43 @@ def solve(
     back[cell_dur[first], first] = -1
     colmin = Q.min(axis=1)
     expanded = 0
-    kq = k / q_pts
+    kq = k / inst.tails.shape[1]
     # Boundaries closer than the shortest duration do not depend on each other (a cell ending at
     # t < t0 + dmin started before t0): select cells boundary by boundary, then align, score and
-    # store a whole block of boundaries at once.
+    # store a whole block of boundaries at once (Eq. 8).
     dmin = max(1, int(cell_dur.min()))
-    # per cell and start time: the distance and the bound at the end of a cell starting there
-    # (inf past the end), one slice per duration (cells are sorted by duration)
+    d_start, f_start = _by_start_time(D, F, cell_dur)
+    for t0 in range(1, t_len, dmin):
+        if should_stop is not None and should_stop():
+            raise InterruptedError
+        ts = np.arange(t0, min(t0 + dmin, t_len))
+        rows = slice(t0, t0 + ts.size)
+        parts = _block_candidates(
+            Q[rows], ts, cell_dur, d_start[rows], f_start[rows], F, colmin, ub, beam, max_cells
+        )
+        if not parts:
+            continue
+        P, S, E, DS, best, arg, n_exp = _relax_block(parts, interp, tails, heads, cell_inst, kq)
+        expanded += n_exp
+        Q[E, S] = DS + best
+        back[E, S] = P[arg]
+        if beam is not None:
+            np.minimum.at(colmin, E, DS + best)
+    cells_arr, ends_arr = _best_path(Q, back, cell_dur)
+    score = float(Q[t_len, cells_arr[-1]])
+    interp_term = float(D[cells_arr, ends_arr].sum())
+    return DPResult(score, cells_arr, ends_arr, expanded, interp_term, score - interp_term)
+
+
+Block = tuple[IntArray, Array, int, IntArray, IntArray, Array]
+"""One boundary ``t`` of a block: its kept predecessors (cells ending at ``t``) and their scores,
+``t``, and its successors (cells starting at ``t``) with their end times and distances."""
+
+
+def _by_start_time(D: Array, F: Array, cell_dur: IntArray) -> tuple[Array, Array]:
+    """``(T + 1, C)`` per start time and cell: the distance ``D`` and the bound ``F`` at the end of
+    the cell started there (infinite past the end); one slice per duration (cells sorted by it)."""
+    cells, t1 = D.shape
     d_start = np.empty((t1, cells))
     f_start = np.empty((t1, cells))
     bounds = np.flatnonzero(np.diff(cell_dur)) + 1
@@ -571,87 +634,114 @@ def solve(
         f_start[:keep_n, lo_c:hi_c] = F[d:, None]
         d_start[keep_n:, lo_c:hi_c] = np.inf
         f_start[keep_n:, lo_c:hi_c] = np.inf
-    for t0 in range(1, t_len, dmin):
-        if should_stop is not None and should_stop():
-            raise InterruptedError
-        ts = np.arange(t0, min(t0 + dmin, t_len))
-        # predecessors of every boundary of the block: (boundary, cell) with a finite, kept score
-        qb = Q[t0 : t0 + ts.size]  # (B, C)
-        qmin_t = qb.min(axis=1)
-        keep = np.isfinite(qb) & (qb + F[ts][:, None] <= ub)
-        if beam is not None:
-            keep &= qb <= qmin_t[:, None] + beam
-        if max_cells is not None and cells > max_cells[0]:
-            kth = max_cells[0] - 1
-            masked = np.where(keep, qb, np.inf)
-            cut = np.partition(masked, kth, axis=1)[:, kth]
-            keep &= masked <= cut[:, None]
-        # successors: cells starting at the boundary, with a finite distance and a chance
-        ends_b = ts[:, None] + cell_dur[None, :]  # (B, C)
-        ends_c = np.minimum(ends_b, t_len)
-        dsucc_b = d_start[t0 : t0 + ts.size]
-        qkept = np.where(keep, qb, np.inf).min(axis=1)
-        lower = qkept[:, None] + dsucc_b
-        f_end = f_start[t0 : t0 + ts.size]
-        est_b = lower + f_end  # infinite for illegal cells and cells ending after T
-        ok = np.isfinite(est_b) & (est_b <= ub)
-        if beam is not None:
-            # a cell already worse than the best score written at its end time by more than the
-            # width would be pruned there anyway (the beam of Sec. 4.4, applied early)
-            ok &= lower <= colmin[ends_c] + beam
-        if max_cells is not None and cells > max_cells[1]:
-            kth = max_cells[1] - 1
-            est = np.where(ok, dsucc_b + f_end, np.inf)
-            cut = np.partition(est, kth, axis=1)[:, kth]
-            ok &= est <= cut[:, None]
-        parts: list[tuple[IntArray, Array, int, IntArray, IntArray, Array]] = []
-        for b, t in enumerate(ts):
-            preds = np.flatnonzero(keep[b])
-            succ = np.flatnonzero(ok[b])
-            if preds.size and succ.size:
-                parts.append((preds, qb[b, preds], int(t), succ, ends_b[b, succ], dsucc_b[b, succ]))
-        if not parts:
-            continue
-        P = np.concatenate([pt[0] for pt in parts])
-        qa = np.concatenate([pt[1] for pt in parts])
-        tp = np.repeat([pt[2] for pt in parts], [pt[0].size for pt in parts])
-        S = np.concatenate([pt[3] for pt in parts])
-        E = np.concatenate([pt[4] for pt in parts])
-        DS = np.concatenate([pt[5] for pt in parts])
-        pts = np.concatenate((tails[cell_inst[P]], heads[cell_inst[S]]))
-        placed = interp.place(pts, np.concatenate((P, S)), np.concatenate((tp, E))).reshape(
-            P.size + S.size, -1
-        )
-        y2, h2 = placed[: P.size], placed[P.size :]
-        # q_j + k' |y_j - h_i|^2 = [q_j + k'|y_j|^2, -2k' y_j] . [1, h_i] + k'|h_i|^2: one matrix product
-        ya = np.empty((P.size, y2.shape[1] + 1))
-        ya[:, 0] = qa + kq * (y2**2).sum(1)
-        ya[:, 1:] = (-2.0 * kq) * y2
-        ha = np.empty((S.size, h2.shape[1] + 1))
-        ha[:, 0] = 1.0
-        ha[:, 1:] = h2
-        best = np.empty(S.size)
-        arg = np.empty(S.size, dtype=np.intp)
-        hh = kq * (h2**2).sum(1)
-        pa = sa = 0
-        for preds, _, _, succ, _, _ in parts:
-            pb, sb = pa + preds.size, sa + succ.size
-            b_best, b_arg, n_exp = min_plus(ya[pa:pb], qa[pa:pb], ha[sa:sb], hh[sa:sb])
-            best[sa:sb] = b_best
-            arg[sa:sb] = pa + b_arg
-            expanded += n_exp
-            pa, sa = pb, sb
-        # rounding can make |y - h|^2 slightly negative for identical points
-        best = np.maximum(best + hh, qa[arg])
-        Q[E, S] = DS + best
-        back[E, S] = P[arg]
-        if beam is not None:
-            np.minimum.at(colmin, E, DS + best)
+    return d_start, f_start
+
+
+def _block_candidates(
+    qb: Array,
+    ts: IntArray,
+    cell_dur: IntArray,
+    dsucc_b: Array,
+    f_end: Array,
+    F: Array,
+    colmin: Array,
+    ub: float,
+    beam: float | None,
+    max_cells: tuple[int, int] | None,
+) -> list[Block]:
+    """The cells that take part at each boundary ``ts (B,)`` of a block: predecessors with a finite
+    score ``qb (B, C)`` within the bound ``ub``, the beam and the count cap; successors with a
+    finite distance whose optimistic score at their end stays within the same limits."""
+    cells = qb.shape[1]
+    t_len = F.size - 1
+    qmin_t = qb.min(axis=1)
+    keep = np.isfinite(qb) & (qb + F[ts][:, None] <= ub)
+    if beam is not None:
+        keep &= qb <= qmin_t[:, None] + beam
+    if max_cells is not None and cells > max_cells[0]:
+        kth = max_cells[0] - 1
+        masked = np.where(keep, qb, np.inf)
+        cut = np.partition(masked, kth, axis=1)[:, kth]
+        keep &= masked <= cut[:, None]
+    # successors: cells starting at the boundary, with a finite distance and a chance
+    ends_b = ts[:, None] + cell_dur[None, :]  # (B, C)
+    ends_c = np.minimum(ends_b, t_len)
+    qkept = np.where(keep, qb, np.inf).min(axis=1)
+    lower = qkept[:, None] + dsucc_b
+    est_b = lower + f_end  # infinite for illegal cells and cells ending after T
+    ok = np.isfinite(est_b) & (est_b <= ub)
+    if beam is not None:
+        # a cell already worse than the best score written at its end time by more than the
+        # width would be pruned there anyway (the beam of Sec. 4.4, applied early)
+        ok &= lower <= colmin[ends_c] + beam
+    if max_cells is not None and cells > max_cells[1]:
+        kth = max_cells[1] - 1
+        est = np.where(ok, dsucc_b + f_end, np.inf)
+        cut = np.partition(est, kth, axis=1)[:, kth]
+        ok &= est <= cut[:, None]
+    parts: list[Block] = []
+    for b, t in enumerate(ts):
+        preds = np.flatnonzero(keep[b])
+        succ = np.flatnonzero(ok[b])
+        if preds.size and succ.size:
+            parts.append((preds, qb[b, preds], int(t), succ, ends_b[b, succ], dsucc_b[b, succ]))
+    return parts
+
+
+def _relax_block(
+    parts: list[Block],
+    interp: Interpretation,
+    tails: Array,
+    heads: Array,
+    cell_inst: IntArray,
+    kq: float,
+) -> tuple[IntArray, IntArray, IntArray, Array, Array, IntArray, int]:
+    """Eq. 8 for a block: every successor's best predecessor by score plus continuity ``k'|y - h|^2``
+    between the aligned tail ``y`` of the predecessor and head ``h`` of the successor. Returns the
+    predecessors ``P``, successors ``S``, their end times ``E`` and distances ``DS``, each
+    successor's best continued score and the index of its predecessor in ``P``, and the pairs
+    expanded."""
+    P = np.concatenate([pt[0] for pt in parts])
+    qa = np.concatenate([pt[1] for pt in parts])
+    tp = np.repeat([pt[2] for pt in parts], [pt[0].size for pt in parts])
+    S = np.concatenate([pt[3] for pt in parts])
+    E = np.concatenate([pt[4] for pt in parts])
+    DS = np.concatenate([pt[5] for pt in parts])
+    pts = np.concatenate((tails[cell_inst[P]], heads[cell_inst[S]]))
+    placed = interp.place(pts, np.concatenate((P, S)), np.concatenate((tp, E))).reshape(P.size + S.size, -1)
+    y2, h2 = placed[: P.size], placed[P.size :]
+    # q_j + k' |y_j - h_i|^2 = [q_j + k'|y_j|^2, -2k' y_j] . [1, h_i] + k'|h_i|^2: one matrix product
+    ya = np.empty((P.size, y2.shape[1] + 1))
+    ya[:, 0] = qa + kq * (y2**2).sum(1)
+    ya[:, 1:] = (-2.0 * kq) * y2
+    ha = np.empty((S.size, h2.shape[1] + 1))
+    ha[:, 0] = 1.0
+    ha[:, 1:] = h2
+    best = np.empty(S.size)
+    arg = np.empty(S.size, dtype=np.intp)
+    hh = kq * (h2**2).sum(1)
+    expanded = 0
+    pa = sa = 0
+    for preds, _, _, succ, _, _ in parts:
+        pb, sb = pa + preds.size, sa + succ.size
+        b_best, b_arg, n_exp = min_plus(ya[pa:pb], qa[pa:pb], ha[sa:sb], hh[sa:sb])
+        best[sa:sb] = b_best
+        arg[sa:sb] = pa + b_arg
+        expanded += n_exp
+        pa, sa = pb, sb
+    # rounding can make |y - h|^2 slightly negative for identical points
+    best = np.maximum(best + hh, qa[arg])
+    return P, S, E, DS, best, arg, expanded
+
+
+def _best_path(Q: Array, back: npt.NDArray[np.int32], cell_dur: IntArray) -> tuple[IntArray, IntArray]:
+    """The cells of the best tiling and their end frames, in order (back-tracked from the best score
+    at the last frame); :class:`Infeasible` when there is none."""
+    t_len = Q.shape[0] - 1
     final = Q[t_len]
     if not np.isfinite(final).any():
         raise Infeasible("no sequence of segments within the stretch bounds and constraints tiles the input")
     c = int(np.argmin(final))
-    score = float(final[c])
     path_cells, path_ends = [], []
     t = t_len
     while c >= 0:
@@ -660,10 +750,7 @@ def solve(
         prev = int(back[t, c])
         t -= int(cell_dur[c])
         c = prev
-    cells_arr = np.array(path_cells[::-1], dtype=np.intp)
-    ends_arr = np.array(path_ends[::-1], dtype=np.intp)
-    interp_term = float(D[cells_arr, ends_arr].sum())
-    return DPResult(score, cells_arr, ends_arr, expanded, interp_term, score - interp_term)
+    return np.array(path_cells[::-1], dtype=np.intp), np.array(path_ends[::-1], dtype=np.intp)
 
 
 def typical_segment_cost(D: Array) -> float:
@@ -715,7 +802,63 @@ def retime(
 
     ``x``: ``(T, P, 3)`` the input at ``rate``; ``constraints``: ``(segment index, frame)`` pairs the
     segment must keep covering; ``rigid``: full 3-D rigid alignments (see :func:`interpretation`)."""
-    t_len = x.shape[0]
+    n_seg = seq.shape[0]
+    states = _retime_states(
+        x.shape[0], inst, seq, coarse_bounds, rate, stretch_s, stretch_ratio, window, constraints
+    )
+    # interpretation of every state, grouped by duration
+    flat_seg = np.concatenate([np.full(s[0].size, i) for i, s in enumerate(states)])
+    flat_a = np.concatenate([s[0] for s in states])
+    flat_b = np.concatenate([s[1] for s in states])
+    al = _StateAlignments.of(x, inst, seq[flat_seg], flat_a, flat_b, rate, context, rigid)
+    offs = np.concatenate(([0], np.cumsum([s[0].size for s in states])))
+    score, idx = _chain(al, inst, seq, offs, flat_a, flat_b, k)
+    bounds = np.concatenate((flat_a[idx], flat_b[idx[-1:]]))
+    # per-boundary continuity of the chosen states
+    sel_rot = None if al.rot is None else al.rot[idx]
+    sel_trans = None if al.trans is None else al.trans[idx]
+    if sel_rot is not None and sel_trans is not None:
+        # the floor part of each rigid transform, for reports: yaw of the rotated +Z axis
+        fwd = sel_rot[:, :, 2]
+        yaw = np.arctan2(fwd[:, 0], fwd[:, 2])
+        al.cos[idx], al.sin[idx] = np.cos(yaw), np.sin(yaw)
+        al.tx[idx], al.tz[idx] = sel_trans[:, 0], sel_trans[:, 2]
+    q_pts = inst.tails.shape[1]
+    y = al.place(inst.tails[seq[:-1]], idx[:-1])
+    h = al.place(inst.heads[seq[1:]], idx[1:])
+    C = ((y - h) ** 2).sum(axis=(1, 2)) / q_pts if n_seg > 1 else np.zeros(0)
+    Dsel = al.D[idx]
+    return Timed(
+        score,
+        float(Dsel.sum()),
+        float(k * C.sum()),
+        seq.copy(),
+        bounds,
+        al.cos[idx],
+        al.sin[idx],
+        al.tx[idx],
+        al.tz[idx],
+        Dsel,
+        C,
+        sel_rot,
+        sel_trans,
+    )
+
+
+def _retime_states(
+    t_len: int,
+    inst: Instances,
+    seq: IntArray,
+    coarse_bounds: Array,
+    rate: float,
+    stretch_s: float | None,
+    stretch_ratio: float | None,
+    window: int,
+    constraints: list[tuple[int, float]] | None,
+) -> list[tuple[IntArray, IntArray]]:
+    """Per segment of ``seq``, its states: ``(start, end)`` full-rate frames with each boundary within
+    ``+-window`` of the coarse one, a legal duration (else the coarse one's own) and every
+    constraint on the segment covered."""
     n_seg = seq.shape[0]
     cb = np.round(np.asarray(coarse_bounds, dtype=np.float64)).astype(np.intp)
     cb[0], cb[-1] = 0, t_len
@@ -725,7 +868,6 @@ def retime(
         options.append(np.arange(lo, hi + 1))
     options.append(np.array([t_len]))
     lengths_s = inst.length[seq] / inst.fps
-    # per segment: states (start, end) with a legal duration
     states: list[tuple[IntArray, IntArray]] = []
     for i in range(n_seg):
         a, b = np.meshgrid(options[i], options[i + 1], indexing="ij")
@@ -739,59 +881,102 @@ def retime(
             if seg_i == i:
                 ok &= (a <= frame) & (frame < b)
         states.append((a[ok], b[ok]))
-    # interpretation of every state, grouped by duration
-    flat_seg = np.concatenate([np.full(s[0].size, i) for i, s in enumerate(states)])
-    flat_a = np.concatenate([s[0] for s in states])
-    flat_b = np.concatenate([s[1] for s in states])
-    m = flat_a.size
-    Dv, cosv, sinv = np.full(m, np.inf), np.ones(m), np.zeros(m)
-    xp = pad_edges(x, context)
-    txv, tzv = np.zeros(m), np.zeros(m)
-    rotv = np.repeat(np.eye(3)[None], m, 0) if rigid else None
-    transv = np.zeros((m, 3)) if rigid else None
-    durs = flat_b - flat_a
-    for d in np.unique(durs):
-        rows = np.flatnonzero(durs == d)
-        tmpl = stretched_templates(inst, seq[flat_seg[rows]], int(d), rate, context)
-        win = xp[flat_a[rows, None] + np.arange(d + 2 * context)[None, :]]
-        p = x.shape[1]
-        if rotv is not None and transv is not None:
-            res, r, t = paired_procrustes(win.reshape(rows.size, -1, 3), tmpl.reshape(rows.size, -1, 3))
-            rotv[rows], transv[rows] = r, t
-            Dv[rows] = res / (p * rate)
-            continue
-        res, c, s, tx_, tz_ = paired_alignment(win.reshape(rows.size, -1, 3), tmpl.reshape(rows.size, -1, 3))
-        Dv[rows], cosv[rows], sinv[rows], txv[rows], tzv[rows] = res / (p * rate), c, s, tx_, tz_
-    q_pts = inst.tails.shape[1]
+    return states
 
-    def place_states(points: Array, rows: IntArray) -> Array:
+
+@dataclass(slots=True)
+class _StateAlignments:
+    """Per re-timing state (``(m,)`` arrays): the interpretation distance ``D`` of its instance
+    stretched over ``[start, end)``, and its alignment: rotation about +Y (``cos``, ``sin``) and floor
+    translation (``tx``, ``tz``), or with ``rigid`` a full rotation ``rot (m, 3, 3)`` and
+    translation ``trans (m, 3)``."""
+
+    D: Array
+    cos: Array
+    sin: Array
+    tx: Array
+    tz: Array
+    rot: Array | None
+    trans: Array | None
+
+    @classmethod
+    def of(
+        cls,
+        x: Array,
+        inst: Instances,
+        state_inst: IntArray,
+        start: IntArray,
+        end: IntArray,
+        rate: float,
+        context: int,
+        rigid: bool,
+    ) -> _StateAlignments:
+        """Align every state's stretched template to its input window, one duration at a time."""
+        m = start.size
+        al = cls(np.full(m, np.inf), np.ones(m), np.zeros(m), np.zeros(m), np.zeros(m), None, None)
+        if rigid:
+            al.rot, al.trans = np.repeat(np.eye(3)[None], m, 0), np.zeros((m, 3))
+        xp = pad_edges(x, context)
+        p = x.shape[1]
+        durs = end - start
+        for d in np.unique(durs):
+            rows = np.flatnonzero(durs == d)
+            tmpl = stretched_templates(inst, state_inst[rows], int(d), rate, context)
+            win = xp[start[rows, None] + np.arange(d + 2 * context)[None, :]]
+            if al.rot is not None and al.trans is not None:
+                res, r, t = paired_procrustes(win.reshape(rows.size, -1, 3), tmpl.reshape(rows.size, -1, 3))
+                al.rot[rows], al.trans[rows] = r, t
+                al.D[rows] = res / (p * rate)
+                continue
+            res, c, s, tx_, tz_ = paired_alignment(
+                win.reshape(rows.size, -1, 3), tmpl.reshape(rows.size, -1, 3)
+            )
+            al.D[rows], al.cos[rows], al.sin[rows] = res / (p * rate), c, s
+            al.tx[rows], al.tz[rows] = tx_, tz_
+        return al
+
+    def place(self, points: Array, rows: IntArray) -> Array:
         """``points (n, ..., 3)`` moved by the alignments of states ``rows (n,)``."""
         return place_points(
             points,
-            cosv[rows],
-            sinv[rows],
-            txv[rows],
-            tzv[rows],
-            None if rotv is None else rotv[rows],
-            None if transv is None else transv[rows],
+            self.cos[rows],
+            self.sin[rows],
+            self.tx[rows],
+            self.tz[rows],
+            None if self.rot is None else self.rot[rows],
+            None if self.trans is None else self.trans[rows],
         )
 
-    offs = np.concatenate(([0], np.cumsum([s[0].size for s in states])))
-    Q = Dv[offs[0] : offs[1]].copy()
+
+def _chain(
+    al: _StateAlignments,
+    inst: Instances,
+    seq: IntArray,
+    offs: IntArray,
+    start: IntArray,
+    end: IntArray,
+    k: float,
+) -> tuple[float, IntArray]:
+    """The DP over the segments' states (``offs``: where each segment's states begin): distance plus
+    continuity between consecutive aligned segments, a state following one that ends where it
+    starts. Returns the best score and the chosen state of every segment."""
+    n_seg = seq.shape[0]
+    q_pts = inst.tails.shape[1]
+    Q = al.D[offs[0] : offs[1]].copy()
     backs: list[IntArray] = []
     for i in range(1, n_seg):
         prev = np.arange(offs[i - 1], offs[i])
         cur = np.arange(offs[i], offs[i + 1])
         if prev.size == 0 or cur.size == 0:
             raise Infeasible("re-timing found no legal boundaries")
-        y = place_states(inst.tails[seq[i - 1]][None].repeat(prev.size, 0), prev)
-        h = place_states(inst.heads[seq[i]][None].repeat(cur.size, 0), cur)
+        y = al.place(inst.tails[seq[i - 1]][None].repeat(prev.size, 0), prev)
+        h = al.place(inst.heads[seq[i]][None].repeat(cur.size, 0), cur)
         y2, h2 = y.reshape(prev.size, -1), h.reshape(cur.size, -1)
         cont = (y2**2).sum(1)[:, None] + (h2**2).sum(1)[None] - 2 * y2 @ h2.T
         total = Q[:, None] + (k / q_pts) * np.maximum(cont, 0.0)
-        total[flat_b[prev][:, None] != flat_a[cur][None, :]] = np.inf
+        total[end[prev][:, None] != start[cur][None, :]] = np.inf
         j = np.argmin(total, axis=0)
-        Q = total[j, np.arange(cur.size)] + Dv[cur]
+        Q = total[j, np.arange(cur.size)] + al.D[cur]
         backs.append(j)
     if not np.isfinite(Q).any():
         raise Infeasible("re-timing found no legal boundaries")
@@ -801,33 +986,4 @@ def retime(
     for i in range(n_seg - 1, 0, -1):
         last = int(backs[i - 1][last])
         chosen.append(offs[i - 1] + last)
-    idx = np.array(chosen[::-1], dtype=np.intp)
-    bounds = np.concatenate((flat_a[idx], flat_b[idx[-1:]]))
-    # per-boundary continuity of the chosen states
-    sel_rot = None if rotv is None else rotv[idx]
-    sel_trans = None if transv is None else transv[idx]
-    if sel_rot is not None and sel_trans is not None:
-        # the floor part of each rigid transform, for reports: yaw of the rotated +Z axis
-        fwd = sel_rot[:, :, 2]
-        yaw = np.arctan2(fwd[:, 0], fwd[:, 2])
-        cosv[idx], sinv[idx] = np.cos(yaw), np.sin(yaw)
-        txv[idx], tzv[idx] = sel_trans[:, 0], sel_trans[:, 2]
-    y = place_states(inst.tails[seq[:-1]], idx[:-1])
-    h = place_states(inst.heads[seq[1:]], idx[1:])
-    C = ((y - h) ** 2).sum(axis=(1, 2)) / q_pts if n_seg > 1 else np.zeros(0)
-    Dsel = Dv[idx]
-    return Timed(
-        score,
-        float(Dsel.sum()),
-        float(k * C.sum()),
-        seq.copy(),
-        bounds,
-        cosv[idx],
-        sinv[idx],
-        txv[idx],
-        tzv[idx],
-        Dsel,
-        C,
-        sel_rot,
-        sel_trans,
-    )
+    return score, np.array(chosen[::-1], dtype=np.intp)

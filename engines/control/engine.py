@@ -34,6 +34,7 @@ from .dp import (
     DPResult,
     Infeasible,
     Instances,
+    Interpretation,
     Timed,
     apply_constraints,
     cost_to_go,
@@ -77,6 +78,23 @@ class ControlInputCloud:
     fps: float
     source: str
     path: Array | None = None
+
+
+@dataclass(slots=True)
+class _Interpreted:
+    """A control interpreted against the database at the solve rate (:meth:`ControlEngine._interpret`)."""
+
+    rate: float  # solve rate, fps
+    x_full: Array  # (F, P, 3) the control at the database rate
+    inst: Instances
+    cell_inst: npt.NDArray[np.intp]  # (C,) instance of each legal cell
+    cell_dur: npt.NDArray[np.intp]  # (C,) its duration, solve frames
+    constraints: list[tuple[int, float]]  # (instance, time s) hard constraints
+    interp: Interpretation
+    to_go: Array
+    d_unit: float  # typical cost of interpreting one segment
+    k: float  # continuity weight
+    window: int  # full-rate frames per solve frame (re-timing window)
 
 
 class ControlEngine(Engine):
@@ -229,13 +247,64 @@ class ControlEngine(Engine):
             self._search(request, budget_s, emit, should_stop)
 
     def _search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+        """The anytime schedule: interpret the control (:meth:`_interpret`), then solve the segment
+        DP with a quick beam, a wider beam and (``exact``) the optimum, re-time every better solution
+        at the full rate and emit it when that improves the score too."""
         t_start = time.perf_counter()
         ctl = self.control_cloud(request)
+        pb = self._interpret(request, ctl)
+        prep_s = time.perf_counter() - t_start
+        stages = ["quick", "beam"] + (["exact"] if request.exact else [])
+        best_coarse: float | None = None
+        seg_unit = pb.d_unit
+        best_score = np.inf
+        for stage_i, stage in enumerate(stages):
+            if stage_i > 0 and (should_stop() or time.perf_counter() - t_start > budget_s):
+                break
+            t0 = time.perf_counter()
+            try:
+                res = self._solve_stage(
+                    pb, stage, seg_unit, best_coarse, request, should_stop if stage_i else None
+                )
+            except InterruptedError:
+                break
+            except Infeasible as exc:
+                if stage != "exact":
+                    continue  # the beam pruned every path; a wider stage may find one
+                if best_coarse is not None:
+                    break
+                raise EngineError(str(exc)) from None
+            if stage == "quick":
+                seg_unit = res.score / max(1, res.cells.size)
+            solve_s = time.perf_counter() - t0
+            if best_coarse is not None and res.score >= best_coarse - 1e-12:
+                continue
+            best_coarse = res.score
+            t1 = time.perf_counter()
+            timed = self._retime(
+                res,
+                pb.x_full,
+                pb.cell_inst,
+                pb.cell_dur,
+                pb.rate,
+                request,
+                pb.constraints,
+                pb.window,
+                pb.inst,
+            )
+            retime_s = time.perf_counter() - t1
+            if timed.score >= best_score:
+                continue
+            best_score = timed.score
+            timings = {"prep_s": prep_s, "solve_s": solve_s, "retime_s": retime_s}
+            emit.solution(self._assembled(pb, ctl, res, timed, stage, request, timings))
+
+    def _interpret(self, request: Any, ctl: ControlInputCloud) -> _Interpreted:
+        """The control resampled to the solve rate, the legal (segment, duration) cells and their
+        interpretation costs D (with the hard constraints), the cost to go, and the weights."""
         rate_full = self.db.fps
         rate = min(float(request.solve_fps), rate_full)
-        x_full = resample_cloud(ctl.cloud, ctl.fps, rate_full)
         x = resample_cloud(ctl.cloud, ctl.fps, rate)
-        n_out = ctl.cloud.shape[0]
         inst = (
             self.solver_instances_ if request.continuity_s <= 0 else self.instances_for(request.continuity_s)
         )
@@ -253,84 +322,78 @@ class ControlEngine(Engine):
         if not np.isfinite(to_go[0]):
             shortest = float(lengths_s.min())
             raise EngineError(
-                f"the control ({(n_out - 1) / ctl.fps:.2f} s) cannot be tiled by the database's segments "
-                f"(shortest {shortest:.2f} s) within the stretch bounds and constraints"
+                f"the control ({(ctl.cloud.shape[0] - 1) / ctl.fps:.2f} s) cannot be tiled by the database's "
+                f"segments (shortest {shortest:.2f} s) within the stretch bounds and constraints"
             )
-        d_unit = typical_segment_cost(interp.D)
-        k = self.continuity_weight(request)
-        prep_s = time.perf_counter() - t_start
-        stages = ["quick", "beam"] + (["exact"] if request.exact else [])
-        best_coarse: float | None = None
-        seg_unit = d_unit
-        best_score = np.inf
-        window = int(np.ceil(rate_full / rate))
-        for stage_i, stage in enumerate(stages):
-            if stage_i > 0 and (should_stop() or time.perf_counter() - t_start > budget_s):
-                break
-            if stage == "quick":
-                width: float | None = QUICK_WIDTH * d_unit
-            elif stage == "beam":
-                width = (BEAM_WIDTH if request.beam is None else float(request.beam)) * seg_unit
-            else:
-                width = None
-            t0 = time.perf_counter()
-            try:
-                res = solve(
-                    interp,
-                    inst,
-                    cell_inst,
-                    cell_dur,
-                    k,
-                    beam=width,
-                    max_cells=QUICK_CELLS if stage == "quick" else BEAM_CELLS if stage == "beam" else None,
-                    upper_bound=best_coarse if stage == "exact" else None,
-                    to_go=to_go,
-                    should_stop=should_stop if stage_i > 0 else None,
-                )
-            except InterruptedError:
-                break
-            except Infeasible as exc:
-                if stage != "exact":
-                    continue  # the beam pruned every path; a wider stage may find one
-                if best_coarse is not None:
-                    break
-                raise EngineError(str(exc)) from None
-            if stage == "quick":
-                seg_unit = res.score / max(1, res.cells.size)
-            solve_s = time.perf_counter() - t0
-            if best_coarse is not None and res.score >= best_coarse - 1e-12:
-                continue
-            best_coarse = res.score
-            t1 = time.perf_counter()
-            timed = self._retime(res, x_full, cell_inst, cell_dur, rate, request, constraints, window, inst)
-            retime_s = time.perf_counter() - t1
-            if timed.score >= best_score:
-                continue
-            best_score = timed.score
-            t2 = time.perf_counter()
-            out = assemble(
-                self.db,
-                self.target_motion,
-                self.db.instances[self.kept_],
-                timed,
-                n_out,
-                ctl.fps,
-                request.smoothing_s,
-            )
-            motion = self._cleanup(out, request)
-            post_s = time.perf_counter() - t2
-            emit.solution(
-                self._solution(
-                    out,
-                    motion,
-                    timed,
-                    res,
-                    stage,
-                    ctl,
-                    {"prep_s": prep_s, "solve_s": solve_s, "retime_s": retime_s, "post_s": post_s},
-                    cell_inst.size,
-                )
-            )
+        return _Interpreted(
+            rate=rate,
+            x_full=resample_cloud(ctl.cloud, ctl.fps, rate_full),
+            inst=inst,
+            cell_inst=cell_inst,
+            cell_dur=cell_dur,
+            constraints=constraints,
+            interp=interp,
+            to_go=to_go,
+            d_unit=typical_segment_cost(interp.D),
+            k=self.continuity_weight(request),
+            window=int(np.ceil(rate_full / rate)),
+        )
+
+    def _solve_stage(
+        self,
+        pb: _Interpreted,
+        stage: str,
+        seg_unit: float,
+        best_coarse: float | None,
+        request: Any,
+        should_stop: ShouldStop | None,
+    ) -> DPResult:
+        """One stage's DP: ``quick`` (a narrow beam in typical segment costs), ``beam`` (wider, in
+        the quick solution's cost per segment) or ``exact`` (bounded by the best score so far)."""
+        if stage == "quick":
+            width: float | None = QUICK_WIDTH * pb.d_unit
+        elif stage == "beam":
+            width = (BEAM_WIDTH if request.beam is None else float(request.beam)) * seg_unit
+        else:
+            width = None
+        return solve(
+            pb.interp,
+            pb.inst,
+            pb.cell_inst,
+            pb.cell_dur,
+            pb.k,
+            beam=width,
+            max_cells=QUICK_CELLS if stage == "quick" else BEAM_CELLS if stage == "beam" else None,
+            upper_bound=best_coarse if stage == "exact" else None,
+            to_go=pb.to_go,
+            should_stop=should_stop,
+        )
+
+    def _assembled(
+        self,
+        pb: _Interpreted,
+        ctl: ControlInputCloud,
+        res: DPResult,
+        timed: Timed,
+        stage: str,
+        request: Any,
+        timings: dict[str, float],
+    ) -> Solution:
+        """The target segments of a re-timed solution concatenated, smoothed and cleaned up, with
+        its report."""
+        t2 = time.perf_counter()
+        out = assemble(
+            self.db,
+            self.target_motion,
+            self.db.instances[self.kept_],
+            timed,
+            ctl.cloud.shape[0],
+            ctl.fps,
+            request.smoothing_s,
+        )
+        motion = self._cleanup(out, request)
+        timings["post_s"] = time.perf_counter() - t2
+        return self._solution(out, motion, timed, res, stage, ctl, timings, pb.cell_inst.size)
 
     def _retime(
         self,

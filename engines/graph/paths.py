@@ -32,11 +32,11 @@ Batches
 from __future__ import annotations
 
 import threading
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from cachetools import LRUCache, cached
 
 from motion.kinematics import forward_kinematics
 
@@ -155,11 +155,6 @@ class Placement:
         return np.repeat(self.theta, counts), np.repeat(self.shift, counts, axis=0)
 
 
-_INDEX_CACHE: OrderedDict[tuple[int, int], tuple[EdgeTree, RootTracks, GraphIndex]] = OrderedDict()
-_INDEX_CACHE_SIZE = 4
-_INDEX_LOCK = threading.Lock()
-
-
 class GraphIndex:
     """What the search precomputes from an edge tree and the root tracks.
 
@@ -207,22 +202,13 @@ class GraphIndex:
         self._pair: dict[tuple[int, int], IntArray] = {}
         self._two: dict[tuple[int, int], tuple[IntArray, IntArray]] = {}
 
-    @classmethod
-    def of(cls, tree: EdgeTree, tracks: RootTracks) -> GraphIndex:
+    @staticmethod
+    @cached(LRUCache(maxsize=4), key=lambda tree, tracks: (id(tree), id(tracks)), lock=threading.Lock())
+    def of(tree: EdgeTree, tracks: RootTracks) -> GraphIndex:
         """The index of a graph, cached for the last few graphs (by identity: a loaded engine
-        keeps its tree and tracks, so its searches share one index)."""
-        key = (id(tree), id(tracks))
-        with _INDEX_LOCK:
-            got = _INDEX_CACHE.get(key)
-            if got is not None and got[0] is tree and got[1] is tracks:
-                _INDEX_CACHE.move_to_end(key)
-                return got[2]
-        index = cls(tree, tracks)
-        with _INDEX_LOCK:
-            _INDEX_CACHE[key] = (tree, tracks, index)
-            while len(_INDEX_CACHE) > _INDEX_CACHE_SIZE:
-                _INDEX_CACHE.popitem(last=False)
-        return index
+        keeps its tree and tracks, so its searches share one index; a cached index holds its tree
+        and tracks, so their ids are not reused while it is cached)."""
+        return GraphIndex(tree, tracks)
 
     # ground frames
     def ground(self, clip: IntArray, frame: IntArray) -> tuple[FloatArray, FloatArray]:

@@ -207,98 +207,21 @@ def compile_problem(request: Any, library: MotionLibrary, tracks: RootTracks) ->
         "label": float(w.label),
         "obstacle": float(w.obstacle),
     }
-    skeleton = library.motions[0].skeleton
-    bodies: list[BodyTarget] = []
-    joints: list[tuple[str, int, int, FloatArray, FloatArray | None, float]] = []
-    poses: list[PoseTarget] = []
-    labels: list[LabelTarget] = []
-    obstacles: list[ObstacleTarget] = []
-    count: dict[str, int] = {}
-    n_frames = int(tracks.offsets[-1])
-
-    def name(kind: str) -> str:
-        i = count.get(kind, 0)
-        count[kind] = i + 1
-        return f"{kind}[{i}]"
-
-    def timed(c: Any, kind: str) -> int:
-        t = _frame_of(c, fps)
-        if not 0 <= t < length:
-            raise EngineError(
-                f"{kind} constraint at output frame {t} is outside the motion (0..{length - 1})"
-            )
-        return t
-
+    targets = _Targets(library, tracks, length)
     for c in request.constraints:
-        if c.type == "body":
-            heading = None if c.heading_deg is None else float(np.radians(c.heading_deg))
-            bodies.append(
-                BodyTarget(name("body"), timed(c, "body"), np.asarray(c.position, float), heading, c.weight)
-            )
-        elif c.type == "joint":
-            try:
-                j = skeleton.index(c.joint)
-            except MotionError:
-                raise EngineError(
-                    f"no joint named {c.joint!r}; joints: {', '.join(skeleton.names)}"
-                ) from None
-            vel = None if c.velocity is None else np.asarray(c.velocity, float)
-            joints.append((name("joint"), timed(c, "joint"), j, np.asarray(c.position, float), vel, c.weight))
-        elif c.type == "pose":
-            try:
-                clip = library.index(c.clip)
-            except MotionError as exc:
-                raise EngineError(str(exc)) from None
-            n = library.motions[clip].num_frames
-            if c.clip_frame >= n:
-                raise EngineError(
-                    f"pose constraint: clip {c.clip!r} has {n} frames, asked for frame {c.clip_frame}"
-                )
-            poses.append(PoseTarget(name("pose"), timed(c, "pose"), clip, int(c.clip_frame)))
-        elif c.type == "label":
-            start, end = min(int(c.start), length), min(int(c.end), length)
-            if end <= start:
-                raise EngineError(
-                    f"label constraint [{c.start}, {c.end}) is outside the motion (0..{length - 1})"
-                )
-            lab = _label_values(library, tracks, c.label)
-            if c.value == 1 and not np.any(lab == 1):
-                raise EngineError(f"no clip of the database carries the label {c.label!r}")
-            good = (lab == 1) if c.value == 1 else (lab != 1)
-            cum = np.zeros(n_frames + 1, dtype=np.int64)
-            np.cumsum(good, out=cum[1:])
-            labels.append(LabelTarget(name("label"), c.label, start, end, int(c.value), c.weight, cum))
-        elif c.type == "obstacle":
-            region = (
-                FloorRegion.disc(c.disc.center, c.disc.radius)
-                if c.disc is not None
-                else FloorRegion.from_polygon(c.polygon)
-            )
-            obstacles.append(ObstacleTarget(name("obstacle"), c.weight, region))
-        else:  # pragma: no cover - the schema's union is closed
-            raise EngineError(f"unknown constraint type {c.type!r}")
-
-    poses.sort(key=lambda p: p.frame)
+        targets.add(c)
+    poses = sorted(targets.poses, key=lambda p: p.frame)
     for a, b in itertools.pairwise(poses):
         if a.frame == b.frame and (a.clip, a.clip_frame) != (b.clip, b.clip_frame):
             raise EngineError(f"{a.name} and {b.name} ask for different poses at output frame {a.frame}")
-    bodies.sort(key=lambda b: b.frame)
-
-    table = None
-    feet = np.zeros(0, np.int64)
-    cols: list[int] = sorted({j for _, _, j, _, _, _ in joints})
-    if obstacles:
-        try:
-            foot = [int(f) for f in foot_joints(skeleton)]
-        except MotionError:
-            foot = []
-        cols = sorted(set(cols) | set(foot))
-        feet = np.array([cols.index(f) for f in foot], dtype=np.int64)
-    if cols:
-        table = JointTable(library, tracks, cols)
-    joint_targets = tuple(JointTarget(n, t, j, cols.index(j), p, v, wt) for n, t, j, p, v, wt in joints)
+    bodies = sorted(targets.bodies, key=lambda b: b.frame)
+    obstacles = targets.obstacles
+    table, cols, feet = _joint_columns(library, tracks, [j for _, _, j, _, _, _ in targets.joints], obstacles)
+    joint_targets = tuple(
+        JointTarget(n, t, j, cols.index(j), p, v, wt) for n, t, j, p, v, wt in targets.joints
+    )
     grid = None
-    if len(bodies) >= 2 or joints or obstacles:
+    if len(bodies) >= 2 or joint_targets or obstacles:
         grid = fit_grid(
             length,
             [(b.frame, b.xz, b.heading, b.weight) for b in bodies],
@@ -312,12 +235,124 @@ def compile_problem(request: Any, library: MotionLibrary, tracks: RootTracks) ->
         tuple(bodies),
         joint_targets,
         tuple(poses),
-        tuple(labels),
+        tuple(targets.labels),
         tuple(obstacles),
         table,
         feet,
         grid,
     )
+
+
+JointSpec = tuple[str, int, int, FloatArray, FloatArray | None, float]
+"""A joint constraint before its column is known: name, output frame, joint, position, velocity, weight."""
+
+
+class _Targets:
+    """The request's constraints checked against the database, one target list per kind, named
+    ``kind[i]`` in request order."""
+
+    def __init__(self, library: MotionLibrary, tracks: RootTracks, length: int) -> None:
+        self.library, self.tracks, self.length = library, tracks, length
+        self.skeleton = library.motions[0].skeleton
+        self.bodies: list[BodyTarget] = []
+        self.joints: list[JointSpec] = []
+        self.poses: list[PoseTarget] = []
+        self.labels: list[LabelTarget] = []
+        self.obstacles: list[ObstacleTarget] = []
+        self._count: dict[str, int] = {}
+
+    def add(self, c: Any) -> None:
+        """Check and add one constraint of the request."""
+        if c.type == "body":
+            heading = None if c.heading_deg is None else float(np.radians(c.heading_deg))
+            self.bodies.append(
+                BodyTarget(
+                    self.name("body"), self.timed(c, "body"), np.asarray(c.position, float), heading, c.weight
+                )
+            )
+        elif c.type == "joint":
+            self.joints.append(self.joint(c))
+        elif c.type == "pose":
+            self.poses.append(self.pose(c))
+        elif c.type == "label":
+            self.labels.append(self.label(c))
+        elif c.type == "obstacle":
+            region = (
+                FloorRegion.disc(c.disc.center, c.disc.radius)
+                if c.disc is not None
+                else FloorRegion.from_polygon(c.polygon)
+            )
+            self.obstacles.append(ObstacleTarget(self.name("obstacle"), c.weight, region))
+        else:  # pragma: no cover - the schema's union is closed
+            raise EngineError(f"unknown constraint type {c.type!r}")
+
+    def name(self, kind: str) -> str:
+        i = self._count.get(kind, 0)
+        self._count[kind] = i + 1
+        return f"{kind}[{i}]"
+
+    def timed(self, c: Any, kind: str) -> int:
+        """The constraint's output frame (``frame`` or ``time_s``), inside the motion."""
+        t = _frame_of(c, self.library.fps)
+        if not 0 <= t < self.length:
+            raise EngineError(
+                f"{kind} constraint at output frame {t} is outside the motion (0..{self.length - 1})"
+            )
+        return t
+
+    def joint(self, c: Any) -> JointSpec:
+        try:
+            j = self.skeleton.index(c.joint)
+        except MotionError:
+            raise EngineError(
+                f"no joint named {c.joint!r}; joints: {', '.join(self.skeleton.names)}"
+            ) from None
+        vel = None if c.velocity is None else np.asarray(c.velocity, float)
+        return self.name("joint"), self.timed(c, "joint"), j, np.asarray(c.position, float), vel, c.weight
+
+    def pose(self, c: Any) -> PoseTarget:
+        try:
+            clip = self.library.index(c.clip)
+        except MotionError as exc:
+            raise EngineError(str(exc)) from None
+        n = self.library.motions[clip].num_frames
+        if c.clip_frame >= n:
+            raise EngineError(
+                f"pose constraint: clip {c.clip!r} has {n} frames, asked for frame {c.clip_frame}"
+            )
+        return PoseTarget(self.name("pose"), self.timed(c, "pose"), clip, int(c.clip_frame))
+
+    def label(self, c: Any) -> LabelTarget:
+        """A label range, with the cumulative count of the database frames that satisfy it."""
+        start, end = min(int(c.start), self.length), min(int(c.end), self.length)
+        if end <= start:
+            raise EngineError(
+                f"label constraint [{c.start}, {c.end}) is outside the motion (0..{self.length - 1})"
+            )
+        lab = _label_values(self.library, self.tracks, c.label)
+        if c.value == 1 and not np.any(lab == 1):
+            raise EngineError(f"no clip of the database carries the label {c.label!r}")
+        good = (lab == 1) if c.value == 1 else (lab != 1)
+        cum = np.zeros(int(self.tracks.offsets[-1]) + 1, dtype=np.int64)
+        np.cumsum(good, out=cum[1:])
+        return LabelTarget(self.name("label"), c.label, start, end, int(c.value), c.weight, cum)
+
+
+def _joint_columns(
+    library: MotionLibrary, tracks: RootTracks, joints: list[int], obstacles: list[ObstacleTarget]
+) -> tuple[JointTable | None, list[int], IntArray]:
+    """The joints whose positions the search tracks (the constrained ones, and the feet when there
+    are obstacles): their table, the joint of each column, and the feet's columns."""
+    feet = np.zeros(0, np.int64)
+    cols: list[int] = sorted(set(joints))
+    if obstacles:
+        try:
+            foot = [int(f) for f in foot_joints(library.motions[0].skeleton)]
+        except MotionError:
+            foot = []
+        cols = sorted(set(cols) | set(foot))
+        feet = np.array([cols.index(f) for f in foot], dtype=np.int64)
+    return (JointTable(library, tracks, cols) if cols else None), cols, feet
 
 
 def _obstacle_step(length: int) -> int:

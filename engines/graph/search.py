@@ -507,17 +507,27 @@ class GraphSearch:
 
     def _scores(self, problem: Problem, cands: PathBatch, clock: _Clock) -> tuple[FloatArray, IntArray]:
         """Totals ``(B,)`` of full-length paths (inf for shorter ones) and their re-anchored
-        start frames, scored :data:`CHUNK` at a time between budget and cancel checks."""
+        start frames (:meth:`_scored`)."""
+        totals, starts, played = self._scored(problem, cands, clock)
+        return np.where(played >= problem.length, totals, np.inf), starts
+
+    def _scored(
+        self, problem: Problem, cands: PathBatch, clock: _Clock
+    ) -> tuple[FloatArray, IntArray, IntArray]:
+        """Totals ``(B,)``, re-anchored start frames and frames played of a batch, scored
+        :data:`CHUNK` at a time between budget and cancel checks."""
         totals = np.empty(cands.size)
         starts = np.empty(cands.size, dtype=np.int64)
+        played = np.empty(cands.size, dtype=np.int64)
         for lo in range(0, cands.size, CHUNK):
             clock.check()
             hi = min(lo + CHUNK, cands.size)
             part = PathBatch(cands.start_clip[lo:hi], cands.start_frame[lo:hi], cands.edges[lo:hi])
             s = score_batch(self.index_, problem, part)
-            totals[lo:hi] = np.where(s.pieces.total >= problem.length, s.total, np.inf)
+            totals[lo:hi] = s.total
             starts[lo:hi] = s.batch.start_frame
-        return totals, starts
+            played[lo:hi] = s.pieces.total
+        return totals, starts, played
 
     # -- rounds ------------------------------------------------------------------------------
     def _round(
@@ -556,17 +566,7 @@ class GraphSearch:
         frames should not buy a better score once a full-length path is found)."""
         if cands.size == 0:
             return []
-        totals = np.empty(cands.size)
-        starts = np.empty(cands.size, dtype=np.int64)
-        played = np.empty(cands.size, dtype=np.int64)
-        for lo in range(0, cands.size, CHUNK):
-            clock.check()
-            hi = min(lo + CHUNK, cands.size)
-            part = PathBatch(cands.start_clip[lo:hi], cands.start_frame[lo:hi], cands.edges[lo:hi])
-            s = score_batch(self.index_, problem, part)
-            totals[lo:hi] = s.total
-            starts[lo:hi] = s.batch.start_frame
-            played[lo:hi] = s.pieces.total
+        totals, starts, played = self._scored(problem, cands, clock)
         full = path_pieces(self.index_, member.path, problem.length).total >= problem.length
         better = np.flatnonzero((totals < member.score - 1e-9) & (~full | (played >= problem.length)))
         if better.size == 0:

@@ -32,7 +32,7 @@ from motion.plausibility import SPEED_P99_MARGIN, SPEED_WINDOW_S
 from motion.quality import QualityInputs
 from motion.skeleton import POSITION_CHANNELS
 
-from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
+from ..base import Arrays, Emitter, Engine, EngineError, LiveSession, ShouldStop, Solution
 from ..library import MotionLibrary
 from .build import build_rhythm, tables_from_arrays
 from .music import MusicError, bpm_beats, parse_midi
@@ -292,6 +292,12 @@ class RhythmEngine(Engine):
                 for c in range(request.characters)
             ]
         return leaders, partners, r
+
+    def live_session(self, *, seed: int = 0, fps: float | None = None, accent: float = 0.6) -> LiveSession:
+        """A dancer driven by beats as they happen (:class:`engines.rhythm.session.LiveDancer`)."""
+        from .session import LiveDancer  # the session module builds on this one
+
+        return LiveDancer(self, seed=seed, fps=fps, accent=accent)
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
         beats = music_beats(request)

@@ -20,6 +20,7 @@ Arrays (``M`` movements, ``N = B * P + 1`` frames each, ``J`` joints, ``B`` beat
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -153,68 +154,39 @@ def extract_movements(examples: list[Example], beats_per_movement: int) -> Movem
         raise MotionError("the examples have fewer than 2 motion beats each")
     period = float(np.median(periods))
     p = max(4, int(round(period * fps)))
-    roots, rots, jts, clips, frames, idx, ends_xz, ends_yaw = [], [], [], [], [], [], [], []
-    kept: list[npt.NDArray[np.bool_]] = []
-    proots, prots = [], []
-    for ci, ex in enumerate(examples):
-        b = np.asarray(ex.beats_s, dtype=np.float64)
-        b = b[(b >= 0) & (b <= ex.motion.duration_s + 1e-9)]
-        src = warp_frames(b, fps, beats_per_movement, p)
-        if src.shape[0] == 0:
-            continue
-        src = np.clip(src, 0.0, ex.motion.num_frames - 1)
-        spans = np.diff(b[: src.shape[0] * beats_per_movement + 1]).reshape(src.shape[0], beats_per_movement)
-        regular = spans.max(axis=1) <= MAX_BEAT_RATIO * spans.min(axis=1)
-        kept.append(regular)
-        c, n = src.shape
-        sampled = sample_at(ex.motion, src.reshape(-1))
-        pos = sampled.global_positions()
-        yaw = heading(sampled, pos).reshape(c, n)
-        # unwrap within each movement, relative to its first frame
-        yaw = np.unwrap(yaw, axis=1)
-        yaw0 = yaw[:, 0]
-        body = pos[:, body_root(ex.motion.skeleton), :].reshape(c, n, 3)
-        origin = body[:, 0, [0, 2]]  # (C, 2)
-        r, q = _normalize(sampled, c, n, origin, yaw0)
-        roots.append(r)
-        rots.append(q)
-        jts.append(sampled.joint_translations.reshape(c, n, *sampled.joint_translations.shape[1:]))
-        if ex.partner is not None:
-            partner = sample_at(ex.partner, np.clip(src.reshape(-1), 0, ex.partner.num_frames - 1))
-            pr, pq = _normalize(partner, c, n, origin, yaw0)
-            proots.append(pr)
-            prots.append(pq)
-        body_local = rotate_points_yaw(
-            body - np.concatenate((origin[:, None, :1], np.zeros((c, 1, 1)), origin[:, None, 1:]), axis=-1),
-            -yaw0[:, None],
-        )
-        ends_xz.append(body_local[:, -1, [0, 2]])
-        ends_yaw.append(yaw[:, -1] - yaw0)
-        clips.append(np.full(c, ci, dtype=np.intp))
-        frames.append(src)
-        idx.append(np.arange(c, dtype=np.intp))
-    if not roots:
+    cuts = [
+        cut
+        for ci, ex in enumerate(examples)
+        if (cut := _cut_example(ci, ex, fps, beats_per_movement, p)) is not None
+    ]
+    if not cuts:
         raise MotionError(
             f"no example has {beats_per_movement + 1} motion beats: nothing to cut into "
             f"{beats_per_movement}-beat movements"
         )
-    keep = np.concatenate(kept)
+    keep = np.concatenate([cut.regular for cut in cuts])
     if not keep.any():
         keep[:] = True  # no clean span at all: irregular movements rather than none
     couples = [e.partner is not None for e in examples]
     if any(couples) and not all(couples):
         raise MotionError("examples must be all solo or all couples")
-    end_xz, end_yaw = np.concatenate(ends_xz)[keep], np.concatenate(ends_yaw)[keep]
-    root_all = np.concatenate(roots)[keep]
+
+    def kept(arrays: list[npt.NDArray[Any] | None]) -> npt.NDArray[Any]:
+        """The regular movements of all the examples, end to end (examples are all solo or all
+        couples, so a partner's arrays are there for every example or for none)."""
+        return np.asarray(np.concatenate([a for a in arrays if a is not None])[keep])
+
+    end_xz, end_yaw = kept([cut.end_xz for cut in cuts]), kept([cut.end_yaw for cut in cuts])
     duration = beats_per_movement * period
     body_path = np.concatenate((np.zeros((end_xz.shape[0], 1, 2)), end_xz[:, None, :]), axis=1)
+    partnered = any(cut.partner_root is not None for cut in cuts)
     return Movements(
-        root=root_all,
-        rot=np.concatenate(rots)[keep],
-        jt=np.concatenate(jts)[keep],
-        src_clip=np.concatenate(clips)[keep],
-        src_frames=np.concatenate(frames)[keep],
-        index_in_clip=np.concatenate(idx)[keep],
+        root=kept([cut.root for cut in cuts]),
+        rot=kept([cut.rot for cut in cuts]),
+        jt=kept([cut.jt for cut in cuts]),
+        src_clip=kept([cut.src_clip for cut in cuts]),
+        src_frames=kept([cut.src_frames for cut in cuts]),
+        index_in_clip=kept([cut.index_in_clip for cut in cuts]),
         end_xz=end_xz,
         end_yaw=end_yaw,
         params=arc_parameters(body_path, end_yaw, duration),
@@ -222,8 +194,69 @@ def extract_movements(examples: list[Example], beats_per_movement: int) -> Movem
         beats_per_movement=beats_per_movement,
         period_s=period,
         fps=fps,
-        partner_root=np.concatenate(proots)[keep] if proots else None,
-        partner_rot=np.concatenate(prots)[keep] if prots else None,
+        partner_root=kept([cut.partner_root for cut in cuts]) if partnered else None,
+        partner_rot=kept([cut.partner_rot for cut in cuts]) if partnered else None,
+    )
+
+
+@dataclass(slots=True)
+class _ClipMovements:
+    """The ``C`` movements cut from one example, each ``n = beats x P`` frames, normalized (its
+    first frame at the floor origin, facing +Z)."""
+
+    root: Array  # (C, n, 3)
+    rot: Array  # (C, n, J, 4)
+    jt: Array  # (C, n, K, 3) joint translations
+    partner_root: Array | None
+    partner_rot: Array | None
+    end_xz: Array  # (C, 2) where the body ends, in the movement's frame
+    end_yaw: Array  # (C,) how far it turned, radians
+    src_clip: IntArray  # (C,)
+    src_frames: Array  # (C, n) source frame of every frame
+    index_in_clip: IntArray  # (C,)
+    regular: npt.NDArray[np.bool_]  # (C,) its beats are regular
+
+
+def _cut_example(ci: int, ex: Example, fps: float, beats_per_movement: int, p: int) -> _ClipMovements | None:
+    """Example ``ci`` cut at its beats into movements time-warped to ``p`` frames per beat (None
+    when it has too few beats)."""
+    b = np.asarray(ex.beats_s, dtype=np.float64)
+    b = b[(b >= 0) & (b <= ex.motion.duration_s + 1e-9)]
+    src = warp_frames(b, fps, beats_per_movement, p)
+    if src.shape[0] == 0:
+        return None
+    src = np.clip(src, 0.0, ex.motion.num_frames - 1)
+    spans = np.diff(b[: src.shape[0] * beats_per_movement + 1]).reshape(src.shape[0], beats_per_movement)
+    c, n = src.shape
+    sampled = sample_at(ex.motion, src.reshape(-1))
+    pos = sampled.global_positions()
+    yaw = heading(sampled, pos).reshape(c, n)
+    # unwrap within each movement, relative to its first frame
+    yaw = np.unwrap(yaw, axis=1)
+    yaw0 = yaw[:, 0]
+    body = pos[:, body_root(ex.motion.skeleton), :].reshape(c, n, 3)
+    origin = body[:, 0, [0, 2]]  # (C, 2)
+    r, q = _normalize(sampled, c, n, origin, yaw0)
+    pr = pq = None
+    if ex.partner is not None:
+        partner = sample_at(ex.partner, np.clip(src.reshape(-1), 0, ex.partner.num_frames - 1))
+        pr, pq = _normalize(partner, c, n, origin, yaw0)
+    body_local = rotate_points_yaw(
+        body - np.concatenate((origin[:, None, :1], np.zeros((c, 1, 1)), origin[:, None, 1:]), axis=-1),
+        -yaw0[:, None],
+    )
+    return _ClipMovements(
+        root=r,
+        rot=q,
+        jt=sampled.joint_translations.reshape(c, n, *sampled.joint_translations.shape[1:]),
+        partner_root=pr,
+        partner_rot=pq,
+        end_xz=body_local[:, -1, [0, 2]],
+        end_yaw=yaw[:, -1] - yaw0,
+        src_clip=np.full(c, ci, dtype=np.intp),
+        src_frames=src,
+        index_in_clip=np.arange(c, dtype=np.intp),
+        regular=spans.max(axis=1) <= MAX_BEAT_RATIO * spans.min(axis=1),
     )
 
 

@@ -14,6 +14,7 @@ four quarter-note beats, 6/8 six eighth-note beats), 4/4 at 120 BPM when the fil
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -111,6 +112,27 @@ def parse_midi(data: bytes) -> TempoMap:
     Raises :class:`MusicError` for anything that is not a well-formed SMF (bad chunk ids, lengths
     past the end of the file, data bytes without a status, truncated events, bad tempo events).
     """
+    ntrks, tpq, smpte, pos = _midi_header(data)
+    tempos: dict[int, int] = {}
+    sigs: dict[int, tuple[int, int]] = {}
+    end_tick = found = 0
+    for body, end in _track_chunks(data, pos, ntrks):
+        found += 1
+        end_tick = max(end_tick, _read_track(data, body, end, tempos, sigs))
+    if found < ntrks:
+        raise MusicError(f"MIDI: the header declares {ntrks} tracks but the file holds {found}")
+    tempo_list = sorted(tempos.items())
+    if not tempo_list or tempo_list[0][0] != 0:
+        tempo_list.insert(0, (0, DEFAULT_TEMPO_US))
+    sig_list = [(t, n, d) for t, (n, d) in sorted(sigs.items())]
+    if sig_list and sig_list[0][0] != 0:
+        sig_list.insert(0, (0, 4, 4))
+    return TempoMap(tpq, smpte, tempo_list, sig_list, end_tick)
+
+
+def _midi_header(data: bytes) -> tuple[int, int, float, int]:
+    """The ``MThd`` chunk: track count, ticks per quarter note (0 for SMPTE timing), seconds per
+    tick in SMPTE timing (0 otherwise), and the byte where the chunks after it start."""
     if len(data) < 14 or data[:4] != b"MThd":
         raise MusicError("not a Standard MIDI File: it must start with an 'MThd' header chunk")
     (hlen,) = struct.unpack(">I", data[4:8])
@@ -127,15 +149,15 @@ def parse_midi(data: bytes) -> TempoMap:
         frames = 29.97 if fps_code == 29 else float(fps_code)
         if frames <= 0 or tpf == 0:
             raise MusicError("MIDI SMPTE division is invalid")
-        tpq, smpte = 0, 1.0 / (frames * tpf)
-    else:
-        if division == 0:
-            raise MusicError("MIDI division (ticks per quarter note) is 0")
-        tpq, smpte = division, 0.0
-    tempos: dict[int, int] = {}
-    sigs: dict[int, tuple[int, int]] = {}
-    end_tick = 0
-    pos = 8 + hlen
+        return ntrks, 0, 1.0 / (frames * tpf), 8 + hlen
+    if division == 0:
+        raise MusicError("MIDI division (ticks per quarter note) is 0")
+    return ntrks, division, 0.0, 8 + hlen
+
+
+def _track_chunks(data: bytes, pos: int, ntrks: int) -> Iterator[tuple[int, int]]:
+    """``(first byte, end)`` of the first ``ntrks`` ``MTrk`` chunks from byte ``pos`` on (unknown
+    chunks are skipped, as the standard asks)."""
     found = 0
     while pos < len(data) and found < ntrks:
         if pos + 8 > len(data):
@@ -148,72 +170,84 @@ def parse_midi(data: bytes) -> TempoMap:
                 f"MIDI: chunk {cid!r} at byte {pos} claims {clen} bytes past the end of the file"
             )
         pos = end
-        if cid != b"MTrk":
-            continue  # unknown chunks are skipped, as the standard asks
-        found += 1
-        tick, p, status = 0, body, 0
-        while p < end:
-            delta, p = _read_varlen(data, p, end)
-            tick += delta
-            if p >= end:
-                raise MusicError(f"MIDI: event missing after a delta time at byte {p}")
-            b = data[p]
-            if b == 0xFF:
-                if p + 2 > end:
-                    raise MusicError(f"MIDI: truncated meta event at byte {p}")
-                mtype = data[p + 1]
-                mlen, q = _read_varlen(data, p + 2, end)
-                if q + mlen > end:
-                    raise MusicError(f"MIDI: meta event at byte {p} runs past the end of its track")
-                payload = data[q : q + mlen]
-                if mtype == 0x51:
-                    if mlen != 3:
-                        raise MusicError(f"MIDI: tempo event at byte {p} must have 3 data bytes, has {mlen}")
-                    us = int.from_bytes(payload, "big")
-                    if us == 0:
-                        raise MusicError(f"MIDI: tempo of 0 microseconds per quarter note at byte {p}")
-                    tempos[tick] = us
-                elif mtype == 0x58:
-                    if mlen < 2:
-                        raise MusicError(f"MIDI: time signature event at byte {p} is too short")
-                    if payload[1] > 6:
-                        raise MusicError(f"MIDI: time signature denominator 2^{payload[1]} is out of range")
-                    if payload[0] == 0:
-                        raise MusicError(f"MIDI: time signature with 0 beats per bar at byte {p}")
-                    sigs[tick] = (payload[0], 2 ** payload[1])
-                p = q + mlen
-                status = 0  # meta events cancel running status
-                if mtype == 0x2F:
-                    break
-            elif b in (0xF0, 0xF7):
-                slen, q = _read_varlen(data, p + 1, end)
-                if q + slen > end:
-                    raise MusicError(f"MIDI: SysEx event at byte {p} runs past the end of its track")
-                p = q + slen
-                status = 0
-            else:
-                if b & 0x80:
-                    status = b
-                    p += 1
-                elif status == 0:
-                    raise MusicError(f"MIDI: data byte 0x{b:02x} without a status byte at byte {p}")
-                n = _DATA_BYTES.get(status & 0xF0)
-                if n is None:
-                    raise MusicError(f"MIDI: unexpected status byte 0x{status:02x} at byte {p}")
-                if p + n > end:
-                    raise MusicError(f"MIDI: truncated channel message at byte {p}")
-                p += n
-            end_tick = max(end_tick, tick)
-        end_tick = max(end_tick, tick)
-    if found < ntrks:
-        raise MusicError(f"MIDI: the header declares {ntrks} tracks but the file holds {found}")
-    tempo_list = sorted(tempos.items())
-    if not tempo_list or tempo_list[0][0] != 0:
-        tempo_list.insert(0, (0, DEFAULT_TEMPO_US))
-    sig_list = [(t, n, d) for t, (n, d) in sorted(sigs.items())]
-    if sig_list and sig_list[0][0] != 0:
-        sig_list.insert(0, (0, 4, 4))
-    return TempoMap(tpq, smpte, tempo_list, sig_list, end_tick)
+        if cid == b"MTrk":
+            found += 1
+            yield body, end
+
+
+def _read_track(
+    data: bytes, p: int, end: int, tempos: dict[int, int], sigs: dict[int, tuple[int, int]]
+) -> int:
+    """Read one track's events (bytes ``[p, end)``), adding its tempo and time-signature events
+    to ``tempos`` / ``sigs`` by tick; returns the track's last tick."""
+    tick, status = 0, 0
+    while p < end:
+        delta, p = _read_varlen(data, p, end)
+        tick += delta
+        if p >= end:
+            raise MusicError(f"MIDI: event missing after a delta time at byte {p}")
+        b = data[p]
+        if b == 0xFF:
+            mtype, p = _meta_event(data, p, end, tick, tempos, sigs)
+            status = 0  # meta events cancel running status
+            if mtype == 0x2F:
+                break
+        elif b in (0xF0, 0xF7):
+            slen, q = _read_varlen(data, p + 1, end)
+            if q + slen > end:
+                raise MusicError(f"MIDI: SysEx event at byte {p} runs past the end of its track")
+            p = q + slen
+            status = 0
+        else:
+            status, p = _channel_message(data, p, end, status)
+    return tick
+
+
+def _meta_event(
+    data: bytes, p: int, end: int, tick: int, tempos: dict[int, int], sigs: dict[int, tuple[int, int]]
+) -> tuple[int, int]:
+    """The meta event at byte ``p`` (a tempo or time signature is recorded at ``tick``); returns its
+    type and the byte after it."""
+    if p + 2 > end:
+        raise MusicError(f"MIDI: truncated meta event at byte {p}")
+    mtype = data[p + 1]
+    mlen, q = _read_varlen(data, p + 2, end)
+    if q + mlen > end:
+        raise MusicError(f"MIDI: meta event at byte {p} runs past the end of its track")
+    payload = data[q : q + mlen]
+    if mtype == 0x51:
+        if mlen != 3:
+            raise MusicError(f"MIDI: tempo event at byte {p} must have 3 data bytes, has {mlen}")
+        us = int.from_bytes(payload, "big")
+        if us == 0:
+            raise MusicError(f"MIDI: tempo of 0 microseconds per quarter note at byte {p}")
+        tempos[tick] = us
+    elif mtype == 0x58:
+        if mlen < 2:
+            raise MusicError(f"MIDI: time signature event at byte {p} is too short")
+        if payload[1] > 6:
+            raise MusicError(f"MIDI: time signature denominator 2^{payload[1]} is out of range")
+        if payload[0] == 0:
+            raise MusicError(f"MIDI: time signature with 0 beats per bar at byte {p}")
+        sigs[tick] = (payload[0], 2 ** payload[1])
+    return mtype, q + mlen
+
+
+def _channel_message(data: bytes, p: int, end: int, status: int) -> tuple[int, int]:
+    """Skip the channel message at byte ``p`` (running status: a data byte reuses ``status``);
+    returns the status in force and the byte after the message."""
+    b = data[p]
+    if b & 0x80:
+        status = b
+        p += 1
+    elif status == 0:
+        raise MusicError(f"MIDI: data byte 0x{b:02x} without a status byte at byte {p}")
+    n = _DATA_BYTES.get(status & 0xF0)
+    if n is None:
+        raise MusicError(f"MIDI: unexpected status byte 0x{status:02x} at byte {p}")
+    if p + n > end:
+        raise MusicError(f"MIDI: truncated channel message at byte {p}")
+    return status, p + n
 
 
 def bpm_beats(bpm: float, duration_s: float, offset_s: float = 0.0) -> Array:

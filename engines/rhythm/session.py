@@ -52,6 +52,11 @@ class LiveDancer:
         self.heading: float | None = None
         self.speed: float | None = None
 
+    @property
+    def period_s(self) -> float:
+        """The examples' beat period, seconds."""
+        return float(self.tables.period_s)
+
     def skeleton_message(self) -> dict[str, Any]:
         """The ``skeleton`` message: joint names, parents, offsets (metres), Euler channel orders."""
         sk = self.engine.leader_skeleton

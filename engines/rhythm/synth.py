@@ -282,38 +282,14 @@ def plan_movement(
         if (d.node < 0).all()
         else np.cumsum(t.p[np.maximum(d.node, 0)], axis=1)
     )
-    group = _sample_rows(cum, rng)
-    duration = t.beats_per_movement * t.period_s
-    extra_yaw = np.zeros(c)
-    extra_xz = np.zeros((c, 2))
+    group = _sample_rows(cum, rng)  # the next node of the movement transition graph
     if control is None:
         members, weights = one_hot(t.blender, group, rng)
+        extra_yaw, extra_xz = np.zeros(c), np.zeros((c, 2))
     else:
-        free_m, _ = one_hot(t.blender, group, rng)
-        free = t.params[free_m[:, 0]]
-        turn_goal = np.angle(np.exp(1j * (control.heading - d.yaw)))
-        target = np.stack(
-            (
-                np.where(np.isnan(control.speed), free[:, 0], control.speed),
-                np.where(np.isnan(control.heading), free[:, 1], turn_goal),
-            ),
-            axis=-1,
+        members, weights, extra_yaw, extra_xz = _steered_blend(
+            t, d, group, control, rng, max_extra_turn, max_extra_speed
         )
-        members, weights = blend_weights(t.blender, group, target)
-        got = (t.params[members] * weights[..., None]).sum(axis=1)
-        steer = ~np.isnan(control.heading)
-        extra_yaw = np.where(steer, np.clip(target[:, 1] - got[:, 1], -max_extra_turn, max_extra_turn), 0.0)
-        # travel: the net displacement of the blend vs the one asked for (speed along the desired
-        # heading), in the movement frame; the difference, capped, is added progressively
-        rel = np.where(steer, turn_goal, 0.0)
-        want = (
-            np.stack((np.sin(rel), np.cos(rel)), axis=-1) * (np.nan_to_num(control.speed) * duration)[:, None]
-        )
-        got_xz = (t.end_xz[members] * weights[..., None]).sum(axis=1)
-        miss = want - got_xz
-        norm = np.linalg.norm(miss, axis=1, keepdims=True)
-        miss = miss * np.minimum(1.0, max_extra_speed * duration / np.maximum(norm, 1e-12))
-        extra_xz = np.where(np.isnan(control.speed)[:, None], 0.0, miss)
     plan = MovementPlan(
         members=members,
         weights=weights,
@@ -326,31 +302,83 @@ def plan_movement(
         d_rot=np.zeros((c, t.rot.shape[2], 3)),
         fade_frames=join_beats * t.frames_per_beat,
     )
+    _join_to_last(t, d, plan)
+    _advance(t, d, plan)
+    return plan
+
+
+def _steered_blend(
+    t: Tables,
+    d: Dancers,
+    group: IntArray,
+    control: Control,
+    rng: np.random.Generator,
+    max_extra_turn: float,
+    max_extra_speed: float,
+) -> tuple[IntArray, Array, Array, Array]:
+    """The members and blend weights of each character's group that best reach the requested
+    ``(speed, turn)`` (a free parameter: a random member's), and the extra turn ``(C,)`` radians
+    and travel ``(C, 2)`` metres (capped) still needed, added over the movement."""
+    duration = t.beats_per_movement * t.period_s
+    free_m, _ = one_hot(t.blender, group, rng)
+    free = t.params[free_m[:, 0]]
+    turn_goal = np.angle(np.exp(1j * (control.heading - d.yaw)))
+    target = np.stack(
+        (
+            np.where(np.isnan(control.speed), free[:, 0], control.speed),
+            np.where(np.isnan(control.heading), free[:, 1], turn_goal),
+        ),
+        axis=-1,
+    )
+    members, weights = blend_weights(t.blender, group, target)
+    got = (t.params[members] * weights[..., None]).sum(axis=1)
+    steer = ~np.isnan(control.heading)
+    extra_yaw = np.where(steer, np.clip(target[:, 1] - got[:, 1], -max_extra_turn, max_extra_turn), 0.0)
+    # travel: the net displacement of the blend vs the one asked for (speed along the desired
+    # heading), in the movement frame; the difference, capped, is added progressively
+    rel = np.where(steer, turn_goal, 0.0)
+    want = np.stack((np.sin(rel), np.cos(rel)), axis=-1) * (np.nan_to_num(control.speed) * duration)[:, None]
+    got_xz = (t.end_xz[members] * weights[..., None]).sum(axis=1)
+    miss = want - got_xz
+    norm = np.linalg.norm(miss, axis=1, keepdims=True)
+    miss = miss * np.minimum(1.0, max_extra_speed * duration / np.maximum(norm, 1e-12))
+    extra_xz = np.where(np.isnan(control.speed)[:, None], 0.0, miss)
+    return members, weights, extra_yaw, extra_xz
+
+
+def _join_to_last(t: Tables, d: Dancers, plan: MovementPlan) -> None:
+    """The offsets that take the new movement's first pose (and its partner's) to the dancers'
+    last pose, faded out over the join (none for the first movement)."""
+    if d.last_root is None or d.last_rot is None:
+        return
     u0 = np.zeros(1)
-    if d.last_root is not None and d.last_rot is not None:
-        root0 = _blend_at(t.root, members, weights, u0, False)[:, 0]
-        rot0 = _blend_at(t.rot, members, weights, u0, True)[:, 0]
-        plan.d_root, plan.d_rot = _join_offsets(plan, d.last_root, d.last_rot, root0, rot0)
-        if (
-            t.partner_root is not None
-            and t.partner_rot is not None
-            and d.last_proot is not None
-            and d.last_prot is not None
-        ):
-            proot0 = _blend_at(t.partner_root, members, weights, u0, False)[:, 0]
-            prot0 = _blend_at(t.partner_rot, members, weights, u0, True)[:, 0]
-            plan.d_proot, plan.d_prot = _join_offsets(plan, d.last_proot, d.last_prot, proot0, prot0)
-    # advance the dancers to the end of the movement
-    end_xz = (t.end_xz[members] * weights[..., None]).sum(axis=1) + extra_xz
-    end_yaw = (t.end_yaw[members] * weights).sum(axis=1) + extra_yaw
-    d.pos = d.pos + _yaw_rotate_xz(_yaw_rotate_xz(end_xz, extra_yaw), d.yaw)
+    members, weights = plan.members, plan.weights
+    root0 = _blend_at(t.root, members, weights, u0, False)[:, 0]
+    rot0 = _blend_at(t.rot, members, weights, u0, True)[:, 0]
+    plan.d_root, plan.d_rot = _join_offsets(plan, d.last_root, d.last_rot, root0, rot0)
+    if (
+        t.partner_root is not None
+        and t.partner_rot is not None
+        and d.last_proot is not None
+        and d.last_prot is not None
+    ):
+        proot0 = _blend_at(t.partner_root, members, weights, u0, False)[:, 0]
+        prot0 = _blend_at(t.partner_rot, members, weights, u0, True)[:, 0]
+        plan.d_proot, plan.d_prot = _join_offsets(plan, d.last_proot, d.last_prot, proot0, prot0)
+
+
+def _advance(t: Tables, d: Dancers, plan: MovementPlan) -> None:
+    """Move the dancers to the end of the planned movement: place, heading, node and last pose."""
+    members, weights = plan.members, plan.weights
+    end_xz = (t.end_xz[members] * weights[..., None]).sum(axis=1) + plan.extra_xz
+    end_yaw = (t.end_yaw[members] * weights).sum(axis=1) + plan.extra_yaw
+    d.pos = d.pos + _yaw_rotate_xz(_yaw_rotate_xz(end_xz, plan.extra_yaw), d.yaw)
     d.yaw = d.yaw + end_yaw
-    d.node = group
+    d.node = plan.group
     last = render(t, plan, np.array([t.frames - 1.0]))
     d.last_root, d.last_rot = last.root[:, 0], last.rot[:, 0]
     if last.proot is not None and last.prot is not None:
         d.last_proot, d.last_prot = last.proot[:, 0], last.prot[:, 0]
-    return plan
 
 
 def _join_offsets(

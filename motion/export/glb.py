@@ -120,15 +120,34 @@ def glb_bytes(motion: Motion, *, ground_root: bool = True, mesh: bool = True) ->
     """
     m = _prepared(motion, ground_root)
     sk = m.skeleton
-    n_joints, n_frames = sk.num_joints, m.num_frames
     scale = m.metres_per_unit
-    grounded = sk.names[0] == GROUND_ROOT_NAME  # True after _prepared(..., ground_root=True)
-
     b = _Builder()
     offsets = sk.offsets * scale
     rest = _rest_globals(sk.parents, offsets)  # (J, 3) metres
+    nodes = _joint_nodes(m, offsets)
+    scene_roots = [0]
+    channels, samplers = _animation(b, m)  # buffer views in file order: animation, skin, mesh
+    gltf: dict[str, Any] = {
+        "asset": {"version": "2.0", "generator": "segue"},
+        "scene": 0,
+        "scenes": [{"name": _label(m), "nodes": scene_roots}],
+        "nodes": nodes,
+        "skins": [_skin(b, m, rest)],
+        "animations": [{"name": _label(m), "channels": channels, "samplers": samplers}],
+    }
+    if mesh:
+        _add_bone_mesh(b, gltf, m, rest)
+    gltf["accessors"] = b.accessors
+    gltf["bufferViews"] = b.views
+    gltf["buffers"] = [{"byteLength": len(b.data)}]
+    return _container(gltf, bytes(b.data))
 
-    # -- nodes ---------------------------------------------------------------------------------
+
+def _joint_nodes(m: Motion, offsets: Array) -> list[dict[str, Any]]:
+    """Nodes ``0 .. J-1`` (the joints, at their rest offsets ``(J, 3)`` metres) then one leaf per End
+    Site, with ``children`` after ``skeleton.parents``."""
+    sk = m.skeleton
+    n_joints = sk.num_joints
     nodes: list[dict[str, Any]] = [
         {"name": name, "translation": _floats(offsets[j])} for j, name in enumerate(sk.names)
     ]
@@ -136,7 +155,7 @@ def glb_bytes(motion: Motion, *, ground_root: bool = True, mesh: bool = True) ->
     for j in range(1, n_joints):
         children[int(sk.parents[j])].append(j)
     end_count = [0] * n_joints
-    for parent, off in zip(sk.end_site_parents, sk.end_site_offsets * scale, strict=True):
+    for parent, off in zip(sk.end_site_parents, sk.end_site_offsets * m.metres_per_unit, strict=True):
         p = int(parent)
         suffix = "_end" if end_count[p] == 0 else f"_end_{end_count[p]}"
         end_count[p] += 1
@@ -145,9 +164,14 @@ def glb_bytes(motion: Motion, *, ground_root: bool = True, mesh: bool = True) ->
     for j in range(n_joints):
         if children[j]:
             nodes[j]["children"] = children[j]
-    scene_roots = [0]
+    return nodes
 
-    # -- animation -----------------------------------------------------------------------------
+
+def _animation(b: _Builder, m: Motion) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The animation's channels and samplers: key times ``frame / fps`` s, every joint's local
+    quaternions (continuous signs) and the translations of the root and translated joints (m)."""
+    sk = m.skeleton
+    n_joints, n_frames = sk.num_joints, m.num_frames
     times = (np.arange(n_frames, dtype=np.float64) / m.fps).astype(np.float32)
     if n_frames > 1 and not np.all(np.diff(times) > 0):
         raise ExportError(
@@ -165,8 +189,8 @@ def glb_bytes(motion: Motion, *, ground_root: bool = True, mesh: bool = True) ->
     rot_acc = [b.accessor(quat_view, j * n_frames * 16, FLOAT, n_frames, "VEC4") for j in range(n_joints)]
 
     moved = np.concatenate(([0], sk.translated_joints)).astype(np.intp)
-    trans = np.concatenate((m.root_positions[:, None], m.joint_translations), axis=1) * scale  # (F, 1+K, 3)
-    trans_view = b.view(np.ascontiguousarray(np.swapaxes(trans, 0, 1)).astype(np.float32))
+    trans = np.concatenate((m.root_positions[:, None], m.joint_translations), axis=1) * m.metres_per_unit
+    trans_view = b.view(np.ascontiguousarray(np.swapaxes(trans, 0, 1)).astype(np.float32))  # (1+K, F, 3)
     trans_acc = [
         b.accessor(trans_view, k * n_frames * 12, FLOAT, n_frames, "VEC3") for k in range(moved.size)
     ]
@@ -179,49 +203,48 @@ def glb_bytes(motion: Motion, *, ground_root: bool = True, mesh: bool = True) ->
     ]:
         channels.append({"sampler": len(samplers), "target": {"node": node, "path": path}})
         samplers.append({"input": t_acc, "interpolation": "LINEAR", "output": acc})
+    return channels, samplers
 
-    # -- skin ----------------------------------------------------------------------------------
+
+def _skin(b: _Builder, m: Motion, rest: Array) -> dict[str, Any]:
+    """The skin: every joint node, inverse bind matrices = the inverse of the rest globals ``rest``
+    ``(J, 3)`` (pure translations), column-major."""
+    sk = m.skeleton
+    n_joints = sk.num_joints
     ibm = np.broadcast_to(np.eye(4), (n_joints, 4, 4)).copy()
     ibm[:, :3, 3] = -rest  # inverse of a pure translation
     ibm_view = b.view(np.ascontiguousarray(np.swapaxes(ibm, 1, 2)).astype(np.float32))  # column-major
-    skin = {
+    return {
         "name": sk.names[0] + "_skin",
         "joints": list(range(n_joints)),
         "skeleton": 0,
         "inverseBindMatrices": b.accessor(ibm_view, 0, FLOAT, n_joints, "MAT4"),
     }
 
-    gltf: dict[str, Any] = {
-        "asset": {"version": "2.0", "generator": "segue"},
-        "scene": 0,
-        "scenes": [{"name": _label(m), "nodes": scene_roots}],
-        "nodes": nodes,
-        "skins": [skin],
-        "animations": [{"name": _label(m), "channels": channels, "samplers": samplers}],
-    }
 
-    # -- mesh ----------------------------------------------------------------------------------
-    if mesh:
-        geometry = _bone_mesh(sk.parents, rest, sk.end_site_parents, sk.end_site_offsets * scale, grounded)
-        if geometry is not None:
-            gltf["meshes"] = [{"name": sk.names[0] + "_bones", "primitives": [_primitive(b, *geometry)]}]
-            gltf["materials"] = [
-                {
-                    "name": "bone",
-                    "pbrMetallicRoughness": {
-                        "baseColorFactor": [0.72, 0.74, 0.78, 1.0],
-                        "metallicFactor": 0.0,
-                        "roughnessFactor": 0.7,
-                    },
-                }
-            ]
-            scene_roots.append(len(nodes))
-            nodes.append({"name": sk.names[0] + "_mesh", "mesh": 0, "skin": 0})
-
-    gltf["accessors"] = b.accessors
-    gltf["bufferViews"] = b.views
-    gltf["buffers"] = [{"byteLength": len(b.data)}]
-    return _container(gltf, bytes(b.data))
+def _add_bone_mesh(b: _Builder, gltf: dict[str, Any], m: Motion, rest: Array) -> None:
+    """Add the skinned bone mesh, its material and its node (a scene root) to ``gltf``."""
+    sk = m.skeleton
+    grounded = sk.names[0] == GROUND_ROOT_NAME  # True after _prepared(..., ground_root=True)
+    geometry = _bone_mesh(
+        sk.parents, rest, sk.end_site_parents, sk.end_site_offsets * m.metres_per_unit, grounded
+    )
+    if geometry is None:
+        return
+    gltf["meshes"] = [{"name": sk.names[0] + "_bones", "primitives": [_primitive(b, *geometry)]}]
+    gltf["materials"] = [
+        {
+            "name": "bone",
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [0.72, 0.74, 0.78, 1.0],
+                "metallicFactor": 0.0,
+                "roughnessFactor": 0.7,
+            },
+        }
+    ]
+    nodes = gltf["nodes"]
+    gltf["scenes"][0]["nodes"].append(len(nodes))
+    nodes.append({"name": sk.names[0] + "_mesh", "mesh": 0, "skin": 0})
 
 
 def write_glb(motion: Motion, path: str | Path, *, ground_root: bool = True, mesh: bool = True) -> None:

@@ -1,30 +1,34 @@
-"""``/v1/databases/{id}/corrections``: the annotation engine's correction loop.
+"""``/v1/databases/{id}/labels`` and ``/corrections``: the annotation engine's correction loop.
 
-The user accepts or corrects label ranges of an ``annotated`` database's clips; the corrected
-ranges are written into a new spec (:func:`engines.annotations.corrections.apply_corrections`)
-whose build retrains the SVMs. The answer is that new database (202 with its ``build_job``, or
-200 when a database with the same content address exists), exactly as ``POST /v1/databases``.
+The user looks at a clip's labels (the user's and the SVMs' propagated ones), then accepts or
+corrects label ranges; the corrected ranges are written into a new spec
+(:meth:`engines.base.Engine.corrected_spec`) whose build retrains the SVMs. The answer is that new
+database (202 with its ``build_job``, or 200 when a database with the same content address exists),
+exactly as ``POST /v1/databases``.
+
+Both read only the database's label table (clip names, lengths, vocabulary, per-frame labels) from
+its ``data.npz``, in a worker thread, through the engine query API
+(:func:`engines.base.open_database`): the motion and the search tables stay on disk.
 """
 
 from __future__ import annotations
 
-import asyncio
 from typing import Annotated
 
-from fastapi import APIRouter, Query, Request, Response, status
+from fastapi import APIRouter, Depends, Query, Response, status
 from pydantic import Field, TypeAdapter
+from starlette.concurrency import run_in_threadpool
 
-from engines.annotations.corrections import apply_corrections, propagated_ranges
-from engines.annotations.search import Database
-from engines.base import EngineError
-from engines.library import library_from_arrays
-from schemas import DatabaseInfo, DatabaseStatus
-from schemas.annotations import AnnotatedDatabaseSpec, LabelCorrection
-from workers.store import Store, load_npz
+from engines.base import EngineError, UnknownClipError, open_database
+from engines.registry import kind_class
+from schemas import DatabaseInfo, DatabaseStatus, parse_database_spec
+from schemas.annotations import ClipLabels, LabelCorrection
+from schemas.bases import DatabaseSpecBase
+from workers.store import Store
 
 from ..deps import BackendDep, MetricsDep, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, conflict, responses
-from ..jsonbody import json_body_doc, read_json, validate_off_loop
+from ..jsonbody import json_body, json_body_doc
 from ..owners import database_for
 from .databases import create_from_spec
 
@@ -35,11 +39,30 @@ CORRECTIONS_ADAPTER: TypeAdapter[list[LabelCorrection]] = TypeAdapter(Correction
 CORRECTIONS_BODY = json_body_doc(
     "LabelCorrections", "Label corrections: 1 to 10,000 ranges to set or accept."
 )
+CorrectionsBody = Annotated[list[LabelCorrection], Depends(json_body(CORRECTIONS_ADAPTER.validate_python))]
 
 
-def _load(store: Store, db_id: str) -> Database:
-    arrays = load_npz(store.database_arrays_bytes(db_id))
-    return Database.from_arrays(library_from_arrays(arrays), arrays)
+def _annotated(info: DatabaseInfo, ready: bool) -> None:
+    """422 unless the database is ``annotated``; 409 unless it is built when ``ready`` is asked."""
+    if info.kind != "annotated":
+        raise ApiError(422, "invalid_request", f"database {info.id} is {info.kind!r}, not 'annotated'")
+    if ready and info.status != DatabaseStatus.ready:
+        raise conflict("database_not_ready", f"database {info.id} is {info.status.value}")
+
+
+def _corrected_spec(store: Store, info: DatabaseInfo, corrections: list[LabelCorrection]) -> DatabaseSpecBase:
+    """The corrected spec (reads the label table only when a correction accepts labels)."""
+    engine = kind_class(info.kind)
+    spec = parse_database_spec(store.database_spec(info.id))
+    if not any(c.action == "accept" for c in corrections):
+        return engine.corrected_spec(spec, corrections, None)
+    with open_database(store.db_dir(info.id) / "data.npz") as arrays:
+        return engine.corrected_spec(spec, corrections, arrays)
+
+
+def _clip_labels(store: Store, info: DatabaseInfo, clip: str, start: int, end: int | None) -> ClipLabels:
+    with open_database(store.db_dir(info.id) / "data.npz") as arrays:
+        return kind_class(info.kind).clip_labels(arrays, clip, start, end)
 
 
 @router.post(
@@ -61,38 +84,29 @@ def _load(store: Store, db_id: str) -> Database:
 )
 async def correct_labels(
     db_id: str,
-    request: Request,
     response: Response,
     store: StoreDep,
     backend: BackendDep,
     metrics: MetricsDep,
     settings: SettingsDep,
     principal: PrincipalDep,
+    corrections: CorrectionsBody,
 ) -> DatabaseInfo:
     """Build the database with corrected labels (``set`` a label on a clip's frame range, or
     ``accept`` the propagated labels of a range); clips are named as in the database."""
-    info = database_for(store, principal, db_id)
-    body = await read_json(request, settings)
-    corrections: list[LabelCorrection] = await validate_off_loop(CORRECTIONS_ADAPTER, body, request, settings)
-    if info.kind != "annotated":
-        raise ApiError(422, "invalid_request", f"database {db_id} is {info.kind!r}, not 'annotated'")
-    spec = AnnotatedDatabaseSpec.model_validate(store.database_spec(db_id))
-    db = None
-    if any(c.action == "accept" for c in corrections):
-        if info.status != DatabaseStatus.ready:
-            raise conflict("database_not_ready", f"database {db_id} is {info.status.value}")
-        db = await asyncio.to_thread(_load, store, db_id)
+    info = await run_in_threadpool(database_for, store, principal, db_id)
+    _annotated(info, ready=any(c.action == "accept" for c in corrections))
     try:
-        corrected = apply_corrections(spec, corrections, db)
+        corrected = await run_in_threadpool(_corrected_spec, store, info, corrections)
     except EngineError as exc:
         raise ApiError(422, "invalid_request", str(exc)) from None
-    shared = frozenset(c.clip for c in spec.clips if c.clip is not None)
+    shared = frozenset(c.clip for c in corrected.clips if c.clip is not None)
     return await create_from_spec(
         corrected, response, store, backend, metrics, principal, shared, settings.max_database_frames
     )
 
 
-@router.get("/{db_id}/labels", responses=responses(401, 404, 409, 422))
+@router.get("/{db_id}/labels", response_model=ClipLabels, responses=responses(401, 404, 409, 422))
 async def clip_labels(
     db_id: str,
     store: StoreDep,
@@ -100,22 +114,15 @@ async def clip_labels(
     clip: Annotated[str, Query(min_length=1, description="clip as named in the database")],
     start: Annotated[int, Query(ge=0)] = 0,
     end: Annotated[int | None, Query(gt=0)] = None,
-) -> dict[str, object]:
+) -> ClipLabels:
     """The labels of a clip of a ready ``annotated`` database as ranges (database frames): the user's
     where given, the SVMs' propagated labels elsewhere; what a client shows before it accepts or
     corrects them (``POST /v1/databases/{id}/corrections``)."""
-    info = database_for(store, principal, db_id)
-    if info.kind != "annotated":
-        raise ApiError(422, "invalid_request", f"database {db_id} is {info.kind!r}, not 'annotated'")
-    if info.status != DatabaseStatus.ready:
-        raise conflict("database_not_ready", f"database {db_id} is {info.status.value}")
-    db = await asyncio.to_thread(_load, store, db_id)
+    info = await run_in_threadpool(database_for, store, principal, db_id)
+    _annotated(info, ready=True)
     try:
-        g0 = db.frame_of(clip, 0)
-    except EngineError as exc:
+        return await run_in_threadpool(_clip_labels, store, info, clip, start, end)
+    except UnknownClipError as exc:
         raise ApiError(404, "not_found", str(exc)) from None
-    try:
-        ranges = propagated_ranges(db, clip, start, end)
     except EngineError as exc:
         raise ApiError(422, "invalid_request", str(exc)) from None
-    return {"clip": clip, "frames": int(db.counts[int(db.clip_of[g0])]), "labels": ranges}

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 from enum import StrEnum
 from typing import Annotated
 
@@ -12,13 +11,12 @@ from starlette.concurrency import run_in_threadpool
 
 from motion.units import METRES_PER_UNIT
 from schemas import ClipInfo
-from workers.store import NotFoundError
 
-from ..deps import PrincipalDep, SettingsDep, StoreDep
+from ..deps import ParseLimiterDep, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, responses
-from ..jsonbody import JsonIntent, parse_limiter
-from ..owners import clip_for, visible
-from ..uploads import read_upload, upload_body
+from ..jsonbody import delete_route
+from ..owners import clip_for, hold, only_visible, release
+from ..uploads import read_upload, stored, upload_body
 
 router = APIRouter(prefix="/v1/clips", tags=["clips"])
 
@@ -49,6 +47,7 @@ async def upload_clip(
     response: Response,
     store: StoreDep,
     settings: SettingsDep,
+    limiter: ParseLimiterDep,
     principal: PrincipalDep,
     name: Annotated[str | None, Query(max_length=255, description="file name (raw-body uploads)")] = None,
     units: Annotated[
@@ -61,11 +60,7 @@ async def upload_clip(
     (409 ``units_conflict`` when that upload declared or was guessed other ``units``).
     """
     file_name, data = await read_upload(request, settings.max_upload_bytes, name)
-    digest = hashlib.sha256(data).hexdigest()
-    try:
-        existing = store.clip_info(digest)
-    except NotFoundError:
-        existing = None
+    existing = await run_in_threadpool(stored, store.clip_info, data)
     if existing is None:
         # parsing is the expensive, memory-hungry part: a bounded number at once, off the event loop
         existing = await anyio.to_thread.run_sync(
@@ -74,7 +69,7 @@ async def upload_clip(
             data,
             settings.bvh_limits,
             units.value if units is not None else None,
-            limiter=parse_limiter(request, settings),
+            limiter=limiter,
         )
     elif units is not None and units.value != existing.units:
         raise ApiError(
@@ -84,20 +79,18 @@ async def upload_clip(
             f"units cannot change (delete it first to upload it again with units={units.value!r})",
             {"clip": existing.id, "units": existing.units},
         )
-    if not store.add_owner("clips", existing.id, principal.name):
-        response.status_code = status.HTTP_200_OK
+    await run_in_threadpool(hold, store, principal, "clips", existing.id, response)
     return existing
 
 
 @router.get("", response_model=list[ClipInfo], responses=responses(401))
-async def list_clips(store: StoreDep, principal: PrincipalDep) -> list[ClipInfo]:
+def list_clips(store: StoreDep, principal: PrincipalDep) -> list[ClipInfo]:
     """Your uploaded clips, oldest first."""
-    mine = visible(store, principal, "clips")
-    return [c for c in await run_in_threadpool(store.list_clips) if mine(c.id)]
+    return only_visible(store, principal, "clips", store.list_clips())
 
 
 @router.get("/{clip_id}", response_model=ClipInfo, responses=responses(401, 404, 422))
-async def get_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> ClipInfo:
+def get_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> ClipInfo:
     """One of your clips by id (or by the file name it was uploaded with)."""
     return clip_for(store, principal, clip_id)
 
@@ -129,16 +122,8 @@ def _ascii(name: str) -> str:
     return "".join(c if c.isascii() and c.isprintable() and c not in '"\\' else "_" for c in name)
 
 
-@router.delete(
-    "/{clip_id}",
-    status_code=status.HTTP_204_NO_CONTENT,
-    dependencies=[JsonIntent],
-    responses=responses(401, 404, 422, 415),
-)
-async def delete_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
+@router.delete("/{clip_id}", **delete_route())
+def delete_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
     """Delete your clip (databases already built from it keep their data). The bytes go when no
     other principal holds the same clip."""
-    info = clip_for(store, principal, clip_id)
-    if principal.admin or not store.remove_owner("clips", info.id, principal.name):
-        store.delete_clip(info.id)
-    return Response(status_code=status.HTTP_204_NO_CONTENT)
+    return release(store, principal, "clips", clip_for(store, principal, clip_id).id, store.delete_clip)

@@ -6,32 +6,44 @@ and spec again returns the existing database instead of building it twice.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import APIRouter, Request, Response, status
+from fastapi import APIRouter, Depends, Request, Response, status
 from pydantic import TypeAdapter
 from starlette.concurrency import run_in_threadpool
 
-from engines.registry import kind_class
+from engines.registry import require_kind
 from motion import MotionError
 from motion.resample import resampled_frames
 from schemas import ClipSource, DatabaseInfo, DatabaseSpec, DatabaseStatus
+from schemas.bases import DatabaseSpecBase
 from schemas.clips import labels_past_clip_end
-from schemas.databases import DatabaseSpecBase, DatabaseSummary, database_id, parse_database_spec
+from schemas.databases import DatabaseSummary, database_id, parse_database_spec
 from schemas.jobs import JobKind
+from workers.backend import JobBackend
 from workers.budget import database_frames
 from workers.samples import store_sample
 from workers.store import NotFoundError, Store, now
 from workers.summary import database_summary
 
-from ..deps import BackendDep, MetricsDep, Principal, PrincipalDep, SettingsDep, StoreDep
+from ..deps import BackendDep, JobQuotaDep, MetricsDep, Principal, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, conflict, responses
 from ..jobs_common import new_job_id, submit_job
-from ..jsonbody import JsonIntent, json_body_doc, read_json, validate_off_loop
-from ..owners import database_for, visible
+from ..jsonbody import delete_route, json_body, json_body_doc
+from ..metrics import Metrics
+from ..owners import database_for, release, visible
 
 SPEC_ADAPTER: TypeAdapter[Any] = TypeAdapter(DatabaseSpec)
 SPEC_BODY = json_body_doc("DatabaseSpec", "A database spec: the clips (uploaded) and the kind's settings.")
+
+
+def validate_spec(value: object) -> DatabaseSpecBase:
+    """A parsed JSON body as a database spec of any kind (pydantic's ``ValidationError`` otherwise)."""
+    spec: DatabaseSpecBase = SPEC_ADAPTER.validate_python(value)
+    return spec
+
+
+SpecBody = Annotated[DatabaseSpecBase, Depends(json_body(validate_spec))]
 
 router = APIRouter(prefix="/v1/databases", tags=["databases"])
 
@@ -121,18 +133,18 @@ def _usable(store: Store, info: DatabaseInfo) -> bool:
     ),
 )
 async def create_database(
-    request: Request,
     response: Response,
     store: StoreDep,
     backend: BackendDep,
     metrics: MetricsDep,
     settings: SettingsDep,
+    quota: JobQuotaDep,
     principal: PrincipalDep,
+    spec: SpecBody,
+    request: Request,
 ) -> DatabaseInfo:
     """Build a database from uploaded clips (202 with ``build_job``; follow its events), or return
     the existing one with the same content address (200)."""
-    spec = await validate_off_loop(SPEC_ADAPTER, await read_json(request, settings), request, settings)
-    quota = request.app.state.job_quota
     quota.check(principal.name)
     info = await create_from_spec(
         spec, response, store, backend, metrics, principal, max_frames=settings.max_database_frames
@@ -175,17 +187,17 @@ async def create_from_spec(
     spec: DatabaseSpecBase,
     response: Response,
     store: Store,
-    backend: Any,
-    metrics: Any,
+    backend: JobBackend,
+    metrics: Metrics,
     principal: Principal,
     shared: frozenset[str] = frozenset(),
     max_frames: int | None = None,
 ) -> DatabaseInfo:
     """The body of ``POST /v1/databases`` once the spec is valid (also used by corrections)."""
-    kind_class(spec.kind)  # 422 unavailable for kinds whose engine has not landed
-    resolved, hashes = resolve_clips(store, spec, principal, shared)
-    check_database_size(store, resolved, hashes, max_frames)
-    check_label_ranges(store, resolved, hashes)
+    require_kind(spec.kind)  # 422 unavailable for kinds whose engine has not landed
+    resolved, hashes = await run_in_threadpool(resolve_clips, store, spec, principal, shared)
+    await run_in_threadpool(check_database_size, store, resolved, hashes, max_frames)
+    await run_in_threadpool(check_label_ranges, store, resolved, hashes)
     db_id = database_id(resolved, hashes)
     # No await between this check and the job being stored (in submit_job, before the backend is
     # awaited), so concurrent posts of one spec in this process start one build.
@@ -268,13 +280,8 @@ async def get_database(
     return await run_in_threadpool(with_summary, request.app.state, store, info)
 
 
-@router.delete(
-    "/{db_id}",
-    status_code=status.HTTP_204_NO_CONTENT,
-    dependencies=[JsonIntent],
-    responses=responses(401, 404, 409, 422, 415),
-)
-async def delete_database(db_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
+@router.delete("/{db_id}", **delete_route(409))
+def delete_database(db_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
     """Delete your database (409 while it is being built, or while unfinished jobs use it). The data
     goes when no other principal holds the same database."""
     info = database_for(store, principal, db_id)
@@ -291,6 +298,4 @@ async def delete_database(db_id: str, store: StoreDep, principal: PrincipalDep) 
             f"{len(users)} unfinished job(s) use database {db_id}; cancel them or wait for them to end",
             {"jobs": users[:20]},
         )
-    if principal.admin or not store.remove_owner("databases", db_id, principal.name):
-        store.delete_database(db_id)
-    return Response(status_code=status.HTTP_204_NO_CONTENT)
+    return release(store, principal, "databases", db_id, store.delete_database)

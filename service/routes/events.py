@@ -13,26 +13,30 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from typing import Annotated
+from collections.abc import Awaitable, Callable
+from typing import Annotated, TypeVar
 
 import anyio
 from fastapi import APIRouter, Query, WebSocket
 from fastapi.websockets import WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
-from schemas import EventType, JobEvent
+from schemas import EventType, JobEvent, JobInfo
 from workers.backend import JobBackend
 from workers.store import NotFoundError
 
-from ..deps import BackendDep, MetricsDep, PrincipalDep, SettingsDep, websocket_principal
+from ..deps import BackendDep, MetricsDep, Principal, PrincipalDep, SettingsDep, websocket_principal
 from ..errors import ApiError, error_response, responses
 from ..metrics import Metrics
 from ..owners import job_for
+from ..settings import Settings
 from ..streaming import EventQueue, pump
 
 log = logging.getLogger("segue.service.events")
 
 router = APIRouter(prefix="/v1/jobs", tags=["events"])
+
+Owned = TypeVar("Owned")
 
 After = Annotated[int, Query(ge=0, description="resume: only events with a larger id")]
 
@@ -87,7 +91,7 @@ async def list_events(
     return await collect_events(backend, job_id, after, wait)
 
 
-async def _refuse(
+async def refuse_handshake(
     websocket: WebSocket,
     status: int,
     code: str,
@@ -103,6 +107,30 @@ async def _refuse(
         return
     await websocket.accept()
     await websocket.close(code=ws_code, reason=message[:120])
+
+
+WebSocketToken = Annotated[str | None, Query(description="bearer token (or the Authorization header)")]
+
+
+async def websocket_owned(
+    websocket: WebSocket,
+    settings: Settings,
+    token: str | None,
+    find: Callable[[Principal], Awaitable[Owned]],
+) -> tuple[Principal, Owned] | None:
+    """The caller of a WebSocket (header, else ``?token=``) and what it asks for (``find``, a
+    lookup that raises ``NotFoundError`` for what the caller may not see), or None once the
+    handshake is refused (401 / close 4401) or the socket closed with 4404."""
+    principal = websocket_principal(websocket, settings, token)
+    if isinstance(principal, ApiError):
+        await refuse_handshake(websocket, 401, principal.code, principal.message, 4401)
+        return None
+    try:
+        return principal, await find(principal)
+    except NotFoundError as exc:
+        await websocket.accept()
+        await websocket.close(code=4404, reason=str(exc)[:120])
+        return None
 
 
 async def _send_events(websocket: WebSocket, queue: EventQueue, metrics: Metrics) -> JobEvent | None:
@@ -150,18 +178,14 @@ async def stream_events(
     settings: SettingsDep,
     metrics: MetricsDep,
     after: After = 0,
-    token: Annotated[str | None, Query(description="bearer token (or the Authorization header)")] = None,
+    token: WebSocketToken = None,
 ) -> None:
     """Stream a job's events as JSON text messages, ending with the terminal event (see module doc)."""
-    principal = websocket_principal(websocket, settings, token)
-    if isinstance(principal, ApiError):
-        await _refuse(websocket, 401, principal.code, principal.message, 4401)
-        return
-    try:
-        job_for(principal, await backend.status(job_id))
-    except NotFoundError as exc:
-        await websocket.accept()
-        await websocket.close(code=4404, reason=str(exc)[:120])
+
+    async def find(principal: Principal) -> JobInfo:
+        return job_for(principal, await backend.status(job_id))
+
+    if await websocket_owned(websocket, settings, token, find) is None:
         return
     await websocket.accept()
     metrics.inc("segue_ws_connections")

@@ -6,20 +6,18 @@ job records the resolved id at submission (``inputs``), so later uploads do not 
 
 from __future__ import annotations
 
-import hashlib
 from typing import Annotated
 
 from fastapi import APIRouter, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from schemas.files import FileInfo
-from workers.store import NotFoundError
 
 from ..deps import PrincipalDep, SettingsDep, StoreDep
 from ..errors import responses
-from ..jsonbody import JsonIntent
-from ..owners import file_for, visible
-from ..uploads import read_upload, upload_body
+from ..jsonbody import delete_route
+from ..owners import file_for, hold, only_visible, release
+from ..uploads import read_upload, stored, upload_body
 
 router = APIRouter(prefix="/v1/files", tags=["files"])
 
@@ -53,40 +51,27 @@ async def upload_file(
     """Upload an input file, stored once per content hash (201 new, 200 already there). Its content
     is checked by the engine that reads it, when a job runs."""
     file_name, data = await read_upload(request, settings.max_upload_bytes, name)
-    try:
-        existing: FileInfo | None = store.file_info(hashlib.sha256(data).hexdigest())
-    except NotFoundError:
-        existing = None
+    existing = await run_in_threadpool(stored, store.file_info, data)
     if existing is None:
         existing = await run_in_threadpool(store.put_file, file_name, data)
-    if not store.add_owner("files", existing.id, principal.name):
-        response.status_code = status.HTTP_200_OK
+    await run_in_threadpool(hold, store, principal, "files", existing.id, response)
     return existing
 
 
 @router.get("", response_model=list[FileInfo], responses=responses(401))
-async def list_files(store: StoreDep, principal: PrincipalDep) -> list[FileInfo]:
+def list_files(store: StoreDep, principal: PrincipalDep) -> list[FileInfo]:
     """Your uploaded files, oldest first."""
-    mine = visible(store, principal, "files")
-    return [f for f in await run_in_threadpool(store.list_files) if mine(f.id)]
+    return only_visible(store, principal, "files", store.list_files())
 
 
 @router.get("/{file_id}", response_model=FileInfo, responses=responses(401, 404, 422))
-async def get_file(file_id: str, store: StoreDep, principal: PrincipalDep) -> FileInfo:
+def get_file(file_id: str, store: StoreDep, principal: PrincipalDep) -> FileInfo:
     """One of your files by id."""
     return file_for(store, principal, file_id)
 
 
-@router.delete(
-    "/{file_id}",
-    status_code=status.HTTP_204_NO_CONTENT,
-    dependencies=[JsonIntent],
-    responses=responses(401, 404, 422, 415),
-)
-async def delete_file(file_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
+@router.delete("/{file_id}", **delete_route())
+def delete_file(file_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
     """Delete your file (jobs already submitted with it fail if they still need it). The bytes go when
     no other principal holds the same file."""
-    info = file_for(store, principal, file_id)
-    if principal.admin or not store.remove_owner("files", info.id, principal.name):
-        store.delete_file(info.id)
-    return Response(status_code=status.HTTP_204_NO_CONTENT)
+    return release(store, principal, "files", file_for(store, principal, file_id).id, store.delete_file)

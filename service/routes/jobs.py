@@ -2,41 +2,50 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated
 
 import anyio
 import numpy as np
-from fastapi import APIRouter, Query, Request, Response, status
+from fastapi import APIRouter, Depends, Query, Response, status
 from starlette.concurrency import run_in_threadpool
 
-from engines.registry import engine_class
+from engines.registry import engine_kind
 from motion import ExportError
 from motion.resample import resample
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
+from schemas.bases import JobRequestBase
 from schemas.jobs import JobKind, JobStatus
 from workers.backend import JobBackend
-from workers.budget import DatabaseFacts, check_work, database_facts, estimate_work
+from workers.budget import check_work, database_facts, estimate_work
 from workers.inputs import InputError, attach_from_store, resolve_inputs
+from workers.store import Store
 
-from ..deps import BackendDep, MetricsDep, Principal, PrincipalDep, SettingsDep, StoreDep
+from ..deps import (
+    BackendDep,
+    JobQuotaDep,
+    MetricsDep,
+    ParseLimiterDep,
+    Principal,
+    PrincipalDep,
+    SettingsDep,
+    StoreDep,
+)
 from ..errors import ApiError, conflict, responses
 from ..exports import MEDIA_TYPES, ExportTarget, ResultFormat, export_bytes
 from ..jobs_common import submit_job
-from ..jsonbody import JsonIntent, parse_limiter, read_json
+from ..jsonbody import JsonIntent, json_body, json_body_doc
 from ..owners import database_for, job_for, visible
+from ..settings import Settings
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 
-JOB_REQUEST_BODY = {
-    "requestBody": {
-        "required": True,
-        "description": "A job request: the built-in engines' requests are shown; engine plugins add theirs.",
-        "content": {"application/json": {"schema": {"$ref": "#/components/schemas/JobRequest"}}},
-    }
-}
-"""The request body as documented (the schema is added by :func:`service.app.custom_openapi`); the
+JOB_REQUEST_BODY = json_body_doc(
+    "JobRequest", "A job request: the built-in engines' requests are shown; engine plugins add theirs."
+)
+"""The request body as documented (the schema is added by :func:`service.app.create_app`); the
 route parses the body itself with :func:`schemas.parse_job_request` so plugin engines work."""
 
+JobRequestBody = Annotated[JobRequestBase, Depends(json_body(parse_job_request))]
 ResultQuery = Annotated[str | None, Query(description="result id (default: the job's best result so far)")]
 
 
@@ -48,23 +57,23 @@ ResultQuery = Annotated[str | None, Query(description="result id (default: the j
     responses=responses(400, 401, 404, 409, 413, 415, 422, 429, 503),
 )
 async def submit(
-    request: Request,
     store: StoreDep,
     backend: BackendDep,
     metrics: MetricsDep,
     settings: SettingsDep,
+    quota: JobQuotaDep,
+    limiter: ParseLimiterDep,
     principal: PrincipalDep,
+    job_request: JobRequestBody,
 ) -> JobInfo:
     """Submit a synthesis job against a ready database; follow it with ``/v1/jobs/{id}/events``.
 
     The request's work (output frames x characters x joints, memory, time) is checked against the
     server's limits first: 413 ``over_budget`` names each number over its limit."""
-    body = await read_json(request, settings)
-    job_request = await run_in_threadpool(parse_job_request, body)
-    engine: str = job_request.engine  # type: ignore[attr-defined]
+    engine = job_request.engine
     if job_request.database is None:
         raise ApiError(422, "invalid_request", "the request names no database ('database': <database id>)")
-    db = database_for(store, principal, job_request.database)
+    db = await run_in_threadpool(database_for, store, principal, job_request.database)
     if db.status != DatabaseStatus.ready:
         detail = f" ({db.error})" if db.error else ""
         raise conflict(
@@ -72,12 +81,12 @@ async def submit(
             f"database {db.id} is {db.status.value}{detail}; submit once it is ready",
             {"database": db.id, "status": db.status.value, "build_job": db.build_job},
         )
-    engine_cls = engine_class(engine)
-    if engine_cls.kind != db.kind:
+    kind = engine_kind(engine)
+    if kind != db.kind:
         raise ApiError(
             422,
             "wrong_database_kind",
-            f"engine {engine!r} needs a {engine_cls.kind!r} database; database {db.id} is {db.kind!r}",
+            f"engine {engine!r} needs a {kind!r} database; database {db.id} is {db.kind!r}",
         )
     try:
         mine = visible(store, principal, "clips", "files")
@@ -85,28 +94,24 @@ async def submit(
         await run_in_threadpool(attach_from_store, store, job_request)
     except InputError as exc:
         raise ApiError(422, "input_not_found", str(exc), {"inputs": job_request.input_files()}) from None
-    await _check_budget(request, settings, store, job_request)
-    request.app.state.job_quota.check(principal.name)
+    await _check_budget(settings, store, limiter, job_request)
+    quota.check(principal.name)
     payload = {"request": job_request.model_dump(mode="json")}
     info = await submit_job(
         store, backend, metrics, JobKind.synth, payload, engine=engine, database=db.id, owner=principal.name
     )
-    request.app.state.job_quota.add(principal.name, info.id)
+    quota.add(principal.name, info.id)
     return info
 
 
-async def _check_budget(request: Request, settings: SettingsDep, store: StoreDep, job_request: Any) -> None:
+async def _check_budget(
+    settings: Settings, store: Store, limiter: anyio.CapacityLimiter, job_request: JobRequestBase
+) -> None:
     """413 ``over_budget`` when the request asks for more work than the server's limits allow."""
-    facts = await run_in_threadpool(
-        database_facts_cached, request.app.state, store, str(job_request.database)
-    )
+    npz = str(store.db_dir(str(job_request.database)) / "data.npz")
+    facts = await run_in_threadpool(database_facts, npz)
     work = await anyio.to_thread.run_sync(
-        estimate_work,
-        job_request,
-        facts.fps,
-        facts.joints,
-        facts.clip_frames,
-        limiter=parse_limiter(request, settings),
+        estimate_work, job_request, facts.fps, facts.joints, facts.clip_frames, limiter=limiter
     )
     problems = check_work(work, settings.work_limits)
     if problems:
@@ -116,19 +121,6 @@ async def _check_budget(request: Request, settings: SettingsDep, store: StoreDep
             "the request asks for more work than this server allows: " + "; ".join(problems),
             {"estimate": work.as_dict(), "limits": settings.work_limits_dict(), "problems": problems},
         )
-
-
-def database_facts_cached(state: Any, store: StoreDep, db_id: str) -> DatabaseFacts:
-    """The budget facts of a ready database (read once per process, the database never changes)."""
-    cache: dict[str, DatabaseFacts] | None = getattr(state, "database_facts", None)
-    if cache is None:
-        cache = state.database_facts = {}
-    facts = cache.get(db_id)
-    if facts is None:
-        facts = cache[db_id] = database_facts(str(store.db_dir(db_id) / "data.npz"))
-        while len(cache) > 256:
-            cache.pop(next(iter(cache)))
-    return facts
 
 
 @router.get("", response_model=list[JobInfo], responses=responses(401, 422))
@@ -268,4 +260,6 @@ async def report(
 ) -> Report:
     """A result's report: score terms, constraint errors, metrics and per-frame provenance (409
     ``result_not_ready`` before the job's first solution)."""
-    return store.result_report(job_id, await _result_id(backend, principal, job_id, result))
+    return await run_in_threadpool(
+        store.result_report, job_id, await _result_id(backend, principal, job_id, result)
+    )

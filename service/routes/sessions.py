@@ -26,8 +26,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import threading
-from collections import OrderedDict
 from typing import Annotated, Any
 
 import anyio
@@ -35,42 +33,31 @@ from fastapi import APIRouter, Query, WebSocket
 from fastapi.websockets import WebSocketDisconnect
 from pydantic import TypeAdapter, ValidationError
 
-from engines.library import library_from_arrays
-from engines.rhythm.engine import RhythmEngine
-from engines.rhythm.session import LiveDancer
+from engines.base import LiveSession
+from engines.registry import kind_class
+from schemas import DatabaseInfo
 from schemas.rhythm import SessionBeat, SessionBpm, SessionDirection, SessionMessage, SessionStop
-from workers.store import NotFoundError, Store, load_npz
+from workers.execute import EngineCache
+from workers.store import Store
 
-from ..deps import SettingsDep, StoreDep, websocket_principal
-from ..errors import ApiError
+from ..deps import EnginesDep, Principal, SessionQuotaDep, SettingsDep, StoreDep
 from ..owners import database_for
-from .events import _refuse
+from .events import WebSocketToken, refuse_handshake, websocket_owned
 
 router = APIRouter(prefix="/v1/sessions", tags=["sessions"])
 
 _MESSAGES: TypeAdapter[Any] = TypeAdapter(SessionMessage)
-_CACHE: OrderedDict[tuple[str, str], RhythmEngine] = OrderedDict()
-_CACHE_LOCK = threading.Lock()
-_CACHE_SIZE = 4
 MAX_MESSAGE_CHARS = 4096
 """Longest client message (every valid one is well under 200 characters)."""
 
 
-def _load_engine(store: Store, db_id: str) -> RhythmEngine:
-    """The loaded engine of a rhythm database (a few kept per process)."""
-    key = (str(store.root), db_id)
-    with _CACHE_LOCK:
-        engine = _CACHE.get(key)
-        if engine is not None:
-            _CACHE.move_to_end(key)
-            return engine
-    arrays = load_npz(store.database_arrays_bytes(db_id))
-    engine = RhythmEngine(library_from_arrays(arrays), arrays)
-    with _CACHE_LOCK:
-        _CACHE[key] = engine
-        while len(_CACHE) > _CACHE_SIZE:
-            _CACHE.popitem(last=False)
-    return engine
+def _open_session(
+    engines: EngineCache, store: Store, db_id: str, kind: str, seed: int, fps: float | None, accent: float
+) -> tuple[LiveSession, dict[str, Any]]:
+    """A live session on a database (its engine loaded once per process) and its first message."""
+    engine = engines.get(db_id, kind_class(kind), store.database_arrays_bytes)
+    session = engine.live_session(seed=seed, fps=fps, accent=accent)
+    return session, session.skeleton_message()
 
 
 async def _reader(websocket: WebSocket, inbox: asyncio.Queue[str | None], limit: int) -> None:
@@ -91,27 +78,26 @@ async def rhythm_session(
     websocket: WebSocket,
     store: StoreDep,
     settings: SettingsDep,
+    engines: EnginesDep,
+    quota: SessionQuotaDep,
     database: Annotated[str, Query(description="id of a ready rhythm database")],
     seed: Annotated[int, Query(ge=0, le=2**32 - 1)] = 0,
     fps: Annotated[float | None, Query(gt=0, le=240)] = None,
     accent: Annotated[float, Query(ge=0, le=0.9)] = 0.6,
-    token: Annotated[str | None, Query(description="bearer token (or the Authorization header)")] = None,
+    token: WebSocketToken = None,
 ) -> None:
     """Dance to beats sent live (see the module doc for the message format)."""
-    principal = websocket_principal(websocket, settings, token)
-    if isinstance(principal, ApiError):
-        await _refuse(websocket, 401, principal.code, principal.message, 4401)
+
+    async def find(principal: Principal) -> DatabaseInfo:
+        return await anyio.to_thread.run_sync(database_for, store, principal, database)
+
+    owned = await websocket_owned(websocket, settings, token, find)
+    if owned is None:
         return
-    try:
-        info = database_for(store, principal, database)
-    except NotFoundError as exc:
-        await websocket.accept()
-        await websocket.close(code=4404, reason=str(exc)[:120])
-        return
-    quota = websocket.app.state.session_quota
+    principal, info = owned
     refusal = quota.refusal(principal.name)
     if refusal is not None:
-        await _refuse(websocket, 429, refusal.code, refusal.message, 4429, refusal.headers)
+        await refuse_handshake(websocket, 429, refusal.code, refusal.message, 4429, refusal.headers)
         return
     with quota.hold(principal.name):
         await websocket.accept()
@@ -120,19 +106,20 @@ async def rhythm_session(
                 code=4400, reason=f"database {database} is not a ready rhythm database"[:120]
             )
             return
-        engine = await anyio.to_thread.run_sync(_load_engine, store, database)
-        dancer = LiveDancer(engine, seed=seed, fps=fps, accent=accent)
-        await websocket.send_json(dancer.skeleton_message())
+        dancer, skeleton = await anyio.to_thread.run_sync(
+            _open_session, engines, store, database, info.kind, seed, fps, accent
+        )
+        await websocket.send_json(skeleton)
         await _Session(websocket, dancer, settings.session_inbox).run()
 
 
 class _Session:
     """The beat clock and message loop of one socket."""
 
-    def __init__(self, websocket: WebSocket, dancer: LiveDancer, inbox_size: int = 64) -> None:
+    def __init__(self, websocket: WebSocket, dancer: LiveSession, inbox_size: int = 64) -> None:
         self.websocket, self.dancer = websocket, dancer
         self.inbox_size = inbox_size
-        self.period = dancer.tables.period_s
+        self.period = dancer.period_s
         self.auto_next: float | None = None  # loop time of the next generated beat (bpm mode)
         self.last_beat: float | None = None
 

@@ -27,6 +27,7 @@ from service.limits import SessionQuota
 from service.routes import sessions
 from service.settings import Settings
 from tests.engines.rhythm_synthetic import library
+from workers.execute import EngineCache
 from workers.store import Store, now, npz_bytes
 
 DB = "rhythmtest"
@@ -65,6 +66,7 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     app.state.settings = Settings(data_dir=data, allowed_hosts=("localhost", "testserver"))
     app.state.store = store
     app.state.session_quota = SessionQuota(2)
+    app.state.engines = EngineCache()
     install_error_handlers(app)
     app.include_router(sessions.router)
     with TestClient(app, base_url="http://localhost") as c:

@@ -32,6 +32,7 @@ from schemas.databases import database_id, parse_database_spec
 from schemas.jobs import JobKind
 from workers.execute import EngineCache, execute_job
 from workers.redis_worker import run_worker
+from workers.settings import Settings
 from workers.store import Store, now
 
 REPO = Path(__file__).resolve().parents[2]
@@ -180,18 +181,13 @@ def synth(store: Store, db_id: str, **request: Any) -> tuple[JobInfo, dict[str, 
 
 
 @contextlib.contextmanager
-def worker_thread(redis_url: str, store: Store, name: str, **kwargs: Any) -> Iterator[threading.Event]:
-    """A worker running in a thread of this process; stopped (and joined) on exit."""
+def worker_thread(redis_url: str, store: Store, name: str, **fields: Any) -> Iterator[threading.Event]:
+    """A worker running in a thread of this process (``fields`` of its
+    :class:`~workers.settings.Settings`); stopped (and joined) on exit."""
     stop = threading.Event()
-    kwargs.setdefault("heartbeat_s", 0.2)
-    kwargs.setdefault("ttl_s", 1.0)
-    kwargs.setdefault("block_ms", 100)
-    thread = threading.Thread(
-        target=run_worker,
-        args=(redis_url, store.root),
-        kwargs={"name": name, "stop": stop, **kwargs},
-        daemon=True,
-    )
+    fields = {"heartbeat_s": 0.2, "heartbeat_ttl_s": 1.0, "block_ms": 100, **fields}
+    settings = Settings(redis_url=redis_url, data_dir=store.root, worker_name=name, **fields)
+    thread = threading.Thread(target=run_worker, args=(settings, stop), daemon=True)
     thread.start()
     try:
         yield stop

@@ -102,7 +102,7 @@ def test_database_cache_survives_flushall(redis_url: str, rclient: redis.Redis, 
         n = int(bytes_client.get(KEYS.db_count(db)) or 0)
         return b"".join(bytes_client.get(KEYS.db_chunk(db, i)) or b"" for i in range(n))
 
-    with worker_thread(redis_url, store, "t1", chunk_size=chunk):
+    with worker_thread(redis_url, store, "t1", cache_chunk_bytes=chunk):
         built = run(run_job("build", {"database": db}))
     disk = store.database_arrays_bytes(db)
     assert built[-1].type == EventType.done and len(disk) > 2 * chunk
@@ -112,7 +112,8 @@ def test_database_cache_survives_flushall(redis_url: str, rclient: redis.Redis, 
 
     rclient.flushall()  # Redis loses the cache (and the queue): the database is rebuilt from disk
     request = {"engine": "clip", "database": db, "clip": "walk", "start": 0, "end": 20}
-    with worker_thread(redis_url, store, "t2", chunk_size=chunk):  # a fresh worker: empty in-memory LRU
+    # a fresh worker: empty in-memory LRU
+    with worker_thread(redis_url, store, "t2", cache_chunk_bytes=chunk):
         events = run(run_job("synth", {"request": request}))
     assert events[-1].type == EventType.done
     assert store.result_motion(events[-1].job, events[-1].data["result"]).num_frames == 20

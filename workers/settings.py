@@ -1,0 +1,190 @@
+"""The one settings class of every Segue process: the API, the CLI and the workers.
+
+Fields come from ``SEGUE_*`` environment variables (pydantic-settings), or from command-line options
+passed as keyword arguments (which win). :func:`get_settings` reads the environment once per
+process; everything else takes a :class:`Settings` and passes it down (the API's
+:func:`service.app.create_app`, :func:`workers.redis_worker.run_worker`, the embedded backend).
+Tests build a :class:`Settings` directly.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Annotated, Any
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
+
+from motion.bvh import DEFAULT_MAX_FRAMES, DEFAULT_MAX_JOINTS, BvhLimits
+
+from .budget import WorkLimits
+from .redis_keys import CHUNK_SIZE, DEFAULT_PREFIX
+
+MiB = 1 << 20
+
+
+class Settings(BaseSettings):
+    """Everything Segue's processes read from their environment (each field is ``SEGUE_<NAME>``):
+    the API, the CLI and the workers share this one class, read once per process
+    (:func:`get_settings`) and passed down; command-line options override fields
+    (``Settings(**options)`` wins over the environment)."""
+
+    model_config = SettingsConfigDict(env_prefix="SEGUE_", extra="ignore", frozen=True)
+
+    data_dir: Path = Field(default=Path("./segue-data"), description="the store's root directory")
+    redis_url: str | None = Field(default=None, description="Redis job backend; unset = embedded pool")
+    workers: int = Field(default=2, ge=1, le=256, description="embedded backend: worker processes")
+    api_tokens: Annotated[tuple[str, ...], NoDecode] = Field(
+        default=(),
+        repr=False,
+        description="comma-separated bearer tokens, each 'principal:token' (a bare token names the "
+        "principal 'token-<first 8 hex digits of its sha256>'); empty = no auth, a single-user tool",
+    )
+    admins: Annotated[tuple[str, ...], NoDecode] = Field(
+        default=(), description="comma-separated principals that may read, cancel and delete everything"
+    )
+    max_upload_bytes: int = Field(default=64 * MiB, ge=1, description="largest accepted clip upload")
+    max_bvh_bytes: int | None = Field(
+        default=None,
+        ge=1,
+        description="largest BVH text after gunzip (a gzip bomb stops here); default 4 x max_upload_bytes",
+    )
+    max_json_bytes: int = Field(default=1 * MiB, ge=64, description="largest JSON request body, bytes")
+    max_parses: int = Field(
+        default=2, ge=1, le=256, description="request bodies (JSON, clip uploads) parsed at once"
+    )
+    allowed_hosts: Annotated[tuple[str, ...], NoDecode] = Field(
+        default=("127.0.0.1", "localhost", "::1"),
+        description="host names the server answers to (Host header; DNS-rebinding defence); '*' = any",
+    )
+    cors_origins: Annotated[tuple[str, ...], NoDecode] = Field(
+        default=(), description="origins (scheme://host:port) allowed to call the API from other pages"
+    )
+    max_queued_jobs: int = Field(
+        default=256, ge=1, description="unfinished jobs per principal (429 + Retry-After above it)"
+    )
+    max_sessions: int = Field(default=8, ge=1, description="live WebSocket sessions per principal")
+    session_inbox: int = Field(default=64, ge=1, le=100_000, description="unread messages per live session")
+    max_frames: int = Field(default=DEFAULT_MAX_FRAMES, ge=1, description="most frames in one clip")
+    max_joints: int = Field(default=DEFAULT_MAX_JOINTS, ge=1, description="most joints in one clip")
+    engine_plugins: str | None = Field(
+        default=None, description="comma-separated plugin modules (engines.registry.load_plugins)"
+    )
+    ws_queue: int = Field(default=64, ge=2, le=100_000, description="per-WebSocket event queue bound")
+
+    max_output_frames: int = Field(
+        default=36_000, ge=1, description="output frames per character of one job (at the output rate)"
+    )
+    max_joint_frames: int = Field(
+        default=10_000_000, ge=1, description="characters x output frames x joints of one job"
+    )
+    max_job_memory_mb: int = Field(
+        default=4096,
+        ge=0,
+        description="estimated memory of one job at submission; also the RSS at which "
+        "a worker's supervisor stops a job (0: no limit)",
+    )
+    max_database_frames: int = Field(
+        default=200_000, ge=1, description="frames of one database at its rate (all its clips), at submission"
+    )
+    job_grace_s: float = Field(
+        default=30.0,
+        gt=0,
+        description="a job running this long past its budget_s is stopped by its supervisor",
+    )
+    cancel_grace_s: float = Field(
+        default=2.0, gt=0, description="a cancelled job still running this long after the cancel is killed"
+    )
+    max_job_seconds: float = Field(
+        default=600.0, gt=0, description="estimated run time of one job (budget_s + assembly), seconds"
+    )
+
+    # -- the Redis runtime (``segue worker`` and the API's Redis backend) --------------------------
+    redis_cache_url: str | None = Field(
+        default=None, description="a separate Redis (allkeys-lru) for the database cache; unset = redis_url"
+    )
+    redis_prefix: str = Field(default=DEFAULT_PREFIX, min_length=1, description="Redis key prefix")
+    worker_name: str | None = Field(
+        default=None, min_length=1, description="worker consumer name, unique among live workers"
+    )
+    heartbeat_s: float = Field(default=1.0, gt=0, description="worker heartbeat period, seconds")
+    heartbeat_ttl_s: float = Field(
+        default=5.0, gt=0, description="a worker silent this long is dead (its jobs are reclaimed)"
+    )
+    max_deliveries: int = Field(default=3, ge=1, description="runs of a job before it is dead-lettered")
+    block_ms: int = Field(default=1000, ge=1, description="XREADGROUP block time (bounds a stop's wait)")
+    reclaim_idle_s: float = Field(
+        default=30.0, gt=0, description="entries not refreshed this long are taken over (hung workers)"
+    )
+    cache_chunk_bytes: int = Field(default=CHUNK_SIZE, ge=1, description="database cache chunk size")
+    engine_cache: int = Field(default=4, ge=1, le=256, description="loaded databases kept per process")
+    cancel_poll_s: float = Field(default=0.05, gt=0, description="how often a worker checks for a cancel")
+    lock_ttl_s: float = Field(default=30.0, gt=0, description="a build lock's lifetime (refreshed)")
+    hang_grace_s: float = Field(
+        default=120.0, gt=0, description="a running job's entry is refreshed until 2 x budget_s + this"
+    )
+    build_timeout_s: float = Field(default=3600.0, gt=0, description="hard time limit of a database build")
+    publish_retry_s: float = Field(
+        default=300.0, gt=0, description="how long a worker retries an event while Redis is away"
+    )
+    log_level: str = Field(default="INFO", description="log level of segue worker")
+
+    @field_validator("api_tokens", "admins", "allowed_hosts", "cors_origins", mode="before")
+    @classmethod
+    def _split_list(cls, value: Any) -> Any:
+        """Accept ``"a,b"`` (the environment form) as well as a sequence."""
+        if isinstance(value, str):
+            return tuple(t.strip() for t in value.split(",") if t.strip())
+        return value
+
+    @property
+    def auth_enabled(self) -> bool:
+        """True when every API request needs a bearer token."""
+        return bool(self.api_tokens)
+
+    @property
+    def work_limits(self) -> WorkLimits:
+        """The work budget of one job (:mod:`workers.budget`)."""
+        return WorkLimits(
+            max_output_frames=self.max_output_frames,
+            max_joint_frames=self.max_joint_frames,
+            max_memory_bytes=self.max_rss_bytes,
+            max_budget_s=self.max_job_seconds,
+        )
+
+    def work_limits_dict(self) -> dict[str, Any]:
+        """The work limits as the settings name them (for error details)."""
+        return {
+            "max_output_frames": self.max_output_frames,
+            "max_joint_frames": self.max_joint_frames,
+            "max_job_memory_mb": self.max_job_memory_mb,
+            "max_job_seconds": self.max_job_seconds,
+        }
+
+    @property
+    def max_rss_bytes(self) -> int | None:
+        """The memory limit of one job in bytes (None: no limit)."""
+        return self.max_job_memory_mb * MiB if self.max_job_memory_mb else None
+
+    @property
+    def inflate_limit(self) -> int:
+        """Largest BVH text after gunzip, bytes (``max_bvh_bytes``, default 4 x the upload limit)."""
+        return self.max_bvh_bytes if self.max_bvh_bytes is not None else 4 * self.max_upload_bytes
+
+    @property
+    def bvh_limits(self) -> BvhLimits:
+        """The reader limits for uploaded clips."""
+        return BvhLimits(max_joints=self.max_joints, max_frames=self.max_frames, max_bytes=self.inflate_limit)
+
+
+@lru_cache
+def get_settings() -> Settings:
+    """The settings of this process, read from the environment once."""
+    return Settings()
+
+
+def with_options(settings: Settings, **options: Any) -> Settings:
+    """``settings`` with the command-line options that were given (``None`` ones left out)."""
+    given = {name: value for name, value in options.items() if value is not None}
+    return Settings.model_validate({**settings.model_dump(), **given}) if given else settings
