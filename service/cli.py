@@ -5,15 +5,17 @@ Commands::
     segue inspect FILE [--json] [--units U]       frames, fps, joints, height and units guess
     segue beats FILE [--json] [--joints A,B] [--positions] [--tempo LO:HI]   motion beats (Kim et al. 2003)
     segue convert IN OUT [--fps N] [--target T]   BVH -> .bvh/.bvh.gz/.glb/.json/.npz
-    segue samples                                 list the bundled sample clips
-    segue demo [--out DIR]                        inspect + convert a bundled sample
+    segue samples                                 list the bundled samples (clips and a MIDI song)
+    segue demo [--out DIR]                        convert a bundled clip and dance it (rhythm)
+    segue demo ENGINE [--out DIR]                 one engine end to end on bundled clips (service.demos)
     segue build SPEC.json --out DIR               build a database (same JSON as POST /v1/databases)
     segue synth REQUEST.json --db DIR --out OUT   run a job in-process (same JSON as POST /v1/jobs)
     segue serve [--host H] [--port P] [--redis URL]   the HTTP/WebSocket API (+ embedded workers)
     segue worker --redis URL                      a Redis job worker
 
-``FILE``/``IN`` may be ``sample:NAME`` for a bundled sample (see ``segue samples``). Bad input
-exits with status 2 and a one-line message naming the problem.
+``FILE``/``IN`` may be ``sample:NAME`` for a bundled sample (see ``segue samples``), as may clip and
+input paths in spec and request files. Bad input exits with status 2 and a one-line message naming
+the problem.
 """
 
 from __future__ import annotations

@@ -218,7 +218,8 @@ class SegueClient:
                 time.sleep(0.1 * failures)
 
     def poll_events(self, job_id: str, after: int = 0, wait: float = 0.0) -> list[JobEvent]:
-        """The events after ``after`` over plain HTTP (optionally long-polling ``wait`` seconds)."""
+        """The events after ``after`` over plain HTTP: those there now, or with ``wait`` > 0 every
+        event until the job ends or ``wait`` seconds pass (a long poll)."""
         params = {"after": after, "wait": wait}
         return [
             JobEvent.model_validate(e)

@@ -56,6 +56,11 @@ def test_every_sample_is_a_documented_packaged_file() -> None:
     assert total < 4_000_000, f"the bundle is {total / 1e6:.1f} MB; keep it a few MB"
     originals = {"salsa-leader", "salsa-follower", "walk", "start-walk-stop", "song"}
     assert set(SOURCES) | originals == set(SAMPLES)
+    # shipped with the package (pyproject's package data), not only present in a clone
+    pyproject = (SAMPLES_DIR.parents[1] / "pyproject.toml").read_text()
+    line = next(ln for ln in pyproject.splitlines() if ln.startswith('"motion.samples" = '))
+    patterns = re.findall(r'"\*(\.[\w.]+)"', line)
+    assert all(any(f.endswith(p) for p in patterns) for f in SAMPLES.values()), (patterns, line)
 
 
 def test_the_cmu_clips_but_one_share_one_skeleton() -> None:

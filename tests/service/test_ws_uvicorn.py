@@ -82,6 +82,7 @@ def test_client_errors_and_unknown_job_close(server: str, segue: SegueClient) ->
     assert exc.value.status == 422 and exc.value.code == "invalid_request"
 
 
+@pytest.mark.slow  # a latency figure (bench/service.py measures it): CI only, not every local run
 def test_submit_to_first_worker_event_latency(server: str, segue: SegueClient, database: str) -> None:
     """p50 of submit -> ``started`` received over the WebSocket, over 20 warm ``clip`` jobs, <= 100 ms."""
     request = {"engine": "clip", "database": database, "clip": WALK_CLIP, "start": 0, "end": 30}

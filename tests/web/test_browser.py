@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import gzip
 import json
+import math
 from typing import Any
 
 import numpy as np
@@ -314,14 +315,17 @@ def test_path_walk(page: Any, segue: SegueClient) -> None:
     reload_databases(page)
     select_database(page, "path-db", db)
     # an L-shaped path at about 1.2 m/s: 2.4 m ahead (+Z) then 1.2 m right, in about 3 s
-    pts = [(0.5, 0.5 + 0.024 * i) for i in range(11)] + [(0.5 + 0.024 * i, 0.74) for i in range(1, 6)]
+    # a curve at about 1.3 m/s: 0.24 m every 180 ms along a circle of 5 m radius, turning 44 degrees
+    # towards +X (the pad spans 10 m: fraction 0.5 is the origin)
+    arc = [(5 * (1 - math.cos(0.048 * i)), 5 * math.sin(0.048 * i)) for i in range(17)]
+    pts = [(0.5 + x / 10, 0.5 + z / 10) for x, z in arc]
     drag(page, "#path-pad", pts, step_ms=180)
     path = state(page, ".path")
     # sampled at exactly 30 Hz over the time the button was held, as the page timed it (no clock of
     # this process: its view of the page's timing includes the IPC in between)
     assert path["fps"] == 30 and len(path["points"]) == int(path["held_ms"] / 1000 * 30) + 1, path
     assert path["points"][0] == pytest.approx([0, 0], abs=0.05)
-    assert path["points"][-1] == pytest.approx([1.2, 2.4], abs=0.1)  # the release point
+    assert path["points"][-1] == pytest.approx(list(arc[-1]), abs=0.1)  # the release point
     page.fill("#path-budget", "2")
     page.click("#path-go")
     wait(page, "s.current && s.current.tool === 'path'", 10_000)

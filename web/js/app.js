@@ -237,7 +237,7 @@ async function refreshDatabases() {
     sel.textContent = '';
     const ready = state.databases.filter((d) => fits(d, sel));
     if (!ready.length) sel.add(new Option(sel.dataset.hint || `(build a ${sel.dataset.kind} database)`, ''));
-    for (const d of ready.slice().reverse()) sel.add(new Option(`${dbLabel(d)} · ${d.clips.length} clips`, d.id));
+    for (const d of ready.slice().reverse()) sel.add(new Option(`${dbLabel(d)} · ${d.clips.length} clip${d.clips.length === 1 ? '' : 's'}`, d.id));
     if (keep && ready.some((d) => d.id === keep)) sel.value = keep;
   }
   timeline.refreshTracks();
