@@ -5,6 +5,8 @@ Commands::
     segue inspect FILE [--json] [--units U]       frames, fps, joints, height and units guess
     segue beats FILE [--json] [--joints A,B] [--positions] [--tempo LO:HI]   motion beats (Kim et al. 2003)
     segue convert IN OUT [--fps N] [--target T]   BVH -> .bvh/.bvh.gz/.glb/.json/.npz
+    segue retarget MOTION --to CHARACTER --out OUT [--map MAP.json] [--rest first|zero]
+                                                  the motion on another character (BVH or GLB/glTF skin)
     segue samples                                 list the bundled samples (clips and a MIDI song)
     segue demo [--out DIR]                        convert a bundled clip and dance it (rhythm)
     segue demo ENGINE [--out DIR]                 one engine end to end on bundled clips (service.demos)
@@ -180,6 +182,40 @@ def cmd_convert(args: argparse.Namespace) -> int:
         print(
             f"wrote {args.output}: {motion.num_frames} frames at {motion.fps:g} fps, "
             f"{motion.num_joints} joints, target {args.target} ({time.perf_counter() - t0:.2f} s)"
+        )
+    return 0
+
+
+def cmd_retarget(args: argparse.Namespace) -> int:
+    from motion import MotionError
+    from motion.io import load_motion, save_motion
+    from motion.retarget import correspond, retarget
+    from motion.retarget.character import load_character
+
+    name_map = None
+    if args.map:
+        try:
+            name_map = json.loads(Path(args.map).read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise MotionError(f"{args.map}: cannot read the joint map: {exc.strerror or exc}") from None
+        if not isinstance(name_map, dict):
+            raise MotionError(
+                f"{args.map}: the joint map must be a JSON object {{source joint: character joint}}"
+            )
+    motion = load_motion(_resolve(args.motion), units=args.in_units, limits=_limits(args))
+    character = load_character(_resolve(args.to), rest=args.rest, limits=_limits(args))
+    t0 = time.perf_counter()
+    out = retarget(motion, character, name_map=name_map, plant=not args.no_plant)
+    notes = save_motion(out, args.out)
+    for note in notes:
+        print(f"segue: note: {note}", file=sys.stderr)
+    if not args.quiet:
+        corr = correspond(motion.skeleton, character.skeleton, name_map)
+        print(
+            f"wrote {args.out}: {out.num_frames} frames at {out.fps:g} fps on {character.name or args.to} "
+            f"({out.num_joints} joints, {len(corr.pairs)} driven; "
+            f"{corr.source_preset} -> {corr.target_preset}, "
+            f"units {out.units}; {time.perf_counter() - t0:.2f} s)"
         )
     return 0
 
@@ -403,6 +439,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
     p.set_defaults(func=cmd_convert)
+
+    p = sub.add_parser("retarget", help="put a motion on another character (BVH or GLB/glTF skin)")
+    p.add_argument("motion", help="the motion: BVH file (.bvh, .bvh.gz) or sample:NAME")
+    p.add_argument(
+        "--to", required=True, help="the character: BVH (.bvh, .bvh.gz, sample:NAME) or .glb/.gltf skin"
+    )
+    p.add_argument("--out", required=True, help="output file: " + ", ".join(OUTPUT_SUFFIXES))
+    p.add_argument(
+        "--map", help='JSON joint map {"source joint or role": "character joint"} (adds to the presets)'
+    )
+    p.add_argument(
+        "--rest",
+        default="first",
+        choices=("first", "zero"),
+        help="the BVH character's rest pose: its first frame (default) or zero rotations",
+    )
+    p.add_argument("--in-units", choices=units, help="declare the motion's length unit instead of guessing")
+    p.add_argument("--no-plant", action="store_true", help="skip the leg IK that keeps planted feet planted")
+    p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
+    limits(p)
+    p.set_defaults(func=cmd_retarget)
 
     p = sub.add_parser("samples", help="list the bundled sample clips")
     p.set_defaults(func=cmd_samples)

@@ -1,0 +1,96 @@
+"""Retargeting: a motion moved onto a character of other joint names, proportions, rest pose and
+units (KPS03 §5 retargets its rhythmic motions to characters of other sizes).
+
+:func:`retarget` is a pure function: ``retarget(motion, character)`` returns the character's own
+skeleton (names, offsets, End Sites, channel layout and units exactly as given) moving like
+``motion``. The steps, one module each:
+
+* :mod:`~motion.retarget.names`: which source joint drives which character joint (naming
+  presets, spine/neck chains by structure, an explicit name map);
+* :mod:`~motion.retarget.transfer`: world-space bone directions carried through the two rest
+  poses, and the root path scaled by leg length;
+* :mod:`~motion.retarget.legik`: planted feet kept planted and above the floor by two-bone leg IK;
+* :mod:`~motion.retarget.character`: reading a character (BVH or glTF/GLB skin) and its rest pose.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..errors import MotionError
+from ..motion import Motion
+from .legik import plant_feet
+from .names import PRESETS, ROLES, Correspondence, correspond, detect_roles
+from .transfer import Pose, hips_path, place_hips, transfer_rotations
+
+__all__ = ["PRESETS", "ROLES", "Correspondence", "correspond", "detect_roles", "retarget"]
+
+
+def _check_finite(motion: Motion, what: str) -> None:
+    for name, arr in (
+        ("rotations", motion.rotations),
+        ("root positions", motion.root_positions),
+        ("joint translations", motion.joint_translations),
+        ("offsets", motion.skeleton.offsets),
+    ):
+        if not np.all(np.isfinite(arr)):
+            raise MotionError(f"the {what} has non-finite {name} (NaN or infinity)")
+
+
+def retarget(
+    motion: Motion,
+    character: Motion,
+    *,
+    name_map: Mapping[str, str] | None = None,
+    plant: bool = True,
+) -> Motion:
+    """``motion`` played by ``character``.
+
+    Parameters
+    ----------
+    motion:
+        The source motion (any skeleton with hips, legs and feet; any units).
+    character:
+        The character: its skeleton and, in frame 0, its rest pose (see
+        :func:`motion.retarget.character.load_character`).
+    name_map:
+        ``{source joint or role: character joint}``, added to the automatic correspondence.
+    plant:
+        Keep planted feet planted and above the floor (leg IK); off, the transfer alone.
+
+    Returns
+    -------
+    A motion with ``character.skeleton``, ``character.units`` and ``motion``'s frame count and fps:
+    limbs point as the source's do, the hips travel the source's path scaled by the ratio of leg
+    lengths. Joints with no source keep their rest rotation.
+
+    Raises
+    ------
+    MotionError
+        When a required joint (hips, legs, feet) has no counterpart, or an input is not finite.
+    """
+    _check_finite(motion, "motion")
+    _check_finite(character, "character")
+    corr = correspond(motion.skeleton, character.skeleton, name_map)
+    src_pose = Pose.of(motion)
+    local = transfer_rotations(motion, character, corr, src_pose)
+    n = motion.num_frames
+    rest = character.slice(0, 1)
+    out = Motion(
+        character.skeleton,
+        np.repeat(rest.root_positions, n, axis=0),
+        local,
+        motion.fps,
+        np.repeat(rest.joint_translations, n, axis=0),
+        character.units,
+        motion.name,
+    )
+    path, _ = hips_path(motion, character, corr, src_pose)
+    out = place_hips(out, corr.target_roles["Hips"], path)
+    if plant and n > 1:
+        out = plant_feet(out, corr.target_roles, np.asarray(rest.global_positions()[0, :, 1]))
+    if not np.all(np.isfinite(out.rotations)) or not np.all(np.isfinite(out.root_positions)):
+        raise MotionError("retargeting produced non-finite values (degenerate bones in a skeleton?)")
+    return out

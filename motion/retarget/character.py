@@ -1,0 +1,151 @@
+"""Reading a character: a BVH skeleton or a glTF/GLB skin, and its rest pose.
+
+A character is returned as a one-frame :class:`~motion.motion.Motion` whose frame is the rest
+pose. BVH: the rest pose is the file's first frame (``rest="first"``, a character exported from a
+DCC tool in its bind pose) or the zero-rotation pose of its offsets (``rest="zero"``); its units
+are guessed from its height as for any BVH (:mod:`motion.units`). glTF/GLB: the skin's joints
+(``skins[0]``), their hierarchy and their rest (bind) pose from the nodes' translation, rotation and
+scale (a parent ``Armature`` node's transform, e.g. a 0.01 scale, is applied); the character is in
+metres, and its BVH offsets are the bind pose's bone vectors in the parent's frame.
+
+The glTF reader is hand-written (the JSON chunk and node transforms only, ~60 lines) rather than
+pulling in ``pygltflib``: no buffers or accessors are needed to know a skeleton's bind pose.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .. import rotations as rot
+from ..bvh import BvhLimits
+from ..errors import MotionError
+from ..io import load_motion
+from ..motion import Motion
+from ..skeleton import Skeleton, default_channels
+from .transfer import zero_pose
+
+Array = npt.NDArray[np.float64]
+REST_POSES = ("first", "zero")
+GLTF_SUFFIXES = (".glb", ".gltf")
+
+
+def load_character(
+    path: str | Path, *, rest: str = "first", units: str | None = None, limits: BvhLimits | None = None
+) -> Motion:
+    """The character in ``path`` (BVH, ``sample:NAME``, ``.glb`` or ``.gltf``) as a one-frame
+    motion in its rest pose (module docstring). ``units`` declares a BVH's unit."""
+    if rest not in REST_POSES:
+        raise MotionError(f"rest pose {rest!r}: use one of {', '.join(REST_POSES)}")
+    p = Path(str(path))
+    if p.name.lower().endswith(GLTF_SUFFIXES):
+        try:
+            raw = p.read_bytes()
+        except OSError as exc:
+            raise MotionError(f"{p}: cannot read the character: {exc.strerror or exc}") from None
+        return gltf_character(raw, name=p.stem)
+    motion = load_motion(path, units=units, limits=limits)
+    return zero_pose(motion) if rest == "zero" else motion.slice(0, 1)
+
+
+def _gltf_json(raw: bytes) -> dict[str, Any]:
+    """The JSON document of a GLB container or a ``.gltf`` text file."""
+    try:
+        if raw[:4] == b"glTF":
+            if len(raw) < 20:
+                raise MotionError("truncated GLB header")
+            length, kind = struct.unpack_from("<II", raw, 12)
+            if kind != 0x4E4F534A:
+                raise MotionError("the GLB's first chunk is not JSON")
+            doc = json.loads(raw[20 : 20 + length])
+        else:
+            doc = json.loads(raw)
+    except (ValueError, struct.error) as exc:
+        raise MotionError(f"not a glTF/GLB file: {exc}") from None
+    if not isinstance(doc, dict):
+        raise MotionError("not a glTF document (its JSON is not an object)")
+    return doc
+
+
+def _node_matrix(node: dict[str, Any]) -> Array:
+    """The 4x4 local transform of a glTF node (``matrix`` or TRS)."""
+    if "matrix" in node:
+        return np.array(node["matrix"], dtype=np.float64).reshape(4, 4).T
+    m = np.eye(4)
+    q = np.array(node.get("rotation", [0.0, 0.0, 0.0, 1.0]), dtype=np.float64)
+    m[:3, :3] = rot.to_matrix(q / np.linalg.norm(q)) * np.array(node.get("scale", [1.0, 1.0, 1.0]))
+    m[:3, 3] = node.get("translation", [0.0, 0.0, 0.0])
+    return m
+
+
+def gltf_character(raw: bytes, name: str = "character") -> Motion:
+    """The first skin of a glTF/GLB document as a one-frame motion in its bind pose (metres)."""
+    doc = _gltf_json(raw)
+    nodes = doc.get("nodes", [])
+    skins = doc.get("skins", [])
+    if not skins or not skins[0].get("joints"):
+        raise MotionError("the glTF file has no skin with joints: a character needs a skinned skeleton")
+    try:
+        joints = [int(j) for j in skins[0]["joints"]]
+        parent = {int(c): i for i, nd in enumerate(nodes) for c in nd.get("children", [])}
+        world: dict[int, Array] = {}
+
+        def world_of(i: int) -> Array:
+            if i not in world:
+                m = _node_matrix(nodes[i])
+                world[i] = world_of(parent[i]) @ m if i in parent else m
+            return world[i]
+
+        in_skin = set(joints)
+
+        def depth(i: int) -> int:
+            d = 0
+            while i in parent:
+                i, d = parent[i], d + 1
+            return d
+
+        order = sorted(joints, key=lambda i: (depth(i), joints.index(i)))
+        index = {node: k for k, node in enumerate(order)}
+        parents = []
+        for node in order:
+            p = parent.get(node)
+            while p is not None and p not in in_skin:
+                p = parent.get(p)
+            parents.append(-1 if p is None else index[p])
+        mats = [world_of(i) for i in order]
+    except (IndexError, KeyError, TypeError, ValueError, RecursionError) as exc:
+        raise MotionError(f"malformed glTF node hierarchy: {exc}") from None
+    if sum(p < 0 for p in parents) != 1:
+        raise MotionError("the skin's joints do not form one tree (several root joints)")
+    pos = np.array([m[:3, 3] for m in mats])
+    rots = []
+    for m in mats:
+        lin = m[:3, :3]
+        u, _, vt = np.linalg.svd(lin)
+        r = u @ vt
+        if np.linalg.det(r) < 0:
+            raise MotionError("a skin joint is mirrored (negative scale), which BVH cannot hold")
+        rots.append(rot.from_matrix(r))
+    g = np.array(rots)
+    names = [str(nodes[i].get("name") or f"joint{i}") for i in order]
+    if len(set(names)) != len(names):
+        raise MotionError("the skin's joint names are not unique")
+    par = np.array(parents, dtype=np.intp)
+    offsets = np.zeros((len(order), 3))
+    local = np.tile(rot.IDENTITY, (len(order), 1))
+    for k, pk in enumerate(par):
+        if pk < 0:
+            offsets[k], local[k] = pos[k], g[k]
+        else:
+            inv = rot.inverse(g[pk])
+            offsets[k] = rot.rotate(inv, pos[k] - pos[pk])
+            local[k] = rot.multiply(inv, g[k])
+    if not np.all(np.isfinite(offsets)):
+        raise MotionError("the skin's bind pose is not finite")
+    skeleton = Skeleton(tuple(names), par, offsets, default_channels(len(names)))
+    return Motion(skeleton, offsets[:1].copy(), local[None], 30.0, units="m", name=name)

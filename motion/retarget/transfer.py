@@ -1,0 +1,242 @@
+"""Rotation transfer through the two rest poses, and the root path scaled by leg length.
+
+Each character joint driven by a source joint gets a world rotation computed from world-space
+bone directions, never from raw Euler values, so the two skeletons may differ in rest pose,
+joint axes, channel order, proportions and units:
+
+* an *aimed* joint (one driven child below it: an upper arm, a shin, a spine joint) turns so that
+  its bone, from the joint to the driven child, points where the source's bone points in that
+  frame. The twist about the bone comes from the source joint's rotation since its rest, carried
+  over by the shortest arc that takes the source's rest bone onto the character's rest bone;
+* a *branching* joint (hips, chest: a centre child and a left and right one) takes the whole
+  frame spanned by its up direction (to the centre child) and its left-right axis (right child to
+  left child), so the pelvis and the shoulders face where the source's do;
+* a *leaf* (hands, head, toes without a driven child) turns with the source joint, rotated into
+  the character by its parent's rest alignment.
+
+Joints without a source (the character's extra spine joints, twist bones, fingers) keep their
+rest rotation, relative to their parent. The hips follow the source's hips scaled by the ratio of
+the two skeletons' leg lengths (thigh plus shin), their height measured from each skeleton's
+standing ankle height, so the character's feet meet its own floor. Only rotations and the
+translation of the root (or the translated joint that carries the hips) change: the character's
+bone offsets, channels and units are kept exactly.
+
+Source rest pose: its zero-rotation pose (any reference pose gives the same bone directions; it
+only sets how twist is carried over). Character rest pose: frame 0 of the character motion.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from .. import rotations as rot
+from ..errors import MotionError
+from ..motion import Motion
+from .names import Correspondence
+
+Array = npt.NDArray[np.float64]
+_EPS = 1e-9
+
+
+def shortest_arc(a: Array, b: Array) -> Array:
+    """Unit quaternions ``(..., 4)`` of the smallest rotation taking directions ``a`` onto ``b``
+    (``(..., 3)``, any length; broadcast). Opposite directions turn half about a perpendicular axis."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    na = np.linalg.norm(a, axis=-1, keepdims=True)
+    nb = np.linalg.norm(b, axis=-1, keepdims=True)
+    ua, ub = a / np.maximum(na, 1e-300), b / np.maximum(nb, 1e-300)
+    q = np.concatenate((np.cross(ua, ub), 1.0 + np.sum(ua * ub, axis=-1, keepdims=True)), axis=-1)
+    bad = q[..., 3] < 1e-9
+    if np.any(bad):
+        perp = np.cross(ua[bad], np.array([1.0, 0.0, 0.0]))
+        weak = np.linalg.norm(perp, axis=-1) < 1e-6
+        perp[weak] = np.cross(ua[bad][weak], np.array([0.0, 1.0, 0.0]))
+        q[bad] = np.concatenate((perp, np.zeros(perp.shape[:-1] + (1,))), axis=-1)
+    zero = (na[..., 0] < 1e-300) | (nb[..., 0] < 1e-300)
+    q[zero] = rot.IDENTITY
+    return np.asarray(q / np.linalg.norm(q, axis=-1, keepdims=True))
+
+
+def frame_matrix(up: Array, lateral: Array) -> Array:
+    """Rotation matrices ``(..., 3, 3)`` with columns (lateral, up, forward): ``up`` exactly,
+    ``lateral`` made perpendicular to it (``(..., 3)`` each)."""
+    y = up / np.maximum(np.linalg.norm(up, axis=-1, keepdims=True), 1e-300)
+    x = lateral - np.sum(lateral * y, axis=-1, keepdims=True) * y
+    x = x / np.maximum(np.linalg.norm(x, axis=-1, keepdims=True), 1e-300)
+    z = np.cross(x, y)
+    return np.stack((x, y, z), axis=-1)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """World positions ``(F, J, 3)`` and rotations ``(F, J, 4)`` of a motion."""
+
+    positions: Array
+    rotations: Array
+
+    @staticmethod
+    def of(motion: Motion) -> Pose:
+        pos, grot = motion.fk()
+        return Pose(np.ascontiguousarray(pos), np.ascontiguousarray(grot))
+
+
+def zero_pose(motion: Motion) -> Motion:
+    """Frame 0 of ``motion`` with every rotation set to identity (its BVH rest pose)."""
+    first = motion.slice(0, 1)
+    return Motion(
+        first.skeleton,
+        first.root_positions,
+        np.broadcast_to(rot.IDENTITY, first.rotations.shape).copy(),
+        first.fps,
+        first.joint_translations,
+        first.units,
+        first.name,
+    )
+
+
+def _driven_children(corr: Correspondence, parents: npt.NDArray[np.intp]) -> dict[int, list[int]]:
+    """Driven character joint -> the driven joints whose nearest driven ancestor it is."""
+    out: dict[int, list[int]] = {j: [] for j in corr.pairs}
+    for j in corr.pairs:
+        p = int(parents[j])
+        while p >= 0 and p not in corr.pairs:
+            p = int(parents[p])
+        if p >= 0:
+            out[p].append(j)
+    return out
+
+
+def leg_length(positions: Array, roles: dict[str, int]) -> float:
+    """Mean over both legs of thigh plus shin length (hip-knee-ankle distances), ``positions``
+    ``(J, 3)`` of one pose, in their units."""
+    total = 0.0
+    for side in ("Left", "Right"):
+        h, k, a = (positions[roles[f"{side}{x}"]] for x in ("UpperLeg", "LowerLeg", "Foot"))
+        total += float(np.linalg.norm(k - h) + np.linalg.norm(a - k))
+    return total / 2.0
+
+
+def transfer_rotations(
+    source: Motion, character: Motion, corr: Correspondence, src_pose: Pose | None = None
+) -> Array:
+    """Local rotations ``(F, J_character, 4)`` of the character following ``source`` (module
+    docstring). ``character``: its frame 0 is the rest pose; ``src_pose``: ``Pose.of(source)``."""
+    sp = Pose.of(source) if src_pose is None else src_pose
+    s0 = Pose.of(zero_pose(source))
+    t0 = Pose.of(character.slice(0, 1))
+    ps, gs, ps0, gs0 = sp.positions, sp.rotations, s0.positions[0], s0.rotations[0]
+    pt0, gt0 = t0.positions[0], t0.rotations[0]
+    sk = character.skeleton
+    n, nj = source.num_frames, sk.num_joints
+    children = _driven_children(corr, sk.parents)
+    side = corr.side(sk)
+    align: dict[int, Array] = {}
+    desired: dict[int, Array] = {}
+    for j in range(nj):  # parents first: a leaf needs its parent's alignment
+        if j not in corr.pairs:
+            continue
+        s = corr.pairs[j]
+        kids = children[j]
+        centre = [c for c in kids if side.get(c, 0) == 0]
+        left = [c for c in kids if side.get(c, 0) > 0]
+        right = [c for c in kids if side.get(c, 0) < 0]
+        if left and right:
+            lt, rt = left[0], right[0]
+            ls, rs = corr.pairs[lt], corr.pairs[rt]
+            if centre:
+                up_t0 = pt0[centre[0]] - pt0[j]
+                up_s0 = ps0[corr.pairs[centre[0]]] - ps0[s]
+                up_s = ps[:, corr.pairs[centre[0]]] - ps[:, s]
+            else:  # no centre child: up is away from the two side children
+                up_t0 = 2 * pt0[j] - pt0[lt] - pt0[rt]
+                up_s0 = 2 * ps0[s] - ps0[ls] - ps0[rs]
+                up_s = 2 * ps[:, s] - ps[:, ls] - ps[:, rs]
+            ft0 = frame_matrix(up_t0, pt0[lt] - pt0[rt])
+            fs0 = frame_matrix(up_s0, ps0[ls] - ps0[rs])
+            fs = frame_matrix(up_s, ps[:, ls] - ps[:, rs])
+            align[j] = rot.from_matrix(ft0 @ fs0.T)
+            desired[j] = rot.multiply(rot.from_matrix(fs @ ft0.T), gt0[j])
+        elif kids:
+            c = centre[0] if centre else kids[0]
+            sc = corr.pairs[c]
+            u_t0 = pt0[c] - pt0[j]
+            a = shortest_arc(ps0[sc] - ps0[s], u_t0)
+            align[j] = a
+            delta = rot.multiply(gs[:, s], rot.inverse(rot.multiply(a, gs0[s])))
+            guess = rot.multiply(delta, gt0[j])
+            swing = shortest_arc(rot.rotate(delta, u_t0), ps[:, sc] - ps[:, s])
+            desired[j] = rot.multiply(swing, guess)
+        else:
+            p = int(sk.parents[j])
+            while p >= 0 and p not in align:
+                p = int(sk.parents[p])
+            a = align[p] if p >= 0 else rot.IDENTITY
+            align[j] = a
+            delta = rot.multiply(gs[:, s], rot.inverse(rot.multiply(a, gs0[s])))
+            desired[j] = rot.multiply(delta, gt0[j])
+    rest_local = character.rotations[0]
+    glob = np.empty((n, nj, 4))
+    local = np.empty((n, nj, 4))
+    for j in range(nj):
+        p = int(sk.parents[j])
+        if j in desired:
+            glob[:, j] = desired[j]
+            local[:, j] = glob[:, j] if p < 0 else rot.multiply(rot.inverse(glob[:, p]), glob[:, j])
+        else:
+            local[:, j] = rest_local[j]
+            glob[:, j] = local[:, j] if p < 0 else rot.multiply(glob[:, p], local[:, j])
+    return np.asarray(rot.standardize(rot.normalize(local)))
+
+
+def floor_height(positions: Array, feet: list[int]) -> float:
+    """The standing height of the ankles: 5th percentile over frames of the lower ankle's height
+    (``positions (F, J, 3)``)."""
+    return float(np.percentile(positions[:, feet, 1].min(axis=1), 5))
+
+
+def hips_path(source: Motion, character: Motion, corr: Correspondence, src_pose: Pose) -> tuple[Array, float]:
+    """Where the character's hips go, ``(F, 3)`` in its units, and the leg-length ratio
+    (character / source, each in its own units)."""
+    s0 = Pose.of(zero_pose(source)).positions[0]
+    t0 = Pose.of(character.slice(0, 1)).positions[0]
+    ratio = leg_length(t0, corr.target_roles) / max(leg_length(s0, corr.source_roles), 1e-300)
+    if not (np.isfinite(ratio) and ratio > 0):
+        raise MotionError("cannot scale the root: a skeleton has legs of zero length")
+    sr, tr = corr.source_roles, corr.target_roles
+    s_feet, t_feet = [sr["LeftFoot"], sr["RightFoot"]], [tr["LeftFoot"], tr["RightFoot"]]
+    hips = src_pose.positions[:, sr["Hips"]]
+    s_floor = floor_height(src_pose.positions, s_feet)
+    t_floor = float(t0[t_feet, 1].min())
+    path = hips * ratio
+    path[:, 1] = t_floor + ratio * (hips[:, 1] - s_floor)
+    return path, ratio
+
+
+def place_hips(motion: Motion, hips: int, path: Array) -> Motion:
+    """``motion`` with its root (or the nearest translated joint at or above ``hips``) moved so that
+    joint ``hips`` follows ``path (F, 3)`` (units of the motion)."""
+    sk = motion.skeleton
+    now = np.ascontiguousarray(motion.global_positions()[:, hips])
+    shift = path - now
+    carrier = hips
+    translated = {int(j): k for k, j in enumerate(sk.translated_joints)}
+    while carrier > 0 and carrier not in translated:
+        carrier = int(sk.parents[carrier])
+    if carrier == 0:
+        return Motion(
+            sk,
+            motion.root_positions + shift,
+            motion.rotations,
+            motion.fps,
+            motion.joint_translations,
+            motion.units,
+            motion.name,
+        )
+    _, grot = motion.fk()
+    parent_rot = np.ascontiguousarray(grot[:, int(sk.parents[carrier])])
+    jt = np.array(motion.joint_translations, copy=True)
+    jt[:, translated[carrier]] += rot.rotate(rot.inverse(parent_rot), shift)
+    return Motion(sk, motion.root_positions, motion.rotations, motion.fps, jt, motion.units, motion.name)
