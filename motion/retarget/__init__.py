@@ -64,7 +64,7 @@ def retarget(
     -------
     A motion with ``character.skeleton``, ``character.units`` and ``motion``'s frame count and fps:
     limbs point as the source's do, the hips travel the source's path scaled by the ratio of leg
-    lengths. Joints with no source keep their rest rotation.
+    heights. Joints with no source keep their rest rotation.
 
     Raises
     ------
@@ -87,10 +87,10 @@ def retarget(
         character.units,
         motion.name,
     )
-    path, _ = hips_path(motion, character, corr, src_pose)
+    path, _ = hips_path(motion, character, corr, src_pose, out)
     out = place_hips(out, corr.target_roles["Hips"], path)
     if plant and n > 1:
-        out = plant_feet(out, corr.target_roles, np.asarray(rest.global_positions()[0, :, 1]))
+        out = plant_feet(out, corr.target_roles)
     if not np.all(np.isfinite(out.rotations)) or not np.all(np.isfinite(out.root_positions)):
         raise MotionError("retargeting produced non-finite values (degenerate bones in a skeleton?)")
     return out

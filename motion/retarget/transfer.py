@@ -16,8 +16,10 @@ joint axes, channel order, proportions and units:
 
 Joints without a source (the character's extra spine joints, twist bones, fingers) keep their
 rest rotation, relative to their parent. The hips follow the source's hips scaled by the ratio of
-the two skeletons' leg lengths (thigh plus shin), their height measured from each skeleton's
-standing ankle height, so the character's feet meet its own floor. Only rotations and the
+the two skeletons' hip heights in the same poses (the median height of the hips above the ankles,
+source and transferred character; thigh plus shin lengths for a motion that rarely stands), their
+height measured from each skeleton's standing ankle height, so the character's feet meet its own
+floor. Only rotations and the
 translation of the root (or the translated joint that carries the hips) change: the character's
 bone offsets, channels and units are kept exactly.
 
@@ -119,6 +121,40 @@ def leg_length(positions: Array, roles: dict[str, int]) -> float:
     return total / 2.0
 
 
+def _aimed(u_t0: Array, u_s0: Array, u_s: Array, gs: Array, gs0: Array, gt0: Array) -> tuple[Array, Array]:
+    """An aimed joint: its rest alignment (shortest arc from the source's rest bone ``u_s0`` to the
+    character's ``u_t0``) and its world rotations ``(F, 4)``: the source's rotation since its rest
+    (``gs (F, 4)`` from ``gs0``), carried over by that arc, then swung so the bone points along the
+    source's ``u_s (F, 3)``."""
+    a = shortest_arc(u_s0, u_t0)
+    delta = rot.multiply(gs, rot.inverse(rot.multiply(a, gs0)))
+    swing = shortest_arc(rot.rotate(delta, u_t0), u_s)
+    return a, rot.multiply(swing, rot.multiply(delta, gt0))
+
+
+def tip_positions(motion: Motion, pose: Pose) -> Array:
+    """``(F, J, 3)`` where each joint's bone ends, for leaves of the correspondence: down a chain
+    of single children to its end, the mean of the joint's child joints and End Sites there (a
+    foot's toe tip, a hand's finger roots). A joint without either gets its own position."""
+    sk = motion.skeleton
+    ends = motion.end_site_positions(pose.positions, pose.rotations) if sk.end_site_parents.size else None
+    kids = [sk.children(j) for j in range(sk.num_joints)]
+    sites = [np.flatnonzero(sk.end_site_parents == j) for j in range(sk.num_joints)]
+    out = np.array(pose.positions, copy=True)
+    for j in range(sk.num_joints):
+        k = j
+        while len(kids[k]) == 1 and sites[k].size == 0:
+            k = kids[k][0]
+        parts = [pose.positions[:, kids[k]]] if kids[k] else []
+        if ends is not None and sites[k].size:
+            parts.append(ends[:, sites[k]])
+        if parts:
+            out[:, j] = np.concatenate(parts, axis=1).mean(axis=1)
+        elif k != j:
+            out[:, j] = pose.positions[:, k]
+    return out
+
+
 def transfer_rotations(
     source: Motion, character: Motion, corr: Correspondence, src_pose: Pose | None = None
 ) -> Array:
@@ -133,6 +169,30 @@ def transfer_rotations(
     n, nj = source.num_frames, sk.num_joints
     children = _driven_children(corr, sk.parents)
     side = corr.side(sk)
+    t_tips = tip_positions(character.slice(0, 1), t0)
+    s_tips = tip_positions(zero_pose(source), s0)
+    s_tip_all: Array | None = None
+
+    def s_tip(joint: int) -> Array:
+        nonlocal s_tip_all
+        if s_tip_all is None:
+            s_tip_all = tip_positions(source, sp)
+        return s_tip_all[:, joint]
+
+    tol_t = 1e-6 * float(np.abs(sk.offsets[1:]).max(initial=1.0))
+    tol_s = 1e-6 * float(np.abs(source.skeleton.offsets[1:]).max(initial=1.0))
+
+    def reach(j: int, c: int) -> int:
+        """``c``, or the first driven joint below it that is not at ``j``'s place in either rest
+        pose (a zero-length bone, e.g. CMU's lowerback at the hips, gives no direction)."""
+        s = corr.pairs[j]
+        while (
+            np.linalg.norm(pt0[c] - pt0[j]) <= tol_t or np.linalg.norm(ps0[corr.pairs[c]] - ps0[s]) <= tol_s
+        ) and children[c]:
+            nxt = [k for k in children[c] if side.get(k, 0) == 0] or children[c]
+            c = nxt[0]
+        return c
+
     align: dict[int, Array] = {}
     desired: dict[int, Array] = {}
     for j in range(nj):  # parents first: a leaf needs its parent's alignment
@@ -140,9 +200,9 @@ def transfer_rotations(
             continue
         s = corr.pairs[j]
         kids = children[j]
-        centre = [c for c in kids if side.get(c, 0) == 0]
-        left = [c for c in kids if side.get(c, 0) > 0]
-        right = [c for c in kids if side.get(c, 0) < 0]
+        centre = [reach(j, c) for c in kids if side.get(c, 0) == 0]
+        left = [reach(j, c) for c in kids if side.get(c, 0) > 0]
+        right = [reach(j, c) for c in kids if side.get(c, 0) < 0]
         if left and right:
             lt, rt = left[0], right[0]
             ls, rs = corr.pairs[lt], corr.pairs[rt]
@@ -160,16 +220,17 @@ def transfer_rotations(
             align[j] = rot.from_matrix(ft0 @ fs0.T)
             desired[j] = rot.multiply(rot.from_matrix(fs @ ft0.T), gt0[j])
         elif kids:
-            c = centre[0] if centre else kids[0]
+            c = centre[0] if centre else reach(j, kids[0])
             sc = corr.pairs[c]
-            u_t0 = pt0[c] - pt0[j]
-            a = shortest_arc(ps0[sc] - ps0[s], u_t0)
-            align[j] = a
-            delta = rot.multiply(gs[:, s], rot.inverse(rot.multiply(a, gs0[s])))
-            guess = rot.multiply(delta, gt0[j])
-            swing = shortest_arc(rot.rotate(delta, u_t0), ps[:, sc] - ps[:, s])
-            desired[j] = rot.multiply(swing, guess)
+            align[j], desired[j] = _aimed(
+                pt0[c] - pt0[j], ps0[sc] - ps0[s], ps[:, sc] - ps[:, s], gs[:, s], gs0[s], gt0[j]
+            )
         else:
+            u_t0, u_s0 = t_tips[0, j] - pt0[j], s_tips[0, s] - ps0[s]
+            if np.linalg.norm(u_t0) > tol_t and np.linalg.norm(u_s0) > tol_s:
+                u_s = s_tip(s) - ps[:, s]
+                align[j], desired[j] = _aimed(u_t0, u_s0, u_s, gs[:, s], gs0[s], gt0[j])
+                continue
             p = int(sk.parents[j])
             while p >= 0 and p not in align:
                 p = int(sk.parents[p])
@@ -197,14 +258,39 @@ def floor_height(positions: Array, feet: list[int]) -> float:
     return float(np.percentile(positions[:, feet, 1].min(axis=1), 5))
 
 
-def hips_path(source: Motion, character: Motion, corr: Correspondence, src_pose: Pose) -> tuple[Array, float]:
-    """Where the character's hips go, ``(F, 3)`` in its units, and the leg-length ratio
-    (character / source, each in its own units)."""
+def hip_height_ratio(
+    source_positions: Array, target_positions: Array, corr: Correspondence, chain_ratio: float
+) -> float:
+    """The character's hip height over the source's in the same poses: the ratio of the median
+    (over frames) heights of the hips above the mean of the two ankles, ``positions (F, J, 3)`` of
+    the source and of the transferred character (any root placement). Falls back to
+    ``chain_ratio`` (thigh plus shin lengths) when the motion rarely stands (a median drop under a
+    quarter of the leg: crawling, lying)."""
+    sr, tr = corr.source_roles, corr.target_roles
+
+    def drop(p: Array, r: dict[str, int]) -> float:
+        ankles = 0.5 * (p[:, r["LeftFoot"], 1] + p[:, r["RightFoot"], 1])
+        return float(np.median(p[:, r["Hips"], 1] - ankles))
+
+    ds, dt = drop(source_positions, sr), drop(target_positions, tr)
+    s_leg = leg_length(source_positions[0], sr)
+    if not (ds > 0.25 * s_leg and dt > 0 and np.isfinite(dt / ds)):
+        return chain_ratio
+    return dt / ds
+
+
+def hips_path(
+    source: Motion, character: Motion, corr: Correspondence, src_pose: Pose, transferred: Motion
+) -> tuple[Array, float]:
+    """Where the character's hips go, ``(F, 3)`` in its units, and the hip-height ratio
+    (character / source, each in its own units; :func:`hip_height_ratio`). ``transferred``: the
+    character with its rotations transferred (any root placement)."""
     s0 = Pose.of(zero_pose(source)).positions[0]
     t0 = Pose.of(character.slice(0, 1)).positions[0]
-    ratio = leg_length(t0, corr.target_roles) / max(leg_length(s0, corr.source_roles), 1e-300)
-    if not (np.isfinite(ratio) and ratio > 0):
+    chain = leg_length(t0, corr.target_roles) / max(leg_length(s0, corr.source_roles), 1e-300)
+    if not (np.isfinite(chain) and chain > 0):
         raise MotionError("cannot scale the root: a skeleton has legs of zero length")
+    ratio = hip_height_ratio(src_pose.positions, np.asarray(transferred.global_positions()), corr, chain)
     sr, tr = corr.source_roles, corr.target_roles
     s_feet, t_feet = [sr["LeftFoot"], sr["RightFoot"]], [tr["LeftFoot"], tr["RightFoot"]]
     hips = src_pose.positions[:, sr["Hips"]]
