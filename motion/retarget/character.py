@@ -103,19 +103,27 @@ def gltf_character(raw: bytes, name: str = "character") -> Motion:
 
         in_skin = set(joints)
 
-        def depth(i: int) -> int:
-            d = 0
-            while i in parent:
-                i, d = parent[i], d + 1
-            return d
-
-        order = sorted(joints, key=lambda i: (depth(i), joints.index(i)))
-        index = {node: k for k, node in enumerate(order)}
-        parents = []
-        for node in order:
+        def joint_parent(node: int) -> int | None:
             p = parent.get(node)
             while p is not None and p not in in_skin:
                 p = parent.get(p)
+            return p
+
+        # the skin's order, each joint after its parent (a stable topological order)
+        order: list[int] = []
+        placed: set[int] = set()
+        pending = list(dict.fromkeys(joints))
+        while pending:
+            ready = next((i for i in pending if joint_parent(i) is None or joint_parent(i) in placed), None)
+            if ready is None:
+                raise MotionError("the skin's joint hierarchy has a cycle")
+            order.append(ready)
+            placed.add(ready)
+            pending.remove(ready)
+        index = {node: k for k, node in enumerate(order)}
+        parents = []
+        for node in order:
+            p = joint_parent(node)
             parents.append(-1 if p is None else index[p])
         mats = [world_of(i) for i in order]
     except (IndexError, KeyError, TypeError, ValueError, RecursionError) as exc:

@@ -1,0 +1,102 @@
+"""``segue retarget``: BVH and GLB characters, outputs, the joint map and clear errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from motion import read_bvh, write_bvh
+from motion.io import load_motion
+from service.cli import main
+from tests.motion.retarget.characters import character
+
+
+@pytest.fixture
+def unreal_bvh(tmp_path: Path) -> Path:
+    path = tmp_path / "mannequin.bvh"
+    write_bvh(character("unreal", scale=1.2), path)
+    return path
+
+
+def test_retarget_to_a_bvh_character(
+    tmp_path: Path, unreal_bvh: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out.bvh"
+    assert main(["retarget", "sample:walk-05-01", "--to", str(unreal_bvh), "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "cmu-daz -> unreal" in said and "units cm" in said
+    got, char = read_bvh(out), read_bvh(unreal_bvh)
+    src = load_motion("sample:walk-05-01")
+    assert got.skeleton.names == char.skeleton.names and got.skeleton.channels == char.skeleton.channels
+    np.testing.assert_allclose(got.skeleton.offsets, char.skeleton.offsets, atol=1e-6)
+    assert got.num_frames == src.num_frames and got.fps == src.fps
+
+
+def test_retarget_to_glb_output_and_glb_character(tmp_path: Path, unreal_bvh: Path) -> None:
+    assert (
+        main(
+            ["retarget", "sample:walk-05-01", "--to", str(unreal_bvh), "--out", str(tmp_path / "o.glb"), "-q"]
+        )
+        == 0
+    )
+    assert (tmp_path / "o.glb").read_bytes()[:4] == b"glTF"
+    assert main(["convert", str(unreal_bvh), str(tmp_path / "char.glb"), "-q"]) == 0
+    out = tmp_path / "o2.bvh"
+    assert (
+        main(["retarget", "sample:walk-05-01", "--to", str(tmp_path / "char.glb"), "--out", str(out), "-q"])
+        == 0
+    )
+    assert "pelvis" in read_bvh(out).skeleton.names
+
+
+def test_map_and_rest_options(tmp_path: Path, unreal_bvh: Path) -> None:
+    text = unreal_bvh.read_text().replace("JOINT foot_l\n", "JOINT LAnkle\n")
+    odd = tmp_path / "odd.bvh"
+    odd.write_text(text)
+    amap = tmp_path / "map.json"
+    amap.write_text(json.dumps({"LeftFoot": "LAnkle"}))
+    out = tmp_path / "o.bvh"
+    args = ["retarget", "sample:walk-05-01", "--to", str(odd), "--out", str(out), "-q", "--rest", "zero"]
+    assert main([*args, "--map", str(amap)]) == 0
+    assert read_bvh(out).skeleton.names == read_bvh(odd).skeleton.names
+
+
+@pytest.mark.parametrize(
+    ("setup", "message"),
+    [
+        ("missing-foot", "the character has no joint for: left foot"),
+        ("bad-map-json", "invalid JSON"),
+        ("map-not-object", "must be a JSON object"),
+        ("map-unknown-joint", "no joint named 'Nope'"),
+        ("bad-character", "no MOTION section"),
+        ("missing-character", "cannot read file"),
+    ],
+)
+def test_errors_name_the_problem(
+    tmp_path: Path, unreal_bvh: Path, capsys: pytest.CaptureFixture[str], setup: str, message: str
+) -> None:
+    char, extra = unreal_bvh, []
+    amap = tmp_path / "map.json"
+    if setup == "missing-foot":
+        char = tmp_path / "c.bvh"
+        char.write_text(unreal_bvh.read_text().replace("JOINT foot_l\n", "JOINT LAnkle\n"))
+    elif setup == "bad-map-json":
+        amap.write_text("{nope")
+        extra = ["--map", str(amap)]
+    elif setup == "map-not-object":
+        amap.write_text("[1, 2]")
+        extra = ["--map", str(amap)]
+    elif setup == "map-unknown-joint":
+        amap.write_text('{"lFoot": "Nope"}')
+        extra = ["--map", str(amap)]
+    elif setup == "bad-character":
+        char = tmp_path / "c.bvh"
+        char.write_text("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 0\n}\n")
+    elif setup == "missing-character":
+        char = tmp_path / "none.bvh"
+    code = main(["retarget", "sample:walk", "--to", str(char), "--out", str(tmp_path / "o.bvh"), *extra])
+    assert code == 2
+    assert message in capsys.readouterr().err
