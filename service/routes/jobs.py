@@ -10,7 +10,7 @@ from fastapi import APIRouter, Depends, Query, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from engines.registry import engine_kind
-from motion import ExportError
+from motion import ExportError, MotionError
 from motion.resample import resample
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
 from schemas.bases import JobRequestBase
@@ -20,6 +20,7 @@ from workers.budget import check_work, database_facts, estimate_work
 from workers.inputs import InputError, attach_from_store, resolve_inputs
 from workers.store import Store
 
+from ..characters import RestPose, load_character
 from ..deps import (
     BackendDep,
     JobQuotaDep,
@@ -217,11 +218,32 @@ async def download_result(
         float | None,
         Query(ge=0.5, le=1000, description="resample down to this rate only if faster (previews)"),
     ] = None,
+    character: Annotated[
+        str | None,
+        Query(
+            max_length=255,
+            description="retarget onto this character: an uploaded clip (BVH, id or name) or file (GLB)",
+        ),
+    ] = None,
+    rest: Annotated[
+        RestPose, Query(description="a BVH character's rest pose: first frame or zero")
+    ] = RestPose.first,
 ) -> Response:
-    """Download a result motion (default: the job's best result so far), optionally resampled; 409
-    ``result_not_ready`` while the job has none yet."""
+    """Download a result motion (default: the job's best result so far), optionally resampled or
+    retargeted onto a character; 409 ``result_not_ready`` while the job has none yet, 422
+    ``retarget_failed`` when the character's joints do not correspond."""
     rid = await _result_id(backend, principal, job_id, result)
     motion = await run_in_threadpool(store.result_motion, job_id, rid)
+    if character is not None:
+        from motion.retarget import retarget  # imported on first use: most downloads do not retarget
+
+        char = await run_in_threadpool(load_character, store, principal, character, rest, settings.bvh_limits)
+        try:
+            motion = await run_in_threadpool(retarget, motion, char)
+        except MotionError as exc:
+            raise ApiError(
+                422, "retarget_failed", f"cannot retarget result {rid} onto {character}: {exc}"
+            ) from None
     finite = await run_in_threadpool(
         lambda: bool(np.isfinite(motion.root_positions).all() and np.isfinite(motion.rotations).all())
     )

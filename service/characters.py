@@ -1,0 +1,43 @@
+"""Characters for result downloads: ``?character=`` names an uploaded BVH clip (by id or upload
+name) or an uploaded glTF/GLB file (by id) whose skeleton the result is retargeted onto
+(:func:`motion.retarget.retarget`)."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+from motion import Motion
+from motion.bvh import BvhLimits, parse_bvh
+from motion.retarget.character import gltf_character
+from motion.retarget.transfer import zero_pose
+from workers.store import NotFoundError, Store
+
+from .deps import Principal
+from .owners import clip_for, file_for
+
+
+class RestPose(StrEnum):
+    """A BVH character's rest pose: its first frame or the zero-rotation pose of its offsets."""
+
+    first = "first"
+    zero = "zero"
+
+
+def load_character(store: Store, principal: Principal, ref: str, rest: RestPose, limits: BvhLimits) -> Motion:
+    """The character ``ref`` (a clip the principal holds, else a file it holds) as a one-frame
+    motion in its rest pose. Raises ``NotFoundError`` (404) when it names neither, and
+    :class:`motion.MotionError` (422) for a file that is not a glTF skin."""
+    try:
+        info = clip_for(store, principal, ref)
+    except NotFoundError:
+        try:
+            finfo = file_for(store, principal, ref)
+        except NotFoundError:
+            raise NotFoundError(
+                f"no character {ref!r}: upload a BVH to /v1/clips or a GLB/glTF to /v1/files first"
+            ) from None
+        return gltf_character(store.file_bytes(finfo.id), name=finfo.name)
+    motion = parse_bvh(
+        store.clip_bytes(info.id), units=info.units, limits=limits, source=info.name, name=info.name
+    )
+    return zero_pose(motion) if rest == RestPose.zero else motion.slice(0, 1)

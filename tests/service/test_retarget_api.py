@@ -1,0 +1,67 @@
+"""``GET /v1/jobs/{id}/result?character=``: a result retargeted onto an uploaded character."""
+
+from __future__ import annotations
+
+import io
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+
+from motion import parse_bvh, write_bvh
+from motion.export.glb import glb_bytes
+from tests.motion.retarget.characters import character
+
+from .conftest import WALK_CLIP, wait_events
+from .test_api import error_of, submit
+
+
+def _bvh_bytes(convention: str, **kw: Any) -> bytes:
+    buf = io.StringIO()
+    write_bvh(character(convention, **kw), buf)
+    return buf.getvalue().encode()
+
+
+@pytest.fixture(scope="module")
+def walk_job(client: TestClient, walk_db: dict[str, Any]) -> str:
+    job = submit(
+        client, {"engine": "clip", "database": walk_db["id"], "clip": WALK_CLIP, "start": 0, "end": 60}
+    )
+    assert wait_events(client, job["id"])[-1]["type"] == "done"
+    return str(job["id"])
+
+
+def test_result_on_an_uploaded_bvh_character(client: TestClient, walk_job: str) -> None:
+    data = _bvh_bytes("mixamo", scale=1.2)
+    clip = client.post("/v1/clips", files={"file": ("mixamo-char.bvh", data)}).json()
+    r = client.get(f"/v1/jobs/{walk_job}/result", params={"format": "bvh", "character": clip["id"]})
+    assert r.status_code == 200, r.text
+    out, char = parse_bvh(r.content), parse_bvh(data)
+    assert out.skeleton.names == char.skeleton.names and out.num_frames == 60
+    by_name = client.get(
+        f"/v1/jobs/{walk_job}/result", params={"character": "mixamo-char.bvh", "rest": "zero"}
+    )
+    assert by_name.status_code == 200
+    glb = client.get(f"/v1/jobs/{walk_job}/result", params={"format": "glb", "character": clip["id"]})
+    assert glb.status_code == 200 and glb.content[:4] == b"glTF"
+
+
+def test_result_on_an_uploaded_glb_character(client: TestClient, walk_job: str) -> None:
+    data = glb_bytes(character("unreal"), ground_root=False, mesh=False)
+    f = client.post("/v1/files", files={"file": ("mannequin.glb", data)}).json()
+    r = client.get(f"/v1/jobs/{walk_job}/result", params={"format": "bvh", "character": f["id"]})
+    assert r.status_code == 200, r.text
+    assert "pelvis" in parse_bvh(r.content).skeleton.names
+
+
+def test_character_errors(client: TestClient, walk_job: str) -> None:
+    err = error_of(client.get(f"/v1/jobs/{walk_job}/result", params={"character": "nope"}), 404, "not_found")
+    assert "no character 'nope'" in err["message"]
+    text = _bvh_bytes("unreal").replace(b"JOINT foot_l\n", b"JOINT ankle_x\n")
+    clip = client.post("/v1/clips", files={"file": ("footless.bvh", text)}).json()
+    err = error_of(
+        client.get(f"/v1/jobs/{walk_job}/result", params={"character": clip["id"]}), 422, "retarget_failed"
+    )
+    assert "left foot" in err["message"]
+    junk = client.post("/v1/files", files={"file": ("junk.glb", b"glTF\x02\x00")}).json()
+    error_of(client.get(f"/v1/jobs/{walk_job}/result", params={"character": junk["id"]}), 400)
