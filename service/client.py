@@ -233,9 +233,12 @@ class SegueClient:
         path: str | Path | None = None,
         result: str | None = None,
         target: str = "gltf",
+        character: str | None = None,
     ) -> bytes:
-        """A result motion as ``bvh``, ``glb``, ``json`` or ``npz`` bytes (also written to ``path``)."""
+        """A result motion as ``bvh``, ``glb``, ``json`` or ``npz`` bytes (also written to ``path``);
+        ``character``: an uploaded clip or file id to retarget it onto (docs/retargeting.md)."""
         params = {"format": format, "target": target} | ({"result": result} if result else {})
+        params |= {"character": character} if character else {}
         data = self._request("GET", f"/v1/jobs/{job_id}/result", params=params).content
         if path is not None:
             Path(path).write_bytes(data)
