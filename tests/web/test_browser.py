@@ -11,6 +11,7 @@ from __future__ import annotations
 import gzip
 import json
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -284,6 +285,20 @@ def test_constraints_build_and_alternatives(page: Any, segue: SegueClient) -> No
     assert bvh["format"] == "bvh" and bvh["frames"] == 120
     assert glb["format"] == "glb" and glb["animations"] == 1
     assert glb["duration_s"] == pytest.approx(119 / 30, abs=0.05)
+
+    # the character picker: the same result retargeted onto an uploaded clip's skeleton
+    chars = page.eval_on_selector_all("#character option", "os => os.map((o) => o.value)")
+    assert chars[0] == "" and len(chars) >= 2
+    page.select_option("#character", chars[1])
+    with page.expect_download() as dl:
+        page.click("#dl-bvh")
+    on_char = state(page, ".downloads")[-1]
+    assert on_char["character"] == chars[1] and on_char["frames"] == 120
+    text = Path(dl.value.path()).read_text()
+    clip = next(c for c in segue.clips() if c.id == chars[1])
+    joints = [ln.split()[1] for ln in text.splitlines() if ln.strip().startswith(("ROOT", "JOINT"))]
+    assert joints == clip.joints
+    page.select_option("#character", "")
 
     press_again(page, "#cons-go", "constraints")
 

@@ -117,8 +117,11 @@ export const api = {
   report: async (job, result) => (await request('GET', `/v1/jobs/${job}/report`, { query: { result } })).json(),
   // maxFps: the server resamples faster results down to it (the viewer's previews; downloads keep
   // the full rate)
-  resultBlob: async (job, result, format, maxFps) =>
-    (await request('GET', `/v1/jobs/${job}/result`, { query: { format, result, max_fps: maxFps } })).blob(),
+  // character: an uploaded clip's id to retarget the result onto (docs/retargeting.md)
+  resultBlob: async (job, result, format, maxFps, character) =>
+    (await request('GET', `/v1/jobs/${job}/result`, {
+      query: { format, result, max_fps: maxFps, character: character || undefined },
+    })).blob(),
 };
 
 export function wsUrl(path, query = {}) {

@@ -175,6 +175,11 @@ async function refreshClips() {
     }
     list.appendChild(li);
   }
+  // the character picker beside the downloads: any uploaded clip's skeleton
+  const picker = $('character');
+  const picked = picker.value;
+  picker.length = 1;
+  for (const c of state.clips) picker.add(new Option(c.name, c.id, false, c.id === picked));
   const checks = $('db-clips');
   const checked = new Set([...checks.querySelectorAll('input:checked')].map((i) => i.value));
   checks.textContent = '';
@@ -501,8 +506,9 @@ $('cancel-job').onclick = () => guarded('download', async () => { if (state.job)
 async function download(format) {
   if (!state.current || !state.current.job) throw new ApiError(0, 'no_result', 'no result to download yet');
   const { job, result } = state.current;
-  const blob = await api.resultBlob(job, result, format);
-  const record = { format, job, result, bytes: blob.size };
+  const character = $('character').value;
+  const blob = await api.resultBlob(job, result, format, undefined, character);
+  const record = { format, job, result, bytes: blob.size, character };
   if (format === 'glb') {
     // check the file the service made: it must load in three.js with its animation
     const gltf = await new GLTFLoader().parseAsync(await blob.arrayBuffer(), '');
