@@ -18,8 +18,9 @@ Joints without a source (the character's extra spine joints, twist bones, finger
 rest rotation, relative to their parent. The hips follow the source's hips scaled by the ratio of
 the two skeletons' hip heights in the same poses (the median height of the hips above the ankles,
 source and transferred character; thigh plus shin lengths for a motion that rarely stands), their
-height measured from each skeleton's standing ankle height, so the character's feet meet its own
-floor. Only rotations and the
+height measured from each skeleton's standing ankle height (the source's usual lowest ankle level;
+the character's lower ankle in its rest pose, or the source's level scaled when that pose is not
+standing), so the character's feet meet its own floor. Only rotations and the
 translation of the root (or the translated joint that carries the hips) change: the character's
 bone offsets, channels and units are kept exactly.
 
@@ -296,6 +297,8 @@ def hips_path(
     hips = src_pose.positions[:, sr["Hips"]]
     s_floor = floor_height(src_pose.positions, s_feet)
     t_floor = float(t0[t_feet, 1].min())
+    if t0[tr["Hips"], 1] - t_floor < 0.5 * leg_length(t0, tr):  # a rest pose not standing (lying, a
+        t_floor = ratio * s_floor  # zero pose of a skeleton that lies down): the source's floor, scaled
     path = hips * ratio
     path[:, 1] = t_floor + ratio * (hips[:, 1] - s_floor)
     return path, ratio
