@@ -3,10 +3,13 @@ and the errors naming missing joints."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
-from motion import MotionError
+from motion import Motion, MotionError, Skeleton
+from motion import rotations as rot
 from motion.io import load_motion
 from motion.retarget import correspond, detect_roles, retarget
 from motion.retarget.names import REQUIRED, bare_name, pair_chains
@@ -85,3 +88,47 @@ def test_map_pairs_extra_joints() -> None:
     j = char.skeleton.index("lIndex2")
     assert np.allclose(plain.rotations[:, j], char.rotations[0, j])  # unmapped: rest rotation
     assert not np.allclose(mapped.rotations[:, j], char.rotations[0, j])
+
+
+def _longer_spine(char: Motion, chest: str, extra: tuple[str, ...]) -> Motion:
+    """``char`` with joints ``extra`` inserted above ``chest`` (an Unreal 5 spine of 5 joints): the
+    chest's children hang from the last one, the bone from the chest to them is split evenly."""
+    sk = char.skeleton
+    c = sk.index(chest)
+    kids = sk.children(c)
+    step = np.mean(sk.offsets[kids], axis=0) / (len(extra) + 1)
+    names = list(sk.names) + list(extra)
+    parents = list(sk.parents) + [c + 0] + [sk.num_joints + k for k in range(len(extra) - 1)]
+    offsets = np.vstack([sk.offsets, np.tile(step, (len(extra), 1))])
+    for k in kids:
+        parents[k] = len(names) - 1
+        offsets[k] = sk.offsets[k] - len(extra) * step
+    # parents must precede children: reorder so the new joints come right after the chest
+    order = list(range(c + 1)) + list(range(sk.num_joints, len(names))) + list(range(c + 1, sk.num_joints))
+    where = {old: new for new, old in enumerate(order)}
+    skeleton = Skeleton(
+        tuple(names[o] for o in order),
+        np.array([-1 if parents[o] < 0 else where[parents[o]] for o in order]),
+        offsets[order],
+        tuple(sk.channels[o] if o < sk.num_joints else sk.channels[c] for o in order),
+        np.array([where[int(p)] for p in sk.end_site_parents]),
+        sk.end_site_offsets,
+    )
+    rotations = np.concatenate([char.rotations, np.tile(rot.IDENTITY, (1, len(extra), 1))], axis=1)[:, order]
+    return replace(char, skeleton=skeleton, rotations=rotations)
+
+
+def test_a_longer_spine_pairs_its_ends_and_keeps_the_rest() -> None:
+    char = _longer_spine(character("unreal"), "spine_02", ("spine_03", "spine_04", "spine_05"))
+    src = walk(120)
+    corr = correspond(src.skeleton, char.skeleton)
+    named = {char.skeleton.names[t]: src.skeleton.names[s] for t, s in corr.pairs.items()}
+    assert named["spine_01"] == "abdomen" and named["spine_05"] == "chest"
+    assert not {"spine_02", "spine_03", "spine_04"} & set(named)
+    out = retarget(src, char, plant=False)
+    err = angle_deg(bone_directions(src, renamed_limbs(None)), bone_directions(out, renamed_limbs("unreal")))
+    assert err.max() < 0.5
+    # the shoulders face where the source's do: the clavicle-to-clavicle axis follows the source's
+    axis_s = bone_directions(src, (("rCollar", "lCollar"),))
+    axis_o = bone_directions(out, (("clavicle_r", "clavicle_l"),))
+    assert angle_deg(axis_s, axis_o).max() < 1.0
