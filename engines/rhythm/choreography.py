@@ -167,6 +167,12 @@ def apply_edits(p: Array, edits: list[ResolvedEdit]) -> Array:
                     {"problem": "no_transition"},
                 )
             lik[a, b] *= float(e.weight or 1.0)
+            if lik[a, b] < 1e-250:
+                raise GraphEditError(
+                    f"{_describe(e, i)}: the weights underflow (cut the transition instead)",
+                    i,
+                    {"problem": "underflow"},
+                )
         else:
             if has:
                 raise GraphEditError(

@@ -225,6 +225,13 @@ def test_rules_dead_end_unreachable_and_existence(arrays: dict[str, Any]) -> Non
     with pytest.raises(GraphEditError, match="connect it first"):
         apply_edits(p, [ResolvedEdit(op="weight", source=1, target=b, weight=3.0)])
     c = int(np.flatnonzero(p[1] > 0)[0])
+    tiny = [ResolvedEdit(op="weight", source=1, target=c, weight=1e-6)] * 50
+    with pytest.raises(GraphEditError, match="underflow") as info:
+        apply_edits(p, tiny)
+    assert info.value.index == 41
+    huge = [ResolvedEdit(op="weight", source=1, target=c, weight=1e6)] * 60
+    with pytest.raises(GraphEditError, match="overflow"):
+        apply_edits(p, huge)
     with pytest.raises(GraphEditError, match="exists already"):
         apply_edits(p, [ResolvedEdit(op="connect", source=1, target=c)])
 
