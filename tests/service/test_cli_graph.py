@@ -111,3 +111,46 @@ def test_graph_of_a_non_rhythm_directory(tmp_path: Path, capsys: pytest.CaptureF
     assert "only 'rhythm' databases have a movement graph" in capsys.readouterr().err
     assert main(["graph", str(tmp_path / "nowhere")]) == 2
     assert "is not a database directory" in capsys.readouterr().err
+
+
+def test_spans_use_the_clip_names_of_the_spec(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A clip named in the spec is that name in the graph and in clip spans; others keep their stem."""
+    spec = {
+        "kind": "rhythm",
+        "clips": [
+            {"bvh": "sample:salsa-leader-02", "name": "first dance"},
+            {"bvh": "sample:salsa-leader-04"},
+        ],
+        "fps": 30,
+        "beats_per_movement": 4,
+    }
+    (tmp_path / "db.json").write_text(json.dumps(spec), encoding="utf-8")
+    assert main(["build", str(tmp_path / "db.json"), "--out", str(tmp_path / "db"), "-q"]) == 0
+    g = graph(tmp_path / "db", capsys)
+    assert {grp.representative.clip for grp in g.groups} == {"first dance", "salsa-leader-04"}
+    named = next(grp for grp in g.groups if grp.representative.clip == "first dance")
+    r = named.representative
+    target = next(u.target for u in g.transitions if u.source == named.id)
+    span = {"clip": "first dance", "frames": [r.start_frame, r.end_frame]}
+    edits = [{"op": "weight", "source": span, "target": target, "weight": 2}]
+    (tmp_path / "e.json").write_text(json.dumps(edits), encoding="utf-8")
+    assert (
+        main(
+            ["graph-edit", str(tmp_path / "db"), str(tmp_path / "e.json"), "--out", str(tmp_path / "d"), "-q"]
+        )
+        == 0
+    )
+    d = graph(tmp_path / "d", capsys)
+    assert d.derived_from is not None and d.derived_from.edits[0].source == named.id
+    (tmp_path / "bad.json").write_text(
+        json.dumps([{"op": "cut", "source": {"clip": "salsa-leader-02", "frames": [10, 10]}, "target": 0}]),
+        encoding="utf-8",
+    )
+    assert (
+        main(["graph-edit", str(tmp_path / "db"), str(tmp_path / "bad.json"), "--out", str(tmp_path / "x")])
+        == 2
+    )
+    assert (
+        "no clip 'salsa-leader-02' among the database's examples (first dance, salsa-leader-04)"
+        in capsys.readouterr().err
+    )
