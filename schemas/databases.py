@@ -48,6 +48,7 @@ class GraphDatabaseSpec(DatabaseSpecBase):
 from .annotations import AnnotatedDatabaseSpec  # noqa: E402
 from .control import ControlDatabaseSpec  # noqa: E402
 from .rhythm import RhythmDatabaseSpec  # noqa: E402
+from .rhythm_graph import DerivedFrom  # noqa: E402
 
 DatabaseSpec = Annotated[
     ClipsDatabaseSpec | ControlDatabaseSpec | GraphDatabaseSpec | AnnotatedDatabaseSpec | RhythmDatabaseSpec,
@@ -143,4 +144,7 @@ class DatabaseInfo(Strict):
     created_at: datetime
     summary: DatabaseSummary | None = Field(
         default=None, description="ready databases: clips, labels, skeleton and units (GET only)"
+    )
+    derived_from: DerivedFrom | None = Field(
+        default=None, description="a database derived by graph edits: its parent and the edits"
     )

@@ -25,6 +25,7 @@ from pydantic import TypeAdapter
 from engines.registry import load_plugins
 from schemas import DatabaseSpec
 from schemas.jobs import JobRequest
+from schemas.rhythm_graph import GraphEdits
 from workers.backend import JobBackend
 from workers.embedded import EmbeddedBackend
 from workers.execute import EngineCache
@@ -37,6 +38,7 @@ from .links import add_links
 from .metrics import HttpMetricsMiddleware, Metrics, observe_terminal_events
 from .routes import annotations as annotation_routes
 from .routes import clips, databases, events, files, health, jobs, sessions
+from .routes import graphs as graph_routes
 from .routes.annotations import Corrections
 from .settings import Settings, get_settings
 from .web import mount_web
@@ -91,6 +93,7 @@ BODY_SCHEMAS: dict[str, Any] = {
     "JobRequest": JobRequest,
     "DatabaseSpec": DatabaseSpec,
     "LabelCorrections": Corrections,
+    "GraphEdits": GraphEdits,
 }
 """Request bodies the routes parse themselves (:mod:`service.jsonbody`), documented as components."""
 
@@ -127,7 +130,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.session_quota = SessionQuota(settings.max_sessions)
     app.state.engines = EngineCache(capacity=4)  # live sessions' engines (the only ones loaded here)
     install_error_handlers(app)
-    for module in (clips, files, databases, annotation_routes, jobs, events, health, sessions):
+    for module in (clips, files, databases, annotation_routes, graph_routes, jobs, events, health, sessions):
         app.include_router(module.router)
     # innermost first: CatchAll turns a bug into the contract's 500 (keeping the connection), metrics
     # count it, the guard refuses foreign hosts and origins before anything else runs, and CORS (only

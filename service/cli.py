@@ -12,6 +12,8 @@ Commands::
     segue demo ENGINE [--out DIR]                 one engine end to end on bundled clips (service.demos)
     segue build SPEC.json --out DIR               build a database (same JSON as POST /v1/databases)
     segue synth REQUEST.json --db DIR --out OUT   run a job in-process (same JSON as POST /v1/jobs)
+    segue graph DIR [--json]                      a rhythm database's movement transition graph
+    segue graph-edit DIR EDITS.json --out DIR2    derive a database with an edited movement graph
     segue serve [--host H] [--port P] [--redis URL]   the HTTP/WebSocket API (+ embedded workers)
     segue worker --redis URL                      a Redis job worker
 
@@ -320,6 +322,47 @@ def cmd_synth(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_graph(args: argparse.Namespace) -> int:
+    from workers.graph_edits import graph_of_dir
+
+    graph = graph_of_dir(Path(args.db))
+    if args.json:
+        print(graph.model_dump_json(indent=2))
+        return 0
+    parent = f", derived from {graph.derived_from.parent[:12]}" if graph.derived_from else ""
+    print(
+        f"database {graph.database[:12]}{parent}: {len(graph.groups)} groups, "
+        f"{len(graph.transitions)} transitions, {graph.beats_per_movement} beats per movement"
+        + ("" if graph.strongly_connected else " (NOT strongly connected)")
+    )
+    for g in graph.groups:
+        r = g.representative
+        mirror = " mirrored" if r.mirrored else ""
+        print(
+            f"group {g.id:3d}: {g.size:3d} movements, e.g. {r.clip}{mirror} frames "
+            f"{r.start_frame}-{r.end_frame} ({r.start_s:.2f}-{r.end_s:.2f} s)"
+        )
+    for t in graph.transitions:
+        tag = "" if t.learned else "  (added)"
+        print(
+            f"{t.source:3d} -> {t.target:3d}  P {t.probability:.3f}  kinematic {t.kinematic:.3f}  "
+            f"behavioural {t.behavioural:.3f}{tag}"
+        )
+    return 0
+
+
+def cmd_graph_edit(args: argparse.Namespace) -> int:
+    from schemas.rhythm_graph import GraphEdits
+    from workers.graph_edits import derive_dir
+
+    data = json.loads(Path(args.edits).read_bytes())
+    body = GraphEdits.model_validate({"edits": data} if isinstance(data, list) else data)
+    info = derive_dir(Path(args.db), body, Path(args.out))
+    if not args.quiet:
+        print(f"derived database {info.id[:12]} in {args.out}: {len(body.edits)} edits of {args.db}")
+    return 0
+
+
 def quality_summary(report: Report) -> str:
     """One line per reason a result is not ok (``quality: ok`` when it is)."""
     if report.ok is None:
@@ -496,6 +539,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--budget", type=float, help="search budget in seconds (overrides the request's budget_s)")
     p.add_argument("--quiet", "-q", action="store_true")
     p.set_defaults(func=cmd_synth)
+
+    p = sub.add_parser("graph", help="a rhythm database's movement transition graph (groups, transitions)")
+    p.add_argument("db", help="rhythm database directory from segue build (or segue graph-edit)")
+    p.add_argument("--json", action="store_true", help="print the graph as JSON (GET /v1/databases/ID/graph)")
+    p.set_defaults(func=cmd_graph)
+
+    p = sub.add_parser(
+        "graph-edit", help="derive a rhythm database whose movement graph is edited (connect, cut, weight)"
+    )
+    p.add_argument("db", help="rhythm database directory")
+    p.add_argument(
+        "edits", help='edits JSON: {"edits": [{"op": "cut", "source": 0, "target": 3}, ...]} or the list'
+    )
+    p.add_argument("--out", required=True, help="derived database directory to write")
+    p.add_argument("--quiet", "-q", action="store_true")
+    p.set_defaults(func=cmd_graph_edit)
 
     p = sub.add_parser("serve", help="run the HTTP/WebSocket API (embedded workers unless --redis)")
     p.add_argument("--host", default="127.0.0.1")

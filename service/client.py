@@ -30,6 +30,7 @@ from websockets.sync.client import ClientConnection, connect
 
 from schemas import ClipInfo, DatabaseInfo, DatabaseStatus, JobEvent, JobInfo, Report
 from schemas.files import FileInfo
+from schemas.rhythm_graph import GraphEdits, MovementGraph
 
 
 class SegueError(Exception):
@@ -172,6 +173,18 @@ class SegueClient:
     def delete_database(self, db_id: str) -> None:
         """Delete a database."""
         self._request("DELETE", f"/v1/databases/{db_id}")
+
+    def graph(self, db_id: str) -> MovementGraph:
+        """A rhythm database's movement transition graph (groups and transitions)."""
+        return MovementGraph.model_validate(self._request("GET", f"/v1/databases/{db_id}/graph").json())
+
+    def edit_graph(self, db_id: str, edits: list[dict[str, Any]] | GraphEdits) -> DatabaseInfo:
+        """The database derived from a rhythm database by movement-graph edits (connect, cut,
+        weight; see the OpenAPI ``GraphEdits`` schema). Raises :class:`SegueError` (422) naming the
+        edit that breaks a rule."""
+        body = edits.model_dump(mode="json") if isinstance(edits, GraphEdits) else {"edits": edits}
+        r = self._request("POST", f"/v1/databases/{db_id}/graph-edits", json=body)
+        return DatabaseInfo.model_validate(r.json())
 
     # -- jobs -----------------------------------------------------------------------------------
     def submit(self, request: dict[str, Any] | BaseModel) -> JobInfo:

@@ -168,7 +168,7 @@ def test_synopses_name_real_commands_and_options(block: Block) -> None:
     parser = build_parser()
     commands = next(a for a in parser._actions if a.dest == "command").choices
     for line in block.text.splitlines():
-        for cmd, rest in re.findall(r"\bsegue (\w+)([^#;]*)", line):
+        for cmd, rest in re.findall(r"\bsegue (\w[\w-]*)([^#;]*)", line):
             assert cmd in commands, f"{block.where}: no command 'segue {cmd}'"
             options = {o for a in commands[cmd]._actions for o in a.option_strings}
             for opt in re.findall(r"(--[\w-]+)", rest):

@@ -6,6 +6,7 @@ import { bvhText, METRES_PER_UNIT, parseBvh, parseBvhText } from './bvh.js';
 import { placeJoint, Viewer } from './viewer.js';
 import { FloorPad, headingDeg } from './pad.js';
 import { setupMusic } from './music.js';
+import { setupGraph } from './graph.js';
 
 const $ = (id) => document.getElementById(id);
 const VIEW_FPS = 30; // results are drawn at most at this rate (the server resamples; downloads are full rate)
@@ -205,7 +206,8 @@ export function dbLabel(d) {
   const clips = d.clips || [];
   const name = d.name || (clips.length ? `${clips[0]}${clips.length > 1 ? ` +${clips.length - 1}` : ''}` : d.id.slice(0, 8));
   const drive = d.summary && d.summary.control ? ` (${d.summary.control === 'path' ? 'walks from a path' : 'partner'})` : '';
-  return `${name} · ${d.kind}${drive}`;
+  const edited = d.derived_from ? ' (edited graph)' : '';
+  return `${name} · ${d.kind}${drive}${edited}`;
 }
 
 // whether a database fits a picker: its kind, and for control databases what drives them
@@ -951,6 +953,8 @@ timeline = tools.timeline = (() => {
 // -- Music: BPM or MIDI, steer with the mouse -> rhythmic synthesis; beat flashes
 music = setupMusic({ state, $, api, runJob, guarded, dbOf, numberOf, viewer, ApiError, FloorPad, headingDeg, showError });
 tools.music = music;
+// -- the rhythm database's movement graph (choreographic edits -> a derived database): graph.js
+setupGraph({ state, $, guarded, clearError, refreshDatabases });
 
 // ---------------------------------------------------------------- start
 $('token').value = getToken();
