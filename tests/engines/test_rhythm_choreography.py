@@ -276,3 +276,13 @@ def test_derived_arrays_keep_everything_but_the_graph(arrays: dict[str, Any]) ->
     np.testing.assert_array_equal(again["rhythm.learned_p"], p)
     added = [t for t in movement_graph(again, "d2").transitions if not t.learned]
     assert added == []  # connecting back a learned transition is not an addition
+
+
+def test_a_learned_graph_that_is_not_strongly_connected_must_be_fixed_by_the_edits() -> None:
+    # groups 0 and 1 lead to each other and to 2; 2 only to itself: a dance that reaches 2 stays there
+    p = np.array([[0.5, 0.3, 0.2], [0.6, 0.0, 0.4], [0.0, 0.0, 1.0]])
+    with pytest.raises(GraphEditError, match=r"groups \[2\] have no transition to the other groups") as info:
+        apply_edits(p, [ResolvedEdit(op="weight", source=0, target=1, weight=2.0)])
+    assert info.value.index is None and info.value.details["unreachable_groups"] == [0, 1]
+    fixed = apply_edits(p, [ResolvedEdit(op="connect", source=2, target=0)])
+    np.testing.assert_allclose(fixed[2], [0.5, 0.0, 0.5])  # as likely as the row's average transition

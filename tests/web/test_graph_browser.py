@@ -60,6 +60,19 @@ def test_graph_view_cut_connect_derive(page: Any, segue: SegueClient) -> None:
         f"s.graph.connects.length === 1 && s.graph.connects[0][0] === {c} && s.graph.connects[0][1] === {d}",
     )
     assert page.locator("#graph-svg path.edge.pending").count() == 1
+    # weight another existing transition with the pickers
+    w_src, w_dst = next(
+        (t["source"], t["target"])
+        for t in g["transitions"]
+        if (t["source"], t["target"]) not in ((a, b), (c, d))
+    )
+    page.select_option("#graph-from", str(w_src))
+    page.select_option("#graph-to", str(w_dst))
+    page.fill("#graph-weight", "4")
+    page.click("#graph-weigh")
+    wait(page, "s.graph.weights.length === 1 && s.graph.weights[0][2] === 4")
+    assert page.locator("#graph-svg path.edge.weighted").count() == 1
+    page.fill("#graph-weight", "1")
     page.locator("#graph-svg").scroll_into_view_if_needed()
     screenshot(page, "graph")
     page.click("#graph-submit")
@@ -68,9 +81,15 @@ def test_graph_view_cut_connect_derive(page: Any, segue: SegueClient) -> None:
     assert page.locator("#music-db").input_value() == derived  # the Music tool dances it now
     info = segue.database(derived)
     assert info.derived_from is not None and info.derived_from.parent == db
-    assert [(e.op, e.source, e.target) for e in info.derived_from.edits] == [("cut", a, b), ("connect", c, d)]
+    assert [(e.op, e.source, e.target, e.weight) for e in info.derived_from.edits] == [
+        ("cut", a, b, None),
+        ("connect", c, d, 1.0),
+        ("weight", w_src, w_dst, 4.0),
+    ]
     new = {(t.source, t.target): t for t in segue.graph(derived).transitions}
     assert (a, b) not in new and not new[(c, d)].learned
+    learned = {(t.source, t.target): t.probability for t in server.transitions}
+    assert new[(w_src, w_dst)].probability > learned[(w_src, w_dst)]
     assert page.locator("#graph-svg path.edge.added").count() == 1  # drawn as added
     assert {(t.source, t.target) for t in segue.graph(db).transitions} == edges  # the original stays
     # cutting every transition out of a group: the server's 422 names the edit, nothing is derived

@@ -2,7 +2,7 @@
 // per group of basic movements, with a stick figure of its representative pose, and one arrow per
 // transition (width = probability). Click an arrow to cut it (click again to keep it); click a
 // node to pick the source of a new transition, shift-click another to connect them (or use the
-// from/to pickers and Add). Submit posts the edits (POST /v1/databases/{id}/graph-edits): the server
+// from/to pickers and Add; Weight multiplies an existing transition's likelihood). Submit posts the edits (POST /v1/databases/{id}/graph-edits): the server
 // checks the rules (no dead end, strongly connected) and answers the derived database, which the
 // page then selects in the Music tool. Self-contained: app.js hands it a few helpers.
 
@@ -44,7 +44,8 @@ export function setupGraph(ctx) {
     groups: [],
     transitions: [],
     cuts: [], // [source, target] pending cuts
-    connects: [], // [source, target] pending additions
+    connects: [], // [source, target, weight] pending additions
+    weights: [], // [source, target, factor] pending weight changes
     from: null, // the node picked as the source of a new transition
     derived: null, // the database the last submit derived
     strongly_connected: null,
@@ -103,11 +104,12 @@ export function setupGraph(ctx) {
       hit.addEventListener('click', () => toggle(a, b));
     };
     for (const t of g.transitions) {
-      const cls = `${t.learned ? 'learned' : 'added'}${has(g.cuts, t.source, t.target) ? ' cut' : ''}`;
-      const title = `${t.source} → ${t.target}: P ${t.probability.toFixed(3)} · kinematic ${t.kinematic.toFixed(3)} · behavioural ${t.behavioural.toFixed(3)}${t.learned ? '' : ' (added)'}\nclick to cut`;
+      const w = g.weights.find(([x, y]) => x === t.source && y === t.target);
+      const cls = `${t.learned ? 'learned' : 'added'}${has(g.cuts, t.source, t.target) ? ' cut' : ''}${w ? ' weighted' : ''}`;
+      const title = `${t.source} → ${t.target}: P ${t.probability.toFixed(3)} · kinematic ${t.kinematic.toFixed(3)} · behavioural ${t.behavioural.toFixed(3)}${t.learned ? '' : ' (added)'}${w ? ` · to be weighted ×${w[2]}` : ''}\nclick to cut`;
       arrow(t.source, t.target, cls, title, (0.6 + 5 * t.probability).toFixed(2));
     }
-    for (const [a, b] of g.connects) arrow(a, b, 'added pending', `${a} → ${b}: to be added\nclick to drop`, 2);
+    for (const [a, b, w] of g.connects) arrow(a, b, 'added pending', `${a} → ${b}: to be added (weight ${w})\nclick to drop`, 2);
     const nodes = el('g', { class: 'nodes' }, svg);
     for (const grp of g.groups) {
       const [x, y] = place(grp.id);
@@ -119,7 +121,7 @@ export function setupGraph(ctx) {
       el('title', {}, node).textContent = `group ${grp.id}: ${grp.size} movement${grp.size === 1 ? '' : 's'}\ne.g. ${r.clip}${r.mirrored ? ' (mirrored)' : ''} frames ${r.start_frame}–${r.end_frame} (${r.start_s.toFixed(2)}–${r.end_s.toFixed(2)} s)\nclick: source of a new transition · shift-click: connect from the source`;
       node.addEventListener('click', (ev) => pick(grp.id, ev.shiftKey));
     }
-    const edits = g.cuts.length + g.connects.length;
+    const edits = g.cuts.length + g.connects.length + g.weights.length;
     $('graph-submit').disabled = !edits;
     $('graph-info').textContent = g.database
       ? `${g.groups.length} groups · ${g.transitions.length} transitions${g.strongly_connected ? '' : ' · NOT strongly connected'} · ${edits} pending edit${edits === 1 ? '' : 's'}`
@@ -130,18 +132,35 @@ export function setupGraph(ctx) {
     ctx.clearError('graph');
     if (has(g.connects, a, b)) g.connects = drop(g.connects, a, b);
     else if (has(g.cuts, a, b)) g.cuts = drop(g.cuts, a, b);
-    else g.cuts.push([a, b]);
+    else { g.cuts.push([a, b]); g.weights = drop(g.weights, a, b); }
     draw();
+  }
+
+  function factor() {
+    const w = Number($('graph-weight').value);
+    if (!(w > 0) || !Number.isFinite(w)) throw new Error('the weight must be a positive number');
+    return w;
   }
 
   function connect(a, b) {
     ctx.clearError('graph');
+    const w = factor();
     if (exists(a, b)) {
       if (has(g.cuts, a, b)) g.cuts = drop(g.cuts, a, b); // adding back what is being cut: keep it
-      else throw new Error(`the transition ${a} → ${b} exists already`);
-    } else if (!has(g.connects, a, b)) {
-      g.connects.push([a, b]);
+      else throw new Error(`the transition ${a} → ${b} exists already (weight it instead)`);
+    } else {
+      g.connects = [...drop(g.connects, a, b), [a, b, w]];
     }
+    draw();
+  }
+
+  // multiply an existing transition's likelihood (or set a pending addition's weight)
+  function weigh(a, b) {
+    ctx.clearError('graph');
+    const w = factor();
+    if (has(g.connects, a, b)) g.connects = g.connects.map((c) => (c[0] === a && c[1] === b ? [a, b, w] : c));
+    else if (!exists(a, b) || has(g.cuts, a, b)) throw new Error(`there is no transition ${a} → ${b} to weight (Add it)`);
+    else g.weights = [...drop(g.weights, a, b), [a, b, w]];
     draw();
   }
 
@@ -174,6 +193,7 @@ export function setupGraph(ctx) {
       parents: graph.parents,
       cuts: [],
       connects: [],
+      weights: [],
       from: null,
     });
     fillPickers();
@@ -183,7 +203,8 @@ export function setupGraph(ctx) {
   async function submit() {
     const edits = [
       ...g.cuts.map(([source, target]) => ({ op: 'cut', source, target })),
-      ...g.connects.map(([source, target]) => ({ op: 'connect', source, target })),
+      ...g.connects.map(([source, target, weight]) => ({ op: 'connect', source, target, weight })),
+      ...g.weights.map(([source, target, weight]) => ({ op: 'weight', source, target, weight })),
     ];
     const info = await (await request('POST', `/v1/databases/${encodeURIComponent(g.database)}/graph-edits`, { json: { edits } })).json();
     g.derived = info.id;
@@ -197,7 +218,8 @@ export function setupGraph(ctx) {
 
   $('graph-load').onclick = () => guarded('graph', () => load());
   $('graph-add').onclick = () => guarded('graph', async () => connect(Number($('graph-from').value), Number($('graph-to').value)));
-  $('graph-reset').onclick = () => { g.cuts = []; g.connects = []; g.from = null; ctx.clearError('graph'); draw(); };
+  $('graph-weigh').onclick = () => guarded('graph', async () => weigh(Number($('graph-from').value), Number($('graph-to').value)));
+  $('graph-reset').onclick = () => { g.cuts = []; g.connects = []; g.weights = []; g.from = null; ctx.clearError('graph'); draw(); };
   $('graph-submit').onclick = () => guarded('graph', submit);
   $('music-db').addEventListener('change', () => {
     if (g.database && $('music-db').value && $('music-db').value !== g.database && $('graph-view').open) guarded('graph', () => load());
