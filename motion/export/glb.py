@@ -59,6 +59,8 @@ from __future__ import annotations
 
 import json
 import struct
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -67,8 +69,10 @@ import numpy.typing as npt
 
 from .. import rotations as rot
 from ..errors import ExportError, MotionError
-from ..ground import GROUND_ROOT_NAME, add_ground_root
+from ..ground import GROUND_ROOT_NAME, add_ground_root, facing_pairs
 from ..motion import Motion
+from ..skeleton import Skeleton
+from .characters import character_prefix, split_characters
 
 Array = npt.NDArray[np.float64]
 
@@ -93,19 +97,35 @@ _MIN_BONE_OF_BODY = 1e-6  # bones shorter than this fraction of the body size ar
 _MAX_SKIN_JOINTS = 65536  # JOINTS_0 is UNSIGNED_SHORT
 
 
-def glb_bytes(motion: Motion, *, ground_root: bool = True, mesh: bool = True) -> bytes:
+def glb_bytes(
+    motion: Motion,
+    *,
+    ground_root: bool = True,
+    mesh: bool = True,
+    in_place: bool = False,
+    events: Sequence[dict[str, Any]] | None = None,
+) -> bytes:
     """The motion as a binary glTF 2.0 file (see the module docstring for the layout).
 
     Parameters
     ----------
     motion:
         The motion to export, ``F >= 1`` frames, lengths in ``motion.units`` (converted to
-        metres with ``motion.metres_per_unit``; unknown units count as metres).
+        metres with ``motion.metres_per_unit``; unknown units count as metres). A combined
+        motion of several characters (:func:`motion.export.characters.split_characters`) gets
+        one skin per character.
     ground_root:
         Add an explicit ground root joint named ``"ground"`` with
         :func:`motion.ground.add_ground_root` (skipped when the root already has that name).
     mesh:
         Add a skinned bone mesh so that any viewer shows the character.
+    in_place:
+        Keep the body over the origin: the ground joint still carries the root motion (floor
+        path and heading) but is not the parent of the hips, whose animation is relative to it
+        (needs ``ground_root``).
+    events:
+        JSON objects (:mod:`motion.export.events`) written to the animation's ``extras`` as
+        ``{"events": [...]}``.
 
     Returns
     -------
@@ -115,51 +135,215 @@ def glb_bytes(motion: Motion, *, ground_root: bool = True, mesh: bool = True) ->
     ------
     ExportError
         When the motion has no frames, holds non-finite values or zero quaternions, has too many
-        joints for ``JOINTS_0`` (65,536), its frame times do not increase in float32, or
-        ``ground_root`` is asked for while a non-root joint is already called ``"ground"``.
+        joints for ``JOINTS_0`` (65,536), its frame times do not increase in float32,
+        ``ground_root`` is asked for while a non-root joint is already called ``"ground"``, or
+        ``in_place`` is asked for without ``ground_root``.
     """
-    m = _prepared(motion, ground_root)
-    sk = m.skeleton
-    scale = m.metres_per_unit
+    if in_place and not ground_root:
+        raise ExportError("in-place export needs the ground root (it keeps the root motion)")
+    _prepared(motion, False)  # validate the input before splitting it
+    chars = split_characters(motion) or [motion]
+    several = len(chars) > 1
+    prepared = [
+        _prepared(c, ground_root, character_prefix(c.skeleton.names) + GROUND_ROOT_NAME if several else None)
+        for c in chars
+    ]
     b = _Builder()
-    offsets = sk.offsets * scale
-    rest = _rest_globals(sk.parents, offsets)  # (J, 3) metres
-    nodes = _joint_nodes(m, offsets)
-    scene_roots = [0]
-    channels, samplers = _animation(b, m)  # buffer views in file order: animation, skin, mesh
+    t_acc = _times(b, prepared[0])
+    nodes: list[dict[str, Any]] = []
+    skins: list[dict[str, Any]] = []
+    channels: list[dict[str, Any]] = []
+    samplers: list[dict[str, Any]] = []
+    scene_roots: list[int] = []
+    meshes: list[dict[str, Any]] = []
+    mesh_nodes: list[dict[str, Any]] = []
+    shared: list[tuple[_Rest, npt.NDArray[np.intp], int, int | None]] = []  # rest, parents, IBM, mesh
+    for m in prepared:
+        base = len(nodes)
+        rest = _rest_pose(m, ground_root)
+        nodes += _joint_nodes(m, rest, base, in_place)
+        scene_roots.append(base)
+        if in_place:
+            scene_roots.append(base + 1)
+        _animation(b, m, t_acc, base, channels, samplers)
+        found = next((s for s in shared if _same_rest(s[0], s[1], rest, m.skeleton.parents)), None)
+        if found is None:
+            ibm = _ibm(b, rest)
+            geometry = (
+                _bone_mesh(
+                    m.skeleton.parents,
+                    rest.globals[:, :3, 3],
+                    m.skeleton.end_site_parents,
+                    rest.ends,
+                    ground_root,
+                )
+                if mesh
+                else None
+            )
+            mesh_index = None
+            if geometry is not None:
+                mesh_index = len(meshes)
+                meshes.append(
+                    {"name": m.skeleton.names[0] + "_bones", "primitives": [_primitive(b, *geometry)]}
+                )
+            shared.append((rest, m.skeleton.parents, ibm, mesh_index))
+        else:
+            ibm, mesh_index = found[2], found[3]
+        skin: dict[str, Any] = {
+            "name": m.skeleton.names[0] + "_skin",
+            "joints": list(range(base, base + m.num_joints)),
+            "inverseBindMatrices": ibm,
+        }
+        if not in_place:
+            skin["skeleton"] = base
+        if mesh_index is not None:
+            mesh_nodes.append({"name": m.skeleton.names[0] + "_mesh", "mesh": mesh_index, "skin": len(skins)})
+        skins.append(skin)
+    scene_roots += range(len(nodes), len(nodes) + len(mesh_nodes))
+    nodes += mesh_nodes
+    animation: dict[str, Any] = {"name": _label(motion), "channels": channels, "samplers": samplers}
+    if events is not None:
+        animation["extras"] = {"events": list(events)}
     gltf: dict[str, Any] = {
         "asset": {"version": "2.0", "generator": "segue"},
         "scene": 0,
-        "scenes": [{"name": _label(m), "nodes": scene_roots}],
+        "scenes": [{"name": _label(motion), "nodes": scene_roots}],
         "nodes": nodes,
-        "skins": [_skin(b, m, rest)],
-        "animations": [{"name": _label(m), "channels": channels, "samplers": samplers}],
+        "skins": skins,
+        "animations": [animation],
     }
-    if mesh:
-        _add_bone_mesh(b, gltf, m, rest)
+    if meshes:
+        gltf["meshes"] = meshes
+        gltf["materials"] = [
+            {
+                "name": "bone",
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": [0.72, 0.74, 0.78, 1.0],
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": 0.7,
+                },
+            }
+        ]
     gltf["accessors"] = b.accessors
     gltf["bufferViews"] = b.views
     gltf["buffers"] = [{"byteLength": len(b.data)}]
     return _container(gltf, bytes(b.data))
 
 
-def _joint_nodes(m: Motion, offsets: Array) -> list[dict[str, Any]]:
-    """Nodes ``0 .. J-1`` (the joints, at their rest offsets ``(J, 3)`` metres) then one leaf per End
-    Site, with ``children`` after ``skeleton.parents``."""
+@dataclass(frozen=True, slots=True)
+class _Rest:
+    """The rest (bind) pose of one skin: ``rotations (J, 4)`` and ``translations (J, 3)`` local
+    (metres), ``globals (J, 4, 4)`` joint matrices and ``ends (E, 3)`` End Site positions (m)."""
+
+    rotations: Array
+    translations: Array
+    globals: Array
+    ends: Array
+
+
+def _rest_pose(m: Motion, grounded: bool) -> _Rest:
+    """The rest pose standing on the floor (module docstring, *Rest pose*)."""
+    sk = m.skeleton
+    scale = m.metres_per_unit
+    body = 1 if grounded else 0
+    q = rot.identity((sk.num_joints,))
+    t = sk.offsets * scale
+    t[body] = 0.0
+    ends_off = sk.end_site_offsets * scale
+    g, ends = _rest_fk(sk.parents, t, q, sk.end_site_parents, ends_off)
+    leg = _leg(sk, np.concatenate((g[:, :3, 3], ends)))
+    if leg is not None and not _down(np.concatenate((g[:, :3, 3], ends))[None], leg)[0]:
+        pos, grot = m.fk()
+        pts = np.concatenate((pos, m.end_site_positions(pos, grot)), axis=1)
+        down = _down(pts, leg)
+        f = int(np.argmax(down)) if down.any() else 0
+        q = np.array(m.rotations[f], dtype=np.float64, copy=True)
+        if grounded:
+            q[0] = rot.identity()
+        else:
+            q[0] = rot.multiply(rot.from_yaw(-rot.yaw(q[0])), q[0])
+        g, ends = _rest_fk(sk.parents, t, q, sk.end_site_parents, ends_off)
+    first = 1 if grounded else 0
+    lowest = min(float(g[first:, 1, 3].min()), float(ends[:, 1].min()) if ends.size else np.inf)
+    t[body] = [0.0, -lowest, 0.0]
+    g, ends = _rest_fk(sk.parents, t, q, sk.end_site_parents, ends_off)
+    return _Rest(q, t, g, ends)
+
+
+def _rest_fk(
+    parents: npt.NDArray[np.intp], t: Array, q: Array, end_parents: npt.NDArray[np.intp], end_off: Array
+) -> tuple[Array, Array]:
+    """Global ``(J, 4, 4)`` matrices of local translations ``t (J, 3)`` and rotations ``q (J, 4)``,
+    and the ``(E, 3)`` End Site positions."""
+    local = np.broadcast_to(np.eye(4), (len(parents), 4, 4)).copy()
+    local[:, :3, :3] = rot.to_matrix(q)
+    local[:, :3, 3] = t
+    g = local.copy()
+    for j in range(1, len(parents)):
+        g[j] = g[parents[j]] @ local[j]
+    ends = np.einsum("eab,eb->ea", g[end_parents, :3, :3], end_off) + g[end_parents, :3, 3]
+    return g, ends.reshape(-1, 3)
+
+
+def _leg(sk: Skeleton, points: Array) -> tuple[int, int] | None:
+    """``(thigh, tip)``: the left thigh (:func:`motion.ground.facing_pairs`) and the point (joint,
+    or End Site numbered from ``J``) of its subtree farthest from it in ``points (J + E, 3)``;
+    ``None`` without left/right hips."""
+    pairs = facing_pairs(sk)
+    if not pairs:
+        return None
+    thigh = pairs[0][0]
+    inside = np.zeros(sk.num_joints, dtype=bool)
+    inside[thigh] = True
+    for j in range(thigh + 1, sk.num_joints):
+        inside[j] = inside[sk.parents[j]] if sk.parents[j] >= 0 else False
+    cand = np.concatenate(
+        (np.flatnonzero(inside), sk.num_joints + np.flatnonzero(inside[sk.end_site_parents]))
+    )
+    tip = int(cand[np.argmax(np.linalg.norm(points[cand] - points[thigh], axis=-1))])
+    return (thigh, tip) if tip != thigh else None
+
+
+def _down(points: Array, leg: tuple[int, int]) -> npt.NDArray[np.bool_]:
+    """``(F,)`` whether the leg points down (more vertical than 60° from the floor) in
+    ``points (F, P, 3)``."""
+    v = points[:, leg[1]] - points[:, leg[0]]
+    return np.asarray(v[:, 1] < -np.sin(np.radians(60.0)) * np.linalg.norm(v, axis=-1))
+
+
+def _same_rest(a: _Rest, pa: npt.NDArray[np.intp], b: _Rest, pb: npt.NDArray[np.intp]) -> bool:
+    """Whether two skins share their bind pose (then their bind matrices and bone mesh too)."""
+    return (
+        a.globals.shape == b.globals.shape
+        and a.ends.shape == b.ends.shape
+        and np.array_equal(pa, pb)
+        and np.allclose(a.globals, b.globals, atol=1e-7)
+        and np.allclose(a.ends, b.ends, atol=1e-7)
+    )
+
+
+def _joint_nodes(m: Motion, rest: _Rest, base: int, in_place: bool) -> list[dict[str, Any]]:
+    """Nodes ``base .. base+J-1`` (the joints, at their rest translations and rotations) then one
+    leaf per End Site, with ``children`` after ``skeleton.parents`` (in place: the body root is
+    not a child of the ground root)."""
     sk = m.skeleton
     n_joints = sk.num_joints
-    nodes: list[dict[str, Any]] = [
-        {"name": name, "translation": _floats(offsets[j])} for j, name in enumerate(sk.names)
-    ]
+    nodes: list[dict[str, Any]] = []
+    for j, name in enumerate(sk.names):
+        node: dict[str, Any] = {"name": name, "translation": _floats(rest.translations[j])}
+        if not np.allclose(rest.rotations[j], [0.0, 0.0, 0.0, 1.0], atol=1e-12):
+            node["rotation"] = _floats(rot.normalize(rest.rotations[j]))
+        nodes.append(node)
     children: list[list[int]] = [[] for _ in range(n_joints)]
     for j in range(1, n_joints):
-        children[int(sk.parents[j])].append(j)
+        if not (in_place and j == 1):
+            children[int(sk.parents[j])].append(base + j)
     end_count = [0] * n_joints
     for parent, off in zip(sk.end_site_parents, sk.end_site_offsets * m.metres_per_unit, strict=True):
         p = int(parent)
         suffix = "_end" if end_count[p] == 0 else f"_end_{end_count[p]}"
         end_count[p] += 1
-        children[p].append(len(nodes))
+        children[p].append(base + len(nodes))
         nodes.append({"name": sk.names[p] + suffix, "translation": _floats(off)})
     for j in range(n_joints):
         if children[j]:
@@ -167,20 +351,31 @@ def _joint_nodes(m: Motion, offsets: Array) -> list[dict[str, Any]]:
     return nodes
 
 
-def _animation(b: _Builder, m: Motion) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """The animation's channels and samplers: key times ``frame / fps`` s, every joint's local
-    quaternions (continuous signs) and the translations of the root and translated joints (m)."""
-    sk = m.skeleton
-    n_joints, n_frames = sk.num_joints, m.num_frames
+def _times(b: _Builder, m: Motion) -> int:
+    """The shared key-time accessor: ``frame / fps`` seconds (float32, increasing)."""
+    n_frames = m.num_frames
     times = (np.arange(n_frames, dtype=np.float64) / m.fps).astype(np.float32)
     if n_frames > 1 and not np.all(np.diff(times) > 0):
         raise ExportError(
             f"frame times at {m.fps} fps do not increase in float32 over {n_frames} frames; "
             "resample the motion before exporting it to glTF"
         )
-    time_view = b.view(times)
-    t_acc = b.accessor(time_view, 0, FLOAT, n_frames, "SCALAR", times[:1], times[-1:])
+    return b.accessor(b.view(times), 0, FLOAT, n_frames, "SCALAR", times[:1], times[-1:])
 
+
+def _animation(
+    b: _Builder,
+    m: Motion,
+    t_acc: int,
+    base: int,
+    channels: list[dict[str, Any]],
+    samplers: list[dict[str, Any]],
+) -> None:
+    """Append the channels and samplers of one skin (joint nodes from ``base``): every joint's
+    local quaternions (continuous signs) and the translations of the root and translated joints
+    (metres), keyed by the shared times ``t_acc``."""
+    sk = m.skeleton
+    n_joints, n_frames = sk.num_joints, m.num_frames
     try:
         quats = rot.make_continuous(rot.normalize(m.rotations), axis=0)
     except MotionError as exc:
@@ -194,65 +389,36 @@ def _animation(b: _Builder, m: Motion) -> tuple[list[dict[str, Any]], list[dict[
     trans_acc = [
         b.accessor(trans_view, k * n_frames * 12, FLOAT, n_frames, "VEC3") for k in range(moved.size)
     ]
-
-    samplers: list[dict[str, Any]] = []
-    channels: list[dict[str, Any]] = []
     for node, acc, path in [
         *((j, rot_acc[j], "rotation") for j in range(n_joints)),
         *((int(j), trans_acc[k], "translation") for k, j in enumerate(moved)),
     ]:
-        channels.append({"sampler": len(samplers), "target": {"node": node, "path": path}})
+        channels.append({"sampler": len(samplers), "target": {"node": base + node, "path": path}})
         samplers.append({"input": t_acc, "interpolation": "LINEAR", "output": acc})
-    return channels, samplers
 
 
-def _skin(b: _Builder, m: Motion, rest: Array) -> dict[str, Any]:
-    """The skin: every joint node, inverse bind matrices = the inverse of the rest globals ``rest``
-    ``(J, 3)`` (pure translations), column-major."""
-    sk = m.skeleton
-    n_joints = sk.num_joints
-    ibm = np.broadcast_to(np.eye(4), (n_joints, 4, 4)).copy()
-    ibm[:, :3, 3] = -rest  # inverse of a pure translation
-    ibm_view = b.view(np.ascontiguousarray(np.swapaxes(ibm, 1, 2)).astype(np.float32))  # column-major
-    return {
-        "name": sk.names[0] + "_skin",
-        "joints": list(range(n_joints)),
-        "skeleton": 0,
-        "inverseBindMatrices": b.accessor(ibm_view, 0, FLOAT, n_joints, "MAT4"),
-    }
+def _ibm(b: _Builder, rest: _Rest) -> int:
+    """The inverse bind matrices accessor: the inverses of the rest globals, column-major."""
+    ibm = np.linalg.inv(rest.globals)
+    ibm[:, 3] = [0.0, 0.0, 0.0, 1.0]
+    view = b.view(np.ascontiguousarray(np.swapaxes(ibm, 1, 2)).astype(np.float32))  # column-major
+    return b.accessor(view, 0, FLOAT, len(ibm), "MAT4")
 
 
-def _add_bone_mesh(b: _Builder, gltf: dict[str, Any], m: Motion, rest: Array) -> None:
-    """Add the skinned bone mesh, its material and its node (a scene root) to ``gltf``."""
-    sk = m.skeleton
-    grounded = sk.names[0] == GROUND_ROOT_NAME  # True after _prepared(..., ground_root=True)
-    geometry = _bone_mesh(
-        sk.parents, rest, sk.end_site_parents, sk.end_site_offsets * m.metres_per_unit, grounded
-    )
-    if geometry is None:
-        return
-    gltf["meshes"] = [{"name": sk.names[0] + "_bones", "primitives": [_primitive(b, *geometry)]}]
-    gltf["materials"] = [
-        {
-            "name": "bone",
-            "pbrMetallicRoughness": {
-                "baseColorFactor": [0.72, 0.74, 0.78, 1.0],
-                "metallicFactor": 0.0,
-                "roughnessFactor": 0.7,
-            },
-        }
-    ]
-    nodes = gltf["nodes"]
-    gltf["scenes"][0]["nodes"].append(len(nodes))
-    nodes.append({"name": sk.names[0] + "_mesh", "mesh": 0, "skin": 0})
-
-
-def write_glb(motion: Motion, path: str | Path, *, ground_root: bool = True, mesh: bool = True) -> None:
+def write_glb(
+    motion: Motion,
+    path: str | Path,
+    *,
+    ground_root: bool = True,
+    mesh: bool = True,
+    in_place: bool = False,
+    events: Sequence[dict[str, Any]] | None = None,
+) -> None:
     """Write :func:`glb_bytes` of the motion to ``path`` (conventionally ``*.glb``).
 
     Parameters
     ----------
-    motion, ground_root, mesh:
+    motion, ground_root, mesh, in_place, events:
         As for :func:`glb_bytes`.
     path:
         Destination file, overwritten if it exists.
@@ -263,7 +429,7 @@ def write_glb(motion: Motion, path: str | Path, *, ground_root: bool = True, mes
         For a motion that cannot be exported (see :func:`glb_bytes`) or a file that cannot be
         written.
     """
-    data = glb_bytes(motion, ground_root=ground_root, mesh=mesh)
+    data = glb_bytes(motion, ground_root=ground_root, mesh=mesh, in_place=in_place, events=events)
     p = Path(path)
     try:
         p.write_bytes(data)
@@ -285,8 +451,10 @@ def _floats(v: npt.ArrayLike) -> list[float]:
     return [float(x) for x in np.asarray(v, dtype=np.float32).reshape(-1)]
 
 
-def _prepared(motion: Motion, ground_root: bool) -> Motion:
-    """Validate the motion and add the ground root when asked (:class:`ExportError` otherwise)."""
+def _prepared(motion: Motion, ground_root: bool, name: str | None = None) -> Motion:
+    """Validate the motion and add the ground root (``name``, default ``"ground"``) when asked
+    (:class:`ExportError` otherwise)."""
+    name = GROUND_ROOT_NAME if name is None else name
     if motion.num_frames == 0:
         raise ExportError(f"cannot export {_label(motion)}: it has no frames")
     if motion.num_joints > _MAX_SKIN_JOINTS - (1 if ground_root else 0):
@@ -295,27 +463,19 @@ def _prepared(motion: Motion, ground_root: bool) -> Motion:
     arrays = (motion.root_positions, motion.rotations, motion.joint_translations)
     if not all(np.all(np.isfinite(a)) for a in (*arrays, sk.offsets, sk.end_site_offsets)):
         raise ExportError(f"cannot export {_label(motion)}: it holds non-finite values (NaN or inf)")
-    if not ground_root or sk.names[0] == GROUND_ROOT_NAME:
+    if not ground_root or sk.names[0] == name:
         return motion
     try:
-        return add_ground_root(motion)
+        return add_ground_root(motion, name=name)
     except MotionError as exc:
         raise ExportError(f"cannot add a ground root to {_label(motion)}: {exc}") from None
-
-
-def _rest_globals(parents: npt.NDArray[np.intp], offsets: Array) -> Array:
-    """``(J, 3)`` global rest positions: offsets summed along the hierarchy (identity rotations)."""
-    g = np.array(offsets, dtype=np.float64, copy=True)
-    for j in range(1, len(parents)):
-        g[j] += g[parents[j]]
-    return g
 
 
 def _bone_mesh(
     parents: npt.NDArray[np.intp],
     rest: Array,
     end_parents: npt.NDArray[np.intp],
-    end_offsets: Array,
+    end_points: Array,
     grounded: bool,
 ) -> tuple[Array, Array, npt.NDArray[np.intp]] | None:
     """Flat-shaded octahedra along the rest-pose bones.
@@ -326,8 +486,8 @@ def _bone_mesh(
         ``(J,)`` parent joint indices.
     rest:
         ``(J, 3)`` global rest positions, metres.
-    end_parents, end_offsets:
-        ``(E,)`` joint and ``(E, 3)`` offset (metres) of each End Site.
+    end_parents, end_points:
+        ``(E,)`` joint and ``(E, 3)`` rest position (metres) of each End Site.
     grounded:
         Joint 0 is the ground root: its links to its children are not drawn.
 
@@ -346,9 +506,9 @@ def _bone_mesh(
         keep = par != 0
         child, par = child[keep], par[keep]
     head = np.concatenate((rest[par], rest[end_parents]))
-    tail = np.concatenate((rest[child], rest[end_parents] + end_offsets))
+    tail = np.concatenate((rest[child], end_points))
     owner = np.concatenate((par, end_parents)).astype(np.intp)
-    points = np.concatenate((rest, rest[end_parents] + end_offsets))
+    points = np.concatenate((rest, end_points))
     body = float(np.max(points.max(axis=0) - points.min(axis=0)))
     vec = tail - head
     length = np.linalg.norm(vec, axis=-1)
