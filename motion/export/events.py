@@ -24,6 +24,7 @@ import numpy as np
 from ..contacts import detect_contacts
 from ..errors import MotionError
 from ..motion import Motion
+from .characters import character_prefix, split_characters
 
 Event = dict[str, Any]
 
@@ -62,6 +63,15 @@ def contact_events(motion: Motion, character: str | None = None) -> list[Event]:
                 ev["character"] = character
             out.append(ev)
     return out
+
+
+def contact_events_of(motion: Motion) -> list[Event]:
+    """:func:`contact_events` of every character of ``motion`` (each character of a combined
+    motion, :func:`motion.export.characters.split_characters`, named by its prefix)."""
+    chars = split_characters(motion)
+    if chars is None:
+        return contact_events(motion)
+    return [ev for c in chars for ev in contact_events(c, character_prefix(c.skeleton.names).rstrip("_"))]
 
 
 def beat_events(times_s: Sequence[float], duration_s: float) -> list[Event]:
