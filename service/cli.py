@@ -401,7 +401,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--units",
         choices=units,
-        help="output length unit of .bvh/.json/.npz (default: the target's: m, cm for unreal; .glb is m)",
+        help="output length unit of .bvh/.json/.npz (default: the target's, m or cm for unreal; "
+        ".npz keeps the file's own for gltf/godot; .glb is always m)",
     )
     p.add_argument("--in-units", choices=units, help="declare the input's length unit instead of guessing")
     p.add_argument("--frames", help="keep frames START:STOP only (Python slice, e.g. 0:240)")

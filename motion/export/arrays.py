@@ -42,10 +42,16 @@ def motion_arrays(motion: Motion) -> dict[str, Any]:
 
 
 def npz_bytes(motion: Motion, target: str | Target = "gltf", units: str | None = None) -> bytes:
-    """An NPZ archive of :func:`motion_arrays`, in the target's axes and units (metres for
-    gltf/godot/unity, centimetres for unreal) or ``units`` when given."""
+    """An NPZ archive of :func:`motion_arrays`.
+
+    Unlike the other formats, an NPZ archive keeps the motion's own numbers (its ``units`` array
+    says which unit) for the ``gltf``/``godot`` targets, so that it holds exactly what was read
+    (the motion-core contract: ``positions`` equal the file's FK); ``units`` converts them, and
+    ``unity``/``unreal`` convert to their axes and units (or ``units``).
+    """
     tgt = get_target(target) if isinstance(target, str) else target
-    motion = to_target(motion, tgt, units)
+    if units is not None or tgt.name not in ("gltf", "godot"):
+        motion = to_target(motion, tgt, units)
     buf = io.BytesIO()
     np.savez_compressed(buf, **motion_arrays(motion), target=np.array(tgt.name))
     return buf.getvalue()
