@@ -14,6 +14,7 @@ import os
 
 import numpy as np
 
+from ..errors import MotionError
 from ..motion import Motion
 from ..skeleton import Skeleton
 
@@ -41,15 +42,15 @@ def split_characters(motion: Motion, atol: float = 1e-9) -> list[Motion] | None:
     """The characters of a combined motion (module docstring), each a motion of its own skeleton.
 
     Returns ``None`` for a motion that is not combined: its root is not a static ``"world"`` joint
-    with at least two child subtrees. Each character's root gets the world-space translation it had
-    (the static world root being the identity), its names keep their prefix, and it keeps the
-    motion's fps, units and name (suffixed with the prefix).
+    with child subtrees (a crowd of one is a character too). Each character's root gets the
+    world-space translation it had (the static world root being the identity), its names keep
+    their prefix, and it keeps the motion's fps, units and name (suffixed with the prefix).
     """
     sk = motion.skeleton
     if sk.names[0] != COMBINED_ROOT_NAME:
         return None
     kids = sk.children(0)
-    if len(kids) < 2:
+    if not kids:
         return None
     q0 = motion.rotations[:, 0]
     if not (
@@ -85,3 +86,49 @@ def split_characters(motion: Motion, atol: float = 1e-9) -> list[Motion] | None:
             )
         )
     return out
+
+
+def combine_characters(motions: list[Motion], prefixes: list[str]) -> Motion:
+    """Several characters (same frame count, fps and units) as one combined motion: a static
+    ``"world"`` root and each character's joints, names prefixed, its root translated from the
+    world (the inverse of :func:`split_characters`; the layout the engines' crowds use)."""
+    if not motions or len(motions) != len(prefixes):
+        raise MotionError("combine_characters needs one prefix per motion, and at least one motion")
+    first = motions[0]
+    if any(m.num_frames != first.num_frames or m.fps != first.fps or m.units != first.units for m in motions):
+        raise MotionError("the characters to combine differ in frame count, fps or units")
+    pos = ("Xposition", "Yposition", "Zposition")
+    names: list[str] = [COMBINED_ROOT_NAME]
+    parents: list[int] = [-1]
+    offsets = [np.zeros((1, 3))]
+    channels: list[tuple[str, ...]] = [(*pos, "Zrotation", "Yrotation", "Xrotation")]
+    es_par, es_off, rots, trans = [], [], [np.tile([0.0, 0.0, 0.0, 1.0], (first.num_frames, 1, 1))], []
+    for m, pre in zip(motions, prefixes, strict=True):
+        sk, base = m.skeleton, len(names)
+        names += [pre + n for n in sk.names]
+        parents += [0] + [int(p) + base for p in sk.parents[1:]]
+        offsets.append(sk.offsets)
+        root_rot = tuple(c for c in sk.channels[0] if c.endswith("rotation"))
+        channels += [(*pos, *root_rot), *sk.channels[1:]]
+        es_par.append(sk.end_site_parents + base)
+        es_off.append(sk.end_site_offsets)
+        rots.append(m.rotations)
+        lt = m.local_translations()
+        trans.append(lt[:, [0, *sk.translated_joints.tolist()]])
+    sk = Skeleton(
+        tuple(names),
+        np.array(parents, dtype=np.intp),
+        np.concatenate(offsets),
+        tuple(channels),
+        np.concatenate(es_par).astype(np.intp),
+        np.concatenate(es_off).reshape(-1, 3),
+    )
+    return Motion(
+        sk,
+        np.zeros((first.num_frames, 3)),
+        np.concatenate(rots, axis=1),
+        first.fps,
+        joint_translations=np.concatenate(trans, axis=1),
+        units=first.units,
+        name=first.name,
+    )

@@ -17,6 +17,7 @@ when the motion is resampled to another frame rate for export.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -71,7 +72,13 @@ def contact_events_of(motion: Motion) -> list[Event]:
     chars = split_characters(motion)
     if chars is None:
         return contact_events(motion)
-    return [ev for c in chars for ev in contact_events(c, character_prefix(c.skeleton.names).rstrip("_"))]
+    out: list[Event] = []
+    for c in chars:
+        pre = character_prefix(c.skeleton.names)
+        # detect on the plain names (foot and side are found by name), report the prefixed ones
+        plain = replace(c, skeleton=replace(c.skeleton, names=tuple(n[len(pre) :] for n in c.skeleton.names)))
+        out += [dict(ev, joint=pre + ev["joint"]) for ev in contact_events(plain, pre.rstrip("_"))]
+    return out
 
 
 def beat_events(times_s: Sequence[float], duration_s: float) -> list[Event]:
