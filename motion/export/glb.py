@@ -149,7 +149,7 @@ def glb_bytes(
         for c in chars
     ]
     b = _Builder()
-    t_acc = _times(b, prepared[0])
+    times = _Times(b, prepared[0])
     nodes: list[dict[str, Any]] = []
     skins: list[dict[str, Any]] = []
     channels: list[dict[str, Any]] = []
@@ -165,7 +165,7 @@ def glb_bytes(
         scene_roots.append(base)
         if in_place:
             scene_roots.append(base + 1)
-        _animation(b, m, t_acc, base, channels, samplers)
+        _animation(b, m, times, base, channels, samplers)
         found = next((s for s in shared if _same_rest(s[0], s[1], rest, m.skeleton.parents)), None)
         if found is None:
             ibm = _ibm(b, rest)
@@ -363,38 +363,69 @@ def _times(b: _Builder, m: Motion) -> int:
     return b.accessor(b.view(times), 0, FLOAT, n_frames, "SCALAR", times[:1], times[-1:])
 
 
+class _Times:
+    """The key-time accessors shared by every sampler: all frames, and (made on first use) one key
+    at 0 s for channels whose value never changes."""
+
+    def __init__(self, b: _Builder, m: Motion) -> None:
+        self.builder = b
+        self.frames = _times(b, m)
+        self.count = m.num_frames
+        self._one: int | None = None
+
+    @property
+    def one(self) -> int:
+        if self._one is None:
+            zero = np.zeros(1, dtype=np.float32)
+            self._one = self.builder.accessor(self.builder.view(zero), 0, FLOAT, 1, "SCALAR", zero, zero)
+        return self._one
+
+
 def _animation(
     b: _Builder,
     m: Motion,
-    t_acc: int,
+    times: _Times,
     base: int,
     channels: list[dict[str, Any]],
     samplers: list[dict[str, Any]],
 ) -> None:
     """Append the channels and samplers of one skin (joint nodes from ``base``): every joint's
     local quaternions (continuous signs) and the translations of the root and translated joints
-    (metres), keyed by the shared times ``t_acc``."""
+    (metres), keyed by the shared times; a channel whose float32 values never change gets a single
+    key (``times.one``), which glTF holds for the whole animation."""
     sk = m.skeleton
-    n_joints, n_frames = sk.num_joints, m.num_frames
+    n_joints = sk.num_joints
     try:
         quats = rot.make_continuous(rot.normalize(m.rotations), axis=0)
     except MotionError as exc:
         raise ExportError(f"cannot export {_label(m)}: {exc}") from None
-    quat_view = b.view(np.ascontiguousarray(np.swapaxes(quats, 0, 1)).astype(np.float32))  # (J, F, 4)
-    rot_acc = [b.accessor(quat_view, j * n_frames * 16, FLOAT, n_frames, "VEC4") for j in range(n_joints)]
-
+    q32 = np.ascontiguousarray(np.swapaxes(quats, 0, 1)).astype(np.float32)  # (J, F, 4)
     moved = np.concatenate(([0], sk.translated_joints)).astype(np.intp)
     trans = np.concatenate((m.root_positions[:, None], m.joint_translations), axis=1) * m.metres_per_unit
-    trans_view = b.view(np.ascontiguousarray(np.swapaxes(trans, 0, 1)).astype(np.float32))  # (1+K, F, 3)
-    trans_acc = [
-        b.accessor(trans_view, k * n_frames * 12, FLOAT, n_frames, "VEC3") for k in range(moved.size)
-    ]
-    for node, acc, path in [
-        *((j, rot_acc[j], "rotation") for j in range(n_joints)),
-        *((int(j), trans_acc[k], "translation") for k, j in enumerate(moved)),
-    ]:
-        channels.append({"sampler": len(samplers), "target": {"node": base + node, "path": path}})
-        samplers.append({"input": t_acc, "interpolation": "LINEAR", "output": acc})
+    t32 = np.ascontiguousarray(np.swapaxes(trans, 0, 1)).astype(np.float32)  # (1+K, F, 3)
+    for nodes, values, path, kind in (
+        (np.arange(n_joints), q32, "rotation", "VEC4"),
+        (moved, t32, "translation", "VEC3"),
+    ):
+        const = (
+            np.all(values == values[:, :1], axis=(1, 2)) if times.count > 1 else np.zeros(len(nodes), bool)
+        )
+        width = values.shape[2] * 4
+        accs: dict[int, tuple[int, int]] = {}
+        varying = np.flatnonzero(~const)
+        if varying.size:
+            view = b.view(np.ascontiguousarray(values[varying]))
+            for k, j in enumerate(varying.tolist()):
+                accs[j] = (times.frames, b.accessor(view, k * times.count * width, FLOAT, times.count, kind))
+        steady = np.flatnonzero(const)
+        if steady.size:
+            view = b.view(np.ascontiguousarray(values[steady, :1]))
+            for k, j in enumerate(steady.tolist()):
+                accs[j] = (times.one, b.accessor(view, k * width, FLOAT, 1, kind))
+        for k, node in enumerate(nodes.tolist()):
+            t_acc, acc = accs[k]
+            channels.append({"sampler": len(samplers), "target": {"node": base + node, "path": path}})
+            samplers.append({"input": t_acc, "interpolation": "LINEAR", "output": acc})
 
 
 def _ibm(b: _Builder, rest: _Rest) -> int:

@@ -232,3 +232,17 @@ def test_every_format_follows_the_target_units(tmp_path: Path, target: str, unit
     np.testing.assert_allclose(np.ptp(back_mm.global_positions()[0], axis=0).max() / 1000, height, rtol=1e-5)
     with pytest.raises(ExportError, match="metres"):
         save_motion(m, tmp_path / "a.glb", target=target, units="cm")
+
+
+def test_channels_that_never_change_get_one_key() -> None:
+    m = motion.read_bvh(sample_path("salsa-leader-02")).slice(0, 60)
+    data = glb_bytes(m)
+    glb = check_file(data, m, ground=True)  # re-animates exactly with the one-key channels
+    anim = glb.gltf["animations"][0]
+    nodes = glb.gltf["nodes"]
+    one_key = {
+        nodes[c["target"]["node"]]["name"]
+        for c in anim["channels"]
+        if glb.gltf["accessors"][anim["samplers"][c["sampler"]]["output"]]["count"] == 1
+    }
+    assert {"lIndex1", "rPinky2"} <= one_key and "hip" not in one_key and "lThigh" not in one_key
