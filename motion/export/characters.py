@@ -11,6 +11,7 @@ characters and the file grows linearly with their number.
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 
 import numpy as np
 
@@ -36,6 +37,18 @@ def character_prefix(names: tuple[str, ...] | list[str]) -> str:
     common = os.path.commonprefix(list(names))
     cut = common.rfind("_")
     return common[: cut + 1] if cut >= 0 else ""
+
+
+def without_prefix(motion: Motion) -> tuple[Motion, str]:
+    """The motion with its joints' common prefix (:func:`character_prefix`) taken off the names,
+    and that prefix: what finds feet, sides and hips by name (contacts, heading, rest pose) reads
+    ``lThigh``, not ``c0_lThigh``."""
+    sk = motion.skeleton
+    pre = character_prefix(sk.names)
+    if not pre:
+        return motion, ""
+    plain = replace(sk, names=tuple(n[len(pre) :] for n in sk.names))
+    return replace(motion, skeleton=plain), pre
 
 
 def split_characters(motion: Motion, atol: float = 1e-9) -> list[Motion] | None:

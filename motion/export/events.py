@@ -17,7 +17,6 @@ when the motion is resampled to another frame rate for export.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -25,7 +24,7 @@ import numpy as np
 from ..contacts import detect_contacts
 from ..errors import MotionError
 from ..motion import Motion
-from .characters import character_prefix, split_characters
+from .characters import split_characters, without_prefix
 
 Event = dict[str, Any]
 
@@ -74,9 +73,7 @@ def contact_events_of(motion: Motion) -> list[Event]:
         return contact_events(motion)
     out: list[Event] = []
     for c in chars:
-        pre = character_prefix(c.skeleton.names)
-        # detect on the plain names (foot and side are found by name), report the prefixed ones
-        plain = replace(c, skeleton=replace(c.skeleton, names=tuple(n[len(pre) :] for n in c.skeleton.names)))
+        plain, pre = without_prefix(c)  # feet and sides are found by name
         out += [dict(ev, joint=pre + ev["joint"]) for ev in contact_events(plain, pre.rstrip("_"))]
     return out
 

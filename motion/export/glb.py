@@ -72,7 +72,7 @@ from ..errors import ExportError, MotionError
 from ..ground import GROUND_ROOT_NAME, add_ground_root, facing_pairs
 from ..motion import Motion
 from ..skeleton import Skeleton
-from .characters import character_prefix, split_characters
+from .characters import split_characters, without_prefix
 
 Array = npt.NDArray[np.float64]
 
@@ -142,14 +142,12 @@ def glb_bytes(
     if in_place and not ground_root:
         raise ExportError("in-place export needs the ground root (it keeps the root motion)")
     _prepared(motion, False)  # validate the input before splitting it
-    chars = split_characters(motion) or [motion]
-    several = len(chars) > 1
-    prepared = [
-        _prepared(c, ground_root, character_prefix(c.skeleton.names) + GROUND_ROOT_NAME if several else None)
-        for c in chars
-    ]
+    split = split_characters(motion)
+    chars = [motion] if split is None else split
+    plain = [(c, "") if split is None else without_prefix(c) for c in chars]  # names read by name-finders
+    prepared = [(_prepared(c, ground_root), pre) for c, pre in plain]
     b = _Builder()
-    times = _Times(b, prepared[0])
+    times = _Times(b, prepared[0][0])
     nodes: list[dict[str, Any]] = []
     skins: list[dict[str, Any]] = []
     channels: list[dict[str, Any]] = []
@@ -158,10 +156,10 @@ def glb_bytes(
     meshes: list[dict[str, Any]] = []
     mesh_nodes: list[dict[str, Any]] = []
     shared: list[tuple[_Rest, npt.NDArray[np.intp], int, int | None]] = []  # rest, parents, IBM, mesh
-    for m in prepared:
+    for m, pre in prepared:
         base = len(nodes)
         rest = _rest_pose(m, ground_root)
-        nodes += _joint_nodes(m, rest, base, in_place)
+        nodes += _joint_nodes(m, rest, base, in_place, pre)
         scene_roots.append(base)
         if in_place:
             scene_roots.append(base + 1)
@@ -190,14 +188,16 @@ def glb_bytes(
         else:
             ibm, mesh_index = found[2], found[3]
         skin: dict[str, Any] = {
-            "name": m.skeleton.names[0] + "_skin",
+            "name": pre + m.skeleton.names[0] + "_skin",
             "joints": list(range(base, base + m.num_joints)),
             "inverseBindMatrices": ibm,
         }
         if not in_place:
             skin["skeleton"] = base
         if mesh_index is not None:
-            mesh_nodes.append({"name": m.skeleton.names[0] + "_mesh", "mesh": mesh_index, "skin": len(skins)})
+            mesh_nodes.append(
+                {"name": pre + m.skeleton.names[0] + "_mesh", "mesh": mesh_index, "skin": len(skins)}
+            )
         skins.append(skin)
     scene_roots += range(len(nodes), len(nodes) + len(mesh_nodes))
     nodes += mesh_nodes
@@ -322,15 +322,15 @@ def _same_rest(a: _Rest, pa: npt.NDArray[np.intp], b: _Rest, pb: npt.NDArray[np.
     )
 
 
-def _joint_nodes(m: Motion, rest: _Rest, base: int, in_place: bool) -> list[dict[str, Any]]:
-    """Nodes ``base .. base+J-1`` (the joints, at their rest translations and rotations) then one
-    leaf per End Site, with ``children`` after ``skeleton.parents`` (in place: the body root is
-    not a child of the ground root)."""
+def _joint_nodes(m: Motion, rest: _Rest, base: int, in_place: bool, prefix: str = "") -> list[dict[str, Any]]:
+    """Nodes ``base .. base+J-1`` (the joints, at their rest translations and rotations, named
+    ``prefix + name``) then one leaf per End Site, with ``children`` after ``skeleton.parents``
+    (in place: the body root is not a child of the ground root)."""
     sk = m.skeleton
     n_joints = sk.num_joints
     nodes: list[dict[str, Any]] = []
     for j, name in enumerate(sk.names):
-        node: dict[str, Any] = {"name": name, "translation": _floats(rest.translations[j])}
+        node: dict[str, Any] = {"name": prefix + name, "translation": _floats(rest.translations[j])}
         if not np.allclose(rest.rotations[j], [0.0, 0.0, 0.0, 1.0], atol=1e-12):
             node["rotation"] = _floats(rot.normalize(rest.rotations[j]))
         nodes.append(node)
@@ -344,7 +344,7 @@ def _joint_nodes(m: Motion, rest: _Rest, base: int, in_place: bool) -> list[dict
         suffix = "_end" if end_count[p] == 0 else f"_end_{end_count[p]}"
         end_count[p] += 1
         children[p].append(base + len(nodes))
-        nodes.append({"name": sk.names[p] + suffix, "translation": _floats(off)})
+        nodes.append({"name": prefix + sk.names[p] + suffix, "translation": _floats(off)})
     for j in range(n_joints):
         if children[j]:
             nodes[j]["children"] = children[j]
