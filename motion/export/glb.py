@@ -13,27 +13,49 @@ GLB container
     every accessor's ``byteOffset`` is a multiple of 4.
 Nodes
     ``0 .. J-1``: one node per joint, in skeleton order (node index = joint index), named after the
-    joint, with ``children`` following ``skeleton.parents`` and a rest transform made of the joint's
-    offset (metres) alone (identity rotation, unit scale). Then one leaf node per End Site, named
-    ``"<parent>_end"`` (``"<parent>_end_<k>"`` for further End Sites of the same joint), child of
-    its joint but not a joint of the skin. Last, when a mesh is written, the mesh node
-    (``mesh: 0``, ``skin: 0``, no transform), a root of the scene beside the skeleton root.
+    joint, with ``children`` following ``skeleton.parents`` and its rest transform (below). Then
+    one leaf node per End Site, named ``"<parent>_end"`` (``"<parent>_end_<k>"`` for further End
+    Sites of the same joint), child of its joint but not a joint of the skin. Last, when a mesh is
+    written, the mesh node (``mesh``, ``skin``, no transform), a root of the scene beside the
+    skeleton root.
+Rest (bind) pose
+    The pose engines and retargeting tools read (Humanoid/T-pose set-up): it stands on the floor.
+    Every joint's rest translation is its offset, except the body root (the hips, under the ground
+    root), which stands over the origin at the height that puts the lowest joint or End Site of
+    the rest pose at y = 0. Rest rotations are the identity (the skeleton's zero pose) when in
+    that pose the legs point down (within 30 degrees of vertical; the left thigh by name,
+    :func:`motion.ground.facing_pairs`, to the farthest point below it). Skeletons whose zero pose
+    lies down (Bandai-Namco files) take instead the local rotations of the first frame in which
+    the legs point down (the hips' heading removed), written as node ``rotation``. Inverse bind
+    matrices and the bone mesh follow this pose; the animation channels override it, so the
+    animated pose does not depend on it.
 Ground root
     With ``ground_root=True`` the motion first gets an explicit ground root joint named
     ``"ground"`` by :func:`motion.ground.add_ground_root` (floor projection of the hips, rotated by
     the heading), so engines and game tools can take root motion. A motion whose root is already
-    named ``"ground"`` (e.g. an engine's output) is exported as it is.
+    named ``"ground"`` (e.g. an engine's output) is exported as it is. With ``in_place=True`` the
+    hips are not the ground joint's child but a second root of the skin (the skin then has no
+    ``skeleton`` property): played as is, the body dances over the origin facing +Z, and the
+    ground joint's track still holds the root motion (floor path and heading) for an engine's
+    root-motion setting.
+Several characters
+    A combined motion (a crowd or a couple: a static ``world`` root and ``cN_``-prefixed
+    characters, :func:`motion.export.characters.split_characters`) is written as one skin per
+    character: its own ``cN_ground`` root, joints, bind matrices and mesh node, all in one
+    animation. Characters with the same bind pose share one bone mesh and one bind-matrix
+    accessor, so the file grows by the animation of each character only (``bench/glb_size.py``).
 Animation
-    One animation named after the motion (``"motion"`` when unnamed). One shared input accessor of
-    key times ``frame / fps`` seconds; LINEAR samplers. Every joint gets a rotation channel (local
-    quaternions, signs made continuous over time so that interpolation takes the short arc); the
-    root and every joint of ``skeleton.translated_joints`` get a translation channel (metres).
-    The quaternions of all joints sit in one buffer view, one accessor per joint; likewise the
-    translations.
+    One animation named after the motion (``"motion"`` when unnamed). Key times ``frame / fps``
+    seconds in one shared input accessor; LINEAR samplers. Every joint gets a rotation channel
+    (local quaternions, signs made continuous over time so that interpolation takes the short
+    arc); the root and every joint of ``skeleton.translated_joints`` get a translation channel
+    (metres). A channel whose float32 values never change (fingers held still) has one key at
+    0 s, which glTF holds for the whole animation. ``events`` (foot contacts, beats, labels:
+    :mod:`motion.export.events`) go in the animation's ``extras`` as ``{"events": [...]}``.
 Skin
     ``joints`` = the ``J`` joint nodes (skin joint index = joint index), ``skeleton`` = node 0, and
     ``inverseBindMatrices`` (``MAT4``, column-major) = the inverse of each joint's global rest
-    transform (rest pose: offsets, identity rotations, i.e. a pure translation).
+    transform.
 Mesh (``mesh=True``)
     One primitive drawing every bone of the rest pose as a flat-shaded octahedron from the parent
     joint to the child joint (or End Site), its widest section a fifth of the way along, rigidly
@@ -329,9 +351,10 @@ def _joint_nodes(m: Motion, rest: _Rest, base: int, in_place: bool, prefix: str 
     sk = m.skeleton
     n_joints = sk.num_joints
     nodes: list[dict[str, Any]] = []
+    turned = np.any(np.abs(rest.rotations - [0.0, 0.0, 0.0, 1.0]) > 1e-12, axis=1)
     for j, name in enumerate(sk.names):
         node: dict[str, Any] = {"name": prefix + name, "translation": _floats(rest.translations[j])}
-        if not np.allclose(rest.rotations[j], [0.0, 0.0, 0.0, 1.0], atol=1e-12):
+        if turned[j]:
             node["rotation"] = _floats(rot.normalize(rest.rotations[j]))
         nodes.append(node)
     children: list[list[int]] = [[] for _ in range(n_joints)]
