@@ -33,11 +33,11 @@ Ground root
     With ``ground_root=True`` the motion first gets an explicit ground root joint named
     ``"ground"`` by :func:`motion.ground.add_ground_root` (floor projection of the hips, rotated by
     the heading), so engines and game tools can take root motion. A motion whose root is already
-    named ``"ground"`` (e.g. an engine's output) is exported as it is. With ``in_place=True`` the
-    hips are not the ground joint's child but a second root of the skin (the skin then has no
-    ``skeleton`` property): played as is, the body dances over the origin facing +Z, and the
-    ground joint's track still holds the root motion (floor path and heading) for an engine's
-    root-motion setting.
+    named ``"ground"`` (e.g. an engine's output) is exported as it is. With ``in_place=True`` a
+    static joint named ``"origin"`` at the origin becomes the skin's root, with two children: the
+    ground joint, whose track still holds the root motion (floor path and heading) for an
+    engine's root-motion setting, and the hips, animated relative to the ground frame. Played as
+    is, the body dances over the origin facing +Z; the skeleton keeps a single root.
 Several characters
     A combined motion (a crowd or a couple: a static ``world`` root and ``cN_``-prefixed
     characters, :func:`motion.export.characters.split_characters`) is written as one skin per
@@ -168,6 +168,9 @@ def glb_bytes(
     chars = [motion] if split is None else split
     plain = [(c, "") if split is None else without_prefix(c) for c in chars]  # names read by name-finders
     prepared = [(_prepared(c, ground_root), pre) for c, pre in plain]
+    if in_place:
+        prepared = [(_in_place(m), pre) for m, pre in prepared]
+    lead = (2 if in_place else 1) if ground_root else 0  # joints before the body root
     b = _Builder()
     times = _Times(b, prepared[0][0])
     nodes: list[dict[str, Any]] = []
@@ -180,11 +183,9 @@ def glb_bytes(
     shared: list[tuple[_Rest, npt.NDArray[np.intp], int, int | None]] = []  # rest, parents, IBM, mesh
     for m, pre in prepared:
         base = len(nodes)
-        rest = _rest_pose(m, ground_root)
-        nodes += _joint_nodes(m, rest, base, in_place, pre)
+        rest = _rest_pose(m, lead)
+        nodes += _joint_nodes(m, rest, base, pre)
         scene_roots.append(base)
-        if in_place:
-            scene_roots.append(base + 1)
         _animation(b, m, times, base, channels, samplers)
         found = next((s for s in shared if _same_rest(s[0], s[1], rest, m.skeleton.parents)), None)
         if found is None:
@@ -195,7 +196,7 @@ def glb_bytes(
                     rest.globals[:, :3, 3],
                     m.skeleton.end_site_parents,
                     rest.ends,
-                    ground_root,
+                    lead,
                 )
                 if mesh
                 else None
@@ -213,9 +214,8 @@ def glb_bytes(
             "name": pre + m.skeleton.names[0] + "_skin",
             "joints": list(range(base, base + m.num_joints)),
             "inverseBindMatrices": ibm,
+            "skeleton": base,
         }
-        if not in_place:
-            skin["skeleton"] = base
         if mesh_index is not None:
             mesh_nodes.append(
                 {"name": pre + m.skeleton.names[0] + "_mesh", "mesh": mesh_index, "skin": len(skins)}
@@ -263,11 +263,12 @@ class _Rest:
     ends: Array
 
 
-def _rest_pose(m: Motion, grounded: bool) -> _Rest:
-    """The rest pose standing on the floor (module docstring, *Rest pose*)."""
+def _rest_pose(m: Motion, lead: int) -> _Rest:
+    """The rest pose standing on the floor (module docstring, *Rest pose*); joints ``0 .. lead-1``
+    are the ground root (and the in-place origin), ``lead`` the body root."""
     sk = m.skeleton
     scale = m.metres_per_unit
-    body = 1 if grounded else 0
+    body = lead
     q = rot.identity((sk.num_joints,))
     t = sk.offsets * scale
     t[body] = 0.0
@@ -280,16 +281,40 @@ def _rest_pose(m: Motion, grounded: bool) -> _Rest:
         down = _down(pts, leg)
         f = int(np.argmax(down)) if down.any() else 0
         q = np.array(m.rotations[f], dtype=np.float64, copy=True)
-        if grounded:
-            q[0] = rot.identity()
+        if lead:
+            q[:lead] = rot.identity()
         else:
             q[0] = rot.multiply(rot.from_yaw(-rot.yaw(q[0])), q[0])
         g, ends = _rest_fk(sk.parents, t, q, sk.end_site_parents, ends_off)
-    first = 1 if grounded else 0
-    lowest = min(float(g[first:, 1, 3].min()), float(ends[:, 1].min()) if ends.size else np.inf)
+    lowest = min(float(g[lead:, 1, 3].min()), float(ends[:, 1].min()) if ends.size else np.inf)
     t[body] = [0.0, -lowest, 0.0]
     g, ends = _rest_fk(sk.parents, t, q, sk.end_site_parents, ends_off)
     return _Rest(q, t, g, ends)
+
+
+def _in_place(m: Motion) -> Motion:
+    """A grounded motion (joint 0 the ground root, joint 1 the hips) in place: a static origin
+    joint at the top, with the ground root and the hips as its two children. The ground root keeps
+    the root motion; the hips keep their motion relative to it, so the body stays over the origin
+    facing +Z."""
+    sk = m.skeleton
+    f = m.num_frames
+    name = "origin" if "origin" not in sk.names else f"{sk.names[0]}_origin"
+    parents = np.concatenate(([-1], sk.parents + 1))
+    parents[2] = 0  # the hips hang from the origin, not from the ground root
+    pos = ("Xposition", "Yposition", "Zposition")
+    channels = ((*pos, "Zrotation", "Yrotation", "Xrotation"), *sk.channels)
+    new = Skeleton(
+        (name, *sk.names),
+        parents,
+        np.concatenate((np.zeros((1, 3)), sk.offsets)),
+        channels,
+        sk.end_site_parents + 1,
+        sk.end_site_offsets,
+    )
+    jt = np.concatenate((m.root_positions[:, None], m.joint_translations), axis=1)
+    q = np.concatenate((np.tile(rot.identity(), (f, 1, 1)), m.rotations), axis=1)
+    return Motion(new, np.zeros((f, 3)), q, m.fps, joint_translations=jt, units=m.units, name=m.name)
 
 
 def _rest_fk(
@@ -344,10 +369,9 @@ def _same_rest(a: _Rest, pa: npt.NDArray[np.intp], b: _Rest, pb: npt.NDArray[np.
     )
 
 
-def _joint_nodes(m: Motion, rest: _Rest, base: int, in_place: bool, prefix: str = "") -> list[dict[str, Any]]:
+def _joint_nodes(m: Motion, rest: _Rest, base: int, prefix: str = "") -> list[dict[str, Any]]:
     """Nodes ``base .. base+J-1`` (the joints, at their rest translations and rotations, named
-    ``prefix + name``) then one leaf per End Site, with ``children`` after ``skeleton.parents``
-    (in place: the body root is not a child of the ground root)."""
+    ``prefix + name``) then one leaf per End Site, with ``children`` after ``skeleton.parents``."""
     sk = m.skeleton
     n_joints = sk.num_joints
     nodes: list[dict[str, Any]] = []
@@ -359,8 +383,7 @@ def _joint_nodes(m: Motion, rest: _Rest, base: int, in_place: bool, prefix: str 
         nodes.append(node)
     children: list[list[int]] = [[] for _ in range(n_joints)]
     for j in range(1, n_joints):
-        if not (in_place and j == 1):
-            children[int(sk.parents[j])].append(base + j)
+        children[int(sk.parents[j])].append(base + j)
     end_count = [0] * n_joints
     for parent, off in zip(sk.end_site_parents, sk.end_site_offsets * m.metres_per_unit, strict=True):
         p = int(parent)
@@ -530,7 +553,7 @@ def _bone_mesh(
     rest: Array,
     end_parents: npt.NDArray[np.intp],
     end_points: Array,
-    grounded: bool,
+    lead: int,
 ) -> tuple[Array, Array, npt.NDArray[np.intp]] | None:
     """Flat-shaded octahedra along the rest-pose bones.
 
@@ -542,8 +565,9 @@ def _bone_mesh(
         ``(J, 3)`` global rest positions, metres.
     end_parents, end_points:
         ``(E,)`` joint and ``(E, 3)`` rest position (metres) of each End Site.
-    grounded:
-        Joint 0 is the ground root: its links to its children are not drawn.
+    lead:
+        Joints ``0 .. lead-1`` are the ground root (and the in-place origin): their links to their
+        children are not drawn.
 
     Returns
     -------
@@ -556,8 +580,8 @@ def _bone_mesh(
     """
     child = np.arange(1, len(parents))
     par = parents[1:]
-    if grounded:
-        keep = par != 0
+    if lead:
+        keep = par >= lead
         child, par = child[keep], par[keep]
     head = np.concatenate((rest[par], rest[end_parents]))
     tail = np.concatenate((rest[child], end_points))

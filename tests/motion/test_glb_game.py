@@ -100,15 +100,17 @@ def test_in_place_keeps_the_body_over_the_origin_and_root_motion_on_ground() -> 
     gltf = glb.gltf
     (skin,) = gltf["skins"]
     nodes = gltf["nodes"]
-    ground, hips = skin["joints"][:2]
-    assert nodes[ground]["name"] == "ground" and "skeleton" not in skin
-    assert hips not in nodes[ground].get("children", []) and hips in gltf["scenes"][0]["nodes"]
+    origin, ground, hips = skin["joints"][:3]
+    assert [nodes[j]["name"] for j in (origin, ground, hips)] == ["origin", "ground", "hip"]
+    assert skin["skeleton"] == origin and nodes[origin]["children"][:2] == [ground, hips]  # one root
+    assert hips not in nodes[ground].get("children", [])
     pos = m.global_positions()
     xz, yaw = ground_frames(m, pos)
     local = to_ground_frame(pos, xz, yaw)
     for f in (0, 40, 88):
         g = node_globals(glb, f)
-        np.testing.assert_allclose(g[skin["joints"][1:], :3, 3], local[f], atol=TOL_M)
+        np.testing.assert_allclose(g[origin], np.eye(4), atol=1e-12)  # the origin never moves
+        np.testing.assert_allclose(g[skin["joints"][2:], :3, 3], local[f], atol=TOL_M)
         np.testing.assert_allclose(g[ground, [0, 2], 3], xz[f], atol=TOL_M)  # root motion kept
     travel = np.linalg.norm(xz[-1] - xz[0])
     assert travel > 0.8  # the walk travels, the body stays

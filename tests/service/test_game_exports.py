@@ -44,8 +44,8 @@ def test_result_units_in_place_and_events(client: TestClient, walk_db: dict[str,
 
     glb = _glb_json(client.get(url, params={"format": "glb", "in_place": True, "events": "contacts"}).content)
     (skin,) = glb["skins"]
-    ground, hips = skin["joints"][:2]
-    assert hips not in glb["nodes"][ground].get("children", [])  # in place
+    origin, ground, hips = skin["joints"][:3]
+    assert glb["nodes"][origin]["children"][:2] == [ground, hips]  # in place: hips beside the ground
     events = glb["animations"][0]["extras"]["events"]
     assert events and {e["type"] for e in events} == {"contact"}
     frames = client.get(url, params={"format": "json", "events": "all", "fps": 15}).json()
