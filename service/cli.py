@@ -37,7 +37,7 @@ if TYPE_CHECKING:
 
 SAMPLE_PREFIX = "sample:"
 
-UNITS = ("cm", "cmu", "ft", "in", "m", "mm")
+UNITS = ("cm", "cmu", "cmu-scaled", "ft", "in", "m", "mm")
 """Length units the options accept (:data:`motion.units.METRES_PER_UNIT`; a test keeps them equal)."""
 TARGETS = ("gltf", "godot", "unity", "unreal")
 """Export conventions (:data:`motion.export.targets.TARGETS`)."""
