@@ -248,3 +248,17 @@ def test_channels_that_never_change_get_one_key() -> None:
         if glb.gltf["accessors"][anim["samplers"][c["sampler"]]["output"]]["count"] == 1
     }
     assert {"lIndex1", "rPinky2"} <= one_key and "hip" not in one_key and "lThigh" not in one_key
+
+
+@pytest.mark.skipif(not BANDAI.exists(), reason="../shared/data (Bandai-Namco) is not here")
+def test_bandai_in_place_under_a_static_file_root() -> None:
+    """Bandai-Namco files have a static ``joint_Root`` above the hips: in place still holds."""
+    m = motion.read_bvh(BANDAI).slice(0, 60)
+    glb = read_glb(glb_bytes(m, in_place=True))
+    (skin,) = glb.gltf["skins"]
+    pos = m.global_positions() * m.metres_per_unit
+    xz, yaw = ground_frames(m, pos)
+    local = to_ground_frame(pos, xz, yaw)
+    for f in (0, 59):
+        g = node_globals(glb, f)
+        np.testing.assert_allclose(g[skin["joints"][2:], :3, 3], local[f], atol=TOL_M)
