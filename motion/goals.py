@@ -147,7 +147,19 @@ class BeatGoal:
     min_score: float = BEAT_MIN_SCORE
 
 
-Goal = LengthGoal | BodyGoal | JointGoal | PoseGoal | ObstacleGoal | LabelGoal | PathGoal | BeatGoal
+@dataclass(frozen=True, slots=True)
+class LoopGoal:
+    """The clip should loop: its last frame's pose equal to its first frame's, root-relative (in
+    the body's ground frame, :func:`body_pose`, so root travel and heading may continue), every
+    joint of every character within ``tolerance_cm``."""
+
+    name: str = "loop"
+    tolerance_cm: float = POSITION_TOLERANCE_CM
+
+
+Goal = (
+    LengthGoal | BodyGoal | JointGoal | PoseGoal | ObstacleGoal | LabelGoal | PathGoal | BeatGoal | LoopGoal
+)
 
 
 def body_track(positions: Array, skeleton: Skeleton) -> tuple[Array, Array | None]:
@@ -203,6 +215,8 @@ def measure(
         return _measure_path(goal, positions, fps, characters)
     if isinstance(goal, BeatGoal):
         return _measure_beats(goal, positions, fps, characters)
+    if isinstance(goal, LoopGoal):
+        return _measure_loop(goal, positions, fps, characters)
     raise MotionError(f"unknown goal {goal!r}")  # pragma: no cover - the union is closed
 
 
@@ -288,6 +302,34 @@ def _measure_pose(goal: PoseGoal, positions: Array, fps: float, characters: Sequ
     e["satisfied"] = ok
     return e, None if ok else (
         f"{goal.name} (frame {goal.frame}): a joint is {err:.1f} cm from the wanted pose "
+        f"(tolerance {goal.tolerance_cm:g} cm)"
+    )
+
+
+def _measure_loop(goal: LoopGoal, positions: Array, fps: float, characters: Sequence[Character]) -> Measured:
+    """The largest joint distance (cm) between the last and the first frame's root-relative pose,
+    and the root-relative hip height change (cm), over every character."""
+    n = positions.shape[0]
+    err, mean, rise = 0.0, 0.0, 0.0
+    for c in characters:
+        pose = body_pose(positions[[0, n - 1]][:, c.joints], c.skeleton)
+        gap = np.linalg.norm(pose[1] - pose[0], axis=-1)
+        err = max(err, 100 * float(gap.max()))
+        mean = max(mean, 100 * float(gap.mean()))
+        hips = body_root(c.skeleton)
+        rise = max(rise, 100 * abs(float(pose[1, hips, 1] - pose[0, hips, 1])))
+    ok = err <= goal.tolerance_cm
+    e = {
+        "first_frame": 0,
+        "last_frame": n - 1,
+        "pose_cm": _r(err),
+        "mean_cm": _r(mean),
+        "hip_height_cm": _r(rise),
+        "tolerance_cm": goal.tolerance_cm,
+        "satisfied": ok,
+    }
+    return e, None if ok else (
+        f"{goal.name}: the last frame's pose is {err:.1f} cm (a joint) from the first one's "
         f"(tolerance {goal.tolerance_cm:g} cm)"
     )
 

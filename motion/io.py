@@ -5,12 +5,15 @@ Input: ``.bvh`` and ``.bvh.gz``. Output: ``.bvh`` (``.bvh.gz``), ``.glb``, ``.js
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from .bvh import BvhLimits, read_bvh, write_bvh
 from .errors import ExportError, MotionError
 from .export.arrays import write_json, write_npz
-from .export.targets import get_target, to_target
+from .export.events import contact_events_of, sorted_events
+from .export.targets import get_target, output_units, to_target
 from .motion import Motion
 from .samples import resolve_path
 
@@ -35,7 +38,14 @@ def load_motion(path: str | Path, *, units: str | None = None, limits: BvhLimits
 
 
 def save_motion(
-    motion: Motion, path: str | Path, *, target: str = "gltf", units: str | None = None
+    motion: Motion,
+    path: str | Path,
+    *,
+    target: str = "gltf",
+    units: str | None = None,
+    in_place: bool = False,
+    events: Sequence[str] = (),
+    extra_events: Sequence[dict[str, Any]] = (),
 ) -> list[str]:
     """Write a motion in the format given by the extension of ``path``.
 
@@ -46,8 +56,13 @@ def save_motion(
         GLB is always glTF's own convention (right-handed, Y up, metres), which every engine's
         glTF importer converts itself; a different target is noted, not applied.
     units:
-        For BVH and NPZ with the ``gltf``/``godot`` target: the length unit to write (default:
-        the motion's own).
+        Override of the length unit of BVH, JSON and NPZ (default: the target's, metres for
+        gltf/godot/unity and centimetres for unreal). GLB is metres: any other unit is an error.
+    in_place:
+        GLB only: the body stays over the origin, the root motion is on the ``ground`` joint.
+    events:
+        Kinds of events measured on the motion (``"contacts"``) written with ``extra_events``
+        (e.g. a result's beats and labels) into GLB ``extras`` and the JSON ``events``.
 
     Returns
     -------
@@ -56,27 +71,29 @@ def save_motion(
     p = Path(path)
     kind = _suffix(p, OUTPUT_SUFFIXES)
     tgt = get_target(target)
+    output_units(tgt, units)  # an unknown unit fails here, before anything is written
     notes: list[str] = []
+    if in_place and kind != ".glb":
+        raise ExportError("in-place export is for .glb (its ground joint keeps the root motion)")
+    wanted = [*(contact_events_of(motion) if "contacts" in events else []), *extra_events]
+    if (events or extra_events) and kind not in (".glb", ".json"):
+        raise ExportError("events go into .glb (animation extras) and .json (events) files only")
+    evs = sorted_events(wanted) if (events or extra_events) else None
     if kind == ".glb":
         from .export.glb import write_glb
 
+        if units is not None and units != "m":
+            raise ExportError(f"GLB is in metres (glTF 2.0); --units {units} does not apply to it")
         if tgt.name not in ("gltf", "godot"):
             notes.append(
                 f"GLB is always written in glTF convention (right-handed, Y up, metres); {tgt.name}'s glTF "
                 "importer converts it on import, so --target does not apply"
             )
-        write_glb(motion, p)
+        write_glb(motion, p, in_place=in_place, events=evs)
     elif kind == ".npz":
         write_npz(motion, p, tgt, units)
     elif kind == ".json":
-        if units is not None:
-            notes.append("JSON frames use the target's units; --units does not apply")
-        write_json(motion, p, tgt)
+        write_json(motion, p, tgt, units, evs)
     else:
-        out = to_target(motion, tgt) if tgt.name not in ("gltf", "godot") else motion
-        if units is not None and tgt.name in ("gltf", "godot"):
-            out = out.to_units(units)
-        elif units is not None:
-            raise ExportError(f"--units cannot be combined with --target {tgt.name} (it fixes the units)")
-        write_bvh(out, p)
+        write_bvh(to_target(motion, tgt, units), p)
     return notes

@@ -184,6 +184,11 @@ class AnnotationRequest(JobRequestBase):
         ),
     )
     footskate: bool = Field(default=True, description="remove foot skate from the result (motion.footskate)")
+    loop: bool = Field(
+        default=False,
+        description="a looping clip: the end is blended so the last pose is the first (root travel "
+        "continues; motion.looping); the report's 'loop' constraint measures it",
+    )
 
     @model_validator(mode="after")
     def _inside(self) -> AnnotationRequest:

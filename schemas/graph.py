@@ -122,6 +122,11 @@ class GraphRequest(JobRequestBase):
     footskate: bool = Field(
         default=True, description="pin planted feet with the source clips' contacts (motion.footskate)"
     )
+    loop: bool = Field(
+        default=False,
+        description="a looping clip: the end is blended so the last pose is the first (root travel "
+        "continues; motion.looping); the report's 'loop' constraint measures it",
+    )
 
     @model_validator(mode="after")
     def _length(self) -> GraphRequest:

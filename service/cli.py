@@ -41,7 +41,7 @@ if TYPE_CHECKING:
 
 SAMPLE_PREFIX = "sample:"
 
-UNITS = ("cm", "cmu", "ft", "in", "m", "mm")
+UNITS = ("cm", "cmu", "cmu-scaled", "ft", "in", "m", "mm")
 """Length units the options accept (:data:`motion.units.METRES_PER_UNIT`; a test keeps them equal)."""
 TARGETS = ("gltf", "godot", "unity", "unreal")
 """Export conventions (:data:`motion.export.targets.TARGETS`)."""
@@ -160,6 +160,7 @@ def cmd_beats(args: argparse.Namespace) -> int:
 
 def cmd_convert(args: argparse.Namespace) -> int:
     from motion import MotionError
+    from motion.export.events import parse_kinds
     from motion.ground import add_ground_root
     from motion.io import load_motion, save_motion
     from motion.resample import resample
@@ -177,7 +178,12 @@ def cmd_convert(args: argparse.Namespace) -> int:
     if args.ground_root and not args.output.lower().endswith(".glb"):
         motion = add_ground_root(motion)
     t0 = time.perf_counter()
-    notes = save_motion(motion, args.output, target=args.target, units=args.units)
+    events = parse_kinds(args.events) if args.events else ()
+    if set(events) - {"contacts"}:
+        raise MotionError("a motion file has contact events only; beats and labels come with results")
+    notes = save_motion(
+        motion, args.output, target=args.target, units=args.units, in_place=args.in_place, events=events
+    )
     for note in notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
@@ -472,13 +478,22 @@ def build_parser() -> argparse.ArgumentParser:
         "--target", default="gltf", choices=sorted(TARGETS), help="axes/handedness/units convention"
     )
     p.add_argument(
-        "--units", choices=units, help="output length unit for .bvh/.npz (default: the file's own)"
+        "--units",
+        choices=units,
+        help="output length unit of .bvh/.json/.npz (default: the target's, m or cm for unreal; "
+        ".npz keeps the file's own for gltf/godot; .glb is always m)",
     )
     p.add_argument("--in-units", choices=units, help="declare the input's length unit instead of guessing")
     p.add_argument("--frames", help="keep frames START:STOP only (Python slice, e.g. 0:240)")
     p.add_argument(
         "--ground-root", action="store_true", help="add the explicit ground root joint (always in .glb)"
     )
+    p.add_argument(
+        "--in-place",
+        action="store_true",
+        help=".glb: the body stays over the origin; the root motion stays on the ground joint",
+    )
+    p.add_argument("--events", help="contacts: foot-contact events in .glb extras / .json events")
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
     p.set_defaults(func=cmd_convert)

@@ -2,8 +2,10 @@
 # Install Segue with its test tools and run the whole check: lint, format, types, tests.
 # This is the README's test command and what CI (.ci/run) runs, on a fresh machine.
 #
-# What it installs, each only when missing: redis-server and chromium with apt (sudo when not
-# root), and `pip install -e '.[dev,web]'` (pytest, hypothesis, fakeredis, ruff, mypy,
+# What it installs, each only when missing: redis-server, chromium, nodejs and npm with apt (sudo
+# when not root), the Khronos glTF-Validator (npm `gltf-validator`, pinned, once, into
+# $SEGUE_GLTF_VALIDATOR_DIR, default ~/.cache/segue/gltf-validator: outside the work tree; the GLB
+# tests run it with node), and `pip install -e '.[dev,web]'` (pytest, hypothesis, fakeredis, ruff, mypy,
 # schemathesis, playwright; playwright drives Debian's /usr/bin/chromium: never
 # `playwright install`). The Redis backend tests start their own redis-server on a free port.
 #
@@ -31,6 +33,18 @@ apt_install() {
 }
 if ! command -v redis-server >/dev/null 2>&1; then apt_install redis-server; fi
 if [ ! -x /usr/bin/chromium ]; then apt_install chromium || echo "tests/run.sh: chromium not installed" >&2; fi
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+    apt_install nodejs npm || echo "tests/run.sh: nodejs/npm not installed" >&2
+fi
+GLTF_VALIDATOR_VERSION=2.0.0-dev.3.10  # keep in step with tests/motion/test_gltf_validator.py
+export SEGUE_GLTF_VALIDATOR_DIR="${SEGUE_GLTF_VALIDATOR_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/segue/gltf-validator}"
+VALIDATOR_PKG="$SEGUE_GLTF_VALIDATOR_DIR/node_modules/gltf-validator/package.json"
+if command -v npm >/dev/null 2>&1 && ! grep -q "\"version\": \"$GLTF_VALIDATOR_VERSION\"" "$VALIDATOR_PKG" 2>/dev/null; then
+    step "npm install gltf-validator@$GLTF_VALIDATOR_VERSION into $SEGUE_GLTF_VALIDATOR_DIR"
+    mkdir -p "$SEGUE_GLTF_VALIDATOR_DIR"
+    npm install --prefix "$SEGUE_GLTF_VALIDATOR_DIR" --no-audit --no-fund --silent \
+        "gltf-validator@$GLTF_VALIDATOR_VERSION" || echo "tests/run.sh: gltf-validator not installed" >&2
+fi
 step "pip install -e '.[dev,web]'"
 "$PY" -m pip install --quiet --disable-pip-version-check -e '.[dev,web]'
 

@@ -23,6 +23,7 @@ from typing import Any, TextIO
 from engines.library import ClipInput
 from engines.registry import engine_class
 from motion import Motion, MotionError
+from motion.export.events import result_events, sorted_events
 from motion.io import save_motion
 from motion.samples import resolve_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobEvent, Report
@@ -154,8 +155,14 @@ def synth_from_dir(
 
 
 def write_result(motion: Motion, report: Report, out: Path, report_path: Path | None) -> list[str]:
-    """Write the motion by extension (and the report as JSON); returns notes for the user."""
-    notes = save_motion(motion, out)
+    """Write the motion by extension (and the report as JSON); returns notes for the user.
+
+    A ``.glb`` or ``.json`` output carries the result's music beats and labels (from the report's
+    annotations) as events (:mod:`motion.export.events`), when it has any."""
+    events: list[dict[str, Any]] = []
+    if out.name.lower().endswith((".glb", ".json")):
+        events = result_events(report.annotations, motion.fps, motion.duration_s)
+    notes = save_motion(motion, out, extra_events=sorted_events(events))
     if report_path is not None:
         report_path.write_text(report.model_dump_json(indent=2), encoding="utf-8")
     return notes

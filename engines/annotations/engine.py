@@ -26,6 +26,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
 from motion.floorfit import CorrectionLimits
+from motion.looping import close_loop, with_loop_goal
 from schemas import LabelRange
 from schemas.annotations import AnnotatedDatabaseSpec, ClipLabels, LabelCorrection
 from schemas.bases import DatabaseSpecBase
@@ -157,6 +158,8 @@ class AnnotationEngine(Engine):
             limits,
             floor,
         )
+        if getattr(request, "loop", False):
+            motion = close_loop(motion)
         annotations, metrics = label_report(self.db, pb, cand.sigma)
         metrics.update(discontinuity(motion, cuts))
         metrics.update({"passes": float(passes), "elapsed_s": float(elapsed)})
@@ -177,7 +180,8 @@ class AnnotationEngine(Engine):
             metrics=metrics,
             annotations=annotations,
         )
-        return self.finish(solution, quality_inputs(self.db, self.frames, pb, cand.sigma, cuts))
+        inputs = quality_inputs(self.db, self.frames, pb, cand.sigma, cuts)
+        return self.finish(solution, with_loop_goal(inputs) if getattr(request, "loop", False) else inputs)
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
         with threadpool_limits(limits=BLAS_THREADS):

@@ -78,6 +78,7 @@ import numpy as np
 import numpy.typing as npt
 
 from motion.floorfit import CorrectionLimits
+from motion.looping import close_loop, with_loop_goal
 from motion.plausibility import Reference
 
 from ..base import Emitter, EngineError, ShouldStop, Solution, finish_solution
@@ -631,9 +632,13 @@ class GraphSearch:
             limits=self.limits,
             floor=self.foot_floor,
         )
+        if getattr(request, "loop", False):
+            motion = close_loop(motion)
         cuts = ev.pieces.start[1:]
         cuts = cuts[(cuts > 0) & (cuts < motion.num_frames)]
         inputs = quality_inputs(motion, provenance, cuts, self._problem, self.library)
+        if getattr(request, "loop", False):
+            inputs = with_loop_goal(inputs)
         metrics = {
             "pieces": float(ev.pieces.clip.size),
             "alternative": float(rank),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -43,36 +44,43 @@ def motion_arrays(motion: Motion) -> dict[str, Any]:
 def npz_bytes(motion: Motion, target: str | Target = "gltf", units: str | None = None) -> bytes:
     """An NPZ archive of :func:`motion_arrays`.
 
-    Positions stay in the motion's own units (a BVH file's units) unless ``units`` is given or the
-    target implies a change of axes (``unity``/``unreal``, in their own units).
+    Unlike the other formats, an NPZ archive keeps the motion's own numbers (its ``units`` array
+    says which unit) for the ``gltf``/``godot`` targets, so that it holds exactly what was read
+    (the motion-core contract: ``positions`` equal the file's FK); ``units`` converts them, and
+    ``unity``/``unreal`` convert to their axes and units (or ``units``).
     """
     tgt = get_target(target) if isinstance(target, str) else target
-    if tgt.name not in ("gltf", "godot"):
-        motion = to_target(motion, tgt)
-    elif units is not None:
-        motion = motion.to_units(units)
+    if units is not None or tgt.name not in ("gltf", "godot"):
+        motion = to_target(motion, tgt, units)
     buf = io.BytesIO()
     np.savez_compressed(buf, **motion_arrays(motion), target=np.array(tgt.name))
     return buf.getvalue()
 
 
-def motion_json(motion: Motion, target: str | Target = "gltf", decimals: int = 5) -> dict[str, Any]:
+def motion_json(
+    motion: Motion,
+    target: str | Target = "gltf",
+    decimals: int = 5,
+    units: str | None = None,
+    events: Sequence[dict[str, Any]] | None = None,
+) -> dict[str, Any]:
     """A JSON-ready dict: skeleton plus per-frame global positions and local rotations.
 
-    Lengths in the target's units (metres for gltf/godot/unity, centimetres for unreal); the
-    motion's units must be known or are taken as metres.
+    Lengths in the target's units (metres for gltf/godot/unity, centimetres for unreal) or
+    ``units`` when given; the motion's units must be known or are taken as metres. ``events``
+    (:mod:`motion.export.events`, times in seconds) go in an ``"events"`` list when given.
     """
     tgt = get_target(target) if isinstance(target, str) else target
-    moved = to_target(motion, tgt)
+    moved = to_target(motion, tgt, units)
     pos = np.round(np.ascontiguousarray(moved.global_positions()), decimals)
     q = np.round(np.ascontiguousarray(moved.rotations), 6)
     sk = moved.skeleton
-    return {
+    out: dict[str, Any] = {
         "format": "segue.frames/1",
         "name": motion.name,
         "fps": motion.fps,
         "frame_count": motion.num_frames,
-        "convention": tgt.describe(),
+        "convention": {**tgt.describe(), "units": moved.units},
         "joints": list(sk.names),
         "parents": [int(p) for p in sk.parents],
         "offsets": np.round(sk.offsets, decimals).tolist(),
@@ -81,11 +89,21 @@ def motion_json(motion: Motion, target: str | Target = "gltf", decimals: int = 5
             for i, (p, r) in enumerate(zip(pos.tolist(), q.tolist(), strict=True))
         ],
     }
+    if events is not None:
+        out["events"] = list(events)
+    return out
 
 
-def write_json(motion: Motion, path: str | Path, target: str | Target = "gltf") -> None:
+def write_json(
+    motion: Motion,
+    path: str | Path,
+    target: str | Target = "gltf",
+    units: str | None = None,
+    events: Sequence[dict[str, Any]] | None = None,
+) -> None:
     """Write :func:`motion_json` compactly (one line) to ``path``."""
-    Path(path).write_text(json.dumps(motion_json(motion, target), separators=(",", ":")), encoding="utf-8")
+    text = json.dumps(motion_json(motion, target, units=units, events=events), separators=(",", ":"))
+    Path(path).write_text(text, encoding="utf-8")
 
 
 def write_npz(

@@ -13,6 +13,9 @@ unreal    left-handed, Z up, +X forward, cm       (X, Y, Z) = (z, -x, y) * 100
 ========  =====================================  ==========================================
 
 Rotations transform as ``R' = M R M^T`` (a proper rotation even when M is a reflection).
+
+Every export to a target is written in the target's units unless the caller overrides them
+(:func:`output_units`): BVH, JSON frames and NPZ alike. GLB is always metres (glTF 2.0 says so).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from .. import rotations as rot
 from ..errors import ExportError
 from ..motion import Motion
 from ..skeleton import Skeleton
+from ..units import METRES_PER_UNIT
 
 Array = npt.NDArray[np.float64]
 
@@ -73,9 +77,11 @@ def get_target(name: str) -> Target:
         raise ExportError(f"unknown target {name!r}; use one of {', '.join(TARGETS)}") from None
 
 
-def transform_points(points: Array, target: Target, metres_per_unit: float) -> Array:
-    """Points ``(..., 3)`` in a motion's units -> the target's axes and units."""
-    scale = metres_per_unit * target.metres_to_units
+def transform_points(
+    points: Array, target: Target, metres_per_unit: float, units: str | None = None
+) -> Array:
+    """Points ``(..., 3)`` in a motion's units -> the target's axes and units (or ``units``)."""
+    scale = metres_per_unit / METRES_PER_UNIT[units if units is not None else target.units]
     return np.asarray(np.asarray(points, dtype=np.float64) @ target.basis.T * scale)
 
 
@@ -88,30 +94,47 @@ def transform_rotations(q: Array, target: Target) -> Array:
     return rot.from_matrix(m @ mats @ m.T)
 
 
-def to_target(motion: Motion, target: str | Target) -> Motion:
-    """The motion expressed in a target convention (lengths converted; units relabelled).
+def output_units(target: str | Target, units: str | None = None) -> str:
+    """The length unit an export to ``target`` is written in: ``units`` when given (an
+    override), else the target's own (metres for gltf/godot/unity, centimetres for unreal)."""
+    tgt = get_target(target) if isinstance(target, str) else target
+    if units is None:
+        return tgt.units
+    if units not in METRES_PER_UNIT:
+        raise ExportError(f"unknown units {units!r}; use one of {', '.join(METRES_PER_UNIT)}")
+    return units
+
+
+def to_target(motion: Motion, target: str | Target, units: str | None = None) -> Motion:
+    """The motion expressed in a target convention: its axes, and its units (the target's own, or
+    ``units`` as an override; see :func:`output_units`). A motion of unknown units is taken as
+    metres.
 
     Global positions of the result equal ``transform_points`` of the original's, and its BVH
     channels describe the same animation in the target's axes.
     """
     tgt = get_target(target) if isinstance(target, str) else target
-    if tgt.name in ("gltf", "godot") and motion.units == "m":
+    out_units = output_units(tgt, units)
+    identity_axes = bool(np.array_equal(tgt.basis, np.eye(3)))
+    if identity_axes and motion.units == out_units:
         return motion
+    if identity_axes and motion.units != "unknown":
+        return motion.to_units(out_units)
     mpu = motion.metres_per_unit
     sk = motion.skeleton
     new_sk = Skeleton(
         sk.names,
         sk.parents,
-        transform_points(sk.offsets, tgt, mpu),
+        transform_points(sk.offsets, tgt, mpu, out_units),
         sk.channels,
         sk.end_site_parents,
-        transform_points(sk.end_site_offsets, tgt, mpu),
+        transform_points(sk.end_site_offsets, tgt, mpu, out_units),
     )
     return replace(
         motion,
         skeleton=new_sk,
-        root_positions=transform_points(motion.root_positions, tgt, mpu),
+        root_positions=transform_points(motion.root_positions, tgt, mpu, out_units),
         rotations=transform_rotations(motion.rotations, tgt),
-        joint_translations=transform_points(motion.joint_translations, tgt, mpu),
-        units=tgt.units,
+        joint_translations=transform_points(motion.joint_translations, tgt, mpu, out_units),
+        units=out_units,
     )

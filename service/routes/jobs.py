@@ -11,6 +11,7 @@ from starlette.concurrency import run_in_threadpool
 
 from engines.registry import engine_kind
 from motion import ExportError, MotionError
+from motion.export.events import parse_kinds
 from motion.resample import resample
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
 from schemas.bases import JobRequestBase
@@ -32,7 +33,7 @@ from ..deps import (
     StoreDep,
 )
 from ..errors import ApiError, conflict, responses
-from ..exports import MEDIA_TYPES, ExportTarget, ResultFormat, export_bytes
+from ..exports import MEDIA_TYPES, ExportTarget, ExportUnits, ResultFormat, export_bytes, result_events
 from ..jobs_common import submit_job
 from ..jsonbody import JsonIntent, json_body, json_body_doc
 from ..owners import database_for, job_for, visible
@@ -228,6 +229,16 @@ async def download_result(
     rest: Annotated[
         RestPose, Query(description="a BVH character's rest pose: first frame or zero")
     ] = RestPose.first,
+    units: Annotated[
+        ExportUnits | None, Query(description="length unit (default: the target's; glb is m)")
+    ] = None,
+    in_place: Annotated[
+        bool, Query(description="glb: body over the origin, root motion on the ground joint")
+    ] = False,
+    events: Annotated[
+        str | None,
+        Query(max_length=40, description="glb/json: contacts,beats,labels or all (glTF extras / events)"),
+    ] = None,
 ) -> Response:
     """Download a result motion (default: the job's best result so far), optionally resampled or
     retargeted onto a character; 409 ``result_not_ready`` while the job has none yet, 422
@@ -251,6 +262,7 @@ async def download_result(
         raise ApiError(
             422, "export_failed", f"result {rid} holds numbers that are not finite; it cannot be exported"
         )
+    result_fps = motion.fps
     try:
         if fps is None and max_fps is not None and motion.fps > max_fps:
             fps = max_fps
@@ -265,8 +277,15 @@ async def download_result(
             )
         if fps is not None and abs(fps - motion.fps) > 1e-9:
             motion = await run_in_threadpool(resample, motion, fps)
-        data = await run_in_threadpool(export_bytes, motion, format, target)
-    except ExportError as exc:
+        kinds = parse_kinds(events) if events else ()
+        evs = None
+        if kinds:
+            annotations = (await run_in_threadpool(store.result_report, job_id, rid)).annotations
+            evs = await run_in_threadpool(result_events, motion, annotations, kinds, result_fps)
+        data = await run_in_threadpool(
+            lambda: export_bytes(motion, format, target, units=units, in_place=in_place, events=evs)
+        )
+    except (ExportError, MotionError) as exc:
         raise ApiError(422, "export_failed", f"cannot export result {rid} as {format.value}: {exc}") from None
     filename = f"segue-{job_id}-{rid}.{format.value}"
     return Response(

@@ -285,3 +285,14 @@ def test_confidence_weights_propagated_labels(engine: AnnotationEngine) -> None:
     assert np.all(np.abs(soft.lab[:, 0]) <= 1.0)
     assert np.all(np.sign(soft.lab[~known, 0]) * hard.lab[~known, 0] >= 0)  # same sign as the label
     assert np.any(np.abs(soft.lab[~known, 0]) < 1.0)
+
+
+def test_loop_option_closes_the_clip_and_is_reported(engine: AnnotationEngine) -> None:
+    req = AnnotationRequest(
+        frames=120, seed=2, timeline=[{"label": "slow", "start": 0, "end": 120}], footskate=False, loop=True
+    )
+    rec = Collect()
+    engine.search(req, 0.3, rec, lambda: False)
+    best = rec.solutions[-1]
+    loop = best.constraint_errors["loop"]
+    assert loop["satisfied"] and loop["pose_cm"] < 1.0 and loop["last_frame"] == 119, loop

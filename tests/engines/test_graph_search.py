@@ -557,3 +557,14 @@ def test_seconds_times_and_no_body_constraint(graph: Graph) -> None:
     xz, yaw = body_frames(out.solutions[-1].motion)
     np.testing.assert_allclose(xz[0], [0.0, 0.0], atol=1e-6)
     assert abs(yaw[0]) < 1e-6
+
+
+def test_loop_option_closes_the_clip_and_is_reported(graph: Graph) -> None:
+    out = Collect()
+    searcher(graph, 3).run(request(loop=True, alternatives=1), 0.6, out, lambda: False)
+    final = out.solutions[-1]
+    loop = final.constraint_errors["loop"]
+    assert loop["satisfied"] and loop["pose_cm"] < 1.0, loop
+    plain = Collect()
+    searcher(graph, 3).run(request(alternatives=1), 0.6, plain, lambda: False)
+    assert "loop" not in plain.solutions[-1].constraint_errors

@@ -47,11 +47,14 @@ def test_npz_contents(tmp_path: Path) -> None:
     path.write_bytes(npz_bytes(m))
     z = np.load(path, allow_pickle=False)
     assert [str(n) for n in z["names"]] == list(m.skeleton.names)
-    np.testing.assert_allclose(z["positions"], m.global_positions())  # the file's own units
+    np.testing.assert_allclose(z["positions"], m.global_positions())  # the file's own numbers
     assert float(z["fps"]) == 30.0 and str(z["units"]) == "cm"
     np.testing.assert_array_equal(z["parents"], m.skeleton.parents)
     z2 = np.load(__import__("io").BytesIO(npz_bytes(m, units="m")), allow_pickle=False)
-    np.testing.assert_allclose(z2["positions"], m.global_positions() / 100)
+    np.testing.assert_allclose(z2["positions"], m.global_positions() / 100)  # the override
+    assert str(z2["units"]) == "m"
+    z3 = np.load(__import__("io").BytesIO(npz_bytes(m, "unreal")), allow_pickle=False)
+    assert str(z3["units"]) == "cm"
 
 
 def test_json_frames_are_valid_and_consistent() -> None:

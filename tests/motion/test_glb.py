@@ -166,7 +166,8 @@ def node_globals(glb: Glb, frame: int | None) -> Array:
         for ch in anim["channels"]:
             sampler = anim["samplers"][ch["sampler"]]
             assert sampler["interpolation"] == "LINEAR"
-            animated[ch["target"]["node"], ch["target"]["path"]] = glb.accessor(sampler["output"])[frame]
+            values = glb.accessor(sampler["output"])  # one key: the value of every frame
+            animated[ch["target"]["node"], ch["target"]["path"]] = values[min(frame, len(values) - 1)]
     local = np.empty((len(nodes), 4, 4))
     for i, node in enumerate(nodes):
         if "matrix" in node:
@@ -211,12 +212,14 @@ def check_file(data: bytes, m: motion.Motion, *, ground: bool, mesh: bool = True
     (anim,) = gltf["animations"]
     assert anim["name"] == (m.name or "motion")
     inputs = {s["input"] for s in anim["samplers"]}
-    assert len(inputs) == 1
-    (t_acc,) = inputs
+    assert 1 <= len(inputs) <= 2  # every frame, and one key for channels that never change
+    t_acc = max(inputs, key=lambda i: gltf["accessors"][i]["count"])
     times = glb.accessor(t_acc)[:, 0]
     np.testing.assert_allclose(times, np.arange(m.num_frames) / m.fps, atol=1e-6)
     for s in anim["samplers"]:
-        assert gltf["accessors"][s["output"]]["count"] == times.size
+        count = gltf["accessors"][s["input"]]["count"]
+        assert gltf["accessors"][s["output"]]["count"] == count
+        assert s["input"] == t_acc or (count == 1 and glb.accessor(s["input"])[0, 0] == 0.0)
     targets = {(c["target"]["node"], c["target"]["path"]) for c in anim["channels"]}
     assert len(targets) == len(anim["channels"])
     assert {(j, "rotation") for j in joints} <= targets

@@ -129,3 +129,28 @@ def test_round_trip_reproduces_positions(loaded: Loaded) -> None:
     assert (
         err <= ROUND_TRIP_TOL * loaded.height
     ), f"{loaded.rel}: round trip moved a joint by {err:.3g} (= {err / loaded.height:.3g} x height)"
+
+
+def test_cmu_salsa_scaled_unit_is_the_daz_figure_over_128() -> None:
+    """The true scale of the CMU salsa "scaled" files (motion.units, ``cmu-scaled``): their skeleton
+    is the CMU-Daz figure (centimetres) divided by 128, and the Daz figure falls at about g."""
+    salsa_path, daz_path = DATA / "cmu-salsa" / "60_02_scaled.bvh", DATA / "cmu-daz" / "walks" / "07_01.bvh"
+    jump_path = DATA / "cmu-daz" / "actions" / "13_11.bvh"
+    if not (salsa_path.exists() and daz_path.exists() and jump_path.exists()):
+        pytest.skip("../shared/data (CMU salsa and CMU-Daz) is not here")
+    salsa = motion.read_bvh(salsa_path, units="cmu-scaled")
+    daz = motion.read_bvh(daz_path)
+    assert daz.units == "cm" and salsa.skeleton.names == daz.skeleton.names
+    big = np.abs(daz.skeleton.offsets) > 1.0
+    ratio = salsa.skeleton.offsets[big] / daz.skeleton.offsets[big]
+    np.testing.assert_allclose(ratio, 1 / 128, rtol=2e-3)
+    h = motion.read_bvh(salsa_path).global_positions()  # the guess: metres, a 1.14 m dancer
+    assert 1.0 < np.ptp(h[0, :, 1]) < 1.3
+    assert 1.35 < np.ptp(salsa.global_positions()[0, :, 1]) * salsa.metres_per_unit < 1.7
+    jump = motion.read_bvh(jump_path)  # free fall of the hips in centimetres: about g
+    y = jump.global_positions()[:, 0, 1]
+    feet = jump.global_positions()[:, [jump.skeleton.names.index(n) for n in ("lFoot", "rFoot")], 1].min(1)
+    air = np.flatnonzero(feet > np.percentile(feet, 5) + 8.0)
+    run = air[: np.argmax(np.diff(air) > 1)] if np.any(np.diff(air) > 1) else air
+    g = -2 * np.polyfit(run / jump.fps, y[run], 2)[0] / 100
+    assert 8.5 < g < 10.5

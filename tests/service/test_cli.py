@@ -35,9 +35,12 @@ def test_convert_all_formats(tmp_path: Path, capsys: pytest.CaptureFixture[str])
         assert main(["convert", str(src), str(tmp_path / f"w.{ext}"), "--frames", "1:61", "-q"]) == 0
     z = np.load(tmp_path / "w.npz", allow_pickle=False)
     ref = read_bvh(src).slice(1, 61).global_positions()
-    np.testing.assert_allclose(z["positions"], ref, atol=1e-9)  # file units (cm)
+    np.testing.assert_allclose(z["positions"], ref, atol=1e-9)  # NPZ: the file's own numbers (cm)
     again = read_bvh(tmp_path / "w.bvh")
-    np.testing.assert_allclose(again.global_positions(), ref, atol=1e-4)
+    assert again.units == "m"
+    np.testing.assert_allclose(again.global_positions(), ref / 100, atol=1e-5)  # 6 decimals of a metre
+    assert main(["convert", str(src), str(tmp_path / "c.bvh"), "--units", "cm", "-q"]) == 0
+    np.testing.assert_allclose(read_bvh(tmp_path / "c.bvh").slice(1, 61).global_positions(), ref, atol=1e-4)
 
 
 def test_convert_fps_units_and_target(tmp_path: Path) -> None:

@@ -153,3 +153,26 @@ def test_spec_files_name_samples_and_label_ranges_stay_inside_clips(
     err = capsys.readouterr().err
     assert "clips[1] (run-09-04): labels[0] 'run' [5, 40) ends after the clip, which has 35 frames" in err
     assert "clips[0]" not in err  # [0, 33) of a 33-frame clip is fine
+
+
+def test_synth_glb_and_json_carry_the_results_beats_and_labels(tmp_path: Path) -> None:
+    from motion.export.glb import glb_bytes
+    from schemas import Report
+    from workers.local import write_result
+
+    m = read_bvh(sample_path("walk")).slice(1, 61)
+    ann = {"music_beats_s": [0.1, 0.2], "achieved_ranges": {"walk": [[0, 30]]}}
+    report = Report(
+        job="j", result="r1", engine="x", score=0.0, frames=60, fps=m.fps, provenance=[], annotations=ann
+    )
+    write_result(m, report, tmp_path / "a.glb", None)
+    write_result(m, report, tmp_path / "a.json", None)
+    write_result(m, report, tmp_path / "a.bvh", None)  # BVH has no place for events: written without
+    raw = (tmp_path / "a.glb").read_bytes()
+    n = int.from_bytes(raw[12:16], "little")
+    events = json.loads(raw[20 : 20 + n])["animations"][0]["extras"]["events"]
+    assert [e["type"] for e in events] == ["label", "beat", "beat"]  # by time: the label starts at 0
+    assert json.loads((tmp_path / "a.json").read_text())["events"] == events
+    plain = Report(job="j", result="r1", engine="x", score=0.0, frames=60, fps=m.fps, provenance=[])
+    write_result(m, plain, tmp_path / "b.glb", None)
+    assert (tmp_path / "b.glb").read_bytes() == glb_bytes(m)  # nothing to add: no extras

@@ -1,0 +1,133 @@
+"""Timed events of a motion for game engines: foot contacts, music beats and labels.
+
+An event is a plain JSON object (so it goes as is into a GLB animation's ``extras`` and into the
+JSON frames export), times in seconds from the first frame:
+
+* ``{"type": "contact", "joint": "lFoot", "time_s": 0.53, "duration_s": 0.31}``: a foot planted
+  (from :func:`motion.contacts.detect_contacts` run on the exported motion itself); with several
+  characters, ``"character"`` names the one it belongs to;
+* ``{"type": "beat", "index": 3, "time_s": 1.5}``: a music beat of a rhythm result;
+* ``{"type": "label", "label": "walk", "time_s": 0.0, "duration_s": 5.0}``: a span of frames whose
+  source frames carry the label (an annotation result's ``achieved_ranges``).
+
+Events are sorted by time, then type. Times are in seconds, not frames, so that they stay right
+when the motion is resampled to another frame rate for export.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..contacts import detect_contacts
+from ..errors import MotionError
+from ..motion import Motion
+from .characters import split_characters, without_prefix
+
+Event = dict[str, Any]
+
+EVENT_KINDS = ("contacts", "beats", "labels")
+"""What ``events`` may ask for (CLI ``--events``, HTTP ``events=``)."""
+
+
+def _runs(flags: np.ndarray[Any, np.dtype[np.bool_]]) -> list[tuple[int, int]]:
+    """``[(start, end), ...]`` frame runs of True (end exclusive)."""
+    x = np.concatenate(([0], flags.astype(np.int8), [0]))
+    edges = np.flatnonzero(np.diff(x))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def contact_events(motion: Motion, character: str | None = None) -> list[Event]:
+    """One ``contact`` event per run of frames where a foot joint is planted, measured on ``motion``.
+
+    A motion without joints named like feet has no contacts (an empty list, not an error). The
+    duration of a run of ``n`` frames is ``n / fps`` seconds (each frame stands for one period).
+    """
+    try:
+        joints, flags = detect_contacts(motion)
+    except MotionError:
+        return []
+    out: list[Event] = []
+    names = motion.skeleton.names
+    for k, j in enumerate(joints.tolist()):
+        for a, b in _runs(flags[:, k]):
+            ev: Event = {
+                "type": "contact",
+                "joint": names[j],
+                "time_s": round(a / motion.fps, 6),
+                "duration_s": round((b - a) / motion.fps, 6),
+            }
+            if character is not None:
+                ev["character"] = character
+            out.append(ev)
+    return out
+
+
+def contact_events_of(motion: Motion) -> list[Event]:
+    """:func:`contact_events` of every character of ``motion`` (each character of a combined
+    motion, :func:`motion.export.characters.split_characters`, named by its prefix)."""
+    chars = split_characters(motion)
+    if chars is None:
+        return contact_events(motion)
+    out: list[Event] = []
+    for c in chars:
+        plain, pre = without_prefix(c)  # feet and sides are found by name
+        out += [dict(ev, joint=pre + ev["joint"]) for ev in contact_events(plain, pre.rstrip("_"))]
+    return out
+
+
+def beat_events(times_s: Sequence[float], duration_s: float) -> list[Event]:
+    """One ``beat`` event per music beat time within ``[0, duration_s]`` seconds."""
+    return [
+        {"type": "beat", "index": i, "time_s": round(float(t), 6)}
+        for i, t in enumerate(times_s)
+        if 0.0 <= float(t) <= duration_s + 1e-9
+    ]
+
+
+def label_events(ranges: Mapping[str, Sequence[Sequence[int]]], fps: float) -> list[Event]:
+    """One ``label`` event per ``[start, end)`` frame range (at ``fps``) of each label."""
+    return [
+        {
+            "type": "label",
+            "label": str(label),
+            "time_s": round(int(a) / fps, 6),
+            "duration_s": round((int(b) - int(a)) / fps, 6),
+        }
+        for label, runs in ranges.items()
+        for a, b in runs
+    ]
+
+
+def result_events(
+    annotations: Mapping[str, Any], fps: float, duration_s: float, kinds: Sequence[str] = ("beats", "labels")
+) -> list[Event]:
+    """The ``beats`` (``annotations["music_beats_s"]``) and ``labels``
+    (``annotations["achieved_ranges"]``, frames at the result's ``fps``) events a result's report
+    carries; kinds the result does not have give nothing."""
+    out: list[Event] = []
+    if "beats" in kinds:
+        out += beat_events(annotations.get("music_beats_s", []), duration_s)
+    if "labels" in kinds:
+        out += label_events(annotations.get("achieved_ranges", {}), fps)
+    return out
+
+
+def sorted_events(events: Sequence[Event]) -> list[Event]:
+    """Events by time, then type (stable otherwise)."""
+    return sorted(events, key=lambda e: (float(e["time_s"]), str(e["type"])))
+
+
+def parse_kinds(text: str | Sequence[str]) -> tuple[str, ...]:
+    """``"contacts,beats"`` (or a list) -> ``("contacts", "beats")``; ``all`` means every kind.
+
+    Raises :class:`MotionError` naming an unknown kind."""
+    items = [s.strip() for s in (text.split(",") if isinstance(text, str) else text) if s.strip()]
+    if items == ["all"]:
+        return EVENT_KINDS
+    bad = [s for s in items if s not in EVENT_KINDS]
+    if bad:
+        raise MotionError(f"unknown event kind {bad[0]!r}; use {', '.join(EVENT_KINDS)} or all")
+    return tuple(dict.fromkeys(items))
