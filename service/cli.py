@@ -199,6 +199,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     from motion.io import load_motion, save_motion
     from motion.retarget import correspond, retarget
     from motion.retarget.character import load_character
+    from motion.units import METRES_PER_UNIT
 
     name_map = None
     if args.map:
@@ -214,7 +215,9 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     character = load_character(_resolve(args.to), rest=args.rest, limits=_limits(args))
     t0 = time.perf_counter()
     out = retarget(motion, character, name_map=name_map, plant=not args.no_plant)
-    notes = save_motion(out, args.out)
+    # the character's own units, exactly (GLB is metres by glTF's rule)
+    keep = out.units in METRES_PER_UNIT and not args.out.lower().endswith(".glb")
+    notes = save_motion(out, args.out, units=out.units if keep else None)
     for note in notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:

@@ -255,6 +255,12 @@ async def download_result(
             raise ApiError(
                 422, "retarget_failed", f"cannot retarget result {rid} onto {character}: {exc}"
             ) from None
+        if (
+            units is None
+            and format is not ResultFormat.glb
+            and motion.units in {u.value for u in ExportUnits}
+        ):
+            units = ExportUnits(motion.units)  # the character's own units, exactly
     finite = await run_in_threadpool(
         lambda: bool(np.isfinite(motion.root_positions).all() and np.isfinite(motion.rotations).all())
     )

@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 from typing import Any
 
+import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
@@ -38,6 +39,8 @@ def test_result_on_an_uploaded_bvh_character(client: TestClient, walk_job: str) 
     assert r.status_code == 200, r.text
     out, char = parse_bvh(r.content), parse_bvh(data)
     assert out.skeleton.names == char.skeleton.names and out.num_frames == 60
+    # the character's offsets and units exactly (not the export target's metres)
+    np.testing.assert_allclose(out.skeleton.offsets, char.skeleton.offsets, atol=1e-4)
     by_name = client.get(
         f"/v1/jobs/{walk_job}/result", params={"character": "mixamo-char.bvh", "rest": "zero"}
     )
