@@ -97,7 +97,12 @@ def walk_clip(client: TestClient) -> dict[str, Any]:
 @pytest.fixture(scope="session")
 def walk_db(client: TestClient, walk_clip: dict[str, Any]) -> dict[str, Any]:
     """A ready ``clips`` database of the walk at 30 fps (built through the API)."""
-    r = client.post("/v1/databases", json={"kind": "clips", "clips": [{"bvh": walk_clip["name"]}], "fps": 30})
+    return ready_database(client, {"kind": "clips", "clips": [{"bvh": walk_clip["name"]}], "fps": 30})
+
+
+def ready_database(client: TestClient, spec: dict[str, Any]) -> dict[str, Any]:
+    """Build ``spec`` through the API and wait until it is ready; its database info."""
+    r = client.post("/v1/databases", json=spec)
     assert r.status_code in (200, 202), r.text
     db = r.json()
     if db["status"] != "ready":

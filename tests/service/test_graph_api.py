@@ -15,7 +15,7 @@ from engines.rhythm.choreography import GraphEditError, apply_edits
 from schemas.rhythm_graph import MovementGraph, ResolvedEdit
 from tests.engines.rhythm_salsa import SPEC
 
-from .conftest import wait_events
+from .conftest import ready_database, wait_events
 from .test_api import JSON, error_of
 
 SEEDS = range(4)
@@ -23,15 +23,7 @@ SEEDS = range(4)
 
 @pytest.fixture(scope="module")
 def salsa_db(client: TestClient) -> dict[str, Any]:
-    r = client.post("/v1/databases", json=SPEC)
-    assert r.status_code in (200, 202), r.text
-    db = r.json()
-    if db["status"] != "ready":
-        events = wait_events(client, db["build_job"])
-        assert events[-1]["type"] == "done", events
-    db = client.get(f"/v1/databases/{db['id']}").json()
-    assert db["status"] == "ready", db
-    return dict(db)
+    return ready_database(client, SPEC)
 
 
 def graph_of(client: TestClient, db_id: str) -> MovementGraph:
