@@ -45,7 +45,23 @@ def resolve_inputs(store: Store, request: JobRequestBase, visible: Visible | Non
             resolved[ref] = store.find_input(given, visible)
         except NotFoundError as exc:
             raise InputError(f"input file {ref!r}: {exc}") from None
+    _check_audio(store, request, resolved)
     return resolved
+
+
+def _check_audio(store: Store, request: JobRequestBase, resolved: dict[str, str]) -> None:
+    """Refuse, at submission, a recording input whose content is not WAV, FLAC, Ogg or MP3 (its
+    first bytes only: decoding happens in the worker)."""
+    audio_inputs = getattr(request, "audio_inputs", None)
+    for ref in audio_inputs() if audio_inputs is not None else []:
+        try:
+            media = store.file_info(resolved[ref]).media_type
+        except NotFoundError:
+            media = "application/x-bvh"  # a clip
+        if not media.startswith("audio/") or media == "audio/midi":
+            raise InputError(
+                f"input file {ref!r} is not a WAV, FLAC, Ogg or MP3 recording (its content is {media})"
+            )
 
 
 def attach_from_store(store: Store, request: JobRequestBase) -> None:

@@ -42,17 +42,21 @@ Array = npt.NDArray[np.float64]
 
 
 def music_beats(request: Any) -> Array:
-    """``(B,)`` beat times in seconds of the request's music (:class:`schemas.rhythm.Music`)."""
+    """``(B,)`` beat times in seconds of the request's music (:class:`schemas.rhythm.Music`).
+
+    A recording's beats start at its first downbeat when one is found (the meter's first beat
+    starts the first movement; the dancer holds the first pose until then)."""
     music = request.music
     try:
         if music.bpm is not None:
             beats = bpm_beats(music.bpm, music.duration_s, music.offset_s)
         elif music.midi is not None:
-            try:
-                data = request.input_bytes(music.midi)
-            except KeyError as exc:
-                raise EngineError(str(exc.args[0])) from None
-            beats = parse_midi(data).beat_times()
+            beats = parse_midi(_input(request, music.midi)).beat_times()
+        elif music.audio is not None:
+            from .audio import audio_beats  # librosa: imported only when a recording is used
+
+            found = audio_beats(_input(request, music.audio), music.tempo_bpm)
+            beats = found.beats_s[found.downbeat or 0 :]
         else:
             beats = np.asarray(music.beats_s, dtype=np.float64)
     except MusicError as exc:
@@ -64,6 +68,13 @@ def music_beats(request: Any) -> Array:
     if beats[-1] > 3600:
         raise EngineError("the music is longer than an hour")
     return beats
+
+
+def _input(request: Any, ref: str) -> bytes:
+    try:
+        return bytes(request.input_bytes(ref))
+    except KeyError as exc:
+        raise EngineError(str(exc.args[0])) from None
 
 
 def combined_skeleton(skeletons: list[Skeleton], prefixes: list[str]) -> Skeleton:
