@@ -21,7 +21,12 @@ MAX_INPUT_BYTES = 256 * 1024 * 1024
 
 
 class InputError(ValueError):
-    """An input file that cannot be found or read; the message names the reference."""
+    """An input file that cannot be found or read; the message names the reference. ``code`` is
+    the API error code (``input_not_found``, ``input_not_audio``)."""
+
+    def __init__(self, message: str, code: str = "input_not_found") -> None:
+        super().__init__(message)
+        self.code = code
 
 
 def resolve_inputs(store: Store, request: JobRequestBase, visible: Visible | None = None) -> dict[str, str]:
@@ -60,7 +65,8 @@ def _check_audio(store: Store, request: JobRequestBase, resolved: dict[str, str]
             media = "application/x-bvh"  # a clip
         if not media.startswith("audio/") or media == "audio/midi":
             raise InputError(
-                f"input file {ref!r} is not a WAV, FLAC, Ogg or MP3 recording (its content is {media})"
+                f"input file {ref!r} is not a WAV, FLAC, Ogg or MP3 recording (its content is {media})",
+                "input_not_audio",
             )
 
 

@@ -16,9 +16,10 @@ librosa's audioread fallback for what it cannot read. Beat tracking uses librosa
    envelope's frame grid and leans towards its tempo), at sub-frame precision (parabola through
    the peak's neighbours).
 
-Downbeats: with ``meter`` beats per bar, the bar phase whose beats carry the most low-frequency
-onset energy (a kick drum or bass on the bar's first beat) is the downbeat when it stands out
-from the others by ``DOWNBEAT_MARGIN``; otherwise none is claimed.
+Downbeats: with ``meter`` beats per bar, the bar phase whose beats carry the most power below
+``DOWNBEAT_MAX_HZ`` (median over the bars of the first 60 ms after each beat: a kick drum or bass
+on the bar's first beat) is the downbeat when it stands out from every other phase by
+``DOWNBEAT_MARGIN``; otherwise none is claimed.
 
 beat_this (Foscarin et al. 2024) is stronger on real recordings, but it needs torch and downloads
 its checkpoint at first use, which this project does not allow (no download at first use).
@@ -51,8 +52,10 @@ TEMPO_SMOOTH_S = 4.0
 """Smoothing of the per-frame tempo, seconds (median filter)."""
 REFINE = 0.15
 """A beat is moved to the strongest onset within this fraction of a period."""
-DOWNBEAT_MARGIN = 1.25
-"""The downbeat phase's low-frequency onset energy must exceed every other phase's by this factor."""
+DOWNBEAT_MARGIN = 1.5
+"""The downbeat phase's low-frequency power must exceed every other phase's by this factor."""
+DOWNBEAT_MAX_HZ = 150.0
+"""Upper frequency of the band (kick drum, bass) whose power marks the downbeat, Hz."""
 MAX_SECONDS = 3600.0
 """Longest recording accepted, seconds."""
 SILENCE_RMS = 1e-4
@@ -214,10 +217,12 @@ def _downbeat(y: Array, beats: Array, meter: int) -> int | None:
 
     if meter < 2 or beats.size < 2 * meter:
         return None
-    low = librosa.onset.onset_strength(y=y.astype(np.float32), sr=SR, hop_length=HOP, fmax=150.0, n_mels=6)
+    spec = np.abs(librosa.stft(y.astype(np.float32), n_fft=2048, hop_length=HOP)) ** 2
+    low = spec[: int(np.ceil(DOWNBEAT_MAX_HZ * 2048 / SR)) + 1].sum(axis=0)  # power below ~150 Hz
     idx = np.clip(np.rint(beats * SR / HOP).astype(np.intp), 0, low.size - 1)
-    strength = np.maximum.reduce([low[np.clip(idx + d, 0, low.size - 1)] for d in (-1, 0, 1)])
-    per_phase = np.array([strength[p::meter].mean() for p in range(meter)])
+    reach = max(1, int(round(0.06 * SR / HOP)))  # the hit's first 60 ms
+    strength = np.max([low[np.clip(idx + d, 0, low.size - 1)] for d in range(reach + 1)], axis=0)
+    per_phase = np.array([np.median(strength[p::meter]) for p in range(meter)])
     order = np.argsort(per_phase)[::-1]
     if per_phase[order[0]] < DOWNBEAT_MARGIN * max(per_phase[order[1]], 1e-12):
         return None

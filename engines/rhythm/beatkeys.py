@@ -43,12 +43,13 @@ def movement_speed(positions: Array) -> Array:
 
 
 def _local_minima(speed: Array, order: int) -> npt.NDArray[np.bool_]:
-    """``(M, S)`` True where a sample is strictly below every other within ``order`` samples."""
+    """``(M, S)`` True where a sample is below every other within ``order`` samples (strictly below
+    those after it: the last sample of a flat bottom counts)."""
     m, s = speed.shape
     pad = np.pad(speed, ((0, 0), (order, order)), constant_values=np.inf)
     is_min = np.ones((m, s), dtype=bool)
     for d in range(1, order + 1):
-        is_min &= speed < pad[:, order - d : order - d + s]
+        is_min &= speed <= pad[:, order - d : order - d + s]
         is_min &= speed < pad[:, order + d : order + d + s]
     return is_min
 

@@ -41,11 +41,12 @@ from .synth import Control, Dancers, SpeedLimits, Tables, initial_dancers, synth
 Array = npt.NDArray[np.float64]
 
 
-def music_beats(request: Any) -> Array:
+def music_beats(request: Any, beats_per_movement: int = 1) -> Array:
     """``(B,)`` beat times in seconds of the request's music (:class:`schemas.rhythm.Music`).
 
-    A recording's beats start at its first downbeat when one is found (the meter's first beat
-    starts the first movement; the dancer holds the first pose until then)."""
+    When a recording's downbeat is found, movements (``beats_per_movement`` beats each) start on
+    the bar: the beats before the first downbeat are completed to a whole movement with beats at
+    the opening period (dropped instead if those would fall before 0 s)."""
     music = request.music
     try:
         if music.bpm is not None:
@@ -56,7 +57,7 @@ def music_beats(request: Any) -> Array:
             from .audio import audio_beats  # librosa: imported only when a recording is used
 
             found = audio_beats(_input(request, music.audio), music.tempo_bpm)
-            beats = found.beats_s[found.downbeat or 0 :]
+            beats = _on_the_bar(found.beats_s, found.downbeat, beats_per_movement)
         else:
             beats = np.asarray(music.beats_s, dtype=np.float64)
     except MusicError as exc:
@@ -68,6 +69,16 @@ def music_beats(request: Any) -> Array:
     if beats[-1] > 3600:
         raise EngineError("the music is longer than an hour")
     return beats
+
+
+def _on_the_bar(beats: Array, downbeat: int | None, per_movement: int) -> Array:
+    """``beats`` shifted by whole beats so that the ``downbeat`` starts a movement (doc above)."""
+    lead = 0 if downbeat is None or per_movement < 2 else downbeat % per_movement
+    if lead == 0 or beats.size < 2:
+        return beats
+    period = float(beats[1] - beats[0])
+    before = beats[0] - period * np.arange(per_movement - lead, 0, -1)
+    return np.concatenate((before, beats)) if before[0] >= 0 else beats[lead:]
 
 
 def _input(request: Any, ref: str) -> bytes:
@@ -311,7 +322,7 @@ class RhythmEngine(Engine):
         return LiveDancer(self, seed=seed, fps=fps, accent=accent)
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
-        beats = music_beats(request)
+        beats = music_beats(request, self.tables.beats_per_movement)
         emit.progress(0.1, f"{beats.size} music beats")
         leaders, partners, r = self.synthesize(request, beats)
         if request.footskate:
