@@ -12,7 +12,8 @@ librosa's audioread fallback for what it cannot read. Beat tracking uses librosa
 3. Ellis' dynamic-programming beat tracker (:func:`librosa.beat.beat_track`) with that
    time-varying tempo (a single global tempo loses the beat when the tempo drifts: a 96 -> 116 BPM
    track drifts a quarter of a beat in 4 s);
-4. each beat moved to the strongest onset within ``REFINE`` of a period (the DP lands on the
+4. a beat the DP skipped (an interval of about two or more local periods) is put back, and each
+   beat is moved to the strongest onset within ``REFINE`` of a period (the DP lands on the
    envelope's frame grid and leans towards its tempo), at sub-frame precision (parabola through
    the peak's neighbours).
 
@@ -182,13 +183,32 @@ def track_beats(y: Array, tempo_bpm: float | None = None, meter: int = 4) -> Aud
     frames = np.asarray(frames, dtype=np.float64)
     if frames.size < MIN_BEATS:
         raise MusicError("audio: no detectable beat")
-    beats = _refine(oenv, frames) / fps
+    beats = _refine(oenv, _fill_gaps(frames)) / fps
     beats = np.unique(np.round(beats, 6))
     if beats.size < MIN_BEATS:
         raise MusicError("audio: no detectable beat")
     tempo = 60.0 / float(np.median(np.diff(beats)))
     down = _downbeat(y, beats, meter)
     return AudioBeats(beats, tempo, down, y.size / SR)
+
+
+def _fill_gaps(frames: Array, window: int = 8) -> Array:
+    """Beats added, evenly, where an interval spans about a whole number (>= 2) of the local period
+    (the median interval of the ``window`` intervals around it): the dynamic programme sometimes
+    skips a beat where the tempo moves faster than its smoothed estimate (they are then refined
+    to onsets like the others)."""
+    ibi = np.diff(frames)
+    if ibi.size < 3:
+        return frames
+    out = [frames[:1]]
+    for i, d in enumerate(ibi):
+        lo, hi = max(0, i - window // 2), min(ibi.size, i + window // 2 + 1)
+        local = float(np.median(ibi[lo:hi]))
+        n = int(round(d / local))
+        if n >= 2 and abs(d / n - local) < 0.2 * local:
+            out.append(frames[i] + d * np.arange(1, n) / n)
+        out.append(frames[i + 1 : i + 2])
+    return np.concatenate(out)
 
 
 def _refine(oenv: npt.NDArray[Any], frames: Array) -> Array:
