@@ -16,6 +16,9 @@ from pydantic import Field, field_validator, model_validator
 from .bases import DatabaseSpecBase, JobRequestBase
 from .common import Strict
 
+AUDIO_SUFFIXES = (".wav", ".flac", ".ogg", ".mp3")
+"""File name endings of the recordings ``music.audio`` accepts."""
+
 
 class Partners(Strict):
     """A two-person example: the leader's and the follower's clips (names as in the spec), captured
@@ -118,10 +121,13 @@ class RhythmDatabaseSpec(DatabaseSpecBase):
 
 
 class Music(Strict):
-    """The music to dance to: exactly one of ``bpm`` (with ``duration_s``), ``midi`` or ``beats_s``.
+    """The music to dance to: exactly one of ``bpm`` (with ``duration_s``), ``midi``, ``audio`` or
+    ``beats_s``.
 
-    ``duration_s`` is the length of a ``bpm`` piece; with ``midi`` or ``beats_s`` it cuts the music
-    after that many seconds."""
+    ``duration_s`` is the length of a ``bpm`` piece; with ``midi``, ``audio`` or ``beats_s`` it cuts
+    the music after that many seconds. ``audio`` is a recording (WAV, FLAC, Ogg or MP3) whose beats
+    are tracked in the worker (:mod:`engines.rhythm.audio`); ``tempo_bpm`` is an optional hint of
+    its tempo."""
 
     bpm: float | None = Field(default=None, gt=0, le=400, examples=[120])
     duration_s: float | None = Field(
@@ -129,13 +135,26 @@ class Music(Strict):
     )
     offset_s: float = Field(default=0.0, ge=0, le=60, description="time of the first beat (bpm only)")
     midi: str | None = Field(default=None, min_length=1, max_length=1024, examples=["song.mid"])
+    audio: str | None = Field(
+        default=None, min_length=1, max_length=1024, examples=["song.wav"], description="WAV, FLAC, Ogg, MP3"
+    )
+    tempo_bpm: float | None = Field(
+        default=None, ge=30, le=300, description="tempo hint for the beat tracker (audio only), BPM"
+    )
     beats_s: list[float] | None = Field(default=None, max_length=100_000)
 
     @model_validator(mode="after")
     def _one_source(self) -> Music:
-        given = [k for k in ("bpm", "midi", "beats_s") if getattr(self, k) is not None]
+        given = [k for k in ("bpm", "midi", "audio", "beats_s") if getattr(self, k) is not None]
         if len(given) != 1:
-            raise ValueError("music needs exactly one of 'bpm' (with 'duration_s'), 'midi' or 'beats_s'")
+            raise ValueError(
+                "music needs exactly one of 'bpm' (with 'duration_s'), 'midi', 'audio' or 'beats_s'"
+            )
+        if self.tempo_bpm is not None and self.audio is None:
+            raise ValueError("music.tempo_bpm is a hint for 'audio' only")
+        name = (self.audio or "").rsplit("/", 1)[-1]
+        if "." in name and not name.lower().endswith(AUDIO_SUFFIXES):  # upload ids have no dot
+            raise ValueError(f"music.audio {self.audio!r}: expected a .wav, .flac, .ogg or .mp3 file")
         if self.bpm is not None and self.duration_s is None:
             raise ValueError("music with 'bpm' needs 'duration_s' (seconds)")
         if self.beats_s is not None:
@@ -199,7 +218,11 @@ class RhythmRequest(JobRequestBase):
         return self
 
     def input_files(self) -> list[str]:
-        return [self.music.midi] if self.music.midi is not None else []
+        return [f for f in (self.music.midi, self.music.audio) if f is not None]
+
+    def audio_inputs(self) -> list[str]:
+        """The input files that must be audio recordings (checked at submission by their content)."""
+        return [self.music.audio] if self.music.audio is not None else []
 
 
 # -- live session (WebSocket /v1/sessions/rhythm) messages from the client -------------------------

@@ -4,6 +4,7 @@ Commands::
 
     segue inspect FILE [--json] [--units U]       frames, fps, joints, height and units guess
     segue beats FILE [--json] [--joints A,B] [--positions] [--tempo LO:HI]   motion beats (Kim et al. 2003)
+    segue beats SONG.wav [--json] [--tempo-bpm X]      music beats of a recording (WAV, FLAC, Ogg, MP3)
     segue convert IN OUT [--fps N] [--target T]   BVH -> .bvh/.bvh.gz/.glb/.json/.npz
     segue retarget MOTION --to CHARACTER --out OUT [--map MAP.json] [--rest first|zero]
                                                   the motion on another character (BVH or GLB/glTF skin)
@@ -124,11 +125,35 @@ def _tempo_range(text: str) -> tuple[float, float]:
         raise MotionError(f"--tempo {text!r}: expected LOW:HIGH beats per minute, e.g. 40:200") from None
 
 
+def _beats_audio(path: Path, args: argparse.Namespace) -> int:
+    """``segue beats`` on a recording: music beats (:mod:`workers.audio`)."""
+    from workers.audio import recording_beats
+
+    info = recording_beats(path, args.tempo_bpm)
+    if args.json:
+        print(json.dumps(info))
+        return 0
+    print(f"{path}")
+    beats = info["beats_s"]
+    print(f"  duration   {info['duration_s']:.2f} s")
+    print(f"  tempo      {info['tempo_bpm']:.1f} bpm")
+    down = "none found" if info["downbeat_s"] is None else f"first at {info['downbeat_s']:.3f} s"
+    print(f"  beats      {len(beats)}, downbeat {down}")
+    shown = ", ".join(f"{t:.3f}" for t in beats[:16])
+    print(f"  times (s)  {shown}{', ...' if len(beats) > 16 else ''}")
+    return 0
+
+
 def cmd_beats(args: argparse.Namespace) -> int:
     from motion.beats import detect_beats
     from motion.io import load_motion
+    from schemas.rhythm import AUDIO_SUFFIXES
 
     path = _resolve(args.file)
+    if str(path).lower().endswith(AUDIO_SUFFIXES):
+        return _beats_audio(path, args)
+    if args.tempo_bpm is not None:
+        raise OSError("--tempo-bpm is a hint for recordings (.wav .flac .ogg .mp3); use --tempo for motion")
     motion = load_motion(path, limits=_limits(args))
     joints: list[str | int] | None = None
     if args.joints:
@@ -141,6 +166,7 @@ def cmd_beats(args: argparse.Namespace) -> int:
         "fps": motion.fps,
         "period_s": round(beats.period_s, 6),
         "bpm": round(beats.bpm, 4),
+        "tempo_bpm": round(beats.bpm, 4),
         "phase_s": round(beats.phase_s, 6),
         "beats_s": [round(float(t), 6) for t in beats.times_s],
         "candidates": int(beats.candidates_s.size),
@@ -458,10 +484,18 @@ def build_parser() -> argparse.ArgumentParser:
     limits(p)
     p.set_defaults(func=cmd_inspect)
 
-    p = sub.add_parser("beats", help="motion beats of a BVH file: tempo and beat times (Kim et al. 2003)")
-    p.add_argument("file", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
+    p = sub.add_parser(
+        "beats",
+        help="motion beats of a BVH file (Kim et al. 2003) or music beats of a recording (WAV FLAC Ogg MP3)",
+    )
+    p.add_argument("file", help="BVH file (.bvh, .bvh.gz), sample:NAME, or a .wav/.flac/.ogg/.mp3 recording")
     p.add_argument(
-        "--json", action="store_true", help='print one JSON object {"period_s", "bpm", "beats_s", ...}'
+        "--json",
+        action="store_true",
+        help='print one JSON object {"beats_s", ...} ("bpm" for motion, "tempo_bpm" for a recording)',
+    )
+    p.add_argument(
+        "--tempo-bpm", type=float, default=None, help="recordings: a hint of the tempo, beats per minute"
     )
     p.add_argument(
         "--joints", help="comma-separated joint names or indices to analyse (default: major joints)"
@@ -608,6 +642,7 @@ def _user_error(exc: Exception) -> str | None:
         ("schemas.jobs", "RequestError"),
         ("engines.registry", "UnavailableError"),
         ("engines.base", "EngineError"),
+        ("workers.inputs", "InputError"),
     ):
         if module in mods:
             known.append(getattr(mods[module], name))

@@ -21,7 +21,12 @@ MAX_INPUT_BYTES = 256 * 1024 * 1024
 
 
 class InputError(ValueError):
-    """An input file that cannot be found or read; the message names the reference."""
+    """An input file that cannot be found or read; the message names the reference. ``code`` is
+    the API error code (``input_not_found``, ``input_not_audio``)."""
+
+    def __init__(self, message: str, code: str = "input_not_found") -> None:
+        super().__init__(message)
+        self.code = code
 
 
 def resolve_inputs(store: Store, request: JobRequestBase, visible: Visible | None = None) -> dict[str, str]:
@@ -45,7 +50,24 @@ def resolve_inputs(store: Store, request: JobRequestBase, visible: Visible | Non
             resolved[ref] = store.find_input(given, visible)
         except NotFoundError as exc:
             raise InputError(f"input file {ref!r}: {exc}") from None
+    _check_audio(store, request, resolved)
     return resolved
+
+
+def _check_audio(store: Store, request: JobRequestBase, resolved: dict[str, str]) -> None:
+    """Refuse, at submission, a recording input whose content is not WAV, FLAC, Ogg or MP3 (its
+    first bytes only: decoding happens in the worker)."""
+    audio_inputs = getattr(request, "audio_inputs", None)
+    for ref in audio_inputs() if audio_inputs is not None else []:
+        try:
+            media = store.file_info(resolved[ref]).media_type
+        except NotFoundError:
+            media = "application/x-bvh"  # a clip
+        if not media.startswith("audio/") or media == "audio/midi":
+            raise InputError(
+                f"input file {ref!r} is not a WAV, FLAC, Ogg or MP3 recording (its content is {media})",
+                "input_not_audio",
+            )
 
 
 def attach_from_store(store: Store, request: JobRequestBase) -> None:

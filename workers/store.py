@@ -78,8 +78,13 @@ def load_npz(data: bytes) -> dict[str, np.ndarray]:
 
 
 def _media_type(data: bytes) -> str:
+    from engines.rhythm.audio import audio_media_type
+
     if data[:4] == b"MThd":
         return "audio/midi"
+    audio = audio_media_type(data[:16])
+    if audio is not None:
+        return audio
     if data[:9].upper().startswith(b"HIERARCHY") or data[:2] == b"\x1f\x8b":
         return "application/x-bvh"
     return "application/octet-stream"

@@ -33,9 +33,10 @@ from motion.mirror import mirror
 
 from ..base import Arrays, Emitter, EngineError, ShouldStop
 from ..library import MotionLibrary
+from .beatkeys import beat_keys, movement_speed
 from .blend import fit_blender
 from .graph import k_medoids, medoids, subtractive_clustering, transition_graph
-from .movements import Example, extract_movements, movement_differences, transition_differences
+from .movements import Example, Movements, extract_movements, movement_differences, transition_differences
 from .synth import Tables
 
 Array = npt.NDArray[np.float64]
@@ -213,6 +214,7 @@ def build_rhythm(spec: Any, library: MotionLibrary, emit: Emitter, should_stop: 
         smoothing=spec.count_smoothing,
     )
     q = _align_signs(mv.rot, labels, centre)
+    keys, clarity = _beat_keys(mv, examples[0].motion)
     meta = {
         "frames_per_beat": mv.frames_per_beat,
         "beats_per_movement": mv.beats_per_movement,
@@ -243,6 +245,8 @@ def build_rhythm(spec: Any, library: MotionLibrary, emit: Emitter, should_stop: 
         "rhythm.kinematic": graph.kinematic,
         "rhythm.behavioural": graph.behavioural,
         "rhythm.group_distance": graph.group_distance,
+        "rhythm.beat_keys": keys,
+        "rhythm.clarity": clarity,
     }
     if mv.partner_root is not None and mv.partner_rot is not None:
         ref = mv.partner_rot[centre[labels]]
@@ -254,12 +258,34 @@ def build_rhythm(spec: Any, library: MotionLibrary, emit: Emitter, should_stop: 
     return arrays
 
 
+def _beat_keys(mv: Movements, example: Motion) -> tuple[Array, Array]:
+    """Beat keys and clarity of every movement (:mod:`engines.rhythm.beatkeys`), measured on the
+    normalized movements' joint positions (metres)."""
+    sk = example.skeleton
+    speed = np.stack(
+        [
+            movement_speed(
+                Motion(sk, mv.root[m], mv.rot[m], mv.fps, mv.jt[m], "m", "movement").global_positions()[None]
+            )[0]
+            for m in range(mv.count)
+        ]
+    )
+    return beat_keys(speed, mv.frames_per_beat, mv.beats_per_movement)
+
+
 def tables_from_arrays(arrays: Any) -> tuple[Tables, dict[str, Any]]:
     """Synthesis tables and metadata of a stored rhythm database."""
     meta = json.loads(str(arrays["rhythm.meta"]))
     labels = np.asarray(arrays["rhythm.labels"], dtype=np.intp)
     params = np.asarray(arrays["rhythm.params"], dtype=np.float64)
     has_partner = "rhythm.partner_rot" in arrays
+    p, b = int(meta["frames_per_beat"]), int(meta["beats_per_movement"])
+    if "rhythm.beat_keys" in arrays:  # databases built before beat keys: the nominal beat frames
+        keys = np.asarray(arrays["rhythm.beat_keys"], dtype=np.float64)
+        clarity = np.asarray(arrays["rhythm.clarity"], dtype=np.float64)
+    else:
+        keys = np.broadcast_to(np.arange(b + 1, dtype=np.float64) * p, (labels.size, b + 1)).copy()
+        clarity = np.ones(labels.size)
     t = Tables(
         root=np.asarray(arrays["rhythm.root"], dtype=np.float32),
         rot=np.asarray(arrays["rhythm.rot"], dtype=np.float32),
@@ -279,5 +305,7 @@ def tables_from_arrays(arrays: Any) -> tuple[Tables, dict[str, Any]]:
         period_s=float(meta["period_s"]),
         src_clip=np.asarray(arrays["rhythm.src_clip"], dtype=np.intp),
         src_frames=np.asarray(arrays["rhythm.src_frames"], dtype=np.float64),
+        beat_keys=keys,
+        clarity=clarity,
     )
     return t, meta

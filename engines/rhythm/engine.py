@@ -41,18 +41,23 @@ from .synth import Control, Dancers, SpeedLimits, Tables, initial_dancers, synth
 Array = npt.NDArray[np.float64]
 
 
-def music_beats(request: Any) -> Array:
-    """``(B,)`` beat times in seconds of the request's music (:class:`schemas.rhythm.Music`)."""
+def music_beats(request: Any, beats_per_movement: int = 1) -> Array:
+    """``(B,)`` beat times in seconds of the request's music (:class:`schemas.rhythm.Music`).
+
+    When a recording's downbeat is found, movements (``beats_per_movement`` beats each) start on
+    the bar: the beats before the first downbeat are completed to a whole movement with beats at
+    the opening period (dropped instead if those would fall before 0 s)."""
     music = request.music
     try:
         if music.bpm is not None:
             beats = bpm_beats(music.bpm, music.duration_s, music.offset_s)
         elif music.midi is not None:
-            try:
-                data = request.input_bytes(music.midi)
-            except KeyError as exc:
-                raise EngineError(str(exc.args[0])) from None
-            beats = parse_midi(data).beat_times()
+            beats = parse_midi(_input(request, music.midi)).beat_times()
+        elif music.audio is not None:
+            from .audio import audio_beats  # librosa: imported only when a recording is used
+
+            found = audio_beats(_input(request, music.audio), music.tempo_bpm)
+            beats = _on_the_bar(found.beats_s, found.downbeat, beats_per_movement)
         else:
             beats = np.asarray(music.beats_s, dtype=np.float64)
     except MusicError as exc:
@@ -64,6 +69,23 @@ def music_beats(request: Any) -> Array:
     if beats[-1] > 3600:
         raise EngineError("the music is longer than an hour")
     return beats
+
+
+def _on_the_bar(beats: Array, downbeat: int | None, per_movement: int) -> Array:
+    """``beats`` shifted by whole beats so that the ``downbeat`` starts a movement (doc above)."""
+    lead = 0 if downbeat is None or per_movement < 2 else downbeat % per_movement
+    if lead == 0 or beats.size < 2:
+        return beats
+    period = float(beats[1] - beats[0])
+    before = beats[0] - period * np.arange(per_movement - lead, 0, -1)
+    return np.concatenate((before, beats)) if before[0] >= 0 else beats[lead:]
+
+
+def _input(request: Any, ref: str) -> bytes:
+    try:
+        return bytes(request.input_bytes(ref))
+    except KeyError as exc:
+        raise EngineError(str(exc.args[0])) from None
 
 
 def combined_skeleton(skeletons: list[Skeleton], prefixes: list[str]) -> Skeleton:
@@ -300,7 +322,7 @@ class RhythmEngine(Engine):
         return LiveDancer(self, seed=seed, fps=fps, accent=accent)
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
-        beats = music_beats(request)
+        beats = music_beats(request, self.tables.beats_per_movement)
         emit.progress(0.1, f"{beats.size} music beats")
         leaders, partners, r = self.synthesize(request, beats)
         if request.footskate:

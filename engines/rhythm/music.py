@@ -1,11 +1,11 @@
 """Music input for rhythmic synthesis: beat times from a standard MIDI file, a BPM or a beat list.
 
-The MIDI reader is a small, dependency-free parser of Standard MIDI Files (SMF formats 0, 1 and 2):
-the ``MThd`` header, every ``MTrk`` chunk with its variable-length delta times, running status,
-channel messages, SysEx and meta events. Only the timing matters here: meta events ``FF 51``
-(set tempo, microseconds per quarter note), ``FF 58`` (time signature) and ``FF 2F`` (end of track)
-are kept; the tempo map of all tracks is merged (format 1 files keep it in track 0, but a tempo in
-any track applies to all). Malformed files raise :class:`MusicError` naming the byte offset.
+Standard MIDI Files (SMF formats 0, 1 and 2) are read with mido; the ``MThd`` header and the chunk
+layout are checked first (mido reads no SMPTE division and does not say which chunk is short).
+Only the timing matters here: set tempo (microseconds per quarter note), time signature and end of
+track events are kept; the tempo map of all tracks is merged (format 1 files keep it in track 0,
+but a tempo in any track applies to all). Malformed files raise :class:`MusicError` naming the
+problem. :func:`write_midi` writes the small test and sample files byte for byte as before.
 
 Beats follow the time signature: the beat unit is the signature's denominator note (a 4/4 bar has
 four quarter-note beats, 6/8 six eighth-note beats), 4/4 at 120 BPM when the file gives neither.
@@ -13,6 +13,7 @@ four quarter-note beats, 6/8 six eighth-note beats), 4/4 at 120 BPM when the fil
 
 from __future__ import annotations
 
+import io
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -90,37 +91,49 @@ class TempoMap:
         return self.time_signatures[0][1] if self.time_signatures else 4
 
 
-def _read_varlen(data: bytes, pos: int, end: int) -> tuple[int, int]:
-    value = 0
-    for _ in range(4):
-        if pos >= end:
-            raise MusicError(f"MIDI: variable-length number runs past the end of the track at byte {pos}")
-        b = data[pos]
-        pos += 1
-        value = (value << 7) | (b & 0x7F)
-        if not b & 0x80:
-            return value, pos
-    raise MusicError(f"MIDI: variable-length number longer than 4 bytes at byte {pos}")
-
-
-_DATA_BYTES = {0x80: 2, 0x90: 2, 0xA0: 2, 0xB0: 2, 0xC0: 1, 0xD0: 1, 0xE0: 2}
-
-
 def parse_midi(data: bytes) -> TempoMap:
     """The tempo map of a Standard MIDI File.
 
     Raises :class:`MusicError` for anything that is not a well-formed SMF (bad chunk ids, lengths
     past the end of the file, data bytes without a status, truncated events, bad tempo events).
     """
+    import mido
+
     ntrks, tpq, smpte, pos = _midi_header(data)
-    tempos: dict[int, int] = {}
-    sigs: dict[int, tuple[int, int]] = {}
-    end_tick = found = 0
-    for body, end in _track_chunks(data, pos, ntrks):
-        found += 1
-        end_tick = max(end_tick, _read_track(data, body, end, tempos, sigs))
+    found = sum(1 for _ in _track_chunks(data, pos, ntrks))
     if found < ntrks:
         raise MusicError(f"MIDI: the header declares {ntrks} tracks but the file holds {found}")
+    try:
+        midi = mido.MidiFile(file=io.BytesIO(data))
+    except EOFError:
+        raise MusicError("MIDI: an event runs past the end of its track") from None
+    except IndexError:
+        raise MusicError("MIDI: a meta event is too short (a tempo event must have 3 data bytes)") from None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        text = str(exc)
+        if "running status" in text:
+            text = "a data byte without a status byte (running status with no status before it)"
+        raise MusicError(f"MIDI: {text}") from None
+    tempos: dict[int, int] = {}
+    sigs: dict[int, tuple[int, int]] = {}
+    end_tick = 0
+    for number, track in enumerate(midi.tracks):
+        tick = 0
+        for msg in track:
+            tick += int(msg.time)
+            if msg.type == "set_tempo":
+                if msg.tempo == 0:
+                    raise MusicError(f"MIDI: tempo of 0 microseconds per quarter note in track {number}")
+                tempos[tick] = int(msg.tempo)
+            elif msg.type == "time_signature":
+                if msg.denominator > 64:
+                    raise MusicError(f"MIDI: time signature denominator {msg.denominator} is out of range")
+                if msg.numerator == 0:
+                    raise MusicError(f"MIDI: time signature with 0 beats per bar in track {number}")
+                sigs[tick] = (int(msg.numerator), int(msg.denominator))
+            elif msg.type == "end_of_track":
+                break
+        end_tick = max(end_tick, tick)
     tempo_list = sorted(tempos.items())
     if not tempo_list or tempo_list[0][0] != 0:
         tempo_list.insert(0, (0, DEFAULT_TEMPO_US))
@@ -132,7 +145,8 @@ def parse_midi(data: bytes) -> TempoMap:
 
 def _midi_header(data: bytes) -> tuple[int, int, float, int]:
     """The ``MThd`` chunk: track count, ticks per quarter note (0 for SMPTE timing), seconds per
-    tick in SMPTE timing (0 otherwise), and the byte where the chunks after it start."""
+    tick in SMPTE timing (0 otherwise; mido reads no SMPTE division), and the byte where the
+    chunks after it start."""
     if len(data) < 14 or data[:4] != b"MThd":
         raise MusicError("not a Standard MIDI File: it must start with an 'MThd' header chunk")
     (hlen,) = struct.unpack(">I", data[4:8])
@@ -157,7 +171,7 @@ def _midi_header(data: bytes) -> tuple[int, int, float, int]:
 
 def _track_chunks(data: bytes, pos: int, ntrks: int) -> Iterator[tuple[int, int]]:
     """``(first byte, end)`` of the first ``ntrks`` ``MTrk`` chunks from byte ``pos`` on (unknown
-    chunks are skipped, as the standard asks)."""
+    chunks are skipped, as the standard asks), naming a chunk that claims bytes past the end."""
     found = 0
     while pos < len(data) and found < ntrks:
         if pos + 8 > len(data):
@@ -173,81 +187,6 @@ def _track_chunks(data: bytes, pos: int, ntrks: int) -> Iterator[tuple[int, int]
         if cid == b"MTrk":
             found += 1
             yield body, end
-
-
-def _read_track(
-    data: bytes, p: int, end: int, tempos: dict[int, int], sigs: dict[int, tuple[int, int]]
-) -> int:
-    """Read one track's events (bytes ``[p, end)``), adding its tempo and time-signature events
-    to ``tempos`` / ``sigs`` by tick; returns the track's last tick."""
-    tick, status = 0, 0
-    while p < end:
-        delta, p = _read_varlen(data, p, end)
-        tick += delta
-        if p >= end:
-            raise MusicError(f"MIDI: event missing after a delta time at byte {p}")
-        b = data[p]
-        if b == 0xFF:
-            mtype, p = _meta_event(data, p, end, tick, tempos, sigs)
-            status = 0  # meta events cancel running status
-            if mtype == 0x2F:
-                break
-        elif b in (0xF0, 0xF7):
-            slen, q = _read_varlen(data, p + 1, end)
-            if q + slen > end:
-                raise MusicError(f"MIDI: SysEx event at byte {p} runs past the end of its track")
-            p = q + slen
-            status = 0
-        else:
-            status, p = _channel_message(data, p, end, status)
-    return tick
-
-
-def _meta_event(
-    data: bytes, p: int, end: int, tick: int, tempos: dict[int, int], sigs: dict[int, tuple[int, int]]
-) -> tuple[int, int]:
-    """The meta event at byte ``p`` (a tempo or time signature is recorded at ``tick``); returns its
-    type and the byte after it."""
-    if p + 2 > end:
-        raise MusicError(f"MIDI: truncated meta event at byte {p}")
-    mtype = data[p + 1]
-    mlen, q = _read_varlen(data, p + 2, end)
-    if q + mlen > end:
-        raise MusicError(f"MIDI: meta event at byte {p} runs past the end of its track")
-    payload = data[q : q + mlen]
-    if mtype == 0x51:
-        if mlen != 3:
-            raise MusicError(f"MIDI: tempo event at byte {p} must have 3 data bytes, has {mlen}")
-        us = int.from_bytes(payload, "big")
-        if us == 0:
-            raise MusicError(f"MIDI: tempo of 0 microseconds per quarter note at byte {p}")
-        tempos[tick] = us
-    elif mtype == 0x58:
-        if mlen < 2:
-            raise MusicError(f"MIDI: time signature event at byte {p} is too short")
-        if payload[1] > 6:
-            raise MusicError(f"MIDI: time signature denominator 2^{payload[1]} is out of range")
-        if payload[0] == 0:
-            raise MusicError(f"MIDI: time signature with 0 beats per bar at byte {p}")
-        sigs[tick] = (payload[0], 2 ** payload[1])
-    return mtype, q + mlen
-
-
-def _channel_message(data: bytes, p: int, end: int, status: int) -> tuple[int, int]:
-    """Skip the channel message at byte ``p`` (running status: a data byte reuses ``status``);
-    returns the status in force and the byte after the message."""
-    b = data[p]
-    if b & 0x80:
-        status = b
-        p += 1
-    elif status == 0:
-        raise MusicError(f"MIDI: data byte 0x{b:02x} without a status byte at byte {p}")
-    n = _DATA_BYTES.get(status & 0xF0)
-    if n is None:
-        raise MusicError(f"MIDI: unexpected status byte 0x{status:02x} at byte {p}")
-    if p + n > end:
-        raise MusicError(f"MIDI: truncated channel message at byte {p}")
-    return status, p + n
 
 
 def bpm_beats(bpm: float, duration_s: float, offset_s: float = 0.0) -> Array:

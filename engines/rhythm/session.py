@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from .beatkeys import warp_frames
 from .engine import RhythmEngine
 from .synth import Control, MovementPlan, accented, bounded_accent, initial_dancers, plan_movement, render
 
@@ -97,7 +98,7 @@ class LiveDancer:
         x = np.arange(n) / n
         beat = np.full(n, self.beat_in_movement, dtype=np.intp)
         a = bounded_accent(t, self.plan, beat, x, self.accent, self.limits, self.fps)
-        u = t.frames_per_beat * (self.beat_in_movement + accented(x, a))
+        u = warp_frames(t.plan_keys(self.plan), beat, accented(x, a))
         r = render(t, self.plan, u)
         msg = {
             "type": "frames",

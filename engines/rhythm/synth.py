@@ -33,11 +33,18 @@ import numpy.typing as npt
 
 from motion import rotations as rot
 
+from .beatkeys import warp_frames
 from .blend import GroupBlender, blend_weights, one_hot
 from .movements import _yaw_rotate_xz
 
 Array = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
+
+CLARITY_PREFERENCE = 4.0
+"""Movements are chosen in proportion to their beat clarity to this power (times the graph's
+transition probability)."""
+CLARITY_FLOOR = 0.05
+"""Beat clarity below this counts as this much (every movement of the graph stays reachable)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,8 +54,24 @@ class Tables:
     root ``(M, N, 3)``, rot ``(M, N, J, 4)`` (signs aligned to each group's medoid), jt
     ``(M, N, K, 3)``, partner_root/partner_rot or None, end_xz ``(M, 2)``, end_yaw ``(M,)``,
     params ``(M, 2)``, labels ``(M,)``, p ``(K, K)``, start ``(K,)``, blender, frames_per_beat
-    ``P``, beats_per_movement ``B``, fps (database), period_s, src_clip ``(M,)``, src_frames ``(M, N)``.
+    ``P``, beats_per_movement ``B``, fps (database), period_s, src_clip ``(M,)``, src_frames ``(M, N)``,
+    beat_keys ``(M, B + 1)`` movement frames of each movement's own beats and their clarity ``(M,)``
+    (:mod:`engines.rhythm.beatkeys`).
     """
+
+    @property
+    def member_preference(self) -> Array:
+        """``(K, G)`` how much each group member is preferred (its beat clarity to the power
+        ``CLARITY_PREFERENCE``, a floor keeping every member possible; 0 for padding)."""
+        m = self.blender.members
+        pref = np.maximum(self.clarity, CLARITY_FLOOR) ** CLARITY_PREFERENCE
+        return np.where(m >= 0, pref[np.maximum(m, 0)], 0.0)
+
+    def plan_keys(self, plan: MovementPlan) -> Array:
+        """``(B + 1,)`` beat keys of a planned movement: its blend's keys, averaged over the characters
+        (a crowd shares one clock, hence one warp)."""
+        keys = (self.beat_keys[plan.members] * plan.weights[..., None]).sum(axis=1)  # (C, B + 1)
+        return np.asarray(keys.mean(axis=0))
 
     root: Array
     rot: Array
@@ -68,6 +91,8 @@ class Tables:
     period_s: float
     src_clip: IntArray
     src_frames: Array
+    beat_keys: Array
+    clarity: Array
 
     @property
     def frames(self) -> int:
@@ -189,7 +214,7 @@ def bounded_accent(
         return accent
 
     def excess(a: float) -> float:
-        u = t.frames_per_beat * (beat + accented(x, a))
+        u = warp_frames(t.plan_keys(plan), beat, accented(x, a))
         root = _blend_at(t.root, plan.members, plan.weights, u, False)[..., [0, 2]]  # (C, F, 2)
         q = _blend_at(t.rot[:, :, :1], plan.members, plan.weights, u, True)[:, :, 0]  # (C, F, 4)
         yaw = np.unwrap(rot.yaw(q), axis=1)
@@ -277,14 +302,16 @@ def plan_movement(
     radians and ``max_extra_speed`` m/s; foot cleanup removes the sliding this causes).
     """
     c = d.count
-    cum = (
-        np.cumsum(t.start)[None, :].repeat(c, 0)
-        if (d.node < 0).all()
-        else np.cumsum(t.p[np.maximum(d.node, 0)], axis=1)
-    )
+    prob = t.start[None, :].repeat(c, 0) if (d.node < 0).all() else t.p[np.maximum(d.node, 0)]
+    # movements whose speed dips on their beats are preferred (their beats land visibly on the
+    # music): a group by its members' mean preference, then (free dancing) a member by its own
+    pref = t.member_preference
+    group_pref = pref.sum(axis=1) / np.maximum(t.blender.counts, 1)
+    cum = np.cumsum(prob * group_pref[None, :], axis=1)
     group = _sample_rows(cum, rng)  # the next node of the movement transition graph
     if control is None:
-        members, weights = one_hot(t.blender, group, rng)
+        pick = _sample_rows(np.cumsum(pref[group], axis=1), rng)
+        members, weights = t.blender.members[group, pick][:, None], np.ones((c, 1))
         extra_yaw, extra_xz = np.zeros(c), np.zeros((c, 2))
     else:
         members, weights, extra_yaw, extra_xz = _steered_blend(
@@ -479,7 +506,7 @@ def synthesize(
         if e <= s:
             continue
         a = accent if limits is None else bounded_accent(t, plan, beat[s:e], x[s:e], accent, limits, fps)
-        u[s:e] = t.frames_per_beat * (beat[s:e] + accented(x[s:e], a))
+        u[s:e] = warp_frames(t.plan_keys(plan), beat[s:e], accented(x[s:e], a))
         r = render(t, plan, u[s:e])
         out_root[:, s:e], out_rot[:, s:e], out_jt[:, s:e] = r.root, r.rot, r.jt
         if out_proot is not None and out_prot is not None and r.proot is not None and r.prot is not None:

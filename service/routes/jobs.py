@@ -95,7 +95,7 @@ async def submit(
         job_request.inputs = await run_in_threadpool(resolve_inputs, store, job_request, mine)
         await run_in_threadpool(attach_from_store, store, job_request)
     except InputError as exc:
-        raise ApiError(422, "input_not_found", str(exc), {"inputs": job_request.input_files()}) from None
+        raise ApiError(422, exc.code, str(exc), {"inputs": job_request.input_files()}) from None
     await _check_budget(settings, store, limiter, job_request)
     quota.check(principal.name)
     payload = {"request": job_request.model_dump(mode="json")}

@@ -114,3 +114,20 @@ def test_console_script_is_installed() -> None:
         timeout=120,
     )
     assert json.loads(r.stdout)["frames"] > 0
+
+
+def test_beats_of_a_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.engines.audio_synthetic import drifting_beats, drum_track, encode
+
+    beats = drifting_beats(120.0, 120.0, 8.0)
+    (tmp_path / "song.wav").write_bytes(encode(drum_track(beats, 8.0, seed=5)))
+    assert main(["beats", str(tmp_path / "song.wav"), "--json", "--tempo-bpm", "120"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert abs(info["tempo_bpm"] - 120) < 3 and len(info["beats_s"]) >= 12
+    assert main(["beats", str(tmp_path / "song.wav")]) == 0
+    assert "tempo      12" in capsys.readouterr().out
+    (tmp_path / "bad.ogg").write_bytes(b"OggS" + bytes(60))
+    assert main(["beats", str(tmp_path / "bad.ogg")]) == 2
+    assert "bad.ogg: audio: cannot decode" in capsys.readouterr().err
+    assert main(["beats", "sample:walk", "--tempo-bpm", "100"]) == 2
+    assert "--tempo-bpm is a hint for recordings" in capsys.readouterr().err

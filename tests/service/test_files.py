@@ -87,3 +87,20 @@ def test_cli_inputs_are_relative_to_the_request_file(tmp_path: Path) -> None:
         attach_from_dir(absent, tmp_path)
     with pytest.raises(KeyError, match="other"):
         request.input_bytes("other")
+
+
+def test_recordings_are_typed_by_content_and_checked_at_submission(
+    client: TestClient, tmp_path: Path
+) -> None:
+    wav = b"RIFF\x24\x00\x00\x00WAVEfmt " + bytes(32)
+    info = client.post("/v1/files?name=song.wav", content=wav).json()
+    assert info["media_type"] == "audio/wav"
+    store = Store(tmp_path)
+    store.put_file("song.wav", wav)
+    store.put_file("notes.wav", MIDI)  # a MIDI file under a recording's name
+    ok = parse_job_request({"engine": "rhythm", "music": {"audio": "song.wav"}})
+    assert set(resolve_inputs(store, ok)) == {"song.wav"}
+    bad = parse_job_request({"engine": "rhythm", "music": {"audio": "notes.wav"}})
+    with pytest.raises(InputError, match="not a WAV, FLAC, Ogg or MP3 recording") as err:
+        resolve_inputs(store, bad)
+    assert err.value.code == "input_not_audio"

@@ -509,3 +509,27 @@ def test_music_midi_job_beats(page: Any, rhythm_db: str) -> None:
     assert s["current"]["frames"] / s["current"]["fps"] == pytest.approx(2.0, abs=0.5)
     wait(page, "s.music.resultBeats >= 5")  # the song's beats, from the result's report
     wait(page, f"s.beats > {s['beats']}")  # flashing again with the dance's playback
+
+
+def test_music_recording_plays_with_the_dance(page: Any, rhythm_db: str) -> None:
+    """Pick a recording: it is uploaded, the server tracks its beats for the job, and the page
+    plays the song (WebAudio) in sync with the result's playback."""
+    from tests.engines.audio_synthetic import drifting_beats, drum_track, encode
+
+    beats = drifting_beats(120.0, 120.0, 4.0)
+    song = encode(drum_track(beats, 4.0, seed=6), "WAV")
+    reload_databases(page)
+    page.click("#tabs button[data-tool='music']")
+    select_database(page, "music-db", rhythm_db)
+    page.set_input_files(
+        "#music-midi", files=[{"name": "drums.wav", "mimeType": "audio/wav", "buffer": song}]
+    )
+    page.fill("#music-seconds", "1")
+    page.click("#music-go")
+    wait(page, "s.current && s.current.tool === 'music'", 30_000)
+    wait(page, f"['done', 'cancelled'].includes(s.job.status) && {BEST_DRAWN}", 60_000)
+    s = first_solution(page, "music", warm=False)
+    assert s["music"]["song"]["name"] == "drums.wav"
+    assert s["music"]["song"]["duration_s"] == pytest.approx(4.0, abs=0.05)
+    wait(page, "s.music.resultBeats >= 6")  # the recording's beats, tracked by the worker
+    wait(page, "s.music.songPlaying && s.music.songStarts >= 1", 10_000)

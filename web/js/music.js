@@ -1,4 +1,5 @@
-// The Music tool: a tempo (BPM) or a MIDI song, a direction steered with the mouse, beat flashes.
+// The Music tool: a tempo (BPM), a MIDI song or a recording (WAV, FLAC, Ogg, MP3), a direction
+// steered with the mouse, beat flashes; a recording plays (WebAudio) in sync with the dance.
 //
 // Live mode (the rhythm session WebSocket, /v1/sessions/rhythm?database=ID): the page sends
 // {"type":"bpm"} (the server then generates the beats), {"type":"direction","heading_deg","speed"}
@@ -6,12 +7,17 @@
 // {"type":"frames"} batch per beat, drawn as it comes, each flashing the beat.
 // Job mode (or a MIDI song): the steering is recorded as per-beat direction keys while a local
 // metronome runs, then one rhythm job is submitted; its beats flash with the result's playback,
-// and the result downloads like any other.
+// and the result downloads like any other. A recording is uploaded and tracked by the server (the
+// job's report gives its beats); the page decodes it too (decodeAudioData) and plays it from the
+// viewer's time whenever the result plays, restarting it when the two drift apart by 80 ms or the
+// playback loops or is scrubbed.
 
 import { wsUrl } from './api.js';
 import { forwardKinematics } from './bvh.js';
 
 const MAX_SPEED = 1.5; // m/s at the pad's edge
+const AUDIO = /\.(wav|flac|ogg|mp3)$/i;
+const DRIFT_S = 0.08; // the song restarts at the viewer's time when it drifts further
 
 export function setupMusic(ctx) {
   const { state, $, api, runJob, guarded, dbOf, numberOf, viewer, ApiError, FloorPad, headingDeg, showError } = ctx;
@@ -24,6 +30,27 @@ export function setupMusic(ctx) {
   let resultBeats = null; // music beat times (s) of the drawn result, from its report
   let lastBeat = -1;
   let live = null;
+  let audioCtx = null;
+  let song = null; // { buffer: AudioBuffer, name } of the chosen recording
+  let playing = null; // { source, startedAt (context time), offset (song time at start) }
+
+  const stopSong = () => {
+    if (playing) { try { playing.source.stop(); } catch (exc) { /* already ended */ } }
+    playing = null;
+    m.songPlaying = false;
+  };
+  const playSong = (t) => {
+    stopSong();
+    if (!song || t >= song.buffer.duration) return;
+    const source = audioCtx.createBufferSource();
+    source.buffer = song.buffer;
+    source.connect(audioCtx.destination);
+    source.start(0, Math.max(0, t));
+    playing = { source, startedAt: audioCtx.currentTime, offset: Math.max(0, t) };
+    m.songPlaying = true;
+    m.songStarts = (m.songStarts || 0) + 1;
+  };
+  const songTime = () => (playing ? playing.offset + audioCtx.currentTime - playing.startedAt : null);
 
   const flash = () => {
     state.beats += 1;
@@ -54,9 +81,16 @@ export function setupMusic(ctx) {
   const music = async (seconds) => {
     const file = $('music-midi').files[0];
     if (file) {
-      const info = await api.uploadFile(file.name, await file.arrayBuffer());
-      return { midi: info.name };
+      const bytes = await file.arrayBuffer();
+      const info = await api.uploadFile(file.name, bytes);
+      if (!AUDIO.test(file.name)) return { midi: info.name };
+      audioCtx = audioCtx || new AudioContext();
+      song = { buffer: await audioCtx.decodeAudioData(bytes.slice(0)), name: file.name };
+      m.song = { name: file.name, duration_s: song.buffer.duration };
+      return { audio: info.name };
     }
+    song = null;
+    m.song = null;
     return { bpm: numberOf('music-bpm', 'BPM', 30, 300), duration_s: seconds };
   };
 
@@ -179,8 +213,13 @@ export function setupMusic(ctx) {
     redraw,
     // beats flash in time with the playback of a rhythm result: on the music's beats as the
     // engine placed them (its report's annotations.music_beats_s), BPM or MIDI alike
-    onTime(t, playing) {
-      if (!resultBeats || m.running || !playing || !state.current || state.current.tool !== 'music' || state.current.live) return;
+    onTime(t, isPlaying) {
+      const ours = state.current && state.current.tool === 'music' && !state.current.live && !m.running;
+      if (song && ours && isPlaying) {
+        const at = songTime();
+        if (at === null || Math.abs(at - t) > DRIFT_S) playSong(t);
+      } else if (playing) stopSong();
+      if (!resultBeats || m.running || !isPlaying || !state.current || state.current.tool !== 'music' || state.current.live) return;
       let lo = 0;
       let hi = resultBeats.length;
       while (lo < hi) {
