@@ -51,6 +51,7 @@ from schemas.rhythm_graph import (
 )
 
 from ..base import EngineError
+from .synth import draw_probabilities
 
 Array = npt.NDArray[np.float64]
 Arrays = dict[str, npt.NDArray[Any]]
@@ -296,6 +297,10 @@ def movement_graph(
     src_clip = np.asarray(arrays["rhythm.src_clip"], dtype=np.intp)
     src = np.asarray(arrays["rhythm.src_frames"], dtype=np.float64)
     sizes = np.bincount(labels, minlength=p.shape[0])
+    # what synthesis really draws with: the graph times each group's beat-clarity preference
+    clarity = np.asarray(arrays["rhythm.clarity"]) if "rhythm.clarity" in arrays else np.ones(labels.size)
+    draw = draw_probabilities(p, clarity, labels)
+    start_draw = draw_probabilities(start, clarity, labels)[0]
     n = src.shape[1]
     groups = []
     for g in range(p.shape[0]):
@@ -307,7 +312,7 @@ def movement_graph(
             GraphGroup(
                 id=g,
                 size=int(sizes[g]),
-                start_probability=round(float(start[g]), 6),
+                start_probability=round(float(start_draw[g]), 6),
                 representative=RepresentativeSpan(
                     clip=names[ci],
                     mirrored=bool(mirrored[ci]),
@@ -325,7 +330,7 @@ def movement_graph(
         GraphTransition(
             source=int(i),
             target=int(j),
-            probability=round(float(p[i, j]), 6),
+            probability=round(float(draw[i, j]), 6),
             kinematic=round(float(pk[i, j]), 6),
             behavioural=round(float(pb[i, j]), 6),
             learned=bool(learned[i, j]),

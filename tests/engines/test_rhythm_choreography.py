@@ -18,6 +18,7 @@ from engines.rhythm.choreography import (
     movement_graph,
     resolve_edits,
 )
+from engines.rhythm.synth import draw_probabilities
 from schemas.rhythm_graph import ClipSpan, GraphEdits, ResolvedEdit
 from tests.engines.rhythm_salsa import SAMPLES, group_walks, salsa_arrays, transition_counts
 
@@ -51,9 +52,10 @@ def test_graph_describes_what_synthesis_walks(arrays: dict[str, Any]) -> None:
     assert [x.id for x in g.groups] == list(range(k))
     assert sum(x.size for x in g.groups) == np.asarray(arrays["rhythm.labels"]).size
     assert len(g.transitions) == int((p > 0).sum()) and all(t.learned for t in g.transitions)
+    draw = draw_probabilities(p, np.asarray(arrays["rhythm.clarity"]), np.asarray(arrays["rhythm.labels"]))
     rows = np.zeros(k)
     for t in g.transitions:
-        assert t.probability == pytest.approx(p[t.source, t.target], abs=1e-6)
+        assert t.probability == pytest.approx(draw[t.source, t.target], abs=1e-6)
         assert t.kinematic == pytest.approx(arrays["rhythm.kinematic"][t.source, t.target], abs=1e-6)
         assert t.behavioural == pytest.approx(arrays["rhythm.behavioural"][t.source, t.target], abs=1e-6)
         rows[t.source] += t.probability
@@ -286,3 +288,21 @@ def test_a_learned_graph_that_is_not_strongly_connected_must_be_fixed_by_the_edi
     assert info.value.index is None and info.value.details["unreachable_groups"] == [0, 1]
     fixed = apply_edits(p, [ResolvedEdit(op="connect", source=2, target=0)])
     np.testing.assert_allclose(fixed[2], [0.5, 0.0, 0.5])  # as likely as the row's average transition
+
+
+def test_reported_probabilities_are_what_dances_take(
+    arrays: dict[str, Any], learned_walks: list[list[int]]
+) -> None:
+    """The graph's probabilities include the beat-clarity preference: the transitions the dances
+    take out of their most visited group follow them (total variation within sampling noise)."""
+    g = movement_graph(arrays, "db", 0.5)
+    k = len(g.groups)
+    counts = transition_counts(learned_walks, k)
+    a = int(np.argmax(counts.sum(axis=1)))
+    reported = np.zeros(k)
+    for t in g.transitions:
+        if t.source == a:
+            reported[t.target] = t.probability
+    observed = counts[a] / counts[a].sum()
+    assert counts[a].sum() >= 100
+    assert 0.5 * np.abs(observed - reported).sum() < 0.12, (observed, reported)
