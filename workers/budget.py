@@ -109,7 +109,8 @@ def estimate_work(
 ) -> WorkEstimate:
     """The cost of a validated request against a database of rate ``db_fps`` and ``joints`` joints."""
     engine = str(getattr(request, "engine", ""))
-    characters = int(getattr(request, "characters", 1) or 1) * (
+    cast = getattr(request, "characters", 1) or 1
+    characters = (len(cast) if isinstance(cast, list) else int(cast)) * (
         2 if getattr(request, "couples", False) else 1
     )
     fps = float(getattr(request, "fps", None) or db_fps)

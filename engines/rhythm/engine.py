@@ -19,20 +19,19 @@ skeleton under it, joint names prefixed ``c0_``, ``c1_``... (couples: ``c0_lead_
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from motion import Motion, MotionError, Skeleton
-from motion.goals import BeatGoal, Character, LengthGoal
+from motion.goals import BeatGoal, LengthGoal
 from motion.metrics import beat_align_scores
 from motion.plausibility import SPEED_P99_MARGIN, SPEED_WINDOW_S
 from motion.quality import QualityInputs
-from motion.skeleton import POSITION_CHANNELS
 
 from ..base import Arrays, Emitter, Engine, EngineError, LiveSession, ShouldStop, Solution
+from ..combine import combine_motions, combined_characters
 from ..library import MotionLibrary
 from .build import build_rhythm, tables_from_arrays
 from .music import MusicError, bpm_beats, parse_midi
@@ -64,35 +63,6 @@ def music_beats(request: Any) -> Array:
     if beats[-1] > 3600:
         raise EngineError("the music is longer than an hour")
     return beats
-
-
-def combined_skeleton(skeletons: list[Skeleton], prefixes: list[str]) -> Skeleton:
-    """One skeleton holding several characters under a static ``world`` root (module doc)."""
-    names: list[str] = ["world"]
-    parents: list[int] = [-1]
-    offsets: list[Array] = [np.zeros((1, 3))]
-    channels: list[tuple[str, ...]] = [
-        ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation")
-    ]
-    es_par: list[npt.NDArray[np.intp]] = []
-    es_off: list[Array] = []
-    for sk, pre in zip(skeletons, prefixes, strict=True):
-        base = len(names)
-        names += [pre + n for n in sk.names]
-        parents += [0] + [int(p) + base for p in sk.parents[1:]]
-        offsets.append(sk.offsets)
-        root_ch = tuple(c for c in sk.channels[0] if c.endswith("rotation"))
-        channels += [POSITION_CHANNELS + root_ch, *sk.channels[1:]]
-        es_par.append(sk.end_site_parents + base)
-        es_off.append(sk.end_site_offsets)
-    return Skeleton(
-        tuple(names),
-        np.array(parents),
-        np.concatenate(offsets),
-        tuple(channels),
-        np.concatenate(es_par),
-        np.concatenate(es_off),
-    )
 
 
 def _path_control(
@@ -346,7 +316,7 @@ class RhythmEngine(Engine):
         joins = np.array([p["start_frame"] for p in r.plans if p["start_frame"] > 0], dtype=np.intp)
         inputs = QualityInputs(
             goals=(LengthGoal(int(np.floor(beats[-1] * first.fps + 1e-9)) + 1), BeatGoal("music", beats)),
-            characters=_characters(chars, motion) if motion is not first else (),
+            characters=combined_characters(chars, motion) if motion is not first else (),
             joins=joins,
         )
         solution = Solution(
@@ -368,19 +338,6 @@ class RhythmEngine(Engine):
             },
         )
         emit.solution(self.finish(solution, inputs))
-
-
-def _characters(skeletons: list[tuple[str, Skeleton]], motion: Motion) -> tuple[Character, ...]:
-    """The characters ``(label, skeleton)`` of a combined output (:func:`combined_skeleton`:
-    joint 0 is the static ``world``, then each character's joints in its own order)."""
-    out: list[Character] = []
-    base = 1
-    for label, sk in skeletons:
-        out.append(Character(np.arange(base, base + sk.num_joints, dtype=np.intp), sk, label))
-        base += sk.num_joints
-    if base != motion.num_joints:
-        raise EngineError(f"the combined skeleton has {motion.num_joints} joints, the characters {base}")
-    return tuple(out)
 
 
 def _clean(m: Motion, floor: dict[int, tuple[float, float]]) -> Motion:
@@ -423,17 +380,4 @@ def _assemble(leaders: list[Motion], partners: list[Motion], couples: bool) -> M
         if partners:
             chars.append(partners[c])
             prefixes.append(f"c{c}_follow_")
-    sk = combined_skeleton([m.skeleton for m in chars], prefixes)
-    f = chars[0].num_frames
-    rot = np.concatenate([np.tile([0.0, 0.0, 0.0, 1.0], (f, 1, 1))] + [m.rotations for m in chars], axis=1)
-    jt = np.stack([m.root_positions for m in chars], axis=1)  # each character's hip translation
-    if any(m.joint_translations.shape[1] for m in chars):
-        raise EngineError("several characters with animated non-root translations are not supported")
-    return replace(
-        chars[0],
-        skeleton=sk,
-        root_positions=np.zeros((f, 3)),
-        rotations=rot,
-        joint_translations=jt,
-        name="rhythm",
-    )
+    return combine_motions(chars, prefixes, "rhythm")
