@@ -188,6 +188,23 @@ class ApartGoal:
     tolerance_cm: float = 0.0
 
 
+HOLD_MIN_FRACTION = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class HoldGoal:
+    """Shared between two characters over the whole output: points ``a`` and ``b`` (a hand
+    hold) within ``max_m`` metres of each other in at least ``min_fraction`` of the frames;
+    ``extra`` entries (e.g. what the examples do) are copied into the report."""
+
+    name: str
+    a: Point
+    b: Point
+    max_m: float
+    min_fraction: float = HOLD_MIN_FRACTION
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+
 Goal = (
     LengthGoal
     | BodyGoal
@@ -199,6 +216,7 @@ Goal = (
     | BeatGoal
     | MeetGoal
     | ApartGoal
+    | HoldGoal
 )
 
 
@@ -259,6 +277,8 @@ def measure(
         return _measure_meet(goal, positions, characters)
     if isinstance(goal, ApartGoal):
         return _measure_apart(goal, positions, characters)
+    if isinstance(goal, HoldGoal):
+        return _measure_hold(goal, positions, characters)
     raise MotionError(f"unknown goal {goal!r}")  # pragma: no cover - the union is closed
 
 
@@ -530,4 +550,37 @@ def _measure_apart(goal: ApartGoal, positions: Array, characters: Sequence[Chara
     return e, None if ok else (
         f"{goal.name}: {goal.a.label} and {goal.b.label} come {100 * float(d[k]):.1f} cm close at frame "
         f"{start + k} ({close} frames under {100 * goal.min_m:g} cm)"
+    )
+
+
+def hold_figures(d: Array, max_m: float) -> dict[str, float]:
+    """Figures of a hold's per-frame distances ``d (F,)`` metres: the fraction of frames within
+    ``max_m``, the median, 90th percentile and largest distance (cm)."""
+    return {
+        "held_fraction": _r(float(np.mean(d <= max_m + 1e-9))),
+        "median_cm": _r(100 * float(np.median(d))),
+        "p90_cm": _r(100 * float(np.percentile(d, 90))),
+        "max_cm": _r(100 * float(d.max())),
+    }
+
+
+def _measure_hold(goal: HoldGoal, positions: Array, characters: Sequence[Character]) -> Measured:
+    """How much of the output the two points spend within the hold distance."""
+    d = point_distance(goal.a, goal.b, positions, characters)
+    fig = hold_figures(d, goal.max_m)
+    ok = fig["held_fraction"] >= goal.min_fraction
+    e: dict[str, Any] = {
+        "a": goal.a.label,
+        "b": goal.b.label,
+        **fig,
+        "frame": int(np.argmax(d)),
+        "tolerance_cm": _r(100 * goal.max_m),
+        "tolerance": goal.min_fraction,
+        **dict(goal.extra),
+        "satisfied": ok,
+    }
+    return e, None if ok else (
+        f"{goal.name}: {goal.a.label} and {goal.b.label} are within {100 * goal.max_m:g} cm in "
+        f"{100 * fig['held_fraction']:.0f}% of the frames (at least {100 * goal.min_fraction:.0f}% asked; "
+        f"median {fig['median_cm']:.1f} cm)"
     )

@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from motion import Motion, MotionError, Skeleton
-from motion.goals import BeatGoal, LengthGoal
+from motion.goals import BeatGoal, Character, Goal, HoldGoal, LengthGoal, Point, hold_figures
 from motion.metrics import beat_align_scores
 from motion.plausibility import SPEED_P99_MARGIN, SPEED_WINDOW_S
 from motion.quality import QualityInputs
@@ -263,6 +263,50 @@ class RhythmEngine(Engine):
             ]
         return leaders, partners, r
 
+    def hold_goals(self, hold: Any, characters: tuple[Character, ...]) -> list[Goal]:
+        """The hand hold of each couple (``characters``: leader, follower, leader...) as a
+        :class:`motion.goals.HoldGoal` named ``hold[c]``, with what the example couples do
+        (``examples_held_fraction``, ``examples_median_cm``: the same joints, the same distance)."""
+        follower = self.follower_skeleton
+        if follower is None:  # pragma: no cover - couples need partners, checked by synthesize
+            raise EngineError("couples need a database built with 'partners'")
+        ends = []
+        for role, sk, name in (
+            ("leader", self.leader_skeleton, hold.leader_joint),
+            ("follower", follower, hold.follower_joint),
+        ):
+            try:
+                ends.append(int(sk.index(name)))
+            except MotionError:
+                raise EngineError(
+                    f"hand_hold: the {role} has no joint named {name!r}; joints: {', '.join(sk.names)}"
+                ) from None
+        max_m = float(hold.max_cm) / 100
+        extra = self._example_hold(ends[0], ends[1], max_m)
+        out: list[Goal] = []
+        for c in range(len(characters) // 2):
+            lead, follow = characters[2 * c], characters[2 * c + 1]
+            a = Point(2 * c, int(lead.joints[ends[0]]), f"c{c}_lead.{hold.leader_joint}")
+            b = Point(2 * c + 1, int(follow.joints[ends[1]]), f"c{c}_follow.{hold.follower_joint}")
+            out.append(HoldGoal(f"hold[{c}]", a, b, max_m, float(hold.min_fraction), extra))
+        return out
+
+    def _example_hold(self, lead_joint: int, follow_joint: int, max_m: float) -> dict[str, float]:
+        """The hold figures of the example couples (leader and follower clips captured together)."""
+        dists = []
+        for lead, follow in zip(self.meta["leaders"], self.meta["followers"], strict=False):
+            if not follow:
+                continue
+            a, b = self.library.clip(lead), self.library.clip(follow)
+            n = min(a.num_frames, b.num_frames)
+            pa = a.global_positions()[:n, lead_joint] * a.metres_per_unit
+            pb = b.global_positions()[:n, follow_joint] * b.metres_per_unit
+            dists.append(np.linalg.norm(pa - pb, axis=-1))
+        if not dists:
+            return {}
+        fig = hold_figures(np.concatenate(dists), max_m)
+        return {"examples_held_fraction": fig["held_fraction"], "examples_median_cm": fig["median_cm"]}
+
     def live_session(self, *, seed: int = 0, fps: float | None = None, accent: float = 0.6) -> LiveSession:
         """A dancer driven by beats as they happen (:class:`engines.rhythm.session.LiveDancer`)."""
         from .session import LiveDancer  # the session module builds on this one
@@ -314,11 +358,14 @@ class RhythmEngine(Engine):
             if partners:
                 chars.append((f"c{c}_follow", partners[c].skeleton))
         joins = np.array([p["start_frame"] for p in r.plans if p["start_frame"] > 0], dtype=np.intp)
-        inputs = QualityInputs(
-            goals=(LengthGoal(int(np.floor(beats[-1] * first.fps + 1e-9)) + 1), BeatGoal("music", beats)),
-            characters=combined_characters(chars, motion) if motion is not first else (),
-            joins=joins,
-        )
+        characters = combined_characters(chars, motion) if motion is not first else ()
+        goals: list[Goal] = [
+            LengthGoal(int(np.floor(beats[-1] * first.fps + 1e-9)) + 1),
+            BeatGoal("music", beats),
+        ]
+        if request.hand_hold is not None and partners:
+            goals += self.hold_goals(request.hand_hold, characters)
+        inputs = QualityInputs(goals=tuple(goals), characters=characters, joins=joins)
         solution = Solution(
             motion=motion,
             score=terms["misaligned"],
