@@ -25,8 +25,9 @@ pass (``coupling_rounds``) searches each character again, warm-started from its 
 the new targets). The pair's score is the sum of each character's own score (its request's
 constraints, :func:`engines.graph.score.evaluate`) and the shared constraints' costs measured on
 the assembled motions in the same units (:func:`shared_cost`); a new combination is emitted only
-when that score improves, and the passes stop when a pass changes no path or the budget (split
-evenly over the remaining searches) is spent.
+when that score improves, and the passes stop when a pass does not improve it or the budget is
+spent (split over the remaining searches, those of pass 0, which make every character's first
+full motion, with twice the share).
 
 Why not one joint search over pairs of paths: the graph search scores batches of paths of one
 character against fixed targets (vectorised over thousands of candidates); a pair search would
@@ -319,8 +320,8 @@ class CoupledSearch:
         shared = self.shared_goals(request, length)
         states: list[_State | None] = [None] * n
         passes = 1 + int(request.coupling_rounds)
-        searches = passes * n
-        done = 0
+        # pass 0 makes every character's first full motion: its searches get twice the share
+        weight_left = float(passes * n + n)
         best_score = np.inf
         for p in range(passes):
             improved = False
@@ -330,8 +331,9 @@ class CoupledSearch:
                 left = budget_s - (time.perf_counter() - t0)
                 if left <= 0.05 and all(s is not None for s in states):
                     break
-                share = max(left, 0.05) / max(searches - done, 1)
-                done += 1
+                w = 2.0 if p == 0 else 1.0
+                share = max(left, 0.05) * w / max(weight_left, 1.0)
+                weight_left -= w
                 sub, keep = self._derived(request, i, shared, states, length)
                 search = GraphSearch(
                     self.library,
