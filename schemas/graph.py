@@ -228,3 +228,23 @@ class GraphRequest(JobRequestBase):
                 raise ValueError(f"{where}: time {c.time_s:g} s is past the motion's {self.seconds:g} s")
         elif n is not None and (c.start >= n or (c.end is not None and c.end > n)):
             raise ValueError(f"{where}: frames [{c.start}, {c.end}) are past the motion's {n} frames")
+
+    def named_joints(self) -> list[tuple[str, str]]:
+        """``(where, joint name)`` of every joint the request names (joint constraints, of each
+        character too, and the points of shared constraints), to check against a database's
+        skeleton at submission."""
+        out: list[tuple[str, str]] = []
+        lists = [("", self.constraints)] + [
+            (f"characters[{i}].", c.constraints) for i, c in enumerate(self.characters or [])
+        ]
+        for prefix, constraints in lists:
+            out += [
+                (f"{prefix}constraints[{k}]", c.joint) for k, c in enumerate(constraints) if c.type == "joint"
+            ]
+        for k, c in enumerate(self.shared):
+            out += [
+                (f"shared[{k}].{side}", p.joint)
+                for side, p in (("a", c.a), ("b", c.b))
+                if p.joint is not None
+            ]
+        return out

@@ -164,6 +164,7 @@ class DatabaseFacts:
     fps: float
     joints: int
     clip_frames: dict[str, int]
+    joint_names: tuple[str, ...] = ()
 
 
 @cached(LRUCache(maxsize=256), lock=threading.Lock())
@@ -177,7 +178,10 @@ def database_facts(npz_path: str) -> DatabaseFacts:
         counts = [int(c) for c in z["library.frame_counts"]]
         fps = float(z["library.fps"])
         joints = int(z["library.offsets"].shape[1])
-    return DatabaseFacts(fps, joints, dict(zip(names, counts, strict=True)))
+        joint_names = (
+            tuple(str(n) for n in z["library.skeleton.names"]) if "library.skeleton.names" in z else ()
+        )
+    return DatabaseFacts(fps, joints, dict(zip(names, counts, strict=True)), joint_names)
 
 
 SHORT_FRACTION = 0.95
