@@ -106,6 +106,10 @@ def test_two_walkers_meet_hand_to_hand_and_keep_apart(walks_db: Path, tmp_path: 
     # each character's own start is met, named per character
     assert errors["c0.body[0]"]["satisfied"] and errors["c1.body[0]"]["satisfied"]
     assert report["metrics"]["characters"] == 2
+    assert report["metrics"]["shared_meet_error_cm_max"] == errors["shared[0]"]["error_cm"]
+    assert report["metrics"]["shared_min_distance_cm"] == min(
+        errors[n]["min_distance_cm"] for n in ("shared[1]", "shared[2]")
+    )
     assert report["ok"], report["reasons"]
 
 
