@@ -125,6 +125,10 @@ def shared_cost(
     tolerance / 5 cm)^2)``; an apart, per frame closer than the minimum by ``d`` metres,
     ``weight * (1 / 10) * (1 + d / 5 cm)^2``."""
     if isinstance(goal, MeetGoal):
+        if goal.frame >= positions.shape[0]:  # a short output misses the meet: cost it as 1 m off
+            return weight * (
+                (1.0 / METRES_UNIT) ** 2 + (max(1.0 - goal.tolerance_cm / 100, 0.0) / EXCESS_METRES) ** 2
+            )
         at = float(point_distance(goal.a, goal.b, positions[goal.frame : goal.frame + 1], characters)[0])
         err = abs(at - goal.distance_m)
         excess = max(err - goal.tolerance_cm / 100, 0.0)

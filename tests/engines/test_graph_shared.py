@@ -195,3 +195,20 @@ def test_shared_constraints_need_characters() -> None:
         GraphRequest.model_validate(
             request([]) | {"constraints": [{"type": "body", "frame": 0, "position": [0, 0]}]}
         )
+
+
+def test_shared_cost_is_finite_past_a_short_output() -> None:
+    """A character whose search ran out of time with a short path shortens the output; a meet
+    past its end costs like a 1 m miss, an apart counts only the frames there are."""
+    from engines.graph.shared import shared_cost
+    from motion.goals import ApartGoal, MeetGoal, Point
+    from tests.motion.test_goals_shared import two_points
+
+    pos, chars = two_points()
+    late = shared_cost(MeetGoal("m", 20, Point(0, 1), Point(1, 2)), 1.0, pos, chars)
+    near = shared_cost(MeetGoal("m", 5, Point(0, 1), Point(1, 2)), 1.0, pos, chars)
+    assert np.isfinite(late) and late > near > 0
+    assert (
+        shared_cost(ApartGoal("a", Point(0, 1), Point(1, 2), min_m=0.1, start=0, end=50), 1.0, pos, chars)
+        == 0
+    )
