@@ -358,6 +358,8 @@ class CoupledSearch:
                     if old is None:
                         return  # cancelled before a first motion
                     continue
+                if old is not None and got.motion.num_frames < old.motion.num_frames:
+                    continue  # out of time with a shorter path: keep the full one
                 m = got.motion
                 pos = np.asarray(m.global_positions() * m.metres_per_unit, dtype=np.float64)
                 own = evaluate(self.index_, owns[i], search.best_path_).score

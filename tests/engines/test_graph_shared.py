@@ -206,8 +206,8 @@ def test_shared_cost_is_finite_past_a_short_output() -> None:
 
     pos, chars = two_points()
     late = shared_cost(MeetGoal("m", 20, Point(0, 1), Point(1, 2)), 1.0, pos, chars)
-    near = shared_cost(MeetGoal("m", 5, Point(0, 1), Point(1, 2)), 1.0, pos, chars)
-    assert np.isfinite(late) and late > near > 0
+    near = shared_cost(MeetGoal("m", 5, Point(0, 1), Point(1, 2), distance_m=1.7), 1.0, pos, chars)
+    assert late == pytest.approx((1 / 0.3) ** 2 + (0.95 / 0.05) ** 2) and late > near > 0
     assert (
         shared_cost(ApartGoal("a", Point(0, 1), Point(1, 2), min_m=0.1, start=0, end=50), 1.0, pos, chars)
         == 0
