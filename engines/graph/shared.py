@@ -53,6 +53,7 @@ smallest separation and where, :mod:`motion.goals`), all measured on that output
 from __future__ import annotations
 
 import contextlib
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -306,8 +307,6 @@ class CoupledSearch:
     def run(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
         """Search the characters jointly until the passes converge, the budget is spent or
         ``should_stop()``, emitting every better combination (module docstring)."""
-        import time
-
         t0 = time.perf_counter()
         n = len(request.characters)
         base = [
