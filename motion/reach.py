@@ -24,6 +24,33 @@ from .motion import Motion
 Array = npt.NDArray[np.float64]
 
 
+def _arm(motion: Motion, joint: int) -> Leg:
+    """The two-bone chain above ``joint`` (shoulder, elbow, the joint)."""
+    sk = motion.skeleton
+    elbow = int(sk.parents[joint])
+    shoulder = int(sk.parents[elbow]) if elbow >= 0 else -1
+    if shoulder < 0 or int(sk.parents[shoulder]) < 0:
+        raise MotionError(f"joint {sk.names[joint]!r} has no shoulder and elbow above it to reach with")
+    return Leg(hip=shoulder, knee=elbow, ankle=joint, toe=-1, ankle_slot=-1, toe_slot=-1)
+
+
+def reach_path(motion: Motion, joint: int, offsets: Array) -> Motion:
+    """``motion`` with joint ``joint`` moved by ``offsets (F, 3)`` metres in every frame (zero rows
+    untouched) by arm IK (module docstring); what is beyond the arm's reach is left."""
+    arm = _arm(motion, joint)
+    offsets = np.asarray(offsets, dtype=np.float64)
+    if offsets.shape != (motion.num_frames, 3):
+        raise MotionError(f"{offsets.shape[0]} offsets for a motion of {motion.num_frames} frames")
+    frames = np.flatnonzero(np.abs(offsets).max(axis=1) > 0)
+    if frames.size == 0:
+        return motion
+    pos, grot = motion.fk()
+    local = np.array(motion.rotations, copy=True)
+    target = pos[frames, joint] + offsets[frames] / motion.metres_per_unit
+    _solve_leg(arm, motion.skeleton, pos, grot, local, frames, target, None, None, -_forward(motion, pos))
+    return replace(motion, rotations=local)
+
+
 def reach(motion: Motion, joint: int, frame: int, target: Array, window: int) -> tuple[Motion, float]:
     """``motion`` with joint ``joint`` at ``target (3,)`` (metres) at ``frame``: the offset
     ``target - position`` is added to the joint's path with a smoothstep weight, 1 at ``frame``,
@@ -31,11 +58,8 @@ def reach(motion: Motion, joint: int, frame: int, target: Array, window: int) ->
 
     Returns the motion and the distance (metres) left at ``frame`` (beyond the arm's reach).
     Raises :class:`~motion.errors.MotionError` when the joint has no two bones above it."""
+    arm = _arm(motion, joint)
     sk = motion.skeleton
-    elbow = int(sk.parents[joint])
-    shoulder = int(sk.parents[elbow]) if elbow >= 0 else -1
-    if shoulder < 0 or int(sk.parents[shoulder]) < 0:
-        raise MotionError(f"joint {sk.names[joint]!r} has no shoulder and elbow above it to reach with")
     n = motion.num_frames
     if not 0 <= frame < n:
         raise MotionError(f"frame {frame} is outside the motion's {n} frames")
@@ -45,7 +69,6 @@ def reach(motion: Motion, joint: int, frame: int, target: Array, window: int) ->
     frames = np.arange(max(frame - window, 0), min(frame + window + 1, n))
     x = 1.0 - np.abs(frames - frame) / (window + 1.0)
     w = x * x * (3.0 - 2.0 * x)
-    arm = Leg(hip=shoulder, knee=elbow, ankle=joint, toe=-1, ankle_slot=-1, toe_slot=-1)
     local = np.array(motion.rotations, copy=True)
     # an arm bends the other way from a leg when it is straight: the forearm swings forward
     forward = -_forward(motion, pos)

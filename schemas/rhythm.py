@@ -172,6 +172,11 @@ class HandHold(Strict):
     follower_joint: str = Field(default="rHand", description="joint of the follower's skeleton")
     max_cm: float = Field(default=25.0, gt=0, le=1000)
     min_fraction: float = Field(default=0.5, ge=0, le=1)
+    reach: bool = Field(
+        default=False,
+        description="bring the two hands together by arm IK where they are near (within twice max_cm) "
+        "but not within max_cm (engines.rhythm.hold); where the dancers let go, nothing changes",
+    )
 
 
 class RhythmRequest(JobRequestBase):

@@ -267,10 +267,23 @@ class RhythmEngine(Engine):
         """The hand hold of each couple (``characters``: leader, follower, leader...) as a
         :class:`motion.goals.HoldGoal` named ``hold[c]``, with what the example couples do
         (``examples_held_fraction``, ``examples_median_cm``: the same joints, the same distance)."""
+        ends = self._hold_joints(hold)
+        max_m = float(hold.max_cm) / 100
+        extra = self._example_hold(ends[0], ends[1], max_m)
+        out: list[Goal] = []
+        for c in range(len(characters) // 2):
+            lead, follow = characters[2 * c], characters[2 * c + 1]
+            a = Point(2 * c, int(lead.joints[ends[0]]), f"c{c}_lead.{hold.leader_joint}")
+            b = Point(2 * c + 1, int(follow.joints[ends[1]]), f"c{c}_follow.{hold.follower_joint}")
+            out.append(HoldGoal(f"hold[{c}]", a, b, max_m, float(hold.min_fraction), extra))
+        return out
+
+    def _hold_joints(self, hold: Any) -> tuple[int, int]:
+        """The leader's and the follower's joint of a hand hold (an error naming the joints)."""
         follower = self.follower_skeleton
         if follower is None:  # pragma: no cover - couples need partners, checked by synthesize
             raise EngineError("couples need a database built with 'partners'")
-        ends = []
+        ends: list[int] = []
         for role, sk, name in (
             ("leader", self.leader_skeleton, hold.leader_joint),
             ("follower", follower, hold.follower_joint),
@@ -281,15 +294,7 @@ class RhythmEngine(Engine):
                 raise EngineError(
                     f"hand_hold: the {role} has no joint named {name!r}; joints: {', '.join(sk.names)}"
                 ) from None
-        max_m = float(hold.max_cm) / 100
-        extra = self._example_hold(ends[0], ends[1], max_m)
-        out: list[Goal] = []
-        for c in range(len(characters) // 2):
-            lead, follow = characters[2 * c], characters[2 * c + 1]
-            a = Point(2 * c, int(lead.joints[ends[0]]), f"c{c}_lead.{hold.leader_joint}")
-            b = Point(2 * c + 1, int(follow.joints[ends[1]]), f"c{c}_follow.{hold.follower_joint}")
-            out.append(HoldGoal(f"hold[{c}]", a, b, max_m, float(hold.min_fraction), extra))
-        return out
+        return ends[0], ends[1]
 
     def _example_hold(self, lead_joint: int, follow_joint: int, max_m: float) -> dict[str, float]:
         """The hold figures of the example couples (leader and follower clips captured together)."""
@@ -322,6 +327,15 @@ class RhythmEngine(Engine):
             partners = [_clean(m, self.foot_floor(m.skeleton)) for m in partners]
             if should_stop():
                 return
+        hold = request.hand_hold
+        if hold is not None and hold.reach and partners:
+            from .hold import hold_hands
+
+            lj, fj = self._hold_joints(hold)
+            for c in range(len(partners)):
+                leaders[c], partners[c] = hold_hands(
+                    leaders[c], partners[c], lj, fj, float(hold.max_cm) / 100
+                )
         first = leaders[0]
         pos0 = first.global_positions()
         mint, bail, speed_minima = beat_align_scores(pos0, first.fps, beats)

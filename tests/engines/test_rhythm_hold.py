@@ -114,3 +114,22 @@ def test_hand_hold_of_an_unknown_joint_fails_clearly(
 def test_hand_hold_needs_couples() -> None:
     with pytest.raises(ValidationError, match="set 'couples'"):
         RhythmRequest.model_validate({"music": {"bpm": 100, "duration_s": 4}, "hand_hold": {}})
+
+
+def test_reach_tightens_the_hold_where_the_hands_are_near(salsa_db: Path, tmp_path: Path) -> None:
+    """``reach``: hands near each other are brought within the hold distance by arm IK; hands
+    apart (a let-go) are left, so the largest distance does not change. Measured on the output."""
+    loose, raw0, pos0 = dance(salsa_db, tmp_path, {"max_cm": 25})
+    (tmp_path / "tight").mkdir()
+    tight, raw1, pos1 = dance(salsa_db, tmp_path / "tight", {"max_cm": 25, "reach": True})
+    a, b = loose["constraint_errors"]["hold[0]"], tight["constraint_errors"]["hold[0]"]
+    assert b["held_fraction"] > a["held_fraction"] + 0.2
+    assert b["max_cm"] == pytest.approx(a["max_cm"], abs=1.0)
+    d = np.linalg.norm(
+        pos1[:, raw1.names.index("c0_lead_lHand")] - pos1[:, raw1.names.index("c0_follow_rHand")], axis=1
+    )
+    scale = 0.01 if np.median(pos1[:, raw1.names.index("c0_lead_head"), 1]) > 10 else 1.0
+    assert b["held_fraction"] == pytest.approx(float(np.mean(d * scale <= 0.25)), abs=2e-3)
+    # only the arms move: the hips are where they were
+    hip = raw0.names.index("c0_follow_hip")
+    np.testing.assert_allclose(pos1[:, hip], pos0[:, hip], atol=1e-3)
