@@ -7,13 +7,14 @@ transition graph (:mod:`engines.rhythm.build`). Request ``engine: "rhythm"``
 of the graph with blended, time-warped movements (:mod:`engines.rhythm.synth`), optional control
 (per-beat direction/speed, a path to follow in formation, crowds steering around each other,
 couples), foot cleanup, and a report with the music beats, the motion beats detected in the
-output and the beat-align scores.
+output and the beat-align scores; couples with ``hand_hold`` get the hold measured (``hold[c]``,
+beside the example couples' own) and, with ``reach``, tightened (:mod:`engines.rhythm.hold`).
 
 Output: one character is a plain motion on the database skeleton. Several characters (or a
 couple) are one motion on a combined skeleton: a static ``world`` root with each character's
 skeleton under it, joint names prefixed ``c0_``, ``c1_``... (couples: ``c0_lead_``,
-``c0_follow_``), each character's hip carrying position channels. Provenance follows character 0
-(the leader of couple 0).
+``c0_follow_``), each character's hip carrying position channels (:mod:`engines.combine`).
+Provenance follows character 0 (the leader of couple 0).
 """
 
 from __future__ import annotations
