@@ -101,11 +101,13 @@ class PoseGoal:
 
 @dataclass(frozen=True, slots=True)
 class ObstacleGoal:
-    """The body root and the feet of every character stay out of a floor region."""
+    """The body root and the feet of every character (or of the ``characters`` listed) stay out
+    of a floor region."""
 
     name: str
     region: FloorRegion
     tolerance_cm: float = 0.0
+    characters: tuple[int, ...] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -157,8 +159,75 @@ class LoopGoal:
     tolerance_cm: float = POSITION_TOLERANCE_CM
 
 
+@dataclass(frozen=True, slots=True)
+class Point:
+    """A point of one character of the output: joint ``joint`` (an index of the output
+    skeleton), or, when ``joint`` is ``None``, the body of character ``character`` (the hips'
+    floor projection). ``label`` names it in messages (``c0.RightHand``)."""
+
+    character: int
+    joint: int | None = None
+    label: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class MeetGoal:
+    """Shared between two characters: points ``a`` and ``b`` are ``distance_m`` metres apart at
+    output ``frame`` (joint to joint: 3-D distance; with a body: floor distance)."""
+
+    name: str
+    frame: int
+    a: Point
+    b: Point
+    distance_m: float = 0.0
+    tolerance_cm: float = POSITION_TOLERANCE_CM
+
+
+@dataclass(frozen=True, slots=True)
+class ApartGoal:
+    """Shared between two characters: points ``a`` and ``b`` stay at least ``min_m`` metres apart
+    over output frames ``[start, end)`` (``end`` None: to the last frame); distances as for
+    :class:`MeetGoal`. ``tolerance_cm``: how far below ``min_m`` still counts as apart."""
+
+    name: str
+    a: Point
+    b: Point
+    min_m: float
+    start: int = 0
+    end: int | None = None
+    tolerance_cm: float = 0.0
+
+
+HOLD_MIN_FRACTION = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class HoldGoal:
+    """Shared between two characters over the whole output: points ``a`` and ``b`` (a hand
+    hold) within ``max_m`` metres of each other in at least ``min_fraction`` of the frames;
+    ``extra`` entries (e.g. what the examples do) are copied into the report."""
+
+    name: str
+    a: Point
+    b: Point
+    max_m: float
+    min_fraction: float = HOLD_MIN_FRACTION
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+
 Goal = (
-    LengthGoal | BodyGoal | JointGoal | PoseGoal | ObstacleGoal | LabelGoal | PathGoal | BeatGoal | LoopGoal
+    LengthGoal
+    | BodyGoal
+    | JointGoal
+    | PoseGoal
+    | ObstacleGoal
+    | LabelGoal
+    | PathGoal
+    | BeatGoal
+    | MeetGoal
+    | ApartGoal
+    | HoldGoal
+    | LoopGoal
 )
 
 
@@ -196,7 +265,7 @@ def measure(
     ``reachable_m_s`` (the fastest example's speed), an unmet body goal says how far the body
     could have gone."""
     n = positions.shape[0]
-    if isinstance(goal, BodyGoal | JointGoal | PoseGoal) and not 0 <= goal.frame < n:
+    if isinstance(goal, BodyGoal | JointGoal | PoseGoal | MeetGoal) and not 0 <= goal.frame < n:
         e = {"frame": goal.frame, "position_cm": None, "missing": True, "satisfied": False}
         return e, f"{goal.name}: frame {goal.frame} is beyond the motion's {n} frames"
     if isinstance(goal, BodyGoal):
@@ -217,6 +286,12 @@ def measure(
         return _measure_beats(goal, positions, fps, characters)
     if isinstance(goal, LoopGoal):
         return _measure_loop(goal, positions, fps, characters)
+    if isinstance(goal, MeetGoal):
+        return _measure_meet(goal, positions, characters)
+    if isinstance(goal, ApartGoal):
+        return _measure_apart(goal, positions, characters)
+    if isinstance(goal, HoldGoal):
+        return _measure_hold(goal, positions, characters)
     raise MotionError(f"unknown goal {goal!r}")  # pragma: no cover - the union is closed
 
 
@@ -340,7 +415,8 @@ def _measure_obstacle(
     """Frames in which a body root or a foot is inside the region, and how deep (cm)."""
     n = positions.shape[0]
     deepest = np.zeros(n)
-    for c in characters:
+    chosen = characters if goal.characters is None else [characters[i] for i in goal.characters]
+    for c in chosen:
         pos = positions[:, c.joints]
         pts = [pos[:, body_root(c.skeleton)][:, None, [0, 2]]]
         with contextlib.suppress(MotionError):  # no feet by name: the body root alone
@@ -439,3 +515,113 @@ def _character(
         raise MotionError(f"{goal.name}: character {i} is not in the output")
     c = characters[i]
     return positions[:, c.joints], c.skeleton
+
+
+def point_track(point: Point, positions: Array, characters: Sequence[Character]) -> Array:
+    """``(F, 3)`` metres: the point's joint positions, or its character's body on the floor
+    (the hips' projection, ``y`` 0)."""
+    if point.joint is not None:
+        if not 0 <= point.joint < positions.shape[1]:
+            raise MotionError(f"{point.label or 'point'}: joint {point.joint} is not in the output")
+        return np.asarray(positions[:, point.joint], dtype=np.float64)
+    if not 0 <= point.character < len(characters):
+        raise MotionError(f"{point.label or 'point'}: character {point.character} is not in the output")
+    c = characters[point.character]
+    hips = positions[:, c.joints[body_root(c.skeleton)]]
+    return np.stack((hips[:, 0], np.zeros(hips.shape[0]), hips[:, 2]), axis=-1)
+
+
+def point_distance(a: Point, b: Point, positions: Array, characters: Sequence[Character]) -> Array:
+    """``(F,)`` metres between two points: 3-D between two joints, on the floor when either is a
+    body."""
+    pa, pb = point_track(a, positions, characters), point_track(b, positions, characters)
+    d = pa - pb
+    if a.joint is None or b.joint is None:
+        d = d[:, [0, 2]]
+    return np.asarray(np.linalg.norm(d, axis=-1))
+
+
+def _measure_meet(goal: MeetGoal, positions: Array, characters: Sequence[Character]) -> Measured:
+    """The distance (cm) between the two points at the frame, against the wanted one."""
+    d = float(point_distance(goal.a, goal.b, positions[goal.frame : goal.frame + 1], characters)[0])
+    err = 100 * abs(d - goal.distance_m)
+    ok = err <= goal.tolerance_cm
+    e = {
+        "frame": goal.frame,
+        "a": goal.a.label,
+        "b": goal.b.label,
+        "distance_cm": _r(100 * d),
+        "wanted_cm": _r(100 * goal.distance_m),
+        "error_cm": _r(err),
+        "tolerance_cm": goal.tolerance_cm,
+        "satisfied": ok,
+    }
+    return e, None if ok else (
+        f"{goal.name} (frame {goal.frame}): {goal.a.label} and {goal.b.label} are {100 * d:.1f} cm apart, "
+        f"{err:.1f} cm from the wanted {100 * goal.distance_m:g} cm (tolerance {goal.tolerance_cm:g} cm)"
+    )
+
+
+def _measure_apart(goal: ApartGoal, positions: Array, characters: Sequence[Character]) -> Measured:
+    """The smallest distance (cm) between the two points over the range, where it occurs, and
+    the frames closer than the minimum."""
+    n = positions.shape[0]
+    end = n if goal.end is None else min(goal.end, n)
+    start = min(goal.start, end)
+    d = point_distance(goal.a, goal.b, positions[start:end], characters)
+    if d.size == 0:
+        e: dict[str, Any] = {"start": goal.start, "end": goal.end, "missing": True, "satisfied": False}
+        return e, f"{goal.name}: frames {goal.start}-{goal.end} are beyond the motion's {n} frames"
+    k = int(np.argmin(d))
+    low = goal.min_m - goal.tolerance_cm / 100
+    close = int(np.count_nonzero(d < low - 1e-9))
+    ok = close == 0
+    e = {
+        "a": goal.a.label,
+        "b": goal.b.label,
+        "start": start,
+        "end": end,
+        "min_distance_cm": _r(100 * float(d[k])),
+        "frame": start + k,
+        "min_cm": _r(100 * goal.min_m),
+        "frames": close,
+        "tolerance_cm": goal.tolerance_cm,
+        "satisfied": ok,
+    }
+    return e, None if ok else (
+        f"{goal.name}: {goal.a.label} and {goal.b.label} come {100 * float(d[k]):.1f} cm close at frame "
+        f"{start + k} ({close} frames under {100 * goal.min_m:g} cm)"
+    )
+
+
+def hold_figures(d: Array, max_m: float) -> dict[str, float]:
+    """Figures of a hold's per-frame distances ``d (F,)`` metres: the fraction of frames within
+    ``max_m``, the median, 90th percentile and largest distance (cm)."""
+    return {
+        "held_fraction": _r(float(np.mean(d <= max_m + 1e-9))),
+        "median_cm": _r(100 * float(np.median(d))),
+        "p90_cm": _r(100 * float(np.percentile(d, 90))),
+        "max_cm": _r(100 * float(d.max())),
+    }
+
+
+def _measure_hold(goal: HoldGoal, positions: Array, characters: Sequence[Character]) -> Measured:
+    """How much of the output the two points spend within the hold distance."""
+    d = point_distance(goal.a, goal.b, positions, characters)
+    fig = hold_figures(d, goal.max_m)
+    ok = fig["held_fraction"] >= goal.min_fraction
+    e: dict[str, Any] = {
+        "a": goal.a.label,
+        "b": goal.b.label,
+        **fig,
+        "frame": int(np.argmax(d)),
+        "tolerance_cm": _r(100 * goal.max_m),
+        "tolerance": goal.min_fraction,
+        **dict(goal.extra),
+        "satisfied": ok,
+    }
+    return e, None if ok else (
+        f"{goal.name}: {goal.a.label} and {goal.b.label} are within {100 * goal.max_m:g} cm in "
+        f"{100 * fig['held_fraction']:.0f}% of the frames (at least {100 * goal.min_fraction:.0f}% asked; "
+        f"median {fig['median_cm']:.1f} cm)"
+    )

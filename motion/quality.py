@@ -5,7 +5,8 @@ the final motion: after warping, smoothing, blending, foot cleanup and any floor
 exports only change its coordinate convention). It measures
 
 * every goal the request set (:mod:`motion.goals`: length, body, joint, pose, obstacle, label,
-  path, music beats), each with ``satisfied`` against a stated tolerance;
+  path, music beats, and between characters meet, apart and hold), each with ``satisfied``
+  against a stated tolerance;
 * physical plausibility against the database's own examples (:mod:`motion.plausibility`: root
   speed and turn rate, planted-foot slide, floor penetration, teleporting joints, spikes at joins,
   jerk);
@@ -151,6 +152,12 @@ def _headline(checks: dict[str, dict[str, Any]], errors: dict[str, Any]) -> dict
         out[f"{names.get(key, key)}_{units.get(check['unit'], 'x')}"] = float(check["value"])
     if checks.get("root_speed", {}).get("ratio") is not None:
         out["root_speed_ratio"] = float(checks["root_speed"]["ratio"])
+    meets = [float(e["error_cm"]) for e in errors.values() if isinstance(e, dict) and "wanted_cm" in e]
+    aparts = [float(e["min_distance_cm"]) for e in errors.values() if isinstance(e, dict) and "min_cm" in e]
+    if meets:
+        out["shared_meet_error_cm_max"] = max(meets)
+    if aparts:
+        out["shared_min_distance_cm"] = min(aparts)
     for entry in errors.values():
         if isinstance(entry, dict) and "beat_align_mint" in entry:
             out["beat_align_mint"] = float(entry["beat_align_mint"])

@@ -90,6 +90,56 @@ Constraint = Annotated[
 ]
 
 
+class Point(Strict):
+    """A point of one character: a named joint, or its body (the hips' floor projection) when
+    ``joint`` is omitted."""
+
+    character: int = Field(ge=0, le=63, description="index into the request's 'characters'")
+    joint: str | None = Field(default=None, description="joint name; omit for the body on the floor")
+
+
+class MeetConstraint(_Timed):
+    """Shared: point ``a`` of one character is ``distance_m`` from point ``b`` of another at a time
+    (hands meeting: two joints and ``distance_m`` 0; passing each other: two bodies and the
+    passing distance). Joint to joint is a 3-D distance; with a body the floor distance."""
+
+    type: Literal["meet"] = "meet"
+    a: Point
+    b: Point
+    distance_m: float = Field(default=0.0, ge=0, le=100, description="wanted distance, metres")
+    tolerance_cm: float = Field(default=5.0, gt=0, le=10_000, description="met within this, cm")
+
+
+class ApartConstraint(Strict):
+    """Shared: points ``a`` and ``b`` of two characters stay at least ``min_m`` apart over output
+    frames ``[start, end)`` (``end`` omitted: to the end of the motion). Bodies: floor distance;
+    joints: 3-D distance."""
+
+    type: Literal["apart"] = "apart"
+    a: Point
+    b: Point
+    min_m: float = Field(gt=0, le=100, description="smallest allowed distance, metres")
+    start: int = Field(default=0, ge=0)
+    end: int | None = Field(default=None, gt=0)
+    weight: float = Field(default=1.0, ge=0, le=1000)
+
+    @model_validator(mode="after")
+    def _range(self) -> ApartConstraint:
+        if self.end is not None and self.end <= self.start:
+            raise ValueError(f"'end' ({self.end}) must be after 'start' ({self.start})")
+        return self
+
+
+SharedConstraint = Annotated[MeetConstraint | ApartConstraint, Field(discriminator="type")]
+
+
+class GraphCharacter(Strict):
+    """One character of a several-character request: its own constraints (a body constraint at
+    frame 0 is its start), as a one-character request's."""
+
+    constraints: list[Constraint] = Field(default_factory=list, max_length=1000)
+
+
 class GraphWeights(Strict):
     """Relative weights of the score terms (paper Eq. 1)."""
 
@@ -99,6 +149,7 @@ class GraphWeights(Strict):
     joint: float = Field(default=1.0, ge=0)
     label: float = Field(default=1.0, ge=0)
     obstacle: float = Field(default=1.0, ge=0)
+    shared: float = Field(default=1.0, ge=0, description="constraints between characters")
 
 
 class GraphRequest(JobRequestBase):
@@ -117,6 +168,22 @@ class GraphRequest(JobRequestBase):
         "with a seed, a search that ends by rounds or convergence within its budget returns the same "
         "motion on every machine and from every face (CLI, HTTP)",
     )
+    characters: list[GraphCharacter] | None = Field(
+        default=None,
+        min_length=2,
+        max_length=16,
+        description="several characters, each with its own constraints, searched jointly with "
+        "'shared' constraints (the top-level 'constraints' must then be empty)",
+    )
+    shared: list[SharedConstraint] = Field(
+        default_factory=list, max_length=1000, description="constraints between two characters"
+    )
+    coupling_rounds: int = Field(
+        default=3,
+        ge=0,
+        le=20,
+        description="rounds of coordinate descent over the characters (engines.graph.shared)",
+    )
     weights: GraphWeights = Field(default_factory=GraphWeights)
     smoothing_frames: int = Field(default=15, ge=0, le=300, description="displacement smoothing half-width")
     footskate: bool = Field(
@@ -132,4 +199,57 @@ class GraphRequest(JobRequestBase):
     def _length(self) -> GraphRequest:
         if (self.frames is None) == (self.seconds is None):
             raise ValueError("give exactly one of 'frames' or 'seconds'")
+        if self.characters is None:
+            if self.shared:
+                raise ValueError("'shared' constraints need 'characters' (at least two)")
+            return self
+        if self.constraints:
+            raise ValueError(
+                "with 'characters', put each character's constraints in characters[i].constraints "
+                "(the top-level 'constraints' must be empty)"
+            )
+        n = len(self.characters)
+        for i, c in enumerate(self.shared):
+            where = f"shared[{i}] ({c.type})"
+            for side, p in (("a", c.a), ("b", c.b)):
+                if p.character >= n:
+                    raise ValueError(
+                        f"{where}: {side}.character {p.character} is not one of the {n} characters "
+                        f"(0..{n - 1})"
+                    )
+            if c.a.character == c.b.character:
+                raise ValueError(f"{where}: 'a' and 'b' name the same character {c.a.character}")
+            self._inside(where, c)
         return self
+
+    def _inside(self, where: str, c: MeetConstraint | ApartConstraint) -> None:
+        """A shared constraint's times fall inside the motion (when its length is in frames, or
+        both are in seconds)."""
+        n = self.frames
+        if isinstance(c, MeetConstraint):
+            if n is not None and c.frame is not None and c.frame >= n:
+                raise ValueError(f"{where}: frame {c.frame} is past the motion's {n} frames (0..{n - 1})")
+            if self.seconds is not None and c.time_s is not None and c.time_s > self.seconds:
+                raise ValueError(f"{where}: time {c.time_s:g} s is past the motion's {self.seconds:g} s")
+        elif n is not None and (c.start >= n or (c.end is not None and c.end > n)):
+            raise ValueError(f"{where}: frames [{c.start}, {c.end}) are past the motion's {n} frames")
+
+    def named_joints(self) -> list[tuple[str, str]]:
+        """``(where, joint name)`` of every joint the request names (joint constraints, of each
+        character too, and the points of shared constraints), to check against a database's
+        skeleton at submission."""
+        out: list[tuple[str, str]] = []
+        lists = [("", self.constraints)] + [
+            (f"characters[{i}].", c.constraints) for i, c in enumerate(self.characters or [])
+        ]
+        for prefix, constraints in lists:
+            out += [
+                (f"{prefix}constraints[{k}]", c.joint) for k, c in enumerate(constraints) if c.type == "joint"
+            ]
+        for k, c in enumerate(self.shared):
+            out += [
+                (f"shared[{k}].{side}", p.joint)
+                for side, p in (("a", c.a), ("b", c.b))
+                if p.joint is not None
+            ]
+        return out

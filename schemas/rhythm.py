@@ -182,6 +182,22 @@ class StartPose(Strict):
     heading_deg: float = 0.0
 
 
+class HandHold(Strict):
+    """Couples: the leader's joint and the follower's joint (a hand hold) within ``max_cm`` of
+    each other in at least ``min_fraction`` of the frames, measured on the output by the quality
+    report (entry ``hold[c]`` per couple, with what the example couples do)."""
+
+    leader_joint: str = Field(default="lHand", description="joint of the leader's skeleton")
+    follower_joint: str = Field(default="rHand", description="joint of the follower's skeleton")
+    max_cm: float = Field(default=25.0, gt=0, le=1000)
+    min_fraction: float = Field(default=0.5, ge=0, le=1)
+    reach: bool = Field(
+        default=False,
+        description="bring the two hands together by arm IK where they are near (within twice max_cm) "
+        "but not within max_cm (engines.rhythm.hold); where the dancers let go, nothing changes",
+    )
+
+
 class RhythmRequest(JobRequestBase):
     """A dance synchronized to music, optionally steered, for one or many characters."""
 
@@ -206,9 +222,14 @@ class RhythmRequest(JobRequestBase):
     )
     fps: float | None = Field(default=None, gt=0, le=240, description="output rate (default: the database's)")
     footskate: bool = Field(default=True, description="keep planted feet still (motion.footskate)")
+    hand_hold: HandHold | None = Field(
+        default=None, description="couples: a hand hold the quality report measures (needs 'couples')"
+    )
 
     @model_validator(mode="after")
     def _control(self) -> RhythmRequest:
+        if self.hand_hold is not None and not self.couples:
+            raise ValueError("'hand_hold' is a constraint between the partners of a couple: set 'couples'")
         if self.path is not None and self.directions is not None:
             raise ValueError("give either 'path' or 'directions', not both")
         if self.directions is not None:

@@ -109,7 +109,8 @@ def estimate_work(
 ) -> WorkEstimate:
     """The cost of a validated request against a database of rate ``db_fps`` and ``joints`` joints."""
     engine = str(getattr(request, "engine", ""))
-    characters = int(getattr(request, "characters", 1) or 1) * (
+    cast = getattr(request, "characters", 1) or 1
+    characters = (len(cast) if isinstance(cast, list) else int(cast)) * (
         2 if getattr(request, "couples", False) else 1
     )
     fps = float(getattr(request, "fps", None) or db_fps)
@@ -163,6 +164,7 @@ class DatabaseFacts:
     fps: float
     joints: int
     clip_frames: dict[str, int]
+    joint_names: tuple[str, ...] = ()
 
 
 @cached(LRUCache(maxsize=256), lock=threading.Lock())
@@ -176,7 +178,10 @@ def database_facts(npz_path: str) -> DatabaseFacts:
         counts = [int(c) for c in z["library.frame_counts"]]
         fps = float(z["library.fps"])
         joints = int(z["library.offsets"].shape[1])
-    return DatabaseFacts(fps, joints, dict(zip(names, counts, strict=True)))
+        joint_names = (
+            tuple(str(n) for n in z["library.skeleton.names"]) if "library.skeleton.names" in z else ()
+        )
+    return DatabaseFacts(fps, joints, dict(zip(names, counts, strict=True)), joint_names)
 
 
 SHORT_FRACTION = 0.95

@@ -3,7 +3,8 @@
 Database kind ``graph`` (:class:`schemas.databases.GraphDatabaseSpec`), request ``engine: "graph"``
 (:class:`schemas.graph.GraphRequest`). The build (``build.py``, ``hierarchy.py``) stores the edge
 hierarchy and root tracks of :mod:`engines.graph.model` beside the motion library; the search
-(``search.py``) walks them and assembles motions (``assemble.py``), emitting every new best.
+(``search.py``) walks them and assembles motions (``assemble.py``), emitting every new best; a
+request with several ``characters`` is searched jointly by ``shared.py``.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from .build import build_graph
 from .model import EdgeTree, FootContacts, RootTracks
 from .paths import GraphIndex
 from .search import GraphSearch
+from .shared import CoupledSearch
 from .tracks import foot_contacts
 
 
@@ -38,6 +40,17 @@ class GraphEngine(Engine):
         return build_graph(spec, library, emit, should_stop)
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+        if getattr(request, "characters", None):
+            CoupledSearch(
+                self.library,
+                self.tree,
+                self.tracks,
+                request.seed,
+                contacts=self.contacts,
+                reference=self.quality_reference,
+                foot_floor=self.foot_floor(self.library.motions[0].skeleton),
+            ).run(request, budget_s, emit, should_stop)
+            return
         GraphSearch(
             self.library,
             self.tree,

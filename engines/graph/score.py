@@ -37,7 +37,7 @@ motion (:mod:`engines.graph.assemble`).
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -98,7 +98,7 @@ OBSTACLE_MARGIN = 0.05
 """Obstacles are grown by this much (metres) while searching, so that the frames between samples
 stay out too (feet move a few centimetres per frame)."""
 
-TERMS = ("continuity", "length", "body", "joint", "label", "obstacle")
+TERMS = ("continuity", "length", "body", "joint", "label", "obstacle", "shared")
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,6 +162,23 @@ class ObstacleTarget:
         return self.region.depth(points, margin)
 
 
+@dataclass(frozen=True, slots=True)
+class KeepawayTarget:
+    """A moving keep-out disc: the character's body (``joint`` None) or the floor position of
+    output joint ``joint`` stays ``radius`` metres from ``track (T, 2)`` (a floor point per
+    output frame, metres) over output frames ``[start, end)``; ``column`` indexes the problem's
+    :class:`JointTable` for a joint (-1 for the body)."""
+
+    name: str
+    weight: float
+    joint: int | None
+    track: FloatArray
+    radius: float
+    start: int
+    end: int
+    column: int = -1
+
+
 @dataclass(frozen=True)
 class Problem:
     """A request compiled against a database: every time in output frames, every clip and joint
@@ -175,6 +192,7 @@ class Problem:
     poses: tuple[PoseTarget, ...] = ()
     labels: tuple[LabelTarget, ...] = ()
     obstacles: tuple[ObstacleTarget, ...] = ()
+    keepaways: tuple[KeepawayTarget, ...] = ()
     table: JointTable | None = None
     foot_columns: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
     grid: FitGrid | None = None
@@ -189,8 +207,14 @@ def _frame_of(c: Any, fps: float) -> int:
     return int(c.frame) if c.frame is not None else round(float(c.time_s) * fps)
 
 
-def compile_problem(request: Any, library: MotionLibrary, tracks: RootTracks) -> Problem:
-    """Check a :class:`schemas.graph.GraphRequest` against the database and compile it.
+def compile_problem(
+    request: Any,
+    library: MotionLibrary,
+    tracks: RootTracks,
+    keepaways: tuple[KeepawayTarget, ...] = (),
+) -> Problem:
+    """Check a :class:`schemas.graph.GraphRequest` against the database and compile it, with the
+    ``keepaways`` a coupled search derives from other characters (:mod:`engines.graph.shared`).
 
     Raises :class:`~engines.base.EngineError` for constraints the database cannot serve: times
     outside the output, unknown clips, joints or labels, clip frames out of range, or two pose
@@ -206,6 +230,7 @@ def compile_problem(request: Any, library: MotionLibrary, tracks: RootTracks) ->
         "joint": float(w.joint),
         "label": float(w.label),
         "obstacle": float(w.obstacle),
+        "shared": float(w.shared),
     }
     targets = _Targets(library, tracks, length)
     for c in request.constraints:
@@ -216,17 +241,22 @@ def compile_problem(request: Any, library: MotionLibrary, tracks: RootTracks) ->
             raise EngineError(f"{a.name} and {b.name} ask for different poses at output frame {a.frame}")
     bodies = sorted(targets.bodies, key=lambda b: b.frame)
     obstacles = targets.obstacles
-    table, cols, feet = _joint_columns(library, tracks, [j for _, _, j, _, _, _ in targets.joints], obstacles)
+    for k in keepaways:
+        if k.track.shape != (length, 2):
+            raise EngineError(f"{k.name}: a track of {k.track.shape[0]} frames for a {length}-frame motion")
+    tracked = [j for _, _, j, _, _, _ in targets.joints] + [k.joint for k in keepaways if k.joint is not None]
+    table, cols, feet = _joint_columns(library, tracks, tracked, obstacles)
     joint_targets = tuple(
         JointTarget(n, t, j, cols.index(j), p, v, wt) for n, t, j, p, v, wt in targets.joints
     )
+    keep = tuple(replace(k, column=-1 if k.joint is None else cols.index(k.joint)) for k in keepaways)
     grid = None
-    if len(bodies) >= 2 or joint_targets or obstacles:
+    if len(bodies) >= 2 or joint_targets or obstacles or keep:
         grid = fit_grid(
             length,
             [(b.frame, b.xz, b.heading, b.weight) for b in bodies],
             [jt.frame for jt in joint_targets],
-            _obstacle_step(length) if obstacles else None,
+            _obstacle_step(length) if obstacles or keep else None,
         )
     return Problem(
         length,
@@ -237,6 +267,7 @@ def compile_problem(request: Any, library: MotionLibrary, tracks: RootTracks) ->
         tuple(poses),
         tuple(targets.labels),
         tuple(obstacles),
+        keep,
         table,
         feet,
         grid,
@@ -559,6 +590,7 @@ def score_batch(index: GraphIndex, problem: Problem, batch: PathBatch, *, rough:
         good = np.where(span > 0, lb.good[np.clip(g + span, 0, lb.good.size - 1)] - lb.good[g], 0).sum(axis=1)
         label += lb.weight * ((lb.end - lb.start) - good) / FRAMES_UNIT
     obstacle = _obstacles(problem, fit) if problem.obstacles and fit is not None else np.zeros(batch.size)
+    shared = _keepaways(problem, fit) if problem.keepaways and fit is not None else np.zeros(batch.size)
     terms = {
         "continuity": w["continuity"] * continuity,
         "length": w["length"] * length,
@@ -566,6 +598,7 @@ def score_batch(index: GraphIndex, problem: Problem, batch: PathBatch, *, rough:
         "joint": w["joint"] * joint,
         "label": w["label"] * label,
         "obstacle": w["obstacle"] * obstacle,
+        "shared": w["shared"] * shared,
     }
     total = sum(terms.values(), np.zeros(batch.size))
     total = np.where(valid, total, np.inf)
@@ -615,6 +648,33 @@ def _obstacles(problem: Problem, fit: BatchFit) -> FloatArray:
         out += ob.weight * np.where(
             d > 0, (step / FRAMES_UNIT) * (1.0 + d / OBSTACLE_DEPTH_UNIT) ** 2, 0.0
         ).sum(axis=1)
+    return out
+
+
+def _keepaways(problem: Problem, fit: BatchFit) -> FloatArray:
+    """Keep-away term ``(B,)`` (unweighted by ``w_h``): at the corrected sample frames inside each
+    target's range, the body (or joint) closer to the other's floor point than ``radius`` plus
+    :data:`OBSTACLE_MARGIN` costs like an obstacle sample that deep."""
+    assert problem.grid is not None
+    grid = problem.grid
+    step = grid.step
+    cols = grid.samples
+    frames = grid.frames[cols]
+    out = np.zeros(fit.goal.shape[0])
+    for k in problem.keepaways:
+        inside = (frames >= k.start) & (frames < k.end)
+        if not inside.any():
+            continue
+        c = cols[inside]
+        if k.column < 0 or problem.table is None:
+            pts = fit.goal[:, c]  # (B, S, 2)
+        else:
+            local = problem.table.at(fit.clip[:, c], fit.frame[:, c])[..., [k.column], :][..., [0, 2]]
+            pts = fit.corrected(local, c)[:, :, 0]
+        gap = np.linalg.norm(pts - k.track[frames[inside]][None], axis=-1)
+        d = np.maximum(k.radius + OBSTACLE_MARGIN - gap, 0.0)
+        cost = np.where(d > 0, (step / FRAMES_UNIT) * (1.0 + d / OBSTACLE_DEPTH_UNIT) ** 2, 0.0)
+        out += k.weight * cost.sum(axis=1)
     return out
 
 

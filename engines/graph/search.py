@@ -86,7 +86,7 @@ from ..library import MotionLibrary
 from .assemble import assemble, quality_inputs
 from .model import EdgeTree, FloatArray, FootContacts, IntArray, RootTracks
 from .paths import GraphIndex, Path, PathBatch, batch_valid, clip_sequence, path_pieces, trim
-from .score import Evaluation, PoseTarget, Problem, compile_problem, evaluate, score_batch
+from .score import Evaluation, KeepawayTarget, PoseTarget, Problem, compile_problem, evaluate, score_batch
 
 CHUNK = 1500
 """Candidates scored per call (keeps each call to a few milliseconds)."""
@@ -256,17 +256,24 @@ class GraphSearch:
         should_stop: ShouldStop,
         *,
         max_rounds: int | None = None,
+        keepaways: tuple[KeepawayTarget, ...] = (),
+        warm: Path | None = None,
     ) -> None:
         """Search until the search converges (:attr:`patience` rounds without a better path:
         the paper's "until no better path can be generated"), ``max_rounds`` rounds (or the
         request's ``rounds``), ``budget_s`` seconds or ``should_stop()``, emitting every new best
         and then the alternatives (module docstring). Only the budget depends on time: a search
         that converges or reaches its rounds within the budget gives the same result for the same
-        seed on any machine."""
+        seed on any machine.
+
+        ``keepaways`` (moving keep-out targets) and ``warm`` (a path that joins the first seeds,
+        so the search returns nothing worse) serve the coupled search of several characters
+        (:mod:`engines.graph.shared`); the best path emitted is left in :attr:`best_path_`."""
         if getattr(request, "rounds", None) is not None:
             max_rounds = int(request.rounds)
         t0 = time.perf_counter()
-        problem = compile_problem(request, self.library, self.tracks)
+        problem = compile_problem(request, self.library, self.tracks, keepaways)
+        self.best_path_: Path | None = None
         rng = np.random.default_rng(self.seed)
         clock = _Clock(budget_s, should_stop, t0)
         if should_stop():
@@ -284,6 +291,12 @@ class GraphSearch:
         reserve = 0.0
         try:
             seeds = self._seed_members(problem, rng, self.population, 0, clock)
+            if warm is not None:
+                ws = score_batch(self.index_, problem, PathBatch.from_paths([warm]))
+                if np.isfinite(ws.total[0]):
+                    w = trim(self.index_, ws.batch.path(0), problem.length)
+                    self._seen.add(w.key)
+                    seeds = sorted([*seeds, _Member(w, float(ws.total[0]), 0)], key=lambda m: m.score)
             if not seeds:
                 raise EngineError(self._no_seed_message(problem))
             population = seeds
@@ -614,6 +627,8 @@ class GraphSearch:
     def _emit(self, emit: Emitter, request: Any, path: Path, *, rank: int, local: bool) -> Path:
         t = time.perf_counter()
         ev = evaluate(self.index_, self._problem, path)
+        if rank == 0:
+            self.best_path_ = ev.path
         emit.solution(self.solution(ev, request, rank=rank, local=local))
         self._emit_cost = max(self._emit_cost, time.perf_counter() - t)
         return path

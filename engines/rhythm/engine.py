@@ -7,32 +7,32 @@ transition graph (:mod:`engines.rhythm.build`). Request ``engine: "rhythm"``
 of the graph with blended, time-warped movements (:mod:`engines.rhythm.synth`), optional control
 (per-beat direction/speed, a path to follow in formation, crowds steering around each other,
 couples), foot cleanup, and a report with the music beats, the motion beats detected in the
-output and the beat-align scores.
+output and the beat-align scores; couples with ``hand_hold`` get the hold measured (``hold[c]``,
+beside the example couples' own) and, with ``reach``, tightened (:mod:`engines.rhythm.hold`).
 
 Output: one character is a plain motion on the database skeleton. Several characters (or a
 couple) are one motion on a combined skeleton: a static ``world`` root with each character's
 skeleton under it, joint names prefixed ``c0_``, ``c1_``... (couples: ``c0_lead_``,
-``c0_follow_``), each character's hip carrying position channels. Provenance follows character 0
-(the leader of couple 0).
+``c0_follow_``), each character's hip carrying position channels (:mod:`engines.combine`).
+Provenance follows character 0 (the leader of couple 0).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from motion import Motion, MotionError, Skeleton
-from motion.goals import BeatGoal, Character, LengthGoal
+from motion.goals import BeatGoal, Character, Goal, HoldGoal, LengthGoal, Point, hold_figures
 from motion.metrics import beat_align_scores
 from motion.plausibility import SPEED_P99_MARGIN, SPEED_WINDOW_S
 from motion.quality import QualityInputs
-from motion.skeleton import POSITION_CHANNELS
 
 from ..base import Arrays, Emitter, Engine, EngineError, LiveSession, ShouldStop, Solution
+from ..combine import combine_motions, combined_characters
 from ..library import MotionLibrary
 from .build import build_rhythm, tables_from_arrays
 from .music import MusicError, bpm_beats, parse_midi
@@ -86,35 +86,6 @@ def _input(request: Any, ref: str) -> bytes:
         return bytes(request.input_bytes(ref))
     except KeyError as exc:
         raise EngineError(str(exc.args[0])) from None
-
-
-def combined_skeleton(skeletons: list[Skeleton], prefixes: list[str]) -> Skeleton:
-    """One skeleton holding several characters under a static ``world`` root (module doc)."""
-    names: list[str] = ["world"]
-    parents: list[int] = [-1]
-    offsets: list[Array] = [np.zeros((1, 3))]
-    channels: list[tuple[str, ...]] = [
-        ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation")
-    ]
-    es_par: list[npt.NDArray[np.intp]] = []
-    es_off: list[Array] = []
-    for sk, pre in zip(skeletons, prefixes, strict=True):
-        base = len(names)
-        names += [pre + n for n in sk.names]
-        parents += [0] + [int(p) + base for p in sk.parents[1:]]
-        offsets.append(sk.offsets)
-        root_ch = tuple(c for c in sk.channels[0] if c.endswith("rotation"))
-        channels += [POSITION_CHANNELS + root_ch, *sk.channels[1:]]
-        es_par.append(sk.end_site_parents + base)
-        es_off.append(sk.end_site_offsets)
-    return Skeleton(
-        tuple(names),
-        np.array(parents),
-        np.concatenate(offsets),
-        tuple(channels),
-        np.concatenate(es_par),
-        np.concatenate(es_off),
-    )
 
 
 def _path_control(
@@ -315,6 +286,55 @@ class RhythmEngine(Engine):
             ]
         return leaders, partners, r
 
+    def hold_goals(self, hold: Any, characters: tuple[Character, ...]) -> list[Goal]:
+        """The hand hold of each couple (``characters``: leader, follower, leader...) as a
+        :class:`motion.goals.HoldGoal` named ``hold[c]``, with what the example couples do
+        (``examples_held_fraction``, ``examples_median_cm``: the same joints, the same distance)."""
+        ends = self._hold_joints(hold)
+        max_m = float(hold.max_cm) / 100
+        extra = self._example_hold(ends[0], ends[1], max_m)
+        out: list[Goal] = []
+        for c in range(len(characters) // 2):
+            lead, follow = characters[2 * c], characters[2 * c + 1]
+            a = Point(2 * c, int(lead.joints[ends[0]]), f"c{c}_lead.{hold.leader_joint}")
+            b = Point(2 * c + 1, int(follow.joints[ends[1]]), f"c{c}_follow.{hold.follower_joint}")
+            out.append(HoldGoal(f"hold[{c}]", a, b, max_m, float(hold.min_fraction), extra))
+        return out
+
+    def _hold_joints(self, hold: Any) -> tuple[int, int]:
+        """The leader's and the follower's joint of a hand hold (an error naming the joints)."""
+        follower = self.follower_skeleton
+        if follower is None:  # pragma: no cover - couples need partners, checked by synthesize
+            raise EngineError("couples need a database built with 'partners'")
+        ends: list[int] = []
+        for role, sk, name in (
+            ("leader", self.leader_skeleton, hold.leader_joint),
+            ("follower", follower, hold.follower_joint),
+        ):
+            try:
+                ends.append(int(sk.index(name)))
+            except MotionError:
+                raise EngineError(
+                    f"hand_hold: the {role} has no joint named {name!r}; joints: {', '.join(sk.names)}"
+                ) from None
+        return ends[0], ends[1]
+
+    def _example_hold(self, lead_joint: int, follow_joint: int, max_m: float) -> dict[str, float]:
+        """The hold figures of the example couples (leader and follower clips captured together)."""
+        dists = []
+        for lead, follow in zip(self.meta["leaders"], self.meta["followers"], strict=False):
+            if not follow:
+                continue
+            a, b = self.library.clip(lead), self.library.clip(follow)
+            n = min(a.num_frames, b.num_frames)
+            pa = a.global_positions()[:n, lead_joint] * a.metres_per_unit
+            pb = b.global_positions()[:n, follow_joint] * b.metres_per_unit
+            dists.append(np.linalg.norm(pa - pb, axis=-1))
+        if not dists:
+            return {}
+        fig = hold_figures(np.concatenate(dists), max_m)
+        return {"examples_held_fraction": fig["held_fraction"], "examples_median_cm": fig["median_cm"]}
+
     def live_session(self, *, seed: int = 0, fps: float | None = None, accent: float = 0.6) -> LiveSession:
         """A dancer driven by beats as they happen (:class:`engines.rhythm.session.LiveDancer`)."""
         from .session import LiveDancer  # the session module builds on this one
@@ -330,6 +350,15 @@ class RhythmEngine(Engine):
             partners = [_clean(m, self.foot_floor(m.skeleton)) for m in partners]
             if should_stop():
                 return
+        hold = request.hand_hold
+        if hold is not None and hold.reach and partners:
+            from .hold import hold_hands
+
+            lj, fj = self._hold_joints(hold)
+            for c in range(len(partners)):
+                leaders[c], partners[c] = hold_hands(
+                    leaders[c], partners[c], lj, fj, float(hold.max_cm) / 100
+                )
         first = leaders[0]
         pos0 = first.global_positions()
         mint, bail, speed_minima = beat_align_scores(pos0, first.fps, beats)
@@ -366,11 +395,14 @@ class RhythmEngine(Engine):
             if partners:
                 chars.append((f"c{c}_follow", partners[c].skeleton))
         joins = np.array([p["start_frame"] for p in r.plans if p["start_frame"] > 0], dtype=np.intp)
-        inputs = QualityInputs(
-            goals=(LengthGoal(int(np.floor(beats[-1] * first.fps + 1e-9)) + 1), BeatGoal("music", beats)),
-            characters=_characters(chars, motion) if motion is not first else (),
-            joins=joins,
-        )
+        characters = combined_characters(chars, motion) if motion is not first else ()
+        goals: list[Goal] = [
+            LengthGoal(int(np.floor(beats[-1] * first.fps + 1e-9)) + 1),
+            BeatGoal("music", beats),
+        ]
+        if request.hand_hold is not None and partners:
+            goals += self.hold_goals(request.hand_hold, characters)
+        inputs = QualityInputs(goals=tuple(goals), characters=characters, joins=joins)
         solution = Solution(
             motion=motion,
             score=terms["misaligned"],
@@ -390,19 +422,6 @@ class RhythmEngine(Engine):
             },
         )
         emit.solution(self.finish(solution, inputs))
-
-
-def _characters(skeletons: list[tuple[str, Skeleton]], motion: Motion) -> tuple[Character, ...]:
-    """The characters ``(label, skeleton)`` of a combined output (:func:`combined_skeleton`:
-    joint 0 is the static ``world``, then each character's joints in its own order)."""
-    out: list[Character] = []
-    base = 1
-    for label, sk in skeletons:
-        out.append(Character(np.arange(base, base + sk.num_joints, dtype=np.intp), sk, label))
-        base += sk.num_joints
-    if base != motion.num_joints:
-        raise EngineError(f"the combined skeleton has {motion.num_joints} joints, the characters {base}")
-    return tuple(out)
 
 
 def _clean(m: Motion, floor: dict[int, tuple[float, float]]) -> Motion:
@@ -445,17 +464,4 @@ def _assemble(leaders: list[Motion], partners: list[Motion], couples: bool) -> M
         if partners:
             chars.append(partners[c])
             prefixes.append(f"c{c}_follow_")
-    sk = combined_skeleton([m.skeleton for m in chars], prefixes)
-    f = chars[0].num_frames
-    rot = np.concatenate([np.tile([0.0, 0.0, 0.0, 1.0], (f, 1, 1))] + [m.rotations for m in chars], axis=1)
-    jt = np.stack([m.root_positions for m in chars], axis=1)  # each character's hip translation
-    if any(m.joint_translations.shape[1] for m in chars):
-        raise EngineError("several characters with animated non-root translations are not supported")
-    return replace(
-        chars[0],
-        skeleton=sk,
-        root_positions=np.zeros((f, 3)),
-        rotations=rot,
-        joint_translations=jt,
-        name="rhythm",
-    )
+    return combine_motions(chars, prefixes, "rhythm")

@@ -97,6 +97,7 @@ async def submit(
     except InputError as exc:
         raise ApiError(422, exc.code, str(exc), {"inputs": job_request.input_files()}) from None
     await _check_budget(settings, store, limiter, job_request)
+    await _check_joints(store, job_request)
     quota.check(principal.name)
     payload = {"request": job_request.model_dump(mode="json")}
     info = await submit_job(
@@ -104,6 +105,23 @@ async def submit(
     )
     quota.add(principal.name, info.id)
     return info
+
+
+async def _check_joints(store: Store, job_request: JobRequestBase) -> None:
+    """422 ``unknown_joint`` when a graph request names a joint the database's skeleton lacks."""
+    named = getattr(job_request, "named_joints", None)
+    if named is None:
+        return
+    npz = str(store.db_dir(str(job_request.database)) / "data.npz")
+    names = (await run_in_threadpool(database_facts, npz)).joint_names
+    missing = [f"{where}: {joint!r}" for where, joint in named() if names and joint not in names]
+    if missing:
+        raise ApiError(
+            422,
+            "unknown_joint",
+            f"the database's skeleton has no joint named {'; '.join(missing)}",
+            {"unknown": missing, "joints": list(names)},
+        )
 
 
 async def _check_budget(

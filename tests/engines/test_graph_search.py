@@ -335,7 +335,7 @@ def test_search_is_anytime_improving_and_meets_the_constraints(graph: Graph) -> 
     assert errors["length"]["frames"] == 0 and errors["length"]["satisfied"]
     assert errors["body[0]"]["position_cm"] < 0.1 and errors["body[1]"]["position_cm"] < 0.1
     assert errors["body[1]"]["heading_deg"] < 0.1
-    assert set(final.terms) == {"continuity", "length", "body", "joint", "label", "obstacle"}
+    assert set(final.terms) == {"continuity", "length", "body", "joint", "label", "obstacle", "shared"}
     assert final.score == pytest.approx(sum(final.terms.values()))
     assert out.times[0] < 0.5  # first solution early (generous for loaded CI machines)
 
