@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -44,6 +44,9 @@ from .dp import (
     solve,
     typical_segment_cost,
 )
+
+if TYPE_CHECKING:
+    from .session import LiveControl
 from .points import derived_control, joint_cloud, resample_cloud, trajectory_control
 
 Array = npt.NDArray[np.float64]
@@ -137,6 +140,13 @@ class ControlEngine(Engine):
             heads=at(start),
             pair_bounds=np.stack((lo, self.db.offsets[rows[:, 0] + 1] - 1), axis=-1),
         )
+
+    def live_control(self, **settings: Any) -> LiveControl:
+        """A live session driven by a streamed control (:class:`engines.control.session.LiveControl`;
+        ``settings``: its ``latency_s``, ``k``, ``stretch_s``, ``solve_fps``, ``smoothing_s``)."""
+        from .session import LiveControl as Live  # the session module builds on this one
+
+        return Live(self, **settings)
 
     def continuity_weight(self, request: Any) -> float:
         """The request's ``k``, or the database kind's default (:data:`K_MOTION`, :data:`K_WALK`)."""
