@@ -1,5 +1,6 @@
 """Live control: ``WebSocket /v1/sessions/control?database=<id>&latency_s=2`` — a follower (or walker)
-generated while the leader's pose (or a path) streams in (:class:`engines.control.session.LiveControl`).
+generated while the leader's pose (or a path) streams in (:class:`engines.base.LiveControlSession`;
+the control engine's :class:`engines.control.session.LiveControl`).
 
 Protocol (JSON text messages):
 
@@ -25,16 +26,15 @@ from __future__ import annotations
 
 import contextlib
 import json
-from typing import Annotated, Any, cast
+from typing import Annotated, Any
 
 import anyio
 from fastapi import APIRouter, Query, WebSocket
 from fastapi.websockets import WebSocketDisconnect
 from pydantic import TypeAdapter, ValidationError
 
-from engines.base import EngineError
-from engines.control.engine import ControlEngine
-from engines.control.session import LiveControl
+from engines.base import EngineError, LiveControlSession
+from engines.registry import kind_class
 from schemas import DatabaseInfo
 from schemas.control import ControlSessionMessage, ControlSessionPath, ControlSessionPose
 from workers.execute import EngineCache
@@ -51,15 +51,18 @@ MAX_MESSAGE_CHARS = 65536
 """Longest client message (240 frames of 4 joints is about 30 KB)."""
 
 
-def _open(engines: EngineCache, store: Store, db_id: str, latency_s: float, k: float | None) -> LiveControl:
-    engine = cast(ControlEngine, engines.get(db_id, ControlEngine, store.database_arrays_bytes))
+def _open(
+    engines: EngineCache, store: Store, db_id: str, latency_s: float, k: float | None
+) -> LiveControlSession:
+    """A live control session on a database (its engine loaded once per process)."""
+    engine = engines.get(db_id, kind_class("control"), store.database_arrays_bytes)
     return engine.live_control(latency_s=latency_s, k=k)
 
 
-def _handle(session: LiveControl, message: ControlSessionPose | ControlSessionPath) -> dict[str, Any]:
+def _handle(session: LiveControlSession, message: ControlSessionPose | ControlSessionPath) -> dict[str, Any]:
     if isinstance(message, ControlSessionPose):
-        return session.push(message.frames)  # type: ignore[arg-type]
-    return session.push(message.points)  # type: ignore[arg-type]
+        return session.push(message.frames)
+    return session.push(message.points)
 
 
 @router.websocket("/control")
@@ -103,7 +106,7 @@ async def control_session(
         await _run(websocket, session)
 
 
-async def _run(websocket: WebSocket, session: LiveControl) -> None:
+async def _run(websocket: WebSocket, session: LiveControlSession) -> None:
     """Read, validate and answer client messages in order until ``stop`` or the client leaves."""
     with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
         while True:
