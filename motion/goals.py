@@ -147,7 +147,32 @@ class BeatGoal:
     min_score: float = BEAT_MIN_SCORE
 
 
-Goal = LengthGoal | BodyGoal | JointGoal | PoseGoal | ObstacleGoal | LabelGoal | PathGoal | BeatGoal
+@dataclass(frozen=True, slots=True)
+class HandholdGoal:
+    """At output ``frames (n,)`` the character holds a partner's hand (an annotation the engine
+    carried over from its examples): one of the output's ``joints`` (its hands) within
+    ``tolerance_cm`` of one of ``partner (n, H, 3)`` (the partner's hands there, metres).
+    ``satisfied`` needs ``min_fraction`` of the frames held."""
+
+    name: str
+    frames: npt.NDArray[np.intp]
+    joints: npt.NDArray[np.intp]
+    partner: Array
+    tolerance_cm: float = 20.0
+    min_fraction: float = LABEL_MIN_FRACTION
+
+
+Goal = (
+    LengthGoal
+    | BodyGoal
+    | JointGoal
+    | PoseGoal
+    | ObstacleGoal
+    | LabelGoal
+    | PathGoal
+    | BeatGoal
+    | HandholdGoal
+)
 
 
 def body_track(positions: Array, skeleton: Skeleton) -> tuple[Array, Array | None]:
@@ -203,6 +228,8 @@ def measure(
         return _measure_path(goal, positions, fps, characters)
     if isinstance(goal, BeatGoal):
         return _measure_beats(goal, positions, fps, characters)
+    if isinstance(goal, HandholdGoal):
+        return _measure_handhold(goal, positions)
     raise MotionError(f"unknown goal {goal!r}")  # pragma: no cover - the union is closed
 
 
@@ -362,6 +389,32 @@ def _measure_path(goal: PathGoal, positions: Array, fps: float, characters: Sequ
     }
     return e, None if ok else (
         f"{goal.name}: the body is {rms:.1f} cm (RMS) from the path (tolerance {goal.tolerance_cm:g} cm)"
+    )
+
+
+def _measure_handhold(goal: HandholdGoal, positions: Array) -> Measured:
+    """The fraction of the annotated frames whose nearest pair of hands (output, partner) is within
+    the tolerance, and the median of that distance (cm)."""
+    keep = (goal.frames >= 0) & (goal.frames < positions.shape[0])
+    if not keep.any():
+        return {"frames": 0, "satisfied": True}, None
+    own = positions[goal.frames[keep]][:, goal.joints]  # (n, K, 3)
+    part = goal.partner[keep]  # (n, H, 3)
+    dist = 100 * np.linalg.norm(own[:, :, None] - part[:, None], axis=-1).min(axis=(1, 2))  # (n,) cm
+    held = float((dist <= goal.tolerance_cm).mean())
+    ok = held >= goal.min_fraction
+    e = {
+        "frames": int(dist.size),
+        "held_fraction": _r(held),
+        "median_cm": _r(float(np.median(dist))),
+        "tolerance_cm": goal.tolerance_cm,
+        "min_fraction": goal.min_fraction,
+        "satisfied": ok,
+    }
+    return e, None if ok else (
+        f"{goal.name}: hands within {goal.tolerance_cm:g} cm on {100 * held:.0f}% of the {dist.size} "
+        f"frames that hold hands in the examples (wanted {100 * goal.min_fraction:.0f}%; "
+        f"median {np.median(dist):.0f} cm)"
     )
 
 

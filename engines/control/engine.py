@@ -13,6 +13,7 @@ and bound against the best score so far; no optimal sequence is ever pruned), ea
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -23,7 +24,7 @@ from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
 from motion import Motion, MotionError
 from motion.bvh import parse_bvh
-from motion.goals import Goal, LengthGoal, PathGoal
+from motion.goals import Goal, HandholdGoal, LengthGoal, PathGoal
 from motion.quality import QualityInputs
 
 from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
@@ -54,6 +55,8 @@ Array = npt.NDArray[np.float64]
 # default continuity weights (seconds), chosen experimentally as in the paper: databases of control
 # motions (a leader drives a follower; leave-one-dance-out on the 14 CMU salsa couples: mean follower
 # error 0.163 x height at 0.1, 0.167 at 0.2, 0.192 at 0.6) and derived walk controls (a path)
+_HANDS = re.compile(r"hand|wrist", re.IGNORECASE)
+
 K_MOTION = 0.1
 K_WALK = 0.2
 
@@ -464,6 +467,27 @@ class ControlEngine(Engine):
         except MotionError:
             return motion
 
+    def _handhold_goal(
+        self, hold: npt.NDArray[np.int8], ctl: ControlInputCloud, motion: Motion
+    ) -> Goal | None:
+        """The propagated hand hold as a goal of the quality report (:class:`motion.goals.HandholdGoal`):
+        where the chosen examples hold hands, the output's hands should be at the control's hands
+        (a motion control whose cloud has hands; ``None`` otherwise)."""
+        if ctl.path is not None or self.db.derived or not (hold == 1).any():
+            return None
+        cj = [i for i, n in enumerate(self.db.meta["control_joints"]) if _HANDS.search(n)]
+        own = [motion.skeleton.names.index(n) for n in self.db.meta["target_joints"] if _HANDS.search(n)]
+        if not cj or not own or ctl.cloud.shape[0] != motion.num_frames:
+            return None
+        frames = np.flatnonzero(hold == 1).astype(np.intp)
+        return HandholdGoal(
+            "handhold",
+            frames,
+            np.asarray(own, dtype=np.intp),
+            ctl.cloud[frames][:, cj],
+            tolerance_cm=100 * float(self.db.meta.get("handhold_m", 0.2)),
+        )
+
     def _solution(
         self,
         out: Assembled,
@@ -530,6 +554,9 @@ class ControlEngine(Engine):
             **timings,
         }
         goals: list[Goal] = [LengthGoal(ctl.cloud.shape[0])]
+        hold_goal = self._handhold_goal(hold, ctl, motion)
+        if hold_goal is not None:
+            goals.append(hold_goal)
         if ctl.path is not None:
             frames = np.arange(ctl.path.shape[0], dtype=np.intp)
             goals.append(PathGoal("path", frames, ctl.path, tolerance_cm=PATH_TOLERANCE_CM))
