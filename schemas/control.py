@@ -299,6 +299,11 @@ class ControlRequest(JobRequestBase):
     constraints: list[InstanceConstraint] = Field(default_factory=list, max_length=1000)
     smoothing_s: float = Field(default=0.15, ge=0, le=2, description="blend half-width across boundaries")
     footskate: bool = Field(default=True, description="clean up foot skate where a cleanup is available")
+    hold_hands: bool = Field(
+        default=True,
+        description="where the chosen examples hold hands, put the output's hand on the control's hand "
+        "(arm IK; dance databases)",
+    )
 
     @model_validator(mode="after")
     def _stretch(self) -> ControlRequest:
