@@ -22,7 +22,7 @@ from numba import njit
 INF = np.inf
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _place(
     pts: np.ndarray,
     p: int,
@@ -51,7 +51,7 @@ def _place(
         out[o, q, 2] = -sth * x + cth * z + tz
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _aligned(
     cell: int,
     end: int,
