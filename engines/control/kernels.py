@@ -143,6 +143,8 @@ def forward(
     skey = np.empty(cells)
     ytab = np.empty((cells, nq, 3))
     hbuf = np.empty((1, nq, 3))
+    ybar = np.empty((cells, 3))
+    hbar = np.empty(3)
     for t in range(1, t_len):
         # predecessors: cells ending at t with a score within the bound and the beam
         qmin = INF
@@ -204,12 +206,21 @@ def forward(
             c = ps[j]
             p = cell_inst[c]
             _aligned(c, t, tails, p, C, S, sum_a, n_pts, dur, context, cs, rot, trans, rigid, ytab, j)
+        for j in range(npred):
+            for b in range(3):
+                ybar[j, b] = 0.0
+                for a in range(nq):
+                    ybar[j, b] += ytab[j, a, b] / nq
         for i in range(nsucc):
             c = ss[i]
             e = t + dur[c]
             p = cell_inst[c]
             _aligned(c, e, heads, p, C, S, sum_a, n_pts, dur, context, cs, rot, trans, rigid, hbuf, 0)
             dc = DT[e, c]
+            hbar[:] = 0.0
+            for a in range(nq):
+                for b in range(3):
+                    hbar[b] += hbuf[0, a, b] / nq
             limit = ub - dc - F[e]  # a total above the bound is pruned anyway
             best = INF
             arg = -1
@@ -217,8 +228,14 @@ def forward(
                 q = qs[j]
                 if q >= best or q > limit:
                     break
-                # early abandon: stop adding points once the partial total cannot win
+                # early abandon: stop adding points once the partial total cannot win; first the
+                # centroids (sum_q |y_q - h_q|^2 >= Q |mean y - mean h|^2), 3 numbers instead of 3 Q
                 room = (min(best, limit) - q) / kq if kq > 0 else INF
+                d0 = ybar[j, 0] - hbar[0]
+                d1 = ybar[j, 1] - hbar[1]
+                d2 = ybar[j, 2] - hbar[2]
+                if nq * (d0 * d0 + d1 * d1 + d2 * d2) > room:
+                    continue
                 acc = 0.0
                 for a in range(nq):
                     for b in range(3):
