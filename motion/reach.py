@@ -40,9 +40,16 @@ def smooth_weights(active: npt.NDArray[np.bool_], blend: int) -> Array:
     return np.asarray(x * x * (3.0 - 2.0 * x))
 
 
-def reach(motion: Motion, joints: npt.NDArray[np.intp], targets: Array, weights: Array) -> Motion:
+def reach(
+    motion: Motion,
+    joints: npt.NDArray[np.intp],
+    targets: Array,
+    weights: Array,
+    fk: tuple[Array, Array] | None = None,
+) -> Motion:
     """The motion with each of ``joints (K,)`` moved towards ``targets (F, K, 3)`` (motion units)
-    by ``weights (F, K)`` (0 = unchanged, 1 = on the target when within reach).
+    by ``weights (F, K)`` (0 = unchanged, 1 = on the target when within reach). ``fk``: the
+    motion's :meth:`Motion.fk` when the caller has it already.
 
     Raises :class:`MotionError` when a joint has no two-bone chain below the root, or two chains
     share joints."""
@@ -64,7 +71,7 @@ def reach(motion: Motion, joints: npt.NDArray[np.intp], targets: Array, weights:
             raise MotionError(f"the chain of {sk.names[j]!r} shares joints with another")
         used |= members
         chains.append(Leg(top, mid, j, -1, -1, -1))
-    pos, grot = motion.fk()
+    pos, grot = motion.fk() if fk is None else fk
     local = np.array(motion.rotations, copy=True)
     # a straight arm bends with the forearm forward (the opposite of a knee)
     backward = -_forward(motion, pos)

@@ -517,11 +517,12 @@ class ControlEngine(Engine):
         joints = np.array([motion.skeleton.names.index(n) for n in names], dtype=np.intp)
         # the correction, not the target, is smoothed in time: the control's hands carry capture
         # noise and the example offsets change at segment boundaries
-        hands = motion.global_positions()[:, joints]
+        fk = motion.fk()
+        hands = fk[0][:, joints]
         corr = gaussian_filter1d(weights[..., None] * (targets - hands), HOLD_SMOOTH_S * motion.fps, axis=0)
         moving = (np.abs(corr).max(axis=-1) > 0).astype(np.float64)
         try:
-            return reach(motion, joints, hands + corr, moving)
+            return reach(motion, joints, hands + corr, moving, fk)
         except MotionError:
             return motion
 
