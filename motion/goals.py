@@ -152,13 +152,15 @@ class HandholdGoal:
     """At output ``frames (n,)`` the character holds a partner's hand (an annotation the engine
     carried over from its examples): one of the output's ``joints`` (its hands) within
     ``tolerance_cm`` of one of ``partner (n, H, 3)`` (the partner's hands there, metres).
-    ``satisfied`` needs ``min_fraction`` of the frames held."""
+    Frames within ``margin`` of either end of a run of consecutive frames (the hands joining or
+    letting go) are not counted for ``satisfied``, which needs ``min_fraction`` of the rest held."""
 
     name: str
     frames: npt.NDArray[np.intp]
     joints: npt.NDArray[np.intp]
     partner: Array
     tolerance_cm: float = 20.0
+    margin: int = 0
     min_fraction: float = LABEL_MIN_FRACTION
 
 
@@ -396,6 +398,14 @@ def _measure_handhold(goal: HandholdGoal, positions: Array) -> Measured:
     """The fraction of the annotated frames whose nearest pair of hands (output, partner) is within
     the tolerance, and the median of that distance (cm)."""
     keep = (goal.frames >= 0) & (goal.frames < positions.shape[0])
+    if goal.margin > 0 and goal.frames.size:
+        # position of each frame in its run of consecutive frames, from the start and from the end
+        f = goal.frames
+        starts = np.concatenate(([True], np.diff(f) != 1))
+        run = np.cumsum(starts) - 1
+        first = np.flatnonzero(starts)
+        last = np.concatenate((first[1:], [f.size])) - 1
+        keep &= (f - f[first[run]] >= goal.margin) & (f[last[run]] - f >= goal.margin)
     if not keep.any():
         return {"frames": 0, "satisfied": True}, None
     own = positions[goal.frames[keep]][:, goal.joints]  # (n, K, 3)
@@ -408,6 +418,7 @@ def _measure_handhold(goal: HandholdGoal, positions: Array) -> Measured:
         "held_fraction": _r(held),
         "median_cm": _r(float(np.median(dist))),
         "tolerance_cm": goal.tolerance_cm,
+        "margin_frames": goal.margin,
         "min_fraction": goal.min_fraction,
         "satisfied": ok,
     }

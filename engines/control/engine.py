@@ -545,6 +545,7 @@ class ControlEngine(Engine):
             np.asarray(own, dtype=np.intp),
             ctl.cloud[frames][:, cj],
             tolerance_cm=100 * float(self.db.meta.get("handhold_m", 0.2)),
+            margin=int(round(HOLD_BLEND_S * motion.fps)),  # joining and letting go (see _hold_hands)
         )
 
     def _solution(

@@ -20,6 +20,10 @@ def test_handhold_goal_counts_the_frames_whose_hands_meet() -> None:
     assert reason is not None and "75%" in reason
     loose = HandholdGoal("handhold", np.array([2, 3, 4]), np.array([1, 2]), partner[:3])
     assert measure(loose, positions, 30.0, [])[1] is None
+    # with a margin, the ends of each run of frames are not counted (joining, letting go)
+    runs = HandholdGoal("handhold", np.array([2, 3, 4, 5]), np.array([1, 2]), partner, margin=1)
+    kept, _ = measure(runs, positions, 30.0, [])
+    assert kept["frames"] == 2 and kept["held_fraction"] == 1.0 and kept["satisfied"]
     # frames beyond the output are not counted
     beyond = HandholdGoal("handhold", np.array([20]), np.array([1]), partner[:1])
     assert measure(beyond, positions, 30.0, [])[0] == {"frames": 0, "satisfied": True}
