@@ -290,7 +290,7 @@ def baselines(held: str, leader: Motion, follower: Motion, out: Motion) -> dict[
     return {
         "nearest_frame_x_height": round(points_error(nearest, follower, height), 4),
         "average_partner_x_height": round(points_error(average, follower, height), 4),
-        "jerk_m_s3": {
+        "jerk_compared_m_s3": {
             "output": round(points_jerk(_points(out, POINTS), out.fps), 1),
             "nearest_frame": round(points_jerk(nearest, leader.fps), 1),
             "real_follower": round(points_jerk(_points(follower, POINTS), follower.fps), 1),
