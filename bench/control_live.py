@@ -53,11 +53,14 @@ def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def stream(session: LiveControl, cloud: np.ndarray, chunk: int) -> tuple[Motion, list[float], list[float]]:
+def stream(
+    session: LiveControl, cloud: np.ndarray, chunk: int
+) -> tuple[Motion, list[float], list[float], int]:
     """Push ``cloud (F, P, 3)`` ``chunk`` frames at a time, then finish. Returns the target motion,
-    the compute time of every message (s) and, per target frame, the compute time of the message
-    that released it (s)."""
+    the compute time of every message (s), per target frame the compute time of the message that
+    released it (s), and the most frames the session was ever behind its stated latency."""
     roots, rots, push_s, frame_wait = [], [], [], []
+    behind = 0
     steps = [cloud[i : i + chunk] for i in range(0, cloud.shape[0], chunk)]
     for k, frames in enumerate([*steps, None]):
         t0 = time.perf_counter()
@@ -65,6 +68,7 @@ def stream(session: LiveControl, cloud: np.ndarray, chunk: int) -> tuple[Motion,
         dt = time.perf_counter() - t0
         if frames is not None:
             push_s.append(dt)
+            behind = max(behind, session.received - session.latency - session.frame)
         n = len(msg["root"])
         if n and frames is not None:
             frame_wait += [dt] * n
@@ -82,7 +86,7 @@ def stream(session: LiveControl, cloud: np.ndarray, chunk: int) -> tuple[Motion,
         fps=session.fps,
         name="live",
     )
-    return motion, push_s, frame_wait
+    return motion, push_s, frame_wait, behind
 
 
 def points_of(motion: Motion) -> np.ndarray:
@@ -117,7 +121,7 @@ def run(held: str, latencies: list[float], chunk: int, cache: Path | None) -> di
     }
     for lat in latencies:
         session = LiveControl(engine, latency_s=lat)
-        out, push_s, wait = stream(session, cloud, chunk)
+        out, push_s, wait, behind = stream(session, cloud, chunk)
         n = min(out.num_frames, ref_pts.shape[0])
         vs = float(np.linalg.norm(points_of(out)[:n] - ref_pts[:n], axis=-1).mean() / height)
         budget = chunk / engine.db.fps
@@ -134,6 +138,7 @@ def run(held: str, latencies: list[float], chunk: int, cache: Path | None) -> di
                 "max": round(session.latency_s * 1000 + pct(wait, 100), 1),
             },
             "realtime_ok": bool(max(push_s) <= budget),
+            "max_frames_behind_latency": int(behind),
             "solve_ms_median": pct(session.solve_s, 50),
             "solves": session.solves,
         }
