@@ -17,6 +17,13 @@ hip controls, footplant segmentation; a held-out walk's hip path drives it). For
   smoothing, foot-skate cleanup) with ``exact: false`` (the beam schedule) and with the exact stage;
 * ``beam_vs_exact``: relative excess of the beam's score over the exact optimum (goal <= 1%).
 
+* ``cpu_x_realtime``: the same ratios from the median CPU time of this process (steadier than wall
+  time on a shared machine: it leaves out the time other processes hold the cores);
+* ``request_stages_cpu_ms``: median CPU milliseconds of each stage of a request (parse, interpret,
+  quick DP, beam DP, re-time, assemble with clean-up, hand hold and quality report);
+* ``first_call_s``: the first DP call in a fresh process, compiling the numba kernel (empty cache)
+  and loading it from ``__pycache__`` (the cost a fresh worker pays once).
+
 Prints one JSON object. Timings are best-of ``--repeat`` (the machine is shared).
 """
 
@@ -24,7 +31,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -69,13 +79,77 @@ def engine_for(spec_data: dict[str, Any]) -> ControlEngine:
     return ControlEngine(library, arrays)
 
 
-def best_of(repeat: int, fn: Any) -> tuple[float, Any]:
-    best, out = np.inf, None
+CPU: dict[str, float] = {}
+"""Median CPU seconds (this process) of every timed step, by name, filled by :func:`best_of`."""
+
+
+def best_of(repeat: int, fn: Any, name: str | None = None) -> tuple[float, Any]:
+    """The best wall time of ``repeat`` runs of ``fn`` and its result; the median CPU time of the
+    runs goes into :data:`CPU` under ``name`` (CPU time counts only this process's own work, so it
+    is steadier than wall time on a shared machine)."""
+    best, out, cpu = np.inf, None, []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         out = fn()
         best = min(best, time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    if name is not None:
+        CPU[name] = float(np.median(cpu))
     return best, out
+
+
+def first_call_s() -> dict[str, float]:
+    """Seconds of the first DP call in a fresh process: with an empty numba cache (compiling) and
+    with the cache the package keeps in ``__pycache__`` (loading)."""
+    code = (
+        "import time, numpy as np;"
+        "from engines.control.dp import Instances, interpretation, legal_cells, solve;"
+        "c = np.random.default_rng(0).normal(size=(60, 3, 3)); s = np.arange(0, 50, 5);"
+        "i = Instances(10.0, s, np.full(10, 5), c, c[s + 5], c[s]);"
+        "ci, cd = legal_cells(i.length / 10.0, 10.0, 0.1, None); x = c[:30];"
+        "it = interpretation(x, i, ci, cd, 10.0); t = time.perf_counter(); solve(it, i, ci, cd, 0.1);"
+        "print(time.perf_counter() - t)"
+    )
+    out = {}
+    with tempfile.TemporaryDirectory() as empty:
+        for label, env in (("compile", {"NUMBA_CACHE_DIR": empty}), ("cached", {})):
+            r = subprocess.run(
+                [sys.executable, "-c", code],
+                cwd=ROOT,
+                env={**os.environ, **env},
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            out[label] = round(float(r.stdout.strip().splitlines()[-1]), 3)
+    return out
+
+
+def stage_costs(engine: ControlEngine, request: Any, repeat: int) -> dict[str, float]:
+    """Median CPU milliseconds of each stage of a request (the quick stage's solution): parse the
+    control, interpret it (every cell and end time), the quick DP, the default beam stage, re-time
+    at the full rate, assemble (with foot clean-up, hand hold and the quality report)."""
+    steps: dict[str, Any] = {}
+    t: dict[str, float] = {}
+
+    def run(name: str, fn: Any) -> Any:
+        best_of(repeat, fn, name)
+        t[name] = round(CPU[name] * 1000, 2)
+        return fn()
+
+    ctl = run("parse", lambda: engine.control_cloud(request))
+    pb = run("interpret", lambda: engine._interpret(request, ctl))
+    res = run("quick", lambda: engine._solve_stage(pb, "quick", pb.d_unit, None, request, None))
+    unit = res.score / max(1, res.cells.size)
+    run("beam", lambda: engine._solve_stage(pb, "beam", unit, None, request, None))
+    steps["timed"] = run(
+        "retime",
+        lambda: engine._retime(
+            res, pb.x_full, pb.cell_inst, pb.cell_dur, pb.rate, request, pb.constraints, pb.window, pb.inst
+        ),
+    )
+    run("assemble", lambda: engine._assembled(pb, ctl, res, steps["timed"], "quick", request, {}))
+    return t
 
 
 def measure(engine: ControlEngine, request: Any, input_s: float, repeat: int) -> dict[str, Any]:
@@ -92,23 +166,25 @@ def measure(engine: ControlEngine, request: Any, input_s: float, repeat: int) ->
 
     out: dict[str, Any] = {"input_s": round(input_s, 2), "instances": int(inst.count), "cells": int(ci.size)}
     with threadpool_limits(limits=1):
-        t_prep, (interp, to_go) = best_of(repeat, prep)
+        t_prep, (interp, to_go) = best_of(repeat, prep, "interpretation")
         d_unit = typical_segment_cost(interp.D)
         t_quick, quick = best_of(
             repeat,
             lambda: solve(
                 interp, inst, ci, cd, k, beam=QUICK_WIDTH * d_unit, max_cells=QUICK_CELLS, to_go=to_go
             ),
+            "quick",
         )
         unit = quick.score / len(quick.cells)
         t_beam1, beam = best_of(
             repeat,
             lambda: solve(interp, inst, ci, cd, k, beam=BEAM_WIDTH * unit, max_cells=BEAM_CELLS, to_go=to_go),
+            "beam",
         )
         t_beam = t_quick + t_beam1
-        t_exh, exh = best_of(1, lambda: solve(interp, inst, ci, cd, k))
+        t_exh, exh = best_of(1, lambda: solve(interp, inst, ci, cd, k), "exhaustive")
         t_bnb, bnb = best_of(
-            repeat, lambda: solve(interp, inst, ci, cd, k, upper_bound=beam.score, to_go=to_go)
+            repeat, lambda: solve(interp, inst, ci, cd, k, upper_bound=beam.score, to_go=to_go), "bnb"
         )
     out.update(
         dp_beam_x_realtime=round(input_s / (t_prep + t_beam), 1),
@@ -128,12 +204,27 @@ def measure(engine: ControlEngine, request: Any, input_s: float, repeat: int) ->
     )
     fast = request.model_copy(update={"exact": False})
     fast.attach_inputs(dict(request._inputs))
-    t_search, _ = best_of(repeat, lambda: engine.search(fast, 60.0, CollectingEmitter(), lambda: False))
-    t_full, _ = best_of(repeat, lambda: engine.search(request, 60.0, CollectingEmitter(), lambda: False))
+    t_search, _ = best_of(
+        repeat, lambda: engine.search(fast, 60.0, CollectingEmitter(), lambda: False), "search_beam"
+    )
+    t_full, _ = best_of(
+        repeat, lambda: engine.search(request, 60.0, CollectingEmitter(), lambda: False), "search_exact"
+    )
     out.update(
         search_beam_x_realtime=round(input_s / t_search, 1),
         search_exact_x_realtime=round(input_s / t_full, 1),
     )
+    c = CPU
+    out["cpu_x_realtime"] = {
+        "dp_quick": round(input_s / (c["interpretation"] + c["quick"]), 1),
+        "dp_beam": round(input_s / (c["interpretation"] + c["quick"] + c["beam"]), 1),
+        "dp_exact_exhaustive": round(input_s / (c["interpretation"] + c["exhaustive"]), 1),
+        "dp_exact_bnb": round(input_s / (c["interpretation"] + c["quick"] + c["beam"] + c["bnb"]), 1),
+        "search_beam": round(input_s / c["search_beam"], 1),
+        "search_exact": round(input_s / c["search_exact"], 1),
+    }
+    with threadpool_limits(limits=1):
+        out["request_stages_cpu_ms"] = stage_costs(engine, fast, repeat)
     return out
 
 
@@ -207,6 +298,8 @@ def main() -> None:
                 "solve_fps": 10.0 if args.solve_fps is None else args.solve_fps,
                 "salsa": salsa(args.held, args.repeat, args.solve_fps),
                 "walk": walks(args.repeat, args.solve_fps),
+                "first_call_s": first_call_s(),
+                "load_avg": [round(x, 2) for x in os.getloadavg()],
             }
         )
     )

@@ -13,11 +13,18 @@ leader (the engine's best solution within ``--budget`` seconds; default the requ
 check's ``segue synth``; ``--request`` adds request fields such as ``k``), and compared with the
 moved real follower, output frame ``i`` against the follower frame nearest in time.
 
+``--settings`` compares several request settings (name -> request fields) on the same databases;
+every figure is given per dance and per setting.
+
 Prints one JSON object on stdout (progress lines go to stderr)::
 
-    {"dances": {"07": {"error_x_height", "placement_x_height", "pose_x_height",
-                       "build_s", "synth_s", "frames"}, ...},
-     "mean_error_x_height", "dances_over_0_17", "load_avg"}
+    {"dances": {"07": {"build_s", "instances",
+                       "<setting>": {"error_x_height", "placement_x_height", "pose_x_height",
+                                     "jerk_m_s3", "foot_slide_m_s", "handhold_held", "synth_s",
+                                     "frames"}, ...}, ...},
+     "settings": {"<setting>": {"mean_error_x_height", "worst_error_x_height", "dances_over_0_17",
+                                "mean_jerk_m_s3", "mean_foot_slide_m_s", "median_synth_s"}},
+     "load_avg"}
 
 * ``error_x_height``: the check's figure — mean distance between the generated and the real
   follower's hip, head, rHand, lHand, rFoot and lFoot (all frames, all six points), divided by the
@@ -26,11 +33,16 @@ Prints one JSON object on stdout (progress lines go to stderr)::
   generated and the real hip, same unit;
 * ``pose_x_height``: the pose with the placement taken out — mean distance between the other five
   points expressed relative to the hip (world axes, so the heading still counts), same unit;
+* ``jerk_m_s3``: mean |third derivative| of the six points of the output (m/s³);
+* ``foot_slide_m_s``: the output's mean horizontal foot speed while the contacts the engine carried
+  over from the examples say the foot is planted (m/s, :func:`motion.metrics.foot_slip`);
+* ``handhold_held``: of the output frames whose examples hold hands, the fraction where a hand of
+  the output is within the database's ``handhold_m`` of a hand of the leader (the quality report's
+  ``handhold`` entry);
 * ``build_s``: seconds to build the database (library + control arrays), ``null`` when it was loaded
   from ``--cache``; ``synth_s``: seconds of the whole search request; ``frames``: output frames;
   ``instances``: instances the database keeps after clustering;
-* ``mean_error_x_height``: mean of ``error_x_height`` over the dances run;
-* ``dances_over_0_17``: the dances whose error exceeds the acceptance bar (0.17);
+* ``dances_over_0_17``: the dances whose error exceeds 0.17 (the earlier acceptance bar);
 * ``load_avg``: the machine's 1, 5 and 15 minute load averages at the end (timings are noisy on a
   shared machine).
 """
@@ -66,7 +78,7 @@ from motion import rotations as rot  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.bvh import bvh_text, parse_bvh  # noqa: E402
 from motion.ground import from_ground_frame, ground_frames, to_ground_frame  # noqa: E402
-from motion.metrics import points_jerk  # noqa: E402
+from motion.metrics import foot_slip, points_jerk  # noqa: E402
 from schemas.databases import parse_database_spec  # noqa: E402
 from schemas.jobs import parse_job_request  # noqa: E402
 from workers.store import load_npz, npz_bytes  # noqa: E402
@@ -278,7 +290,7 @@ def baselines(held: str, leader: Motion, follower: Motion, out: Motion) -> dict[
     return {
         "nearest_frame_x_height": round(points_error(nearest, follower, height), 4),
         "average_partner_x_height": round(points_error(average, follower, height), 4),
-        "jerk_m_s3": {
+        "jerk_compared_m_s3": {
             "output": round(points_jerk(_points(out, POINTS), out.fps), 1),
             "nearest_frame": round(points_jerk(nearest, leader.fps), 1),
             "real_follower": round(points_jerk(_points(follower, POINTS), follower.fps), 1),
@@ -286,14 +298,11 @@ def baselines(held: str, leader: Motion, follower: Motion, out: Motion) -> dict[
     }
 
 
-def run_dance(
-    job: tuple[str, float, float, float, float | None, str | None, dict[str, Any], bool, dict[str, Any]],
-) -> tuple[str, dict[str, Any]]:
-    """One held-out dance: build (or load), move, synthesize, measure (and the baselines)."""
-    held, yaw, tx, tz, budget, cache, extra, with_baselines, db_extra = job
-    engine, build_s = engine_for(held, None if cache is None else Path(cache), db_extra)
-    leader = moved(parse_bvh((SALSA / f"60_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
-    follower = moved(parse_bvh((SALSA / f"61_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
+def synthesize(
+    engine: ControlEngine, leader: Motion, extra: dict[str, Any], budget: float | None
+) -> tuple[Any, float]:
+    """The engine's best solution for ``leader`` with request fields ``extra``, and the seconds the
+    whole request took (parse, interpret, solve, re-time, assemble)."""
     request_data: dict[str, Any] = {**extra, "engine": "control", "control": {"bvh": "lead.bvh"}}
     if budget is not None:
         request_data["budget_s"] = budget
@@ -304,21 +313,56 @@ def run_dance(
     engine.search(request, request.budget_s, quiet, lambda: False)
     synth_s = time.perf_counter() - t0
     if not quiet.solutions:
-        raise RuntimeError(f"dance {held}: the engine found no solution within {request.budget_s} s")
-    out = min(quiet.solutions, key=lambda s: s.score).motion  # the runtime's best result
-    ratio = (out.num_frames / out.fps) / (follower.num_frames / follower.fps)  # as the check
-    if abs(ratio - 1.0) > 0.02:
-        log(f"warning: dance {held}: output lasts {ratio:.3f}x the control motion (the check fails > 2%)")
+        raise RuntimeError(f"the engine found no solution within {request.budget_s} s")
+    return min(quiet.solutions, key=lambda s: s.score), synth_s  # the runtime's best result
+
+
+def output_measures(solution: Any) -> dict[str, Any]:
+    """Jerk of the six points (m/s^3), foot slide while the propagated contacts are planted (m/s)
+    and the fraction of the propagated hand-hold frames whose hands meet (quality report)."""
+    out = solution.motion
+    fc = solution.annotations["foot_contacts"]
+    joints = np.array([out.skeleton.names.index(n) for n in fc["joints"]], dtype=np.intp)
+    flags = np.asarray(fc["flags"], dtype=bool).T
+    hold = solution.quality.constraint_errors.get("handhold") if solution.quality is not None else None
+    return {
+        "jerk_m_s3": round(points_jerk(_points(out, POINTS), out.fps), 1),
+        "foot_slide_m_s": round(foot_slip(out, contacts=flags, joints=joints), 4),
+        "handhold_held": None if hold is None else hold.get("held_fraction"),
+    }
+
+
+def run_dance(
+    job: tuple[
+        str, float, float, float, float | None, str | None, dict[str, dict[str, Any]], bool, dict[str, Any]
+    ],
+) -> tuple[str, dict[str, Any]]:
+    """One held-out dance: build (or load), move, then for every setting synthesize and measure
+    (and the baselines, on the first setting's output)."""
+    held, yaw, tx, tz, budget, cache, settings, with_baselines, db_extra = job
+    engine, build_s = engine_for(held, None if cache is None else Path(cache), db_extra)
+    leader = moved(parse_bvh((SALSA / f"60_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
+    follower = moved(parse_bvh((SALSA / f"61_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
     result: dict[str, Any] = {
-        **follower_errors(out, follower, leader),
         "build_s": None if build_s is None else round(build_s, 1),
-        "synth_s": round(synth_s, 1),
-        "frames": out.num_frames,
         "instances": int(engine.kept_.size),
     }
-    if with_baselines:
-        result.update(baselines(held, leader, follower, out))
-    log(f"dance {held}: {json.dumps(result)}")
+    for k, (name, extra) in enumerate(settings.items()):
+        solution, synth_s = synthesize(engine, leader, extra, budget)
+        out = solution.motion
+        ratio = (out.num_frames / out.fps) / (follower.num_frames / follower.fps)  # as the check
+        if abs(ratio - 1.0) > 0.02:
+            log(f"warning: dance {held}: output lasts {ratio:.3f}x the control motion (the check fails > 2%)")
+        entry = {
+            **follower_errors(out, follower, leader),
+            **output_measures(solution),
+            "synth_s": round(synth_s, 2),
+            "frames": out.num_frames,
+        }
+        if with_baselines and k == 0:
+            entry.update(baselines(held, leader, follower, out))
+        log(f"dance {held} [{name}]: {json.dumps(entry)}")
+        result[name] = entry
     return held, result
 
 
@@ -342,6 +386,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--budget", type=float, default=None, help="search budget, s (default: the request's)")
     ap.add_argument(
         "--request", default="{}", help="extra request fields as a JSON object, e.g. '{\"k\": 0.2}'"
+    )
+    ap.add_argument(
+        "--settings",
+        default=None,
+        help="settings to compare, a JSON object of name -> request fields, e.g. "
+        '\'{"k 0.1": {}, "k 0.2": {"k": 0.2}}\' (default: one setting, \'default\', with --request)',
     )
     ap.add_argument(
         "--database",
@@ -375,9 +425,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.budget is not None and args.budget <= 0:
         ap.error("--budget must be positive")
     extra = json_object(ap, "--request", args.request)
+    settings = {"default": extra} if args.settings is None else json_object(ap, "--settings", args.settings)
+    if not settings or not all(isinstance(v, dict) for v in settings.values()):
+        ap.error("--settings takes a JSON object of name -> request fields (objects)")
     db_extra = json_object(ap, "--database", args.database)
     cache = None if args.cache is None else str(args.cache.resolve())
-    jobs = [(h, args.yaw, tx, tz, args.budget, cache, extra, args.baselines, db_extra) for h in held]
+    jobs = [(h, args.yaw, tx, tz, args.budget, cache, settings, args.baselines, db_extra) for h in held]
     log(f"{len(jobs)} held-out dance(s): {','.join(held)}; {args.jobs} process(es)")
     if args.jobs == 1:
         results = [run_dance(job) for job in jobs]
@@ -385,17 +438,20 @@ def main(argv: list[str] | None = None) -> int:
         with Pool(min(args.jobs, len(jobs)), initializer=tune_process) as pool:
             results = pool.map(run_dance, jobs, chunksize=1)
     dances = dict(sorted(results))
-    errors = [d["error_x_height"] for d in dances.values()]
-    print(
-        json.dumps(
-            {
-                "dances": dances,
-                "mean_error_x_height": round(float(np.mean(errors)), 4),
-                "dances_over_0_17": [h for h, d in dances.items() if d["error_x_height"] > BAR],
-                "load_avg": [round(x, 2) for x in os.getloadavg()],
-            }
-        )
-    )
+    summary = {}
+    for name in settings:
+        per = {h: d[name] for h, d in dances.items()}
+        errors = [e["error_x_height"] for e in per.values()]
+        summary[name] = {
+            "mean_error_x_height": round(float(np.mean(errors)), 4),
+            "worst_error_x_height": round(float(np.max(errors)), 4),
+            "dances_over_0_17": [h for h, e in per.items() if e["error_x_height"] > BAR],
+            "mean_jerk_m_s3": round(float(np.mean([e["jerk_m_s3"] for e in per.values()])), 1),
+            "mean_foot_slide_m_s": round(float(np.mean([e["foot_slide_m_s"] for e in per.values()])), 4),
+            "median_synth_s": round(float(np.median([e["synth_s"] for e in per.values()])), 2),
+        }
+    load = [round(x, 2) for x in os.getloadavg()]
+    print(json.dumps({"dances": dances, "settings": summary, "load_avg": load}))
     return 0
 
 

@@ -52,6 +52,28 @@ def open_database(path: str | Path) -> Iterator[DatabaseArrays]:
         yield arrays
 
 
+class LiveControlSession(Protocol):
+    """A target an engine generates while its control streams in (the control engine's live
+    follower or walker): control frames in, the target frames that became final out."""
+
+    frame: int
+    """Target frames sent so far."""
+    solves: int
+    """Windows solved so far."""
+
+    def hello_message(self) -> dict[str, Any]:
+        """The first message of a session: the skeleton, rates, latency and the control expected."""
+        ...
+
+    def push(self, frames: Any) -> dict[str, Any]:
+        """Append control frames; the ``frames`` message of the target frames now final."""
+        ...
+
+    def finish(self) -> dict[str, Any]:
+        """The control has ended: the remaining target frames."""
+        ...
+
+
 class LiveSession(Protocol):
     """A character an engine animates as events arrive (the rhythm engine's live dancer): one
     batch of frames per beat, steered between beats."""
@@ -259,6 +281,11 @@ class Engine(ABC):
         """A character driven live by events (``seed`` of its random choices, output ``fps``,
         beat ``accent``); raises :class:`EngineError` for engines without live sessions."""
         raise EngineError(f"engine {self.name!r} has no live sessions; the 'rhythm' engine has")
+
+    def live_control(self, **settings: Any) -> LiveControlSession:
+        """A target generated from a control streamed live (``settings``: the engine's session
+        options); raises :class:`EngineError` for engines without live control."""
+        raise EngineError(f"engine {self.name!r} has no live control sessions; the 'control' engine has")
 
     def finish(self, solution: Solution, inputs: QualityInputs | None = None) -> Solution:
         """``solution`` with its quality report against this database's examples

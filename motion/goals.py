@@ -215,6 +215,25 @@ class HoldGoal:
     extra: Mapping[str, Any] = field(default_factory=dict)
 
 
+@dataclass(frozen=True, slots=True)
+class HandholdGoal:
+    """At output ``frames (n,)`` the character holds a partner's hand (an annotation the engine
+    carried over from its examples): one of the output's ``joints`` (its hands) within
+    ``tolerance_cm`` of one of ``partner (n, H, 3)`` (the partner's hands there, metres).
+    Frames within ``margin`` of either end of a run of consecutive frames (the hands joining or
+    letting go) are not counted for ``satisfied``, which needs ``min_fraction`` of the rest held.
+    The partner is outside the output (the control engine's leader, given as input); for two
+    characters of one output see :class:`HoldGoal`."""
+
+    name: str
+    frames: npt.NDArray[np.intp]
+    joints: npt.NDArray[np.intp]
+    partner: Array
+    tolerance_cm: float = 20.0
+    margin: int = 0
+    min_fraction: float = LABEL_MIN_FRACTION
+
+
 Goal = (
     LengthGoal
     | BodyGoal
@@ -228,6 +247,7 @@ Goal = (
     | ApartGoal
     | HoldGoal
     | LoopGoal
+    | HandholdGoal
 )
 
 
@@ -292,6 +312,8 @@ def measure(
         return _measure_apart(goal, positions, characters)
     if isinstance(goal, HoldGoal):
         return _measure_hold(goal, positions, characters)
+    if isinstance(goal, HandholdGoal):
+        return _measure_handhold(goal, positions)
     raise MotionError(f"unknown goal {goal!r}")  # pragma: no cover - the union is closed
 
 
@@ -480,6 +502,41 @@ def _measure_path(goal: PathGoal, positions: Array, fps: float, characters: Sequ
     }
     return e, None if ok else (
         f"{goal.name}: the body is {rms:.1f} cm (RMS) from the path (tolerance {goal.tolerance_cm:g} cm)"
+    )
+
+
+def _measure_handhold(goal: HandholdGoal, positions: Array) -> Measured:
+    """The fraction of the annotated frames whose nearest pair of hands (output, partner) is within
+    the tolerance, and the median of that distance (cm)."""
+    keep = (goal.frames >= 0) & (goal.frames < positions.shape[0])
+    if goal.margin > 0 and goal.frames.size:
+        # position of each frame in its run of consecutive frames, from the start and from the end
+        f = goal.frames
+        starts = np.concatenate(([True], np.diff(f) != 1))
+        run = np.cumsum(starts) - 1
+        first = np.flatnonzero(starts)
+        last = np.concatenate((first[1:], [f.size])) - 1
+        keep &= (f - f[first[run]] >= goal.margin) & (f[last[run]] - f >= goal.margin)
+    if not keep.any():
+        return {"frames": 0, "satisfied": True}, None
+    own = positions[goal.frames[keep]][:, goal.joints]  # (n, K, 3)
+    part = goal.partner[keep]  # (n, H, 3)
+    dist = 100 * np.linalg.norm(own[:, :, None] - part[:, None], axis=-1).min(axis=(1, 2))  # (n,) cm
+    held = float((dist <= goal.tolerance_cm).mean())
+    ok = held >= goal.min_fraction
+    e = {
+        "frames": int(dist.size),
+        "held_fraction": _r(held),
+        "median_cm": _r(float(np.median(dist))),
+        "tolerance_cm": goal.tolerance_cm,
+        "margin_frames": goal.margin,
+        "min_fraction": goal.min_fraction,
+        "satisfied": ok,
+    }
+    return e, None if ok else (
+        f"{goal.name}: hands within {goal.tolerance_cm:g} cm on {100 * held:.0f}% of the {dist.size} "
+        f"frames that hold hands in the examples (wanted {100 * goal.min_fraction:.0f}%; "
+        f"median {np.median(dist):.0f} cm)"
     )
 
 

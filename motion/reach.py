@@ -1,13 +1,17 @@
-"""Reaching: a hand (any joint two bones below its chain) brought to a point at one frame by
-two-bone IK of its parent and grandparent (elbow and shoulder), faded in and out.
+"""Reaching: move end joints (hands) onto per-frame targets with analytic two-bone IK.
 
-The graph engine uses it to make two characters' hands meet (:mod:`engines.graph.shared`): the
-search and assembly's floor correction bring the bodies to the right place, but the height of a
-hand at a frame (a phase of the arm swing) only follows from the clips chosen. The solver is the
-foot-skate cleanup's closed-form two-bone IK (:func:`motion.footskate._solve_leg`, the same law
-of cosines and soft reach near full extension, so an arm never snaps straight), run on the arm
-instead of the leg; only the shoulder and elbow rotations change (the hand keeps its global
-orientation and bone lengths are exact).
+For a hand, the chain is shoulder -> elbow -> hand (the nearest distinct ancestors, as the legs of
+:mod:`motion.footskate`, whose closed-form two-bone solver this reuses: the elbow bends in its own
+plane to the wanted shoulder-hand distance, with soft IK near full extension; the shoulder swings
+by the shortest arc; the hand keeps its global orientation). Each target is blended in by a
+per-frame weight in ``[0, 1]``: the joint moves to ``position + weight (target - position)``, so a
+caller fades corrections in and out. Only the local rotations of the chain's joints change; bone
+lengths are preserved. Positions are in the motion's units, Y up.
+
+Three entry points: :func:`reach` (many joints, per-frame targets and weights; the control engine's
+hand hold), :func:`reach_path` (one joint moved along by offsets; the rhythm couples' hand hold) and
+:func:`reach_at` (one joint onto a point at one frame, faded in and out; the graph engine's shared
+meetings, :mod:`engines.graph.shared`).
 """
 
 from __future__ import annotations
@@ -18,63 +22,105 @@ import numpy as np
 import numpy.typing as npt
 
 from .errors import MotionError
-from .footskate import Leg, _forward, _solve_leg
+from .footskate import Leg, _distinct_ancestor, _forward, _rest_positions, _solve_leg
 from .motion import Motion
 
 Array = npt.NDArray[np.float64]
 
 
-def _arm(motion: Motion, joint: int) -> Leg:
-    """The two-bone chain above ``joint`` (shoulder, elbow, the joint)."""
+def smooth_weights(active: npt.NDArray[np.bool_], blend: int) -> Array:
+    """``(F,)`` weights: 1 on ``active`` frames, easing (smoothstep) to 0 over ``blend`` frames on
+    either side of every run, 0 elsewhere."""
+    w = active.astype(np.float64)
+    if blend <= 0 or not active.any():
+        return w
+    idx = np.flatnonzero(active)
+    frames = np.arange(active.size)
+    # distance (frames) to the nearest active frame
+    pos = np.searchsorted(idx, frames)
+    left = np.abs(frames - idx[np.clip(pos - 1, 0, idx.size - 1)])
+    right = np.abs(idx[np.clip(pos, 0, idx.size - 1)] - frames)
+    dist = np.minimum(left, right).astype(np.float64)
+    x = np.clip(1.0 - dist / (blend + 1), 0.0, 1.0)
+    return np.asarray(x * x * (3.0 - 2.0 * x))
+
+
+def reach(
+    motion: Motion,
+    joints: npt.NDArray[np.intp],
+    targets: Array,
+    weights: Array,
+    fk: tuple[Array, Array] | None = None,
+) -> Motion:
+    """The motion with each of ``joints (K,)`` moved towards ``targets (F, K, 3)`` (motion units)
+    by ``weights (F, K)`` (0 = unchanged, 1 = on the target when within reach). ``fk``: the
+    motion's :meth:`Motion.fk` when the caller has it already.
+
+    Raises :class:`MotionError` when a joint has no two-bone chain below the root, or two chains
+    share joints."""
+    n = motion.num_frames
+    if targets.shape != (n, joints.size, 3) or weights.shape != (n, joints.size):
+        raise MotionError(f"targets must be (F, K, 3) and weights (F, K) for F={n}, K={joints.size}")
     sk = motion.skeleton
-    elbow = int(sk.parents[joint])
-    shoulder = int(sk.parents[elbow]) if elbow >= 0 else -1
-    if shoulder < 0 or int(sk.parents[shoulder]) < 0:
-        raise MotionError(f"joint {sk.names[joint]!r} has no shoulder and elbow above it to reach with")
-    return Leg(hip=shoulder, knee=elbow, ankle=joint, toe=-1, ankle_slot=-1, toe_slot=-1)
+    rest = _rest_positions(motion)
+    scale = float(np.abs(sk.offsets[1:]).max(initial=0.0)) or 1.0
+    chains: list[Leg] = []
+    used: set[int] = set()
+    for j in (int(v) for v in joints):
+        mid = _distinct_ancestor(sk, rest, j, scale)
+        top = _distinct_ancestor(sk, rest, mid, scale) if mid > 0 else -1
+        if mid <= 0 or top <= 0:
+            raise MotionError(f"no two-bone chain below the root above joint {sk.names[j]!r}")
+        members = {top, mid, j}
+        if members & used:
+            raise MotionError(f"the chain of {sk.names[j]!r} shares joints with another")
+        used |= members
+        chains.append(Leg(top, mid, j, -1, -1, -1))
+    pos, grot = motion.fk() if fk is None else fk
+    local = np.array(motion.rotations, copy=True)
+    # a straight arm bends with the forearm forward (the opposite of a knee)
+    backward = -_forward(motion, pos)
+    for k, chain in enumerate(chains):
+        frames = np.flatnonzero(weights[:, k] > 0)
+        if frames.size == 0:
+            continue
+        w = weights[frames, k, None]
+        target = pos[frames, chain.ankle] + w * (targets[frames, k] - pos[frames, chain.ankle])
+        _solve_leg(chain, sk, pos, grot, local, frames, target, None, None, backward)
+    return replace(motion, rotations=local)
 
 
 def reach_path(motion: Motion, joint: int, offsets: Array) -> Motion:
     """``motion`` with joint ``joint`` moved by ``offsets (F, 3)`` metres in every frame (zero rows
-    untouched) by arm IK (module docstring); what is beyond the arm's reach is left."""
-    arm = _arm(motion, joint)
+    untouched) by arm IK (:func:`reach`); what is beyond the arm's reach is left."""
     offsets = np.asarray(offsets, dtype=np.float64)
     if offsets.shape != (motion.num_frames, 3):
         raise MotionError(f"{offsets.shape[0]} offsets for a motion of {motion.num_frames} frames")
-    frames = np.flatnonzero(np.abs(offsets).max(axis=1) > 0)
-    if frames.size == 0:
+    moving = np.abs(offsets).max(axis=1) > 0
+    if not moving.any():
         return motion
-    pos, grot = motion.fk()
-    local = np.array(motion.rotations, copy=True)
-    target = pos[frames, joint] + offsets[frames] / motion.metres_per_unit
-    _solve_leg(arm, motion.skeleton, pos, grot, local, frames, target, None, None, -_forward(motion, pos))
-    return replace(motion, rotations=local)
+    fk = motion.fk()
+    targets = fk[0][:, joint] + offsets / motion.metres_per_unit
+    return reach(motion, np.array([joint]), targets[:, None], moving[:, None].astype(np.float64), fk)
 
 
-def reach(motion: Motion, joint: int, frame: int, target: Array, window: int) -> tuple[Motion, float]:
+def reach_at(motion: Motion, joint: int, frame: int, target: Array, window: int) -> tuple[Motion, float]:
     """``motion`` with joint ``joint`` at ``target (3,)`` (metres) at ``frame``: the offset
     ``target - position`` is added to the joint's path with a smoothstep weight, 1 at ``frame``,
-    0 at ``window`` frames either side, and each frame is solved by arm IK (module docstring).
+    0 at ``window`` frames either side, and each frame is solved by arm IK (:func:`reach`).
 
     Returns the motion and the distance (metres) left at ``frame`` (beyond the arm's reach).
-    Raises :class:`~motion.errors.MotionError` when the joint has no two bones above it."""
-    arm = _arm(motion, joint)
-    sk = motion.skeleton
+    Raises :class:`~motion.errors.MotionError` for a frame outside the motion or a joint with no
+    two-bone chain above it."""
     n = motion.num_frames
     if not 0 <= frame < n:
         raise MotionError(f"frame {frame} is outside the motion's {n} frames")
-    pos, grot = motion.fk()
+    fk = motion.fk()
     mpu = motion.metres_per_unit
-    delta = np.asarray(target, dtype=np.float64) / mpu - pos[frame, joint]
-    frames = np.arange(max(frame - window, 0), min(frame + window + 1, n))
-    x = 1.0 - np.abs(frames - frame) / (window + 1.0)
-    w = x * x * (3.0 - 2.0 * x)
-    local = np.array(motion.rotations, copy=True)
-    # an arm bends the other way from a leg when it is straight: the forearm swings forward
-    forward = -_forward(motion, pos)
-    reached, _ = _solve_leg(
-        arm, sk, pos, grot, local, frames, pos[frames, joint] + w[:, None] * delta, None, None, forward
-    )
-    at = int(np.flatnonzero(frames == frame)[0])
-    left = float(np.linalg.norm(pos[frame, joint] + delta - reached[at])) * mpu
-    return replace(motion, rotations=local), left
+    here = fk[0][:, joint]
+    delta = np.asarray(target, dtype=np.float64) / mpu - here[frame]
+    x = np.clip(1.0 - np.abs(np.arange(n) - frame) / (window + 1.0), 0.0, 1.0)
+    weights = (x * x * (3.0 - 2.0 * x))[:, None]
+    out = reach(motion, np.array([joint]), (here + delta)[:, None], weights, fk)
+    got = out.slice(frame, frame + 1).global_positions()[0, joint]
+    return out, float(np.linalg.norm(here[frame] + delta - got)) * mpu

@@ -17,7 +17,7 @@ Times are seconds; lengths metres; floor positions ``[x, z]``.
 from __future__ import annotations
 
 import itertools
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
@@ -299,6 +299,11 @@ class ControlRequest(JobRequestBase):
     constraints: list[InstanceConstraint] = Field(default_factory=list, max_length=1000)
     smoothing_s: float = Field(default=0.15, ge=0, le=2, description="blend half-width across boundaries")
     footskate: bool = Field(default=True, description="clean up foot skate where a cleanup is available")
+    hold_hands: bool = Field(
+        default=True,
+        description="where the chosen examples hold hands, put the output's hand on the control's hand "
+        "(arm IK; dance databases)",
+    )
 
     @model_validator(mode="after")
     def _stretch(self) -> ControlRequest:
@@ -309,3 +314,33 @@ class ControlRequest(JobRequestBase):
     def input_files(self) -> list[str]:
         """The control BVH, when the control is a motion."""
         return [self.control.bvh] if self.control.bvh is not None else []
+
+
+# --------------------------------------------------------------------------- live control session
+
+
+class ControlSessionPose(Strict):
+    """Leader frames (a motion database): per frame the control joints' world positions, metres,
+    Y up, in the order the session's first message names (``control_joints``), at its ``fps``."""
+
+    type: Literal["pose"]
+    frames: list[list[tuple[float, float, float]]] = Field(min_length=1, max_length=240)
+
+
+class ControlSessionPath(Strict):
+    """Path points (a walk database), e.g. from a game pad: ``[x, z]`` metres per frame at the
+    session's ``fps``."""
+
+    type: Literal["path"]
+    points: list[tuple[float, float]] = Field(min_length=1, max_length=240)
+
+
+class ControlSessionStop(Strict):
+    """The control has ended: the server sends the remaining frames, ``{"type": "end"}``, closes."""
+
+    type: Literal["stop"]
+
+
+ControlSessionMessage = Annotated[
+    ControlSessionPose | ControlSessionPath | ControlSessionStop, Field(discriminator="type")
+]

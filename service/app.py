@@ -37,7 +37,7 @@ from .limits import JobQuota, SessionQuota
 from .links import add_links
 from .metrics import HttpMetricsMiddleware, Metrics, observe_terminal_events
 from .routes import annotations as annotation_routes
-from .routes import clips, databases, events, files, health, jobs, sessions
+from .routes import clips, control_sessions, databases, events, files, health, jobs, sessions
 from .routes import graphs as graph_routes
 from .routes.annotations import Corrections
 from .settings import Settings, get_settings
@@ -130,7 +130,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.session_quota = SessionQuota(settings.max_sessions)
     app.state.engines = EngineCache(capacity=4)  # live sessions' engines (the only ones loaded here)
     install_error_handlers(app)
-    for module in (clips, files, databases, annotation_routes, graph_routes, jobs, events, health, sessions):
+    for module in (
+        clips,
+        files,
+        databases,
+        annotation_routes,
+        graph_routes,
+        jobs,
+        events,
+        health,
+        sessions,
+        control_sessions,
+    ):
         app.include_router(module.router)
     # innermost first: CatchAll turns a bug into the contract's 500 (keeping the connection), metrics
     # count it, the guard refuses foreign hosts and origins before anything else runs, and CORS (only

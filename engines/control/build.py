@@ -315,6 +315,7 @@ def build_control_database(spec: Any, library: MotionLibrary, should_stop: Shoul
             "control_joints": cjoints,
             "target_joints": tjoints,
             "hip_separation_m": spec.hip_separation_m,
+            "handhold_m": spec.handhold_m,
             "segmentation": seg.model_dump(mode="json"),
             "tempo_bpm": None if tempo is None else [float(tempo[0]), float(tempo[1])],
         },

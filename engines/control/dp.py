@@ -35,6 +35,7 @@ import numpy.typing as npt
 
 from motion.align import kabsch, rotation_from_covariance
 
+from .kernels import forward
 from .points import sample_cloud
 
 Array = npt.NDArray[np.float64]
@@ -481,60 +482,6 @@ def cost_to_go(D: Array, cell_dur: IntArray) -> Array:
     return F
 
 
-def min_plus(
-    ya: Array,
-    q: Array,
-    ha: Array,
-    hh: Array,
-    head: int = 16,
-    chunk: int = 64,
-    max_chunks: int = 16,
-    direct: int = 16384,
-) -> tuple[Array, IntArray, int]:
-    """For every successor ``i``: ``min_j ya_j . ha_i`` and its argmin, exactly, without forming the
-    whole predecessor x successor matrix.
-
-    ``ya (P, m)`` rows ``[q_j + k'|y_j|^2, -2k' y_j]``, ``q (P,)`` the predecessors' scores,
-    ``ha (S, m)`` rows ``[1, h_i]``, ``hh (S,)`` ``k'|h_i|^2`` (so that ``ya_j . ha_i + hh_i =
-    q_j + k'|y_j - h_i|^2 >= q_j``). The ``head`` best predecessors by score give every successor an
-    upper bound ``u_i`` of its optimum; a predecessor with ``q_j > u_i`` cannot beat it (continuity is
-    never negative), so each successor only scans the prefix of the predecessors sorted by score
-    below its bound (successors sorted by prefix length and cut into at most ``max_chunks`` groups
-    of at least ``chunk``: one matrix product each); small problems (at most ``4 head`` predecessors
-    or ``direct`` pairs) take the whole product.
-
-    Returns ``(best (S,), argmin (S,) into the predecessors, pairs evaluated)``."""
-    n_pred, n_succ = ya.shape[0], ha.shape[0]
-    if n_pred <= 4 * head or n_pred * n_succ <= direct:  # small: the whole product is cheaper
-        tot = ya @ ha.T
-        j = np.argmin(tot, axis=0)
-        return tot[j, np.arange(n_succ)], j, n_pred * n_succ
-    order = np.argsort(q, kind="stable")
-    ys, qs = ya[order], q[order]
-    tot = ys[:head] @ ha.T
-    j = np.argmin(tot, axis=0)
-    best = tot[j, np.arange(n_succ)]
-    arg = j.copy()
-    n_exp = head * n_succ
-    # predecessors with q_j <= best_i + hh_i may still win (ties kept: the same value either way)
-    reach = np.searchsorted(qs, best + hh, side="right")
-    todo = np.flatnonzero(reach > head)
-    if todo.size:
-        todo = todo[np.argsort(reach[todo], kind="stable")]
-        step = max(chunk, -(-todo.size // max_chunks))
-        for a in range(0, todo.size, step):
-            rows = todo[a : a + step]
-            stop = int(reach[rows[-1]])
-            part = ys[head:stop] @ ha[rows].T
-            jj = np.argmin(part, axis=0)
-            val = part[jj, np.arange(rows.size)]
-            better = val < best[rows]
-            best[rows] = np.where(better, val, best[rows])
-            arg[rows] = np.where(better, head + jj, arg[rows])
-            n_exp += (stop - head) * rows.size
-    return best, order[arg], n_exp
-
-
 @dataclass(slots=True)
 class DPResult:
     """A solution of the DP: the cells in order, their end frames and the score terms."""
@@ -574,167 +521,44 @@ def solve(
     t_len = t1 - 1
     # time-major (T + 1, C): a boundary's cells are one contiguous row
     Q = np.full((t1, cells), np.inf)
-    back = np.empty((t1, cells), dtype=np.int32)  # read only where a score was written
-    tails = inst.tails.reshape(inst.count, -1, 3)
-    heads = inst.heads.reshape(inst.count, -1, 3)
-    ub = np.inf if upper_bound is None else upper_bound * (1 + 1e-9) + 1e-12
-    F = np.zeros(t1) if to_go is None else to_go
+    back = np.full((t1, cells), -1, dtype=np.int64)  # read only where a score was written
     if np.any(np.diff(cell_dur) < 0):
         raise ValueError("cells must be sorted by duration (see legal_cells)")
-    # t = 0 (Eq. 7)
-    first = np.arange(cells)[cell_dur <= t_len]
-    Q[cell_dur[first], first] = D[first, cell_dur[first]]
-    back[cell_dur[first], first] = -1
-    colmin = Q.min(axis=1)
-    expanded = 0
-    kq = k / inst.tails.shape[1]
-    # Boundaries closer than the shortest duration do not depend on each other (a cell ending at
-    # t < t0 + dmin started before t0): select cells boundary by boundary, then align, score and
-    # store a whole block of boundaries at once (Eq. 8).
-    dmin = max(1, int(cell_dur.min()))
-    d_start, f_start = _by_start_time(D, F, cell_dur)
-    for t0 in range(1, t_len, dmin):
-        if should_stop is not None and should_stop():
-            raise InterruptedError
-        ts = np.arange(t0, min(t0 + dmin, t_len))
-        rows = slice(t0, t0 + ts.size)
-        parts = _block_candidates(
-            Q[rows], ts, cell_dur, d_start[rows], f_start[rows], F, colmin, ub, beam, max_cells
+    if should_stop is not None and should_stop():
+        raise InterruptedError
+    expanded = int(
+        forward(
+            D,
+            interp.c,
+            interp.s,
+            interp.sum_a,
+            interp.n_pts,
+            interp.dur.astype(np.int64),
+            interp.context,
+            interp.cs,
+            np.zeros((0, 0, 3, 3)) if interp.rot is None else interp.rot,
+            np.zeros((0, 0, 3)) if interp.trans is None else interp.trans,
+            interp.rigid,
+            np.ascontiguousarray(inst.tails.reshape(inst.count, -1, 3)),
+            np.ascontiguousarray(inst.heads.reshape(inst.count, -1, 3)),
+            cell_inst.astype(np.int64),
+            k / inst.tails.shape[1],
+            np.inf if beam is None else float(beam),
+            0 if max_cells is None else int(max_cells[0]),
+            0 if max_cells is None else int(max_cells[1]),
+            np.inf if upper_bound is None else upper_bound * (1 + 1e-9) + 1e-12,
+            np.zeros(t1) if to_go is None else np.ascontiguousarray(to_go, dtype=np.float64),
+            Q,
+            back,
         )
-        if not parts:
-            continue
-        P, S, E, DS, best, arg, n_exp = _relax_block(parts, interp, tails, heads, cell_inst, kq)
-        expanded += n_exp
-        Q[E, S] = DS + best
-        back[E, S] = P[arg]
-        if beam is not None:
-            np.minimum.at(colmin, E, DS + best)
+    )
     cells_arr, ends_arr = _best_path(Q, back, cell_dur)
     score = float(Q[t_len, cells_arr[-1]])
     interp_term = float(D[cells_arr, ends_arr].sum())
     return DPResult(score, cells_arr, ends_arr, expanded, interp_term, score - interp_term)
 
 
-Block = tuple[IntArray, Array, int, IntArray, IntArray, Array]
-"""One boundary ``t`` of a block: its kept predecessors (cells ending at ``t``) and their scores,
-``t``, and its successors (cells starting at ``t``) with their end times and distances."""
-
-
-def _by_start_time(D: Array, F: Array, cell_dur: IntArray) -> tuple[Array, Array]:
-    """``(T + 1, C)`` per start time and cell: the distance ``D`` and the bound ``F`` at the end of
-    the cell started there (infinite past the end); one slice per duration (cells sorted by it)."""
-    cells, t1 = D.shape
-    d_start = np.empty((t1, cells))
-    f_start = np.empty((t1, cells))
-    bounds = np.flatnonzero(np.diff(cell_dur)) + 1
-    for lo_c, hi_c in zip(np.concatenate(([0], bounds)), np.concatenate((bounds, [cells])), strict=True):
-        d = int(cell_dur[lo_c])
-        keep_n = max(t1 - d, 0)
-        d_start[:keep_n, lo_c:hi_c] = D[lo_c:hi_c, d:].T
-        f_start[:keep_n, lo_c:hi_c] = F[d:, None]
-        d_start[keep_n:, lo_c:hi_c] = np.inf
-        f_start[keep_n:, lo_c:hi_c] = np.inf
-    return d_start, f_start
-
-
-def _block_candidates(
-    qb: Array,
-    ts: IntArray,
-    cell_dur: IntArray,
-    dsucc_b: Array,
-    f_end: Array,
-    F: Array,
-    colmin: Array,
-    ub: float,
-    beam: float | None,
-    max_cells: tuple[int, int] | None,
-) -> list[Block]:
-    """The cells that take part at each boundary ``ts (B,)`` of a block: predecessors with a finite
-    score ``qb (B, C)`` within the bound ``ub``, the beam and the count cap; successors with a
-    finite distance whose optimistic score at their end stays within the same limits."""
-    cells = qb.shape[1]
-    t_len = F.size - 1
-    qmin_t = qb.min(axis=1)
-    keep = np.isfinite(qb) & (qb + F[ts][:, None] <= ub)
-    if beam is not None:
-        keep &= qb <= qmin_t[:, None] + beam
-    if max_cells is not None and cells > max_cells[0]:
-        kth = max_cells[0] - 1
-        masked = np.where(keep, qb, np.inf)
-        cut = np.partition(masked, kth, axis=1)[:, kth]
-        keep &= masked <= cut[:, None]
-    # successors: cells starting at the boundary, with a finite distance and a chance
-    ends_b = ts[:, None] + cell_dur[None, :]  # (B, C)
-    ends_c = np.minimum(ends_b, t_len)
-    qkept = np.where(keep, qb, np.inf).min(axis=1)
-    lower = qkept[:, None] + dsucc_b
-    est_b = lower + f_end  # infinite for illegal cells and cells ending after T
-    ok = np.isfinite(est_b) & (est_b <= ub)
-    if beam is not None:
-        # a cell already worse than the best score written at its end time by more than the
-        # width would be pruned there anyway (the beam of Sec. 4.4, applied early)
-        ok &= lower <= colmin[ends_c] + beam
-    if max_cells is not None and cells > max_cells[1]:
-        kth = max_cells[1] - 1
-        est = np.where(ok, dsucc_b + f_end, np.inf)
-        cut = np.partition(est, kth, axis=1)[:, kth]
-        ok &= est <= cut[:, None]
-    parts: list[Block] = []
-    for b, t in enumerate(ts):
-        preds = np.flatnonzero(keep[b])
-        succ = np.flatnonzero(ok[b])
-        if preds.size and succ.size:
-            parts.append((preds, qb[b, preds], int(t), succ, ends_b[b, succ], dsucc_b[b, succ]))
-    return parts
-
-
-def _relax_block(
-    parts: list[Block],
-    interp: Interpretation,
-    tails: Array,
-    heads: Array,
-    cell_inst: IntArray,
-    kq: float,
-) -> tuple[IntArray, IntArray, IntArray, Array, Array, IntArray, int]:
-    """Eq. 8 for a block: every successor's best predecessor by score plus continuity ``k'|y - h|^2``
-    between the aligned tail ``y`` of the predecessor and head ``h`` of the successor. Returns the
-    predecessors ``P``, successors ``S``, their end times ``E`` and distances ``DS``, each
-    successor's best continued score and the index of its predecessor in ``P``, and the pairs
-    expanded."""
-    P = np.concatenate([pt[0] for pt in parts])
-    qa = np.concatenate([pt[1] for pt in parts])
-    tp = np.repeat([pt[2] for pt in parts], [pt[0].size for pt in parts])
-    S = np.concatenate([pt[3] for pt in parts])
-    E = np.concatenate([pt[4] for pt in parts])
-    DS = np.concatenate([pt[5] for pt in parts])
-    pts = np.concatenate((tails[cell_inst[P]], heads[cell_inst[S]]))
-    placed = interp.place(pts, np.concatenate((P, S)), np.concatenate((tp, E))).reshape(P.size + S.size, -1)
-    y2, h2 = placed[: P.size], placed[P.size :]
-    # q_j + k' |y_j - h_i|^2 = [q_j + k'|y_j|^2, -2k' y_j] . [1, h_i] + k'|h_i|^2: one matrix product
-    ya = np.empty((P.size, y2.shape[1] + 1))
-    ya[:, 0] = qa + kq * (y2**2).sum(1)
-    ya[:, 1:] = (-2.0 * kq) * y2
-    ha = np.empty((S.size, h2.shape[1] + 1))
-    ha[:, 0] = 1.0
-    ha[:, 1:] = h2
-    best = np.empty(S.size)
-    arg = np.empty(S.size, dtype=np.intp)
-    hh = kq * (h2**2).sum(1)
-    expanded = 0
-    pa = sa = 0
-    for preds, _, _, succ, _, _ in parts:
-        pb, sb = pa + preds.size, sa + succ.size
-        b_best, b_arg, n_exp = min_plus(ya[pa:pb], qa[pa:pb], ha[sa:sb], hh[sa:sb])
-        best[sa:sb] = b_best
-        arg[sa:sb] = pa + b_arg
-        expanded += n_exp
-        pa, sa = pb, sb
-    # rounding can make |y - h|^2 slightly negative for identical points
-    best = np.maximum(best + hh, qa[arg])
-    return P, S, E, DS, best, arg, expanded
-
-
-def _best_path(Q: Array, back: npt.NDArray[np.int32], cell_dur: IntArray) -> tuple[IntArray, IntArray]:
+def _best_path(Q: Array, back: npt.NDArray[np.int64], cell_dur: IntArray) -> tuple[IntArray, IntArray]:
     """The cells of the best tiling and their end frames, in order (back-tracked from the best score
     at the last frame); :class:`Infeasible` when there is none."""
     t_len = Q.shape[0] - 1

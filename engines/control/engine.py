@@ -13,18 +13,21 @@ and bound against the best score so far; no optimal sequence is ever pruned), ea
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
+from scipy.ndimage import gaussian_filter1d
 from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
 from motion import Motion, MotionError
 from motion.bvh import parse_bvh
-from motion.goals import Goal, LengthGoal, PathGoal
+from motion.goals import Goal, HandholdGoal, LengthGoal, PathGoal
 from motion.quality import QualityInputs
+from motion.reach import reach, smooth_weights
 
 from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
 from ..library import MotionLibrary
@@ -44,6 +47,9 @@ from .dp import (
     solve,
     typical_segment_cost,
 )
+
+if TYPE_CHECKING:
+    from .session import LiveControl
 from .points import derived_control, joint_cloud, resample_cloud, trajectory_control
 
 Array = npt.NDArray[np.float64]
@@ -51,6 +57,13 @@ Array = npt.NDArray[np.float64]
 # default continuity weights (seconds), chosen experimentally as in the paper: databases of control
 # motions (a leader drives a follower; leave-one-dance-out on the 14 CMU salsa couples: mean follower
 # error 0.163 x height at 0.1, 0.167 at 0.2, 0.192 at 0.6) and derived walk controls (a path)
+_HANDS = re.compile(r"hand|wrist", re.IGNORECASE)
+
+HOLD_BLEND_S = 0.15
+"""Fade in and out of the hand-hold correction, seconds."""
+HOLD_SMOOTH_S = 0.1
+"""Gaussian smoothing (sigma, seconds) of the hand-hold correction."""
+
 K_MOTION = 0.1
 K_WALK = 0.2
 
@@ -137,6 +150,13 @@ class ControlEngine(Engine):
             heads=at(start),
             pair_bounds=np.stack((lo, self.db.offsets[rows[:, 0] + 1] - 1), axis=-1),
         )
+
+    def live_control(self, **settings: Any) -> LiveControl:
+        """A live session driven by a streamed control (:class:`engines.control.session.LiveControl`;
+        ``settings``: its ``latency_s``, ``k``, ``stretch_s``, ``solve_fps``, ``smoothing_s``)."""
+        from .session import LiveControl as Live  # the session module builds on this one
+
+        return Live(self, **settings)
 
     def continuity_weight(self, request: Any) -> float:
         """The request's ``k``, or the database kind's default (:data:`K_MOTION`, :data:`K_WALK`)."""
@@ -392,6 +412,8 @@ class ControlEngine(Engine):
             request.smoothing_s,
         )
         motion = self._cleanup(out, request)
+        if request.hold_hands:
+            motion = self._hold_hands(out, motion, ctl, timed)
         timings["post_s"] = time.perf_counter() - t2
         return self._solution(out, motion, timed, res, stage, ctl, timings, pb.cell_inst.size)
 
@@ -453,6 +475,78 @@ class ControlEngine(Engine):
             return remove_foot_skate(motion, (joints, flags), floor=lowest)
         except MotionError:
             return motion
+
+    def _hold_hands(self, out: Assembled, motion: Motion, ctl: ControlInputCloud, timed: Timed) -> Motion:
+        """Where the chosen examples hold hands (the database's hand-hold annotation, carried to the
+        output frames), put the output's hand on the control's hand as it was in the example: the
+        example's offset from the leader's hand to the follower's nearest hand, turned by the
+        segment's alignment, added to the control's hand (two-bone arm IK, :func:`motion.reach.reach`,
+        faded in and out over 0.15 s). Dance databases only; the motion unchanged otherwise."""
+        db = self.db
+        hold = db.handhold[out.global_frames] == 1
+        if ctl.path is not None or db.derived or not hold.any() or ctl.cloud.shape[0] != motion.num_frames:
+            return motion
+        cj = [i for i, n in enumerate(db.meta["control_joints"]) if _HANDS.search(n)]
+        tcols = [i for i, n in enumerate(db.meta["target_joints"]) if _HANDS.search(n)]
+        if not cj or not tcols:
+            return motion
+        names = [db.meta["target_joints"][i] for i in tcols]
+        if any(n not in motion.skeleton.names for n in names):
+            return motion
+        g = out.global_frames
+        src_f = db.target[g][:, tcols]  # (F, Ht, 3) the example's follower hands
+        src_l = db.control[g][:, cj]  # (F, Hc, 3) the example's leader hands
+        nearest = np.linalg.norm(src_f[:, :, None] - src_l[:, None], axis=-1).argmin(axis=2)  # (F, Ht)
+        rows = np.arange(g.size)[:, None]
+        offset = src_f - src_l[rows, nearest]  # (F, Ht, 3) example frame
+        seg = out.segment_of_frame
+        c, s = timed.cos[seg][:, None], timed.sin[seg][:, None]
+        turned = np.stack(
+            (
+                c * offset[..., 0] + s * offset[..., 2],
+                offset[..., 1],
+                -s * offset[..., 0] + c * offset[..., 2],
+            ),
+            axis=-1,
+        )
+        targets = (ctl.cloud[:, cj][rows, nearest] + turned) / motion.metres_per_unit
+        dist = np.linalg.norm(src_f[:, :, None] - src_l[:, None], axis=-1).min(axis=2)  # (F, Ht)
+        holding = hold[:, None] & (dist < float(db.meta.get("handhold_m", 0.2)))
+        blend = int(round(HOLD_BLEND_S * motion.fps))
+        weights = np.stack([smooth_weights(holding[:, k], blend) for k in range(len(tcols))], axis=-1)
+        joints = np.array([motion.skeleton.names.index(n) for n in names], dtype=np.intp)
+        # the correction, not the target, is smoothed in time: the control's hands carry capture
+        # noise and the example offsets change at segment boundaries
+        fk = motion.fk()
+        hands = fk[0][:, joints]
+        corr = gaussian_filter1d(weights[..., None] * (targets - hands), HOLD_SMOOTH_S * motion.fps, axis=0)
+        moving = (np.abs(corr).max(axis=-1) > 0).astype(np.float64)
+        try:
+            return reach(motion, joints, hands + corr, moving, fk)
+        except MotionError:
+            return motion
+
+    def _handhold_goal(
+        self, hold: npt.NDArray[np.int8], ctl: ControlInputCloud, motion: Motion
+    ) -> Goal | None:
+        """The propagated hand hold as a goal of the quality report (:class:`motion.goals.HandholdGoal`):
+        where the chosen examples hold hands, the output's hands should be at the control's hands
+        (a motion control whose cloud has hands; ``None`` otherwise)."""
+        if ctl.path is not None or self.db.derived or not (hold == 1).any():
+            return None
+        cj = [i for i, n in enumerate(self.db.meta["control_joints"]) if _HANDS.search(n)]
+        own = [motion.skeleton.names.index(n) for n in self.db.meta["target_joints"] if _HANDS.search(n)]
+        if not cj or not own or ctl.cloud.shape[0] != motion.num_frames:
+            return None
+        frames = np.flatnonzero(hold == 1).astype(np.intp)
+        return HandholdGoal(
+            "handhold",
+            frames,
+            np.asarray(own, dtype=np.intp),
+            ctl.cloud[frames][:, cj],
+            tolerance_cm=100 * float(self.db.meta.get("handhold_m", 0.2)),
+            margin=int(round(HOLD_BLEND_S * motion.fps)),  # joining and letting go (see _hold_hands)
+        )
 
     def _solution(
         self,
@@ -520,6 +614,9 @@ class ControlEngine(Engine):
             **timings,
         }
         goals: list[Goal] = [LengthGoal(ctl.cloud.shape[0])]
+        hold_goal = self._handhold_goal(hold, ctl, motion)
+        if hold_goal is not None:
+            goals.append(hold_goal)
         if ctl.path is not None:
             frames = np.arange(ctl.path.shape[0], dtype=np.intp)
             goals.append(PathGoal("path", frames, ctl.path, tolerance_cm=PATH_TOLERANCE_CM))

@@ -41,7 +41,7 @@ on average (worst 20.7, 5 of 8 within 5 cm); with 3 rounds by 0.7 cm (worst 4.9,
 **Reach.** Assembly's correction moves bodies on the floor; the height of a hand at a frame (the
 phase of an arm swing) only follows from the clips chosen. So when the passes are done, each
 joint-to-joint meet still open by at most :data:`REACH_MAX_M` is closed by arm IK
-(:func:`motion.reach.reach`): each of the two joints goes half the way, faded in and out over
+(:func:`motion.reach.reach_at`): each of the two joints goes half the way, faded in and out over
 :data:`REACH_S`; the quality report (plausibility included) is measured after it.
 
 Output: one motion on the combined skeleton of :mod:`engines.combine` (joints ``c0_...``,
@@ -79,7 +79,7 @@ from motion.goals import (
 from motion.ground import body_root
 from motion.plausibility import Reference
 from motion.quality import QualityInputs
-from motion.reach import reach
+from motion.reach import reach_at
 
 from ..base import CollectingEmitter, Emitter, EngineError, ShouldStop, Solution, finish_solution
 from ..combine import combine_motions, combined_characters
@@ -425,7 +425,7 @@ class CoupledSearch:
 
     def _reach(self, motions: list[Motion], shared: list[tuple[MeetGoal | ApartGoal, float]]) -> list[Motion]:
         """The characters' motions with the hands of every joint-to-joint meet brought together by
-        arm IK (:func:`motion.reach.reach`): each joint goes half of what is left, when that is
+        arm IK (:func:`motion.reach.reach_at`): each joint goes half of what is left, when that is
         within :data:`REACH_MAX_M`, faded over :data:`REACH_S` either side of the frame."""
         nj = self.skeleton.num_joints
         out = list(motions)
@@ -446,7 +446,7 @@ class CoupledSearch:
             step = gap / d * move
             for (c, j), here, sign in zip(ends, at, (1.0, -1.0), strict=True):
                 with contextlib.suppress(MotionError):  # no arm above the joint: the meet stays as it is
-                    out[c], _ = reach(out[c], j, t, here + sign * step, window)
+                    out[c], _ = reach_at(out[c], j, t, here + sign * step, window)
         return out
 
     def _joins(self, states: list[_State]) -> np.ndarray[Any, np.dtype[np.intp]]:

@@ -18,7 +18,6 @@ from engines.control.dp import (
     cost_to_go,
     interpretation,
     legal_cells,
-    min_plus,
     paired_procrustes,
     retime,
     solve,
@@ -151,27 +150,6 @@ def test_dp_is_optimal_and_beam_and_exact_agree(seed: int) -> None:
     bnb = solve(interp, inst, ci, cd, k, upper_bound=narrow.score, to_go=cost_to_go(interp.D, cd))
     assert bnb.score == pytest.approx(exhaustive.score, rel=1e-12)
     assert bnb.expanded <= exhaustive.expanded
-
-
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_pruned_min_plus_equals_the_full_product(seed: int) -> None:
-    """The score-sorted prefix scan finds every successor's best predecessor (ties included)."""
-    rng = np.random.default_rng(seed)
-    n_pred, n_succ, dim, kq = 300, 200, 6, 0.05
-    y = rng.normal(size=(n_pred, dim))
-    h = rng.normal(size=(n_succ, dim))
-    q = rng.exponential(0.5, size=n_pred)
-    q[:40] = q[0]  # ties in score
-    ya = np.column_stack((q + kq * (y**2).sum(1), -2 * kq * y))
-    ha = np.column_stack((np.ones(n_succ), h))
-    hh = kq * (h**2).sum(1)
-    best, arg, n_exp = min_plus(ya, q, ha, hh, head=8, chunk=16, direct=0)
-    full = q[:, None] + kq * ((y[:, None] - h[None]) ** 2).sum(-1)
-    assert np.allclose(best + hh, full.min(axis=0), rtol=0, atol=1e-12)
-    assert np.allclose(full[arg, np.arange(n_succ)], full.min(axis=0), rtol=0, atol=1e-12)
-    assert 8 * n_succ <= n_exp < n_pred * n_succ
-    small = min_plus(ya[:30], q[:30], ha, hh, head=8)
-    assert np.allclose(small[0] + hh, full[:30].min(axis=0), rtol=0, atol=1e-12)
 
 
 def test_stretch_bounds() -> None:
