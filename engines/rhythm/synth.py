@@ -55,7 +55,7 @@ transition was never taken in 40 dances; beat alignment with ``accent: 0`` stays
 def member_preference(clarity: Array) -> Array:
     """``(M,)`` how much each movement is preferred: its beat clarity to the power
     ``CLARITY_PREFERENCE``, at least ``CLARITY_FLOOR`` of it."""
-    return np.maximum(clarity, CLARITY_FLOOR) ** CLARITY_PREFERENCE
+    return np.asarray(np.maximum(clarity, CLARITY_FLOOR) ** CLARITY_PREFERENCE, dtype=np.float64)
 
 
 def group_preference(pref: Array, counts: npt.NDArray[np.integer[Any]]) -> Array:
@@ -63,7 +63,7 @@ def group_preference(pref: Array, counts: npt.NDArray[np.integer[Any]]) -> Array
     mean preference ``pref`` ``(K, G)`` (0 for padding; ``counts`` ``(K,)`` members per group)
     relative to the most preferred group's, at least ``GROUP_FLOOR``."""
     mean = pref.sum(axis=1) / np.maximum(counts, 1)
-    return np.maximum(mean / max(float(mean.max()), 1e-12), GROUP_FLOOR)
+    return np.asarray(np.maximum(mean / max(float(mean.max()), 1e-12), GROUP_FLOOR), dtype=np.float64)
 
 
 def draw_probabilities(p: Array, clarity: Array, labels: IntArray) -> Array:
@@ -74,8 +74,9 @@ def draw_probabilities(p: Array, clarity: Array, labels: IntArray) -> Array:
     k = p.shape[-1]
     counts = np.bincount(labels, minlength=k)
     sums = np.bincount(labels, weights=member_preference(clarity), minlength=k)
-    w = np.atleast_2d(p) * group_preference(sums[:, None], counts)[None, :]
-    w *= counts[None, :] > 0
+    pref: Array = np.asarray(sums, dtype=np.float64)[:, None]
+    w = np.atleast_2d(p) * group_preference(pref, counts)[None, :]
+    w = w * (counts[None, :] > 0)
     return np.asarray(w / np.maximum(w.sum(axis=1, keepdims=True), 1e-300))
 
 
