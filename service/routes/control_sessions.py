@@ -35,14 +35,12 @@ from pydantic import TypeAdapter, ValidationError
 
 from engines.base import EngineError, LiveControlSession
 from engines.registry import kind_class
-from schemas import DatabaseInfo
 from schemas.control import ControlSessionMessage, ControlSessionPath, ControlSessionPose
 from workers.execute import EngineCache
 from workers.store import Store
 
-from ..deps import EnginesDep, Principal, SessionQuotaDep, SettingsDep, StoreDep
-from ..owners import database_for
-from .events import WebSocketToken, refuse_handshake, websocket_owned
+from ..deps import EnginesDep, SessionQuotaDep, SettingsDep, StoreDep
+from .events import WebSocketToken, live_session_database
 
 router = APIRouter(prefix="/v1/sessions", tags=["sessions"])
 
@@ -78,24 +76,8 @@ async def control_session(
     token: WebSocketToken = None,
 ) -> None:
     """Generate the target from a control streamed live (see the module doc for the protocol)."""
-
-    async def find(principal: Principal) -> DatabaseInfo:
-        return await anyio.to_thread.run_sync(database_for, store, principal, database)
-
-    owned = await websocket_owned(websocket, settings, token, find)
-    if owned is None:
-        return
-    principal, info = owned
-    refusal = quota.refusal(principal.name)
-    if refusal is not None:
-        await refuse_handshake(websocket, 429, refusal.code, refusal.message, 4429, refusal.headers)
-        return
-    with quota.hold(principal.name):
-        await websocket.accept()
-        if info.kind != "control" or info.status.value != "ready":
-            await websocket.close(
-                code=4400, reason=f"database {database} is not a ready control database"[:120]
-            )
+    async with live_session_database(websocket, settings, token, store, quota, database, "control") as info:
+        if info is None:
             return
         try:
             session = await anyio.to_thread.run_sync(_open, engines, store, database, latency_s, k)

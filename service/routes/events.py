@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Annotated, TypeVar
 
 import anyio
@@ -21,14 +21,15 @@ from fastapi import APIRouter, Query, WebSocket
 from fastapi.websockets import WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
-from schemas import EventType, JobEvent, JobInfo
+from schemas import DatabaseInfo, EventType, JobEvent, JobInfo
 from workers.backend import JobBackend
-from workers.store import NotFoundError
+from workers.store import NotFoundError, Store
 
 from ..deps import BackendDep, MetricsDep, Principal, PrincipalDep, SettingsDep, websocket_principal
 from ..errors import ApiError, error_response, responses
+from ..limits import SessionQuota
 from ..metrics import Metrics
-from ..owners import job_for
+from ..owners import database_for, job_for
 from ..settings import Settings
 from ..streaming import EventQueue, pump
 
@@ -131,6 +132,45 @@ async def websocket_owned(
         await websocket.accept()
         await websocket.close(code=4404, reason=str(exc)[:120])
         return None
+
+
+@contextlib.asynccontextmanager
+async def live_session_database(
+    websocket: WebSocket,
+    settings: Settings,
+    token: str | None,
+    store: Store,
+    quota: SessionQuota,
+    database: str,
+    kind: str,
+) -> AsyncIterator[DatabaseInfo | None]:
+    """The handshake of a live session on a database (rhythm and control sessions): the caller
+    (:func:`websocket_owned`), a place in its session quota (HTTP 429 / close 4429), the socket
+    accepted, and the database a ready one of ``kind`` (else close 4400). Yields the database's
+    info while the quota place is held, or None once the socket was refused or closed."""
+
+    async def find(principal: Principal) -> DatabaseInfo:
+        return await anyio.to_thread.run_sync(database_for, store, principal, database)
+
+    owned = await websocket_owned(websocket, settings, token, find)
+    if owned is None:
+        yield None
+        return
+    principal, info = owned
+    refusal = quota.refusal(principal.name)
+    if refusal is not None:
+        await refuse_handshake(websocket, 429, refusal.code, refusal.message, 4429, refusal.headers)
+        yield None
+        return
+    with quota.hold(principal.name):
+        await websocket.accept()
+        if info.kind != kind or info.status.value != "ready":
+            await websocket.close(
+                code=4400, reason=f"database {database} is not a ready {kind} database"[:120]
+            )
+            yield None
+            return
+        yield info
 
 
 async def _send_events(websocket: WebSocket, queue: EventQueue, metrics: Metrics) -> JobEvent | None:
