@@ -40,18 +40,9 @@ class GraphEngine(Engine):
         return build_graph(spec, library, emit, should_stop)
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
-        if getattr(request, "characters", None):
-            CoupledSearch(
-                self.library,
-                self.tree,
-                self.tracks,
-                request.seed,
-                contacts=self.contacts,
-                reference=self.quality_reference,
-                foot_floor=self.foot_floor(self.library.motions[0].skeleton),
-            ).run(request, budget_s, emit, should_stop)
-            return
-        GraphSearch(
+        # several characters with shared constraints are searched jointly (engines.graph.shared)
+        searcher = CoupledSearch if getattr(request, "characters", None) else GraphSearch
+        searcher(
             self.library,
             self.tree,
             self.tracks,
