@@ -45,6 +45,12 @@ CLARITY_PREFERENCE = 4.0
 transition probability)."""
 CLARITY_FLOOR = 0.05
 """Beat clarity below this counts as this much (every movement of the graph stays reachable)."""
+PARTNER_JOIN_SPEED = 1.0
+"""m/s: the fastest a couple's partner is moved by its join offset (:func:`partner_fade_frames`)."""
+PARTNER_JOIN_TURN = np.radians(240.0)
+"""rad/s: the fastest a couple's partner is turned by its join offset."""
+PARTNER_FIT_FLOOR = 1e-6
+"""Least weight of a movement in :func:`partner_fit` (every transition stays possible)."""
 GROUP_FLOOR = 0.1
 """A group's preference (its members' mean, relative to the most preferred group's) counts at
 least this much, so every transition of the movement graph, learned or added by a choreographer's
@@ -174,6 +180,7 @@ class MovementPlan:
     fade_frames: float  # movement frames over which the join offsets fade out
     d_proot: Array | None = None
     d_prot: Array | None = None
+    pfade_frames: Array | None = None  # (C,) frames over which the partner's root offsets fade out
 
 
 @dataclass(slots=True)
@@ -238,22 +245,30 @@ def bounded_accent(
     """The largest accent up to ``accent`` with which a planned movement, rendered at the output
     frames whose beat and phase are ``beat``, ``x`` ``(F,)``, keeps the body (root) within
     ``limits`` (or no faster than the unaccented warp when that already exceeds them), found by
-    bisection. The accent speeds the motion up between beats (up to ``1 + a`` times), and a dancer
-    does not move faster than the fastest example for the sake of an accent."""
+    bisection; with couples, the partner's root too. The accent speeds the motion up between beats
+    (up to ``1 + a`` times), and a dancer does not move faster than the fastest example for the
+    sake of an accent."""
     if accent <= 0 or x.size < 3:
         return max(accent, 0.0)
     w = max(1, int(round(limits.window_s * fps)))
     if x.size <= w:
         return accent
 
+    bodies = [(t.root, t.rot)]
+    if t.partner_root is not None and t.partner_rot is not None:
+        bodies.append((t.partner_root, t.partner_rot))  # a couple's partner is held to them too
+
     def excess(a: float) -> float:
         u = warp_frames(t.plan_keys(plan), beat, accented(x, a))
-        root = _blend_at(t.root, plan.members, plan.weights, u, False)[..., [0, 2]]  # (C, F, 2)
-        q = _blend_at(t.rot[:, :, :1], plan.members, plan.weights, u, True)[:, :, 0]  # (C, F, 4)
-        yaw = np.unwrap(rot.yaw(q), axis=1)
-        speed = np.linalg.norm(root[:, w:] - root[:, :-w], axis=-1).max() * fps / w
-        turn = np.abs(yaw[:, w:] - yaw[:, :-w]).max() * fps / w
-        return float(max(speed / max(limits.speed, 1e-9), turn / max(limits.turn, 1e-9)))
+        worst = 0.0
+        for root_tab, rot_tab in bodies:
+            root = _blend_at(root_tab, plan.members, plan.weights, u, False)[..., [0, 2]]  # (C, F, 2)
+            q = _blend_at(rot_tab[:, :, :1], plan.members, plan.weights, u, True)[:, :, 0]  # (C, F, 4)
+            yaw = np.unwrap(rot.yaw(q), axis=1)
+            speed = np.linalg.norm(root[:, w:] - root[:, :-w], axis=-1).max() * fps / w
+            turn = np.abs(yaw[:, w:] - yaw[:, :-w]).max() * fps / w
+            worst = max(worst, speed / max(limits.speed, 1e-9), turn / max(limits.turn, 1e-9))
+        return float(worst)
 
     allowed = max(1.0, excess(0.0))
     if excess(accent) <= allowed:
@@ -268,9 +283,9 @@ def bounded_accent(
     return lo
 
 
-def _smooth_fade(u: Array, length: float) -> Array:
-    """1 at ``u = 0`` falling to 0 at ``u = length`` (smoothstep), 0 after."""
-    x = np.clip(u / max(length, 1e-9), 0.0, 1.0)
+def _smooth_fade(u: Array, length: float | Array) -> Array:
+    """1 at ``u = 0`` falling to 0 at ``u = length`` (smoothstep), 0 after (broadcast)."""
+    x = np.clip(u / np.maximum(length, 1e-9), 0.0, 1.0)
     return np.asarray(1.0 - x * x * (3.0 - 2.0 * x))
 
 
@@ -339,10 +354,17 @@ def plan_movement(
     # movements whose speed dips on their beats are preferred (their beats land visibly on the
     # music): a group by its members' mean preference, then (free dancing) a member by its own
     pref = t.member_preference
-    cum = np.cumsum(prob * group_preference(pref, t.blender.counts)[None, :], axis=1)
+    prob = prob * group_preference(pref, t.blender.counts)[None, :]
+    member_fit = partner_fit(t, d)  # (C, M) or None
+    if member_fit is not None:
+        m = t.blender.members
+        fit = np.where(m >= 0, member_fit[:, np.maximum(m, 0)], 0.0)  # (C, K, G)
+        prob = prob * fit.max(axis=2)
+    cum = np.cumsum(prob, axis=1)
     group = _sample_rows(cum, rng)  # the next node of the movement transition graph
     if control is None:
-        pick = _sample_rows(np.cumsum(pref[group], axis=1), rng)
+        within = pref[group] if member_fit is None else pref[group] * fit[np.arange(c), group]
+        pick = _sample_rows(np.cumsum(within, axis=1), rng)
         members, weights = t.blender.members[group, pick][:, None], np.ones((c, 1))
         extra_yaw, extra_xz = np.zeros(c), np.zeros((c, 2))
     else:
@@ -364,6 +386,25 @@ def plan_movement(
     _join_to_last(t, d, plan)
     _advance(t, d, plan)
     return plan
+
+
+def partner_fit(t: Tables, d: Dancers) -> Array | None:
+    """``(C, M)`` how well each movement continues a couple from where the partner is now (None
+    without couples, or before the first movement): ``exp(-s / period)``, ``s`` the seconds the
+    partner's join would take to fade out at :data:`PARTNER_JOIN_SPEED` and
+    :data:`PARTNER_JOIN_TURN` (:func:`partner_fade_frames`), at least ``PARTNER_FIT_FLOOR``. The
+    leader's next movement is chosen by the graph, which matches the leader's posture; where the
+    pair stands relative to each other differs between movements by up to a metre and a half turn,
+    and a partner carried that far at a join moves faster than any example."""
+    if t.partner_root is None or t.partner_rot is None or d.last_proot is None or d.last_prot is None:
+        return None
+    rel = _yaw_rotate_xz(d.last_proot[:, [0, 2]] - d.pos, -d.yaw)  # (C, 2) in the next placement
+    yaw_now = rot.yaw(rot.multiply(rot.from_yaw(-d.yaw), d.last_prot[:, 0]))  # (C,)
+    start = t.partner_root[:, 0][:, [0, 2]]  # (M, 2)
+    dist = np.linalg.norm(rel[:, None, :] - start[None, :, :], axis=-1)  # (C, M)
+    turn = np.abs(np.angle(np.exp(1j * (yaw_now[:, None] - rot.yaw(t.partner_rot[:, 0, 0])[None, :]))))
+    seconds = 1.5 * np.maximum(dist / PARTNER_JOIN_SPEED, turn / PARTNER_JOIN_TURN)
+    return np.asarray(np.maximum(np.exp(-seconds / max(t.period_s, 1e-9)), PARTNER_FIT_FLOOR))
 
 
 def _steered_blend(
@@ -424,6 +465,21 @@ def _join_to_last(t: Tables, d: Dancers, plan: MovementPlan) -> None:
         proot0 = _blend_at(t.partner_root, members, weights, u0, False)[:, 0]
         prot0 = _blend_at(t.partner_rot, members, weights, u0, True)[:, 0]
         plan.d_proot, plan.d_prot = _join_offsets(plan, d.last_proot, d.last_prot, proot0, prot0)
+        plan.pfade_frames = partner_fade_frames(t, plan.d_proot, plan.d_prot, plan.fade_frames)
+
+
+def partner_fade_frames(t: Tables, d_proot: Array, d_prot: Array, shortest: float) -> Array:
+    """``(C,)`` movement frames over which each partner's join offsets (root ``(C, 3)`` metres,
+    rotations ``(C, J, 3)``) fade out: at least ``shortest``, at most the whole movement, and long
+    enough that the smoothstep (peak rate 1.5 times the mean) moves the partner's root by no more
+    than :data:`PARTNER_JOIN_SPEED` and turns it by no more than :data:`PARTNER_JOIN_TURN`, at the
+    database's tempo. The leader's offsets are centimetres (transitions match its posture), but
+    where the pair stands differs between movements: the partner's can be a metre and a half turn."""
+    dist = np.linalg.norm(d_proot[:, [0, 2]], axis=1)
+    turn = np.linalg.norm(d_prot[:, 0], axis=1)
+    seconds = 1.5 * np.maximum(dist / PARTNER_JOIN_SPEED, turn / PARTNER_JOIN_TURN)
+    frames_per_s = t.frames_per_beat / max(t.period_s, 1e-9)
+    return np.asarray(np.clip(seconds * frames_per_s, shortest, t.frames - 1.0))
 
 
 def _advance(t: Tables, d: Dancers, plan: MovementPlan) -> None:
@@ -455,20 +511,26 @@ def _join_offsets(
 
 def render(t: Tables, plan: MovementPlan, u: Array) -> Rendered:
     """The planned movement of every character at movement frames ``u (F,)`` in ``[0, N-1]``."""
-    fade = _smooth_fade(u, plan.fade_frames)  # (F,)
     prog = u / (t.frames - 1)  # progress through the movement, for the extra turn/travel
 
     def place(
-        root_tab: Array, rot_tab: Array, d_root: Array | None, d_rot: Array | None
+        root_tab: Array, rot_tab: Array, d_root: Array | None, d_rot: Array | None, length: float | Array
     ) -> tuple[Array, Array]:
+        """Blend, add the join offsets (the root's and the root rotation's faded over ``length``
+        movement frames, ``()`` or ``(C,)``; the other joints' over ``plan.fade_frames``), place."""
         root = _blend_at(root_tab, plan.members, plan.weights, u, False)  # (C, F, 3)
         q = _blend_at(rot_tab, plan.members, plan.weights, u, True)  # (C, F, J, 4)
-        if d_root is not None and d_rot is not None and fade[0] > 0:
-            active = fade > 0
-            root[:, active] += fade[active][None, :, None] * d_root[:, None, :]
-            q[:, active] = rot.multiply(
-                rot.exp(fade[active][None, :, None, None] * d_rot[:, None]), q[:, active]
-            )
+        c = root.shape[0]
+        fade = np.broadcast_to(_smooth_fade(u[None, :], np.reshape(length, (-1, 1))), (c, u.size))
+        pose = np.broadcast_to(_smooth_fade(u, plan.fade_frames)[None, :], (c, u.size))
+        active = (fade > 0).any(axis=0) | (pose > 0).any(axis=0)
+        if d_root is not None and d_rot is not None and active.any():
+            f, g = fade[:, active], pose[:, active]  # (C, A)
+            root[:, active] += f[..., None] * d_root[:, None, :]
+            scale = np.concatenate(
+                (f[..., None], np.repeat(g[..., None], q.shape[2] - 1, axis=-1)), axis=-1
+            )  # (C, A, J)
+            q[:, active] = rot.multiply(rot.exp(scale[..., None] * d_rot[:, None]), q[:, active])
         turn = plan.yaw[:, None] + plan.extra_yaw[:, None] * prog[None, :]  # (C, F)
         xz = _yaw_rotate_xz(root[..., [0, 2]], plan.extra_yaw[:, None] * prog[None, :])
         xz = xz + plan.extra_xz[:, None, :] * prog[None, :, None]
@@ -477,10 +539,11 @@ def render(t: Tables, plan: MovementPlan, u: Array) -> Rendered:
         q[:, :, 0] = rot.multiply(rot.from_yaw(turn), q[:, :, 0])
         return world, q
 
-    root, q = place(t.root, t.rot, plan.d_root, plan.d_rot)
+    root, q = place(t.root, t.rot, plan.d_root, plan.d_rot, plan.fade_frames)
     proot = prot = None
     if t.partner_root is not None and t.partner_rot is not None:
-        proot, prot = place(t.partner_root, t.partner_rot, plan.d_proot, plan.d_prot)
+        length = plan.fade_frames if plan.pfade_frames is None else plan.pfade_frames
+        proot, prot = place(t.partner_root, t.partner_rot, plan.d_proot, plan.d_prot, length)
     jt = (
         _blend_at(t.jt, plan.members, plan.weights, u, False)
         if t.jt.shape[2]
