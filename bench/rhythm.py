@@ -70,12 +70,12 @@ def _quality(sol: Solution, tag: str) -> dict[str, Any]:
 
 def _sweep(engine: RhythmEngine, bpms: list[float]) -> list[dict[str, Any]]:
     """The 20 s dance at each tempo, seeds 1-3, default accent and none: beat alignment in both
-    conventions (mean over seeds) and how many results are ``ok``."""
+    conventions (mean over seeds), how many results are ``ok`` and why the others are not."""
     out = []
     for bpm in bpms:
         row: dict[str, Any] = {"bpm": bpm}
         for tag, accent in (("default_accent", None), ("accent_0", 0.0)):
-            mint, bail, ok = [], [], 0
+            mint, bail, ok, why = [], [], 0, []
             for seed in (1, 2, 3):
                 body: dict[str, Any] = {"music": {"bpm": bpm, "duration_s": 20}, "seed": seed}
                 if accent is not None:
@@ -87,10 +87,12 @@ def _sweep(engine: RhythmEngine, bpms: list[float]) -> list[dict[str, Any]]:
                 mint.append(q.metrics["beat_align_mint"])
                 bail.append(q.metrics["beat_align_bailando"])
                 ok += int(q.ok)
+                why += [f"seed {seed}: {r}" for r in q.reasons]
             row[tag] = {
                 "mint": round(float(np.mean(mint)), 3),
                 "bailando": round(float(np.mean(bail)), 3),
                 "ok": f"{ok}/3",
+                "reasons": why,
             }
         out.append(row)
     return out

@@ -127,7 +127,10 @@ class GraphTransition(Strict):
 
     source: int
     target: int
-    probability: float = Field(description="P(target | source): what synthesis draws with")
+    probability: float = Field(
+        description="P(target | source): what synthesis draws with (beat-clarity preference included), "
+        "at a tempo that allows every movement; faster music avoids the movements too fast for it"
+    )
     kinematic: float = Field(description="P_k: kinematic likelihood (end/start posture continuity, Eq. 22)")
     behavioural: float = Field(description="P_b: behavioural likelihood (observed in the examples, Eq. 26)")
     learned: bool = Field(description="the transition was in the graph learned from the examples")

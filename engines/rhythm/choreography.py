@@ -297,7 +297,8 @@ def movement_graph(
     src_clip = np.asarray(arrays["rhythm.src_clip"], dtype=np.intp)
     src = np.asarray(arrays["rhythm.src_frames"], dtype=np.float64)
     sizes = np.bincount(labels, minlength=p.shape[0])
-    # what synthesis really draws with: the graph times each group's beat-clarity preference
+    # what synthesis really draws with: the graph times each group's beat-clarity preference (at
+    # a tempo that allows every movement: faster music avoids those too fast for it, synth.too_fast)
     clarity = np.asarray(arrays["rhythm.clarity"]) if "rhythm.clarity" in arrays else np.ones(labels.size)
     draw = draw_probabilities(p, clarity, labels)
     start_draw = draw_probabilities(start, clarity, labels)[0]

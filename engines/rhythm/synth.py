@@ -86,6 +86,12 @@ def draw_probabilities(p: Array, clarity: Array, labels: IntArray) -> Array:
     return np.asarray(w / np.maximum(w.sum(axis=1, keepdims=True), 1e-300))
 
 
+TOO_FAST_WEIGHT = 0.01
+"""How much a movement counts when, danced at the music's beat period, its floor speed or turn rate
+would pass the examples' limit (:func:`too_fast`): the music does not allow it (KPS03 keeps a movement's
+speed to its own tempo); not 0, so a dancer whose next groups are all too fast still goes on."""
+
+
 @dataclass(frozen=True, slots=True)
 class Tables:
     """What synthesis reads (loaded once per database).
@@ -283,6 +289,31 @@ def bounded_accent(
     return lo
 
 
+def beat_rates(t: Tables) -> Array:
+    """``(M, 2)`` each movement's fastest floor travel (metres) and root turn (radians) per beat,
+    over a quarter-beat window (the partner's too, for couples): divided by a beat period (s),
+    the floor speed (m/s) and turn rate (rad/s) it reaches danced at that tempo, before any accent."""
+    q = max(1, t.frames_per_beat // 4)
+    worst = np.zeros((t.root.shape[0], 2))
+    for root, rots in ((t.root, t.rot), (t.partner_root, t.partner_rot)):
+        if root is None or rots is None:
+            continue
+        xz = root[:, :, [0, 2]]
+        yaw = np.unwrap(rot.yaw(rots[:, :, 0]), axis=1)
+        worst[:, 0] = np.maximum(worst[:, 0], np.linalg.norm(xz[:, q:] - xz[:, :-q], axis=-1).max(axis=1))
+        worst[:, 1] = np.maximum(worst[:, 1], np.abs(yaw[:, q:] - yaw[:, :-q]).max(axis=1))
+    return np.asarray(worst * t.frames_per_beat / q, dtype=np.float64)
+
+
+def too_fast(rates: Array, period_s: float, limits: SpeedLimits, native_s: float) -> npt.NDArray[np.bool_]:
+    """``(M,)`` the movements whose floor speed or turn rate at beat period ``period_s`` (``rates``
+    from :func:`beat_rates`) passes ``limits`` and what they do at the examples' own period
+    ``native_s`` (a movement danced at its own tempo is what the examples do: never too fast)."""
+    at, own = rates / max(period_s, 1e-9), rates / max(native_s, 1e-9)
+    cap = np.maximum(own, np.array([limits.speed, limits.turn]))
+    return np.asarray((at > cap * (1.0 + 1e-9)).any(axis=1), dtype=np.bool_)
+
+
 def _smooth_fade(u: Array, length: float | Array) -> Array:
     """1 at ``u = 0`` falling to 0 at ``u = length`` (smoothstep), 0 after (broadcast)."""
     x = np.clip(u / np.maximum(length, 1e-9), 0.0, 1.0)
@@ -339,8 +370,12 @@ def plan_movement(
     join_beats: float = 0.5,
     max_extra_turn: float = np.radians(45.0),
     max_extra_speed: float = 0.3,
+    fast: npt.NDArray[np.bool_] | None = None,
 ) -> MovementPlan:
     """Choose each character's next node and blend, place it, and measure the join offsets.
+
+    ``fast`` ``(M,)``: movements the music's tempo does not allow (:func:`too_fast`); they and
+    groups of nothing else count ``TOO_FAST_WEIGHT`` times as much.
 
     ``control``: target speed and heading per character (NaN entries leave that parameter free).
     Without control a random member of the node is used as is (weight 1). With it, the blend
@@ -355,6 +390,11 @@ def plan_movement(
     # music): a group by its members' mean preference, then (free dancing) a member by its own
     pref = t.member_preference
     prob = prob * group_preference(pref, t.blender.counts)[None, :]
+    if fast is not None and fast.any():
+        m = t.blender.members
+        allowed = np.where(m >= 0, ~fast[np.maximum(m, 0)], False)  # (K, G)
+        pref = pref * np.where(allowed, 1.0, TOO_FAST_WEIGHT)
+        prob = prob * np.where(allowed.any(axis=1), 1.0, TOO_FAST_WEIGHT)[None, :]
     member_fit = partner_fit(t, d)  # (C, M) or None
     if member_fit is not None:
         m = t.blender.members
@@ -572,8 +612,9 @@ def synthesize(
     """Frames ``0 .. floor(beats[-1] * fps)`` of every character, movements time-warped onto the beats.
 
     ``control(beat_index, dancers)`` returns the targets for the movement starting at that beat
-    (or None for free dancing). With ``limits``, each movement's accent is lowered as far as it
-    must be to keep the body within them (:func:`bounded_accent`)."""
+    (or None for free dancing). With ``limits``, movements too fast for the music's tempo are
+    avoided (:func:`too_fast`) and each movement's accent is lowered as far as it must be to keep
+    the body within them (:func:`bounded_accent`)."""
     b = np.asarray(beats_s, dtype=np.float64)
     n_frames = int(np.floor(b[-1] * fps + 1e-9)) + 1
     times = np.arange(n_frames) / fps
@@ -594,9 +635,16 @@ def synthesize(
     dominant = np.empty((c, n_frames), dtype=np.intp)
     plans: list[dict[str, Any]] = []
     bounds = np.searchsorted(mv_index, np.arange(n_moves + 1))
+    rates = beat_rates(t) if limits is not None else None
+    per = t.beats_per_movement
     for m in range(n_moves):
-        ctl = control(m * t.beats_per_movement, dancers) if control is not None else None
-        plan = plan_movement(t, dancers, ctl, rng)
+        ctl = control(m * per, dancers) if control is not None else None
+        fast = None
+        if rates is not None and limits is not None:
+            span = b[m * per : m * per + per + 1]
+            period = float(np.median(np.diff(span))) if span.size > 1 else t.period_s
+            fast = too_fast(rates, period, limits, t.period_s)
+        plan = plan_movement(t, dancers, ctl, rng, fast=fast)
         s, e = int(bounds[m]), int(bounds[m + 1])
         if e <= s:
             continue

@@ -42,10 +42,12 @@ def salsa_arrays() -> dict[str, Any]:
 
 
 def group_walks(
-    arrays: dict[str, Any], seeds: range, bpm: float = 110.0, duration_s: float = 30.0
+    arrays: dict[str, Any], seeds: range, bpm: float = 80.0, duration_s: float = 30.0
 ) -> list[list[int]]:
     """The group sequence synthesis walks for each seed (one dancer, free dancing): what the
-    engine's ``search`` reports as ``annotations.movements[*].group``."""
+    engine's ``search`` reports as ``annotations.movements[*].group``. At 80 BPM, slower than the
+    salsa examples (about 87), the tempo allows every movement; faster music avoids the movements
+    too fast for it (:func:`engines.rhythm.synth.too_fast`)."""
     from engines.rhythm.engine import music_beats
     from schemas.rhythm import RhythmRequest
 
