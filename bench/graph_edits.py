@@ -4,7 +4,8 @@ Builds a rhythm database of salsa leaders (cmu-salsa from ../shared/data, ``--cl
 bundled samples), with an ``--edge-threshold`` that leaves the learned graph sparse. Then, for each
 of ``--trials`` trials, draws a random edit list on it (``--cuts`` cuts, ``--connects`` added
 transitions, one weight by a factor in [2, 8]; lists the rules refuse are drawn again and counted),
-derives the database, dances ``--seeds`` dances of ``--seconds`` s at ``--bpm`` on it (one dancer,
+derives the database, dances ``--seeds`` dances of ``--seconds`` s at ``--bpm`` on it (default 80,
+slower than these dancers' 87 BPM: a tempo that allows every movement; one dancer,
 free: the engine's own synthesis, whose group sequence the report's ``annotations.movements``
 holds) and checks every edit on the group sequences:
 
@@ -16,7 +17,9 @@ holds) and checks every edit on the group sequences:
   standard deviations of its edited probability (when the source was visited 30 times or more).
 
 A trial obeys every edit when all its checkable edits pass. Prints one JSON object with the counts,
-the mean total-variation distance between the observed and the edited transition rows, and the
+the mean total-variation distance between the observed and the edited transition rows (the
+probabilities synthesis draws with on the edited graph: the graph times the beat-clarity
+preference, :func:`engines.rhythm.synth.draw_probabilities`, what ``segue graph`` shows), and the
 time to derive a database (``derive_ms``: resolve, apply, check and write the npz).
 """
 
@@ -37,6 +40,7 @@ sys.path.insert(0, str(ROOT))
 from engines.library import ClipInput  # noqa: E402
 from engines.rhythm.choreography import GraphEditError, apply_edits, edited_arrays  # noqa: E402
 from engines.rhythm.engine import RhythmEngine, music_beats  # noqa: E402
+from engines.rhythm.synth import draw_probabilities  # noqa: E402
 from schemas.databases import parse_database_spec  # noqa: E402
 from schemas.rhythm import RhythmRequest  # noqa: E402
 from schemas.rhythm_graph import ResolvedEdit  # noqa: E402
@@ -154,7 +158,7 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--seconds", type=float, default=60.0)
-    ap.add_argument("--bpm", type=float, default=110.0)
+    ap.add_argument("--bpm", type=float, default=80.0)
     ap.add_argument("--cuts", type=int, default=3)
     ap.add_argument("--connects", type=int, default=2)
     args = ap.parse_args()
@@ -176,7 +180,12 @@ def main() -> None:
         engine = RhythmEngine.load(load_npz(npz))
         assert isinstance(engine, RhythmEngine)
         ws = walks(engine, range(trial * 1000, trial * 1000 + args.seeds), args.bpm, args.seconds)
-        results.append(check(edits, np.asarray(derived["rhythm.p"]), ws))
+        draw = draw_probabilities(
+            np.asarray(derived["rhythm.p"]),
+            np.asarray(derived["rhythm.clarity"]),
+            np.asarray(derived["rhythm.labels"]),
+        )
+        results.append(check(edits, draw, ws))
     total = {k: int(sum(r[k] for r in results)) for k in results[0] if k not in ("tv", "obeyed")}
     out = {
         "database": label,
