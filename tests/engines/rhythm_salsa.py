@@ -27,6 +27,19 @@ SPEC: dict[str, Any] = {
     "edge_threshold": 0.08,
 }
 
+COUPLES_SPEC: dict[str, Any] = {
+    "kind": "rhythm",
+    "clips": [
+        {"bvh": "sample:salsa-leader-02", "name": "L2"},
+        {"bvh": "sample:salsa-follower-02", "name": "F2"},
+        {"bvh": "sample:salsa-leader-04", "name": "L4"},
+        {"bvh": "sample:salsa-follower-04", "name": "F4"},
+    ],
+    "partners": [{"leader": "L2", "follower": "F2"}, {"leader": "L4", "follower": "F4"}],
+    "beats_per_movement": 4,
+}
+"""Two bundled salsa couples (leader and follower captured together) as a rhythm database spec."""
+
 
 @lru_cache(maxsize=1)
 def salsa_npz() -> bytes:

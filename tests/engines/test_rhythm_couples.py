@@ -7,7 +7,6 @@ where the examples reach 2.2."""
 from __future__ import annotations
 
 from functools import lru_cache
-from typing import Any
 
 import numpy as np
 import pytest
@@ -19,20 +18,11 @@ from engines.rhythm.synth import partner_fade_frames
 from motion.samples import sample_path
 from schemas.databases import parse_database_spec
 from schemas.rhythm import RhythmRequest
+from tests.engines.rhythm_salsa import COUPLES_SPEC
 from workers.execute import build_database_bytes
 from workers.store import load_npz
 
-SPEC: dict[str, Any] = {
-    "kind": "rhythm",
-    "clips": [
-        {"bvh": "sample:salsa-leader-02", "name": "L2"},
-        {"bvh": "sample:salsa-follower-02", "name": "F2"},
-        {"bvh": "sample:salsa-leader-04", "name": "L4"},
-        {"bvh": "sample:salsa-follower-04", "name": "F4"},
-    ],
-    "partners": [{"leader": "L2", "follower": "F2"}, {"leader": "L4", "follower": "F4"}],
-    "beats_per_movement": 4,
-}
+SPEC = COUPLES_SPEC
 
 
 @lru_cache(maxsize=1)

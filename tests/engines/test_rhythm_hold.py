@@ -16,6 +16,7 @@ from motion.io import load_motion
 from motion.samples import sample_path
 from schemas.rhythm import RhythmRequest
 from service.cli import main
+from tests.engines.rhythm_salsa import COUPLES_SPEC
 from tests.motion.bvh_helpers import read_raw_bvh, reference_fk
 
 
@@ -23,17 +24,7 @@ from tests.motion.bvh_helpers import read_raw_bvh, reference_fk
 def salsa_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A rhythm database of two bundled salsa couples (leader and follower captured together)."""
     d = tmp_path_factory.mktemp("salsa")
-    spec = {
-        "kind": "rhythm",
-        "clips": [
-            {"bvh": "sample:salsa-leader-02", "name": "L2"},
-            {"bvh": "sample:salsa-follower-02", "name": "F2"},
-            {"bvh": "sample:salsa-leader-04", "name": "L4"},
-            {"bvh": "sample:salsa-follower-04", "name": "F4"},
-        ],
-        "partners": [{"leader": "L2", "follower": "F2"}, {"leader": "L4", "follower": "F4"}],
-        "beats_per_movement": 4,
-    }
+    spec = COUPLES_SPEC
     (d / "db.json").write_text(json.dumps(spec))
     assert main(["build", str(d / "db.json"), "--out", str(d / "db"), "-q"]) == 0
     return d / "db"
