@@ -33,6 +33,7 @@ import numpy.typing as npt
 
 from .errors import MotionError
 from .plausibility import SPEED_WINDOW_S
+from .rotations import rotate_floor, wrap_angle
 
 Array = npt.NDArray[np.float64]
 
@@ -91,15 +92,6 @@ def water_fill(caps: Array, total: float) -> Array:
     return np.asarray(np.minimum(caps, level))
 
 
-def _wrap(a: Array | float) -> Array:
-    return np.asarray((np.asarray(a) + np.pi) % (2 * np.pi) - np.pi)
-
-
-def _rotate(theta: Array, v: Array) -> Array:
-    c, s = np.cos(theta), np.sin(theta)
-    return np.stack((c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]), axis=-1)
-
-
 def _smoothed_rate(x: Array, fps: float) -> Array:
     """``(F, ...)`` rate of change of ``x (F, ...)`` per second over the speed window (centred,
     one-sided at the ends)."""
@@ -137,7 +129,7 @@ def floor_correction(
     alpha = _turn_corrections(yaw, fps, goals, order, limits, head_left)
     path = _turned_path(xz, alpha, goals, order)
     shift = _shift_corrections(path, alpha, fps, goals, order, limits, pos_left)
-    return FloorCorrection(alpha, path + shift - _rotate(alpha, xz), pos_left, head_left)
+    return FloorCorrection(alpha, path + shift - rotate_floor(alpha, xz), pos_left, head_left)
 
 
 def _turn_corrections(
@@ -157,12 +149,12 @@ def _turn_corrections(
     prev_t: int | None = None
     for i in (i for i in order if goals[i].heading is not None):
         t = goals[i].frame
-        want = float(_wrap(float(goals[i].heading) - yaw[t]))  # type: ignore[arg-type]
+        want = float(wrap_angle(float(goals[i].heading) - yaw[t]))  # type: ignore[arg-type]
         if prev_t is None:
             alpha[:] = want  # rigid before (and, until the next goal, after) the first one
             head_left[i] = 0.0
         else:
-            need = float(_wrap(want - alpha[prev_t]))
+            need = float(wrap_angle(want - alpha[prev_t]))
             seg = slice(prev_t + 1, t + 1)
             if limits is None:
                 steps = np.full(t - prev_t, need / max(t - prev_t, 1))
@@ -175,7 +167,7 @@ def _turn_corrections(
                 steps = s * water_fill(np.maximum(room, 0.0) / fps, abs(need))
             alpha[seg] = alpha[prev_t] + np.cumsum(steps)
             alpha[t + 1 :] = alpha[t]
-            head_left[i] = abs(float(_wrap(want - alpha[t])))
+            head_left[i] = abs(float(wrap_angle(want - alpha[t])))
         prev_t = t
     return alpha
 
@@ -185,11 +177,11 @@ def _turned_path(xz: Array, alpha: Array, goals: Sequence[FloorGoal], order: lis
     first position goal's frame (else the first goal's) turned about the origin."""
     n = xz.shape[0]
     steps_xz = np.zeros((n, 2))
-    steps_xz[1:] = _rotate(alpha[1:], np.diff(xz, axis=0))
+    steps_xz[1:] = rotate_floor(alpha[1:], np.diff(xz, axis=0))
     path = np.cumsum(steps_xz, axis=0)
     places = [i for i in order if goals[i].xz is not None]
     t0 = goals[places[0] if places else order[0]].frame
-    path += _rotate(np.array(alpha[t0]), xz[t0]) - path[t0]  # frame t0 turns about the origin
+    path += rotate_floor(np.array(alpha[t0]), xz[t0]) - path[t0]  # frame t0 turns about the origin
     return np.asarray(path)
 
 
@@ -214,7 +206,7 @@ def _shift_corrections(
         t = goal.frame
         target = np.asarray(goal.xz, dtype=np.float64)
         if goal.offset is not None:
-            target = target - _rotate(np.array(alpha[t]), np.asarray(goal.offset, dtype=np.float64))
+            target = target - rotate_floor(np.array(alpha[t]), np.asarray(goal.offset, dtype=np.float64))
         residual = target - (path[t] + shift[t])
         dist = float(np.linalg.norm(residual))
         if prev_t is None:

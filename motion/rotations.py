@@ -250,6 +250,20 @@ def from_euler_components(order: str, angles_deg: list[Array]) -> tuple[Array, A
     return q[0], q[1], q[2], q[3]
 
 
+def wrap_angle(a: Array | float) -> Array:
+    """Angles (radians) wrapped to ``[-pi, pi)``."""
+    return np.asarray((np.asarray(a, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi)
+
+
+def rotate_floor(theta: Array | float, xz: Array) -> Array:
+    """Floor vectors ``xz (..., 2)`` ``[x, z]`` rotated by ``theta (...)`` radians about +Y (+Z
+    turns towards +X at ``pi / 2``; the yaw convention of :func:`yaw`)."""
+    th = np.asarray(theta, dtype=np.float64)
+    c, s = np.cos(th), np.sin(th)
+    x, z = xz[..., 0], xz[..., 1]
+    return np.stack((c * x + s * z, -s * x + c * z), axis=-1)
+
+
 def _wrap_deg(a: Array) -> Array:
     """Angles wrapped to (-180, 180]."""
     return np.asarray(180.0 - np.mod(180.0 - a, 360.0))

@@ -55,6 +55,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from motion.rotations import wrap_angle
+
 from ..base import Arrays, EngineError
 from ..library import MotionLibrary
 from .blocks import next_features
@@ -69,11 +71,6 @@ TRANSITION_MARGIN = 15
 
 SHIFTS = (-2, -1, 1, 2)
 """Shifts of the parent's block added to every finer active set."""
-
-
-def wrap(a: FloatArray | float) -> FloatArray:
-    """Angles (radians) wrapped to ``[-pi, pi)``."""
-    return np.asarray((np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi)
 
 
 def rot2(theta: FloatArray | float, v: FloatArray) -> FloatArray:
@@ -245,7 +242,7 @@ class Problem:
             return np.zeros(np.shape(yaw))
         cost = np.linalg.norm(xz - self.end_xz, axis=-1) / 0.3
         if self.end_yaw is not None:
-            cost = cost + np.degrees(np.abs(wrap(yaw - self.end_yaw))) / 10.0
+            cost = cost + np.degrees(np.abs(wrap_angle(yaw - self.end_yaw))) / 10.0
         return np.asarray(self.end_weight * 10.0 * cost)
 
 

@@ -25,9 +25,10 @@ import numpy as np
 import numpy.typing as npt
 
 from motion.floorfit import CorrectionLimits
+from motion.rotations import rotate_floor, wrap_angle
 
 from .model import FloatArray, IntArray
-from .paths import BatchPieces, GraphIndex, JointTable, rotate2, wrap_angle
+from .paths import BatchPieces, GraphIndex, JointTable
 
 FIT_SAMPLES = 48
 """Grid frames over the output (besides goal frames) when no obstacle sets a finer grid."""
@@ -175,7 +176,7 @@ def batch_fit(
     clip, frame, th, sh = _grid_locate(pieces, theta, shift, grid.frames)
     yaw_l, xz_l = index.ground(clip, frame)
     yaw = th + yaw_l
-    xz = rotate2(th, xz_l) + sh
+    xz = rotate_floor(th, xz_l) + sh
     b, s = yaw.shape
     alpha = np.zeros((b, s))
     head_inc = np.zeros((b, grid.head_at.size))
@@ -196,7 +197,7 @@ def batch_fit(
     # the path with its steps turned by the correction angle, anchored at the first floor goal
     steps = np.diff(xz, axis=1)
     mid = 0.5 * (alpha[:, 1:] + alpha[:, :-1])
-    path = np.concatenate((np.zeros((b, 1, 2)), np.cumsum(rotate2(mid, steps), axis=1)), axis=1)
+    path = np.concatenate((np.zeros((b, 1, 2)), np.cumsum(rotate_floor(mid, steps), axis=1)), axis=1)
     floor_inc = np.zeros((b, grid.floor_at.size))
     floor_excess = np.zeros_like(floor_inc)
     goal = path
@@ -214,7 +215,7 @@ def batch_fit(
         head_excess[:, 1:] = np.maximum(np.abs(head_inc[:, 1:]) - room, 0.0)
     if grid.floor_at.size:
         i0 = int(grid.floor_at[0])
-        path = path + (rotate2(alpha[:, i0], xz[:, i0]) - path[:, i0])[:, None, :]
+        path = path + (rotate_floor(alpha[:, i0], xz[:, i0]) - path[:, i0])[:, None, :]
         targets = np.empty((b, grid.floor_at.size, 2))
         for g, (at_i, kind, ref) in enumerate(
             zip(grid.floor_at, grid.floor_kind, grid.floor_ref, strict=True)
@@ -225,9 +226,9 @@ def batch_fit(
                 if table is None or joint_xz is None:  # pragma: no cover - compile_problem builds both
                     raise ValueError("joint floor goals need the joint table")
                 p = table.at(clip[:, at_i], frame[:, at_i])[:, joint_columns[ref], :][:, [0, 2]]
-                world = rotate2(th[:, at_i], p) + sh[:, at_i]
+                world = rotate_floor(th[:, at_i], p) + sh[:, at_i]
                 offset = world - xz[:, at_i]
-                targets[:, g] = joint_xz[ref] - rotate2(alpha[:, at_i], offset)
+                targets[:, g] = joint_xz[ref] - rotate_floor(alpha[:, at_i], offset)
         residual = targets - path[:, grid.floor_at]  # (B, G, 2)
         floor_inc[:, 1:] = np.linalg.norm(np.diff(residual, axis=1), axis=-1)
         a, z = grid.floor_at[:-1], grid.floor_at[1:]

@@ -39,6 +39,7 @@ import numpy.typing as npt
 from cachetools import LRUCache, cached
 
 from motion.kinematics import forward_kinematics
+from motion.rotations import rotate_floor
 
 from ..library import MotionLibrary
 from .model import EdgeTree, FloatArray, IntArray, RootTracks
@@ -48,30 +49,17 @@ BoolArray = npt.NDArray[np.bool_]
 # -- 2-D rigid transforms on the floor ---------------------------------------------------------
 
 
-def rotate2(theta: FloatArray | float, v: FloatArray) -> FloatArray:
-    """Rotate floor vectors ``v (..., 2)`` ``[x, z]`` by ``theta (...)`` radians about +Y."""
-    th = np.asarray(theta, dtype=np.float64)
-    c, s = np.cos(th), np.sin(th)
-    x, z = v[..., 0], v[..., 1]
-    return np.stack((c * x + s * z, -s * x + c * z), axis=-1)
-
-
 def compose2(
     a_theta: FloatArray | float, a_shift: FloatArray, b_theta: FloatArray | float, b_shift: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """``a o b`` (apply ``b`` first): ``(a_theta + b_theta, R(a_theta) b_shift + a_shift)``."""
-    return np.asarray(a_theta + np.asarray(b_theta)), rotate2(a_theta, b_shift) + a_shift
+    return np.asarray(a_theta + np.asarray(b_theta)), rotate_floor(a_theta, b_shift) + a_shift
 
 
 def invert2(theta: FloatArray | float, shift: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Inverse transform: ``(-theta, -R(-theta) shift)``."""
     th = -np.asarray(theta, dtype=np.float64)
-    return th, -rotate2(th, shift)
-
-
-def wrap_angle(a: FloatArray | float) -> FloatArray:
-    """Angles (radians) wrapped to ``[-pi, pi)``."""
-    return np.asarray((np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi)
+    return th, -rotate_floor(th, shift)
 
 
 # -- paths -------------------------------------------------------------------------------------
@@ -146,7 +134,7 @@ class Placement:
         j = np.searchsorted(self.pieces.start, t, side="right") - 1
         rows = self.tracks.offsets[self.pieces.clip[j]] + self.pieces.first[j] + (t - self.pieces.start[j])
         yaw = self.theta[j] + self.tracks.root_yaw[rows]
-        xz = rotate2(self.theta[j], self.tracks.root_xz[rows]) + self.shift[j]
+        xz = rotate_floor(self.theta[j], self.tracks.root_xz[rows]) + self.shift[j]
         return xz, yaw
 
     def per_frame(self) -> tuple[FloatArray, FloatArray]:

@@ -45,6 +45,7 @@ import numpy as np
 from motion import MotionError
 from motion.contacts import foot_joints
 from motion.regions import FloorRegion
+from motion.rotations import rotate_floor, wrap_angle
 
 from ..base import EngineError
 from ..library import MotionLibrary
@@ -65,8 +66,6 @@ from .paths import (
     compose2,
     locate,
     path_pieces,
-    rotate2,
-    wrap_angle,
 )
 
 FRAMES_UNIT = 10.0
@@ -483,7 +482,7 @@ def _anchor_bodies(
         )
     else:
         alpha = np.zeros(yaw0.shape)
-    t_a = b0.xz - rotate2(alpha, p0)
+    t_a = b0.xz - rotate_floor(alpha, p0)
     th, sh = compose2(alpha[:, None], t_a[:, None, :], theta, shift)
     return th, sh
 
@@ -496,7 +495,7 @@ def body_at(
     rows = np.arange(j.size)
     yaw, xz = index.ground(clip, frame)
     th = theta[rows, j]
-    return th + yaw, rotate2(th, xz) + shift[rows, j]
+    return th + yaw, rotate_floor(th, xz) + shift[rows, j]
 
 
 def _neutralise(batch: PathBatch, valid: BoolArray) -> PathBatch:
@@ -569,14 +568,14 @@ def score_batch(index: GraphIndex, problem: Problem, batch: PathBatch, *, rough:
             p = problem.table.at(clip, frame)[:, jt.column]
             th = theta[rows, j]
             if fit is None:  # rough: the whole error as played
-                xz = rotate2(th, p[:, [0, 2]]) + shift[rows, j]
+                xz = rotate_floor(th, p[:, [0, 2]]) + shift[rows, j]
                 cost = ((xz - jt.position[[0, 2]]) ** 2).sum(-1) / METRES_UNIT**2
             else:  # the floor part is corrected by assembly (charged above as the correction it needs)
                 cost = np.zeros(batch.size)
             cost = cost + (p[:, 1] - jt.position[1]) ** 2 / METRES_UNIT**2
             if jt.velocity is not None:
                 v = problem.table.velocity(clip, frame, problem.fps)[:, jt.column]
-                vxz = rotate2(th, v[:, [0, 2]])
+                vxz = rotate_floor(th, v[:, [0, 2]])
                 dv2 = ((vxz - jt.velocity[[0, 2]]) ** 2).sum(-1) + (v[:, 1] - jt.velocity[1]) ** 2
                 cost = cost + dv2 / VELOCITY_UNIT**2
             joint += jt.weight * cost

@@ -30,6 +30,7 @@ from motion import Motion, MotionError
 from motion import rotations as rot
 from motion.ground import body_root, heading
 from motion.resample import sample_at
+from motion.rotations import rotate_floor
 
 Array = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -75,17 +76,10 @@ class Movements:
         return int(self.root.shape[1])
 
 
-def _yaw_rotate_xz(xz: Array, angle: Array) -> Array:
-    """Rotate floor vectors ``(..., 2)`` ``[x, z]`` about +Y by ``angle (...)`` radians (+Z -> +X at pi/2)."""
-    c, s = np.cos(angle), np.sin(angle)
-    x, z = xz[..., 0], xz[..., 1]
-    return np.stack((c * x + s * z, -s * x + c * z), axis=-1)
-
-
 def rotate_points_yaw(p: Array, angle: Array) -> Array:
     """Rotate points ``(..., 3)`` about +Y by ``angle`` (broadcast over the leading axes)."""
     out = np.array(p, dtype=np.float64, copy=True)
-    out[..., [0, 2]] = _yaw_rotate_xz(p[..., [0, 2]], angle)
+    out[..., [0, 2]] = rotate_floor(angle, p[..., [0, 2]])
     return out
 
 

@@ -32,10 +32,10 @@ import numpy as np
 import numpy.typing as npt
 
 from motion import rotations as rot
+from motion.rotations import rotate_floor
 
 from .beatkeys import warp_frames
 from .blend import GroupBlender, blend_weights, one_hot
-from .movements import _yaw_rotate_xz
 
 Array = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -351,7 +351,7 @@ def initial_dancers(count: int, formation: str, spacing: float, start_xz: Array,
     else:
         cols = int(np.ceil(np.sqrt(count)))
         local = np.stack((i % cols - (cols - 1) / 2, -(i // cols)), axis=-1) * spacing
-    pos = start_xz[None, :] + _yaw_rotate_xz(local, np.full(count, start_yaw))
+    pos = start_xz[None, :] + rotate_floor(np.full(count, start_yaw), local)
     return Dancers(pos=pos, yaw=np.full(count, start_yaw), node=np.full(count, -1, dtype=np.intp))
 
 
@@ -438,11 +438,11 @@ def partner_fit(t: Tables, d: Dancers) -> Array | None:
     and a partner carried that far at a join moves faster than any example."""
     if t.partner_root is None or t.partner_rot is None or d.last_proot is None or d.last_prot is None:
         return None
-    rel = _yaw_rotate_xz(d.last_proot[:, [0, 2]] - d.pos, -d.yaw)  # (C, 2) in the next placement
+    rel = rotate_floor(-d.yaw, d.last_proot[:, [0, 2]] - d.pos)  # (C, 2) in the next placement
     yaw_now = rot.yaw(rot.multiply(rot.from_yaw(-d.yaw), d.last_prot[:, 0]))  # (C,)
     start = t.partner_root[:, 0][:, [0, 2]]  # (M, 2)
     dist = np.linalg.norm(rel[:, None, :] - start[None, :, :], axis=-1)  # (C, M)
-    turn = np.abs(np.angle(np.exp(1j * (yaw_now[:, None] - rot.yaw(t.partner_rot[:, 0, 0])[None, :]))))
+    turn = np.abs(rot.wrap_angle(yaw_now[:, None] - rot.yaw(t.partner_rot[:, 0, 0])[None, :]))
     seconds = 1.5 * np.maximum(dist / PARTNER_JOIN_SPEED, turn / PARTNER_JOIN_TURN)
     return np.asarray(np.maximum(np.exp(-seconds / max(t.period_s, 1e-9)), PARTNER_FIT_FLOOR))
 
@@ -462,7 +462,7 @@ def _steered_blend(
     duration = t.beats_per_movement * t.period_s
     free_m, _ = one_hot(t.blender, group, rng)
     free = t.params[free_m[:, 0]]
-    turn_goal = np.angle(np.exp(1j * (control.heading - d.yaw)))
+    turn_goal = rot.wrap_angle(control.heading - d.yaw)
     target = np.stack(
         (
             np.where(np.isnan(control.speed), free[:, 0], control.speed),
@@ -527,7 +527,7 @@ def _advance(t: Tables, d: Dancers, plan: MovementPlan) -> None:
     members, weights = plan.members, plan.weights
     end_xz = (t.end_xz[members] * weights[..., None]).sum(axis=1) + plan.extra_xz
     end_yaw = (t.end_yaw[members] * weights).sum(axis=1) + plan.extra_yaw
-    d.pos = d.pos + _yaw_rotate_xz(_yaw_rotate_xz(end_xz, plan.extra_yaw), d.yaw)
+    d.pos = d.pos + rotate_floor(d.yaw, rotate_floor(plan.extra_yaw, end_xz))
     d.yaw = d.yaw + end_yaw
     d.node = plan.group
     last = render(t, plan, np.array([t.frames - 1.0]))
@@ -542,7 +542,7 @@ def _join_offsets(
     """Root offset ``(C, 3)`` and rotation offsets ``(C, J, 3)`` taking the new movement's first
     pose to the previous movement's last pose, in the new movement's placement frame."""
     rel = last_root.copy()
-    rel[:, [0, 2]] = _yaw_rotate_xz(last_root[:, [0, 2]] - plan.pos, -plan.yaw)
+    rel[:, [0, 2]] = rotate_floor(-plan.yaw, last_root[:, [0, 2]] - plan.pos)
     prev = last_rot.copy()
     prev[:, 0] = rot.multiply(rot.from_yaw(-plan.yaw), last_rot[:, 0])
     d_rot = rot.log(rot.multiply(prev, rot.conjugate(rot0)))
@@ -572,10 +572,10 @@ def render(t: Tables, plan: MovementPlan, u: Array) -> Rendered:
             )  # (C, A, J)
             q[:, active] = rot.multiply(rot.exp(scale[..., None] * d_rot[:, None]), q[:, active])
         turn = plan.yaw[:, None] + plan.extra_yaw[:, None] * prog[None, :]  # (C, F)
-        xz = _yaw_rotate_xz(root[..., [0, 2]], plan.extra_yaw[:, None] * prog[None, :])
+        xz = rotate_floor(plan.extra_yaw[:, None] * prog[None, :], root[..., [0, 2]])
         xz = xz + plan.extra_xz[:, None, :] * prog[None, :, None]
         world = root.copy()
-        world[..., [0, 2]] = _yaw_rotate_xz(xz, turn) + plan.pos[:, None, :]
+        world[..., [0, 2]] = rotate_floor(turn, xz) + plan.pos[:, None, :]
         q[:, :, 0] = rot.multiply(rot.from_yaw(turn), q[:, :, 0])
         return world, q
 

@@ -99,3 +99,18 @@ def test_yaw_convention() -> None:
 def test_normalize_rejects_zero() -> None:
     with pytest.raises(MotionError):
         rot.normalize(np.zeros((2, 4)))
+
+
+def test_wrap_angle_and_rotate_floor_agree_with_yaw() -> None:
+    """The floor helpers every engine uses: angles wrap to [-pi, pi); a floor vector turned by the
+    yaw of a rotation is where that rotation takes it (Y up)."""
+    a = np.array([-3 * np.pi, -np.pi, 0.0, np.pi, 2.5 * np.pi, 7.0])
+    w = rot.wrap_angle(a)
+    assert (w >= -np.pi).all() and (w < np.pi).all()
+    np.testing.assert_allclose(np.cos(w), np.cos(a), atol=1e-12)
+    np.testing.assert_allclose(np.sin(w), np.sin(a), atol=1e-12)
+    rng = np.random.default_rng(0)
+    theta, xz = rng.uniform(-4, 4, 20), rng.normal(size=(20, 2))
+    v3 = np.stack((xz[:, 0], np.zeros(20), xz[:, 1]), axis=1)
+    turned = Rotation.from_quat(rot.from_yaw(theta)).apply(v3)
+    np.testing.assert_allclose(rot.rotate_floor(theta, xz), turned[:, [0, 2]], atol=1e-12)
