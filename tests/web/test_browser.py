@@ -353,6 +353,36 @@ def test_path_walk(page: Any, segue: SegueClient) -> None:
     press_again(page, "#path-go", "path")
 
 
+def test_path_live_walk(page: Any, segue: SegueClient) -> None:
+    """Draw a path with "live while drawing": it streams to the live control session and the walker
+    arrives while the button is still held, a fixed latency behind the pointer; at release the rest
+    comes, one walker frame per path frame, ending near the release point."""
+    needs_engine("control")
+    db = segue.build_database(DEMOS["walk"].spec).id
+    reload_databases(page)
+    select_database(page, "path-db", db)
+    page.check("#path-live")
+    page.fill("#path-latency", "1")
+    # 3.6 s along a gentle curve at about 1.3 m/s (as test_path_walk, longer)
+    arc = [(5 * (1 - math.cos(0.04 * i)), 5 * math.sin(0.04 * i)) for i in range(21)]
+    drag(page, "#path-pad", [(0.5 + x / 10, 0.5 + z / 10) for x, z in arc], step_ms=180)
+    wait(page, "s.pathLive && s.pathLive.end", 20_000)
+    s = state(page)
+    live = s["pathLive"]
+    assert not live["errors"], live["errors"]
+    skeleton = live["skeleton"]
+    assert skeleton["control"] == "path" and skeleton["latency_frames"] == round(skeleton["fps"])  # 1 s
+    # frames came while the path was being drawn: live, not after the fact
+    assert live["framesBeforeStop"] > 0, live
+    # nothing came earlier than the stated latency allows
+    assert live["maxAhead"] <= 0, live
+    assert live["end"]["frames"] == live["frames"] == live["sent"] == s["current"]["frames"]
+    current = s["current"]
+    assert current["tool"] == "path" and current["live"]
+    assert current["root"][-1] == pytest.approx(s["path"]["points"][-1], abs=0.6)  # near the release point
+    screenshot(page, "path-live")
+
+
 def test_partner_follower(page: Any, segue: SegueClient) -> None:
     """Pick a leader clip uploaded through the API (not from this page): the generated follower
     dances with the leader, both drawn. The database picker offers partner databases only."""

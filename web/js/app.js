@@ -7,6 +7,7 @@ import { placeJoint, Viewer } from './viewer.js';
 import { FloorPad, headingDeg } from './pad.js';
 import { setupMusic } from './music.js';
 import { setupGraph } from './graph.js';
+import { startLiveWalk } from './livewalk.js';
 
 const $ = (id) => document.getElementById(id);
 const VIEW_FPS = 30; // results are drawn at most at this rate (the server resamples; downloads are full rate)
@@ -607,13 +608,13 @@ tools.path = (() => {
   // interpolation: the path keeps the performance's timing whatever the event and timer jitter.
   let raw = null;
   let timer = null;
-  const resample = (until) => {
+  const resample = (until, fps = 30) => {
     const t0 = raw[0][0];
-    const n = Math.floor(((until - t0) / 1000) * 30) + 1;
+    const n = Math.floor(((until - t0) / 1000) * fps) + 1;
     const out = [];
     let k = 0;
     for (let i = 0; i < n; i++) {
-      const t = t0 + (i * 1000) / 30;
+      const t = t0 + (i * 1000) / fps;
       while (k + 1 < raw.length && raw[k + 1][0] <= t) k++;
       const a = raw[k];
       const b = raw[Math.min(k + 1, raw.length - 1)];
@@ -626,14 +627,68 @@ tools.path = (() => {
     const [x, z] = pad.toFloor(ev.clientX, ev.clientY);
     raw.push([performance.now(), x, z]);
   };
+  // live mode: the path streams to the live control session while it is drawn (livewalk.js)
+  let live = null;
+  const startLive = () => {
+    const database = dbOf('path-db');
+    const latencyS = numberOf('path-latency', 'latency', 0.5, 5);
+    if (live) live.close();
+    viewer.clear();
+    let first = true;
+    const t0 = performance.now();
+    live = startLiveWalk({
+      database,
+      latencyS,
+      ApiError,
+      onStatus: (text) => { $('sol-info').textContent = text; },
+      onFrames: (positions, frames, fps, names, parents) => {
+        viewer.loop = false;
+        viewer.follow = 'result';
+        viewer.set('result', { name: 'live walk', fps, joints: names, parents, frames, positions }, undefined, { frame: first });
+        const J = names.length;
+        result = [];
+        for (let f = 0; f < frames; f++) result.push([positions[f * J * 3], positions[f * J * 3 + 2]]);
+        state.current = { tool: 'path', live: true, frames, fps, root: result };
+        if (first) {
+          state.timings.path_live = performance.now() - t0;
+          viewer.seek(0);
+          viewer.play();
+          first = false;
+        }
+        redraw();
+      },
+    });
+    state.pathLive = live.info;
+    const session = live;
+    guarded('path', async () => {
+      try {
+        await session.done;
+      } finally {
+        viewer.loop = true;
+        viewer.follow = null;
+        if (live === session) live = null;
+      }
+    });
+  };
   canvas.addEventListener('pointerdown', (ev) => {
+    if ($('path-live').checked) {
+      clearError('path');
+      try {
+        startLive();
+      } catch (exc) {
+        showError('path', exc);
+        return;
+      }
+    }
     canvas.setPointerCapture(ev.pointerId);
     raw = [];
     record(ev);
     result = [];
     clearInterval(timer);
     timer = setInterval(() => {
-      state.path.points = resample(performance.now());
+      const now = performance.now();
+      state.path.points = resample(now);
+      if (live && live.fps()) live.push(resample(now, live.fps()));
       redraw();
     }, 1000 / 30);
   });
@@ -651,6 +706,10 @@ tools.path = (() => {
     const until = performance.now();
     state.path.points = resample(until);
     state.path.held_ms = until - raw[0][0]; // how long the button was held, as the page timed it
+    if (live) {
+      if (live.fps()) live.push(resample(until, live.fps()));
+      live.stop();
+    }
     redraw();
   };
   canvas.addEventListener('pointerup', stop);
