@@ -234,6 +234,22 @@ class HandholdGoal:
     min_fraction: float = LABEL_MIN_FRACTION
 
 
+@dataclass(frozen=True, slots=True)
+class FootplantGoal:
+    """The feet stay where the examples plant them (an annotation the engine carried over to the
+    output frames, Hsu et al. 2004 Sec. 5): over the frames where ``contacts (F, K)`` flags joint
+    ``joints[k]`` planted, that joint's mean horizontal speed (m/s), at most ``tolerance_m_s``
+    (e.g. the examples' own figure on their contacts). Speeds are taken over ``step_s`` (default
+    1/30 s, every frame of the interval planted), so that capture noise at high frame rates does
+    not count as sliding."""
+
+    name: str
+    joints: npt.NDArray[np.intp]
+    contacts: BoolArray
+    tolerance_m_s: float
+    step_s: float = 1.0 / 30.0
+
+
 Goal = (
     LengthGoal
     | BodyGoal
@@ -248,6 +264,7 @@ Goal = (
     | HoldGoal
     | LoopGoal
     | HandholdGoal
+    | FootplantGoal
 )
 
 
@@ -314,6 +331,8 @@ def measure(
         return _measure_hold(goal, positions, characters)
     if isinstance(goal, HandholdGoal):
         return _measure_handhold(goal, positions)
+    if isinstance(goal, FootplantGoal):
+        return _measure_footplants(goal, positions, fps)
     raise MotionError(f"unknown goal {goal!r}")  # pragma: no cover - the union is closed
 
 
@@ -537,6 +556,47 @@ def _measure_handhold(goal: HandholdGoal, positions: Array) -> Measured:
         f"{goal.name}: hands within {goal.tolerance_cm:g} cm on {100 * held:.0f}% of the {dist.size} "
         f"frames that hold hands in the examples (wanted {100 * goal.min_fraction:.0f}%; "
         f"median {np.median(dist):.0f} cm)"
+    )
+
+
+def planted_speeds(
+    positions: Array, joints: npt.NDArray[np.intp], contacts: BoolArray, fps: float, step_s: float
+) -> Array:
+    """Horizontal speeds (m/s) of ``joints`` over every interval of ``step_s`` (at least one
+    frame) whose frames are all flagged planted in ``contacts (F, K)``; ``positions (F, J, 3)``
+    metres at ``fps``. Returns the speeds of every planted (interval, joint), flattened."""
+    step = max(1, int(round(step_s * fps)))
+    n = min(positions.shape[0], contacts.shape[0])
+    if n <= step:
+        return np.zeros(0)
+    feet = positions[:n, joints][:, :, [0, 2]]  # (n, K, 2)
+    speed = np.linalg.norm(feet[step:] - feet[:-step], axis=-1) * (fps / step)  # (n - step, K)
+    # every frame of [t, t + step] planted: a window count over the flags
+    flags = np.asarray(contacts[:n], dtype=np.int64)
+    counts: npt.NDArray[np.int64] = np.concatenate(
+        (np.zeros((1, flags.shape[1]), np.int64), np.cumsum(flags, axis=0))
+    )
+    planted = counts[step + 1 :] - counts[: n - step] == step + 1
+    return np.asarray(speed[planted])
+
+
+def _measure_footplants(goal: FootplantGoal, positions: Array, fps: float) -> Measured:
+    """The feet's mean horizontal speed where the carried-over contacts plant them."""
+    speeds = planted_speeds(positions, goal.joints, goal.contacts, fps, goal.step_s)
+    if speeds.size == 0:
+        return {"frames": 0, "satisfied": True}, None
+    slide = float(speeds.mean())
+    ok = slide <= goal.tolerance_m_s
+    e = {
+        "frames": int(speeds.size),
+        "slide_m_s": _r(slide),
+        "p90_m_s": _r(float(np.percentile(speeds, 90))),
+        "tolerance_m_s": _r(goal.tolerance_m_s),
+        "satisfied": ok,
+    }
+    return e, None if ok else (
+        f"{goal.name}: the feet slide {slide:.2f} m/s where the examples plant them "
+        f"({speeds.size} foot-frames; tolerance {goal.tolerance_m_s:.2f} m/s)"
     )
 
 

@@ -25,7 +25,7 @@ from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
 from motion import Motion, MotionError
 from motion.bvh import parse_bvh
-from motion.goals import Goal, HandholdGoal, LengthGoal, PathGoal
+from motion.goals import FootplantGoal, Goal, HandholdGoal, LengthGoal, PathGoal, planted_speeds
 from motion.quality import QualityInputs
 from motion.reach import reach, smooth_weights
 
@@ -124,6 +124,7 @@ class ControlEngine(Engine):
         self.local_of_ = np.full(self.db.instances.shape[0], -1, dtype=np.intp)
         self.local_of_[kept] = np.arange(kept.size)
         self._targets: dict[str, tuple[Motion, int]] = {}
+        self._planted_slide: float | None = None
         self.solver_instances_ = self.instances_for(0.0)
 
     def instances_for(self, continuity_s: float) -> Instances:
@@ -526,6 +527,36 @@ class ControlEngine(Engine):
         except MotionError:
             return motion
 
+    def examples_planted_slide(self) -> float | None:
+        """The examples' own mean horizontal foot speed (m/s) where their contacts plant the feet
+        (the database's target clouds and contacts, each pair apart, over 1/30 s intervals); ``None``
+        when the contact joints are not among the target joints."""
+        if self._planted_slide is None:
+            db = self.db
+            names = list(db.meta["target_joints"])
+            if not db.contact_joints or any(n not in names for n in db.contact_joints):
+                self._planted_slide = float("nan")
+            else:
+                cols = np.array([names.index(n) for n in db.contact_joints], dtype=np.intp)
+                speeds = [
+                    planted_speeds(db.target[a:b], cols, db.contacts[a:b], db.fps, 1.0 / 30.0)
+                    for a, b in zip(db.offsets[:-1], db.offsets[1:], strict=True)
+                ]
+                every = np.concatenate(speeds)
+                self._planted_slide = float(every.mean()) if every.size else float("nan")
+        return None if np.isnan(self._planted_slide) else self._planted_slide
+
+    def _footplant_goal(self, contacts: npt.NDArray[np.bool_], motion: Motion) -> Goal | None:
+        """The propagated foot contacts as a goal of the quality report
+        (:class:`motion.goals.FootplantGoal`): the output's feet slide no more where the examples
+        plant them than the examples' own feet do (``None`` without contacts)."""
+        tolerance = self.examples_planted_slide()
+        names = motion.skeleton.names
+        if tolerance is None or not contacts.any() or any(n not in names for n in self.db.contact_joints):
+            return None
+        joints = np.array([names.index(n) for n in self.db.contact_joints], dtype=np.intp)
+        return FootplantGoal("footplants", joints, contacts, tolerance_m_s=tolerance)
+
     def _handhold_goal(
         self, hold: npt.NDArray[np.int8], ctl: ControlInputCloud, motion: Motion
     ) -> Goal | None:
@@ -617,6 +648,9 @@ class ControlEngine(Engine):
         hold_goal = self._handhold_goal(hold, ctl, motion)
         if hold_goal is not None:
             goals.append(hold_goal)
+        plant_goal = self._footplant_goal(contacts, motion)
+        if plant_goal is not None:
+            goals.append(plant_goal)
         if ctl.path is not None:
             frames = np.arange(ctl.path.shape[0], dtype=np.intp)
             goals.append(PathGoal("path", frames, ctl.path, tolerance_cm=PATH_TOLERANCE_CM))

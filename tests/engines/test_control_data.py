@@ -156,3 +156,33 @@ def test_pairs_build_and_synth_through_the_cli_runtime(tmp_path: Path, sample_co
     motion, report = result
     assert motion.num_frames == 360 and report.fps == 120.0 and len(report.provenance) == 360
     assert report.annotations["segments"] and "foot_slide_m_s" in report.metrics and report.ok is not None
+
+
+def test_the_report_says_whether_the_feet_stay_where_the_examples_plant_them(sample_couple) -> None:  # type: ignore[no-untyped-def]
+    """The foot contacts carried over from the examples are a goal of the report, measured on the
+    output: met with the foot clean-up (the default), not met without it (the pieces slide more
+    than the examples' own feet do)."""
+    pairs = [sample_couple] + [
+        (sample_path(f"salsa-leader-{t}").read_bytes(), sample_path(f"salsa-follower-{t}").read_bytes())
+        for t in ("02", "04")
+    ]
+    engine = engine_of(pairs, {"method": "beats", "beats_per_segment": 2})
+    lead = parse_bvh(sample_path("salsa-leader-12").read_bytes()).with_units("m").slice(0, 960)  # 8 s
+    examples = engine.examples_planted_slide()
+    assert examples is not None and 0.02 < examples < 0.5  # salsa feet swivel while planted
+    entries = {}
+    for cleanup in (True, False):
+        req = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}, "footskate": cleanup})
+        req.attach_inputs({"lead.bvh": bvh_text(lead).encode()})
+        out = Collect()
+        engine.search(req, 5.0, out, lambda: False)
+        sol = out.solutions[-1]
+        assert sol.quality is not None
+        entries[cleanup] = (sol.quality.constraint_errors["footplants"], sol.quality.reasons)
+        flags = np.asarray(sol.annotations["foot_contacts"]["flags"], dtype=bool)
+        assert entries[cleanup][0]["frames"] > 0.2 * flags.sum()  # most planted frames are measured
+    (kept, _), (slid, reasons) = entries[True], entries[False]
+    assert kept["satisfied"] and kept["slide_m_s"] < 0.5 * examples
+    assert kept["tolerance_m_s"] == pytest.approx(examples, abs=1e-4)
+    assert not slid["satisfied"] and slid["slide_m_s"] > examples
+    assert any(r.startswith("footplants:") for r in reasons)

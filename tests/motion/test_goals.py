@@ -1,10 +1,10 @@
-"""Goals of :mod:`motion.goals` measured on positions: the hand-hold goal."""
+"""Goals of :mod:`motion.goals` measured on positions: the hand-hold and foot-plant goals."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from motion.goals import HandholdGoal, measure
+from motion.goals import FootplantGoal, HandholdGoal, measure, planted_speeds
 
 
 def test_handhold_goal_counts_the_frames_whose_hands_meet() -> None:
@@ -27,3 +27,28 @@ def test_handhold_goal_counts_the_frames_whose_hands_meet() -> None:
     # frames beyond the output are not counted
     beyond = HandholdGoal("handhold", np.array([20]), np.array([1]), partner[:1])
     assert measure(beyond, positions, 30.0, [])[0] == {"frames": 0, "satisfied": True}
+
+
+def test_planted_speeds_take_whole_planted_intervals_of_the_step() -> None:
+    fps = 120.0
+    positions = np.zeros((13, 2, 3))  # joint 1 is the foot; it moves 1 cm per frame along +X
+    positions[:, 1, 0] = 0.01 * np.arange(13)
+    positions[:, 1, 1] = 5.0 * np.arange(13)  # vertical motion is not sliding
+    contacts = np.zeros((13, 1), dtype=bool)
+    contacts[0:9] = True  # planted over frames 0-8: intervals of 4 frames starting at 0..4
+    speeds = planted_speeds(positions, np.array([1]), contacts, fps, 1.0 / 30.0)
+    assert speeds.shape == (5,)
+    np.testing.assert_allclose(speeds, 0.01 * fps)  # 1.2 m/s, measured over 4 frames
+    assert planted_speeds(positions[:4], np.array([1]), contacts[:4], fps, 1.0 / 30.0).size == 0
+
+
+def test_footplant_goal_compares_the_slide_with_its_tolerance() -> None:
+    positions = np.zeros((31, 2, 3))
+    positions[:, 1, 2] = 0.002 * np.arange(31)  # 0.06 m/s at 30 fps
+    contacts = np.ones((31, 1), dtype=bool)
+    entry, reason = measure(FootplantGoal("footplants", np.array([1]), contacts, 0.1), positions, 30.0, [])
+    assert entry["frames"] == 30 and entry["slide_m_s"] == 0.06 and entry["satisfied"] and reason is None
+    entry, reason = measure(FootplantGoal("footplants", np.array([1]), contacts, 0.05), positions, 30.0, [])
+    assert not entry["satisfied"] and reason is not None and "0.06 m/s" in reason
+    none = FootplantGoal("footplants", np.array([1]), np.zeros((31, 1), dtype=bool), 0.05)
+    assert measure(none, positions, 30.0, []) == ({"frames": 0, "satisfied": True}, None)
