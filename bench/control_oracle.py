@@ -50,7 +50,7 @@ from control_salsa import POINTS, SALSA, engine_for, log, moved, synthesize, tri
 
 from engines.control.dp import align_points, paired_alignment, stretched_templates  # noqa: E402
 from engines.control.engine import ControlEngine  # noqa: E402
-from engines.control.points import resample_cloud  # noqa: E402
+from engines.control.points import resample_cloud, sample_cloud  # noqa: E402
 from motion import Motion  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.bvh import parse_bvh  # noqa: E402
@@ -67,14 +67,6 @@ def joint_points(motion: Motion, names: list[str] | tuple[str, ...]) -> Array:
     """``(F, len(names), 3)`` metres: the named joints' world positions."""
     pos = motion.global_positions() * motion.metres_per_unit
     return np.asarray(pos[:, [motion.skeleton.names.index(n) for n in names]])
-
-
-def cloud_at(cloud: Array, frames: Array) -> Array:
-    """``cloud (F, P, 3)`` linearly interpolated at fractional ``frames (...)`` -> ``(..., P, 3)``."""
-    lo = np.clip(np.floor(frames).astype(np.intp), 0, cloud.shape[0] - 1)
-    hi = np.minimum(lo + 1, cloud.shape[0] - 1)
-    w = (frames - lo)[..., None, None]
-    return np.asarray(cloud[lo] * (1.0 - w) + cloud[hi] * w)
 
 
 def nearest_frames(out: Motion, other: Motion) -> npt.NDArray[np.intp]:
@@ -134,7 +126,7 @@ def segment_bounds(
             templates.reshape(inst.count, -1, 3),
         )
         src = inst.start[:, None] + inst.length[:, None] * (np.arange(d) / d)[None, :]
-        placed = align_points(cloud_at(target, src).reshape(inst.count, -1, 3), cos, sin, tx, tz)
+        placed = align_points(sample_cloud(target, src).reshape(inst.count, -1, 3), cos, sin, tx, tz)
         placed = placed.reshape(inst.count, d, -1, 3)
         errors = np.linalg.norm(placed - truth[None], axis=-1).mean(axis=(1, 2)) / height
         chosen = int(engine.local_of_[seg["instance"]])
