@@ -1,7 +1,7 @@
 """Accuracy of the control-by-example engine: leave-one-dance-out on the CMU salsa couples.
 
 Usage: ``python bench/control_salsa.py [--held 07,12] [--jobs 2] [--yaw 25] [--move 0.8,-1.1]
-[--budget 10] [--cache DIR] [--request JSON] [--database JSON] [--baselines]`` from the project
+[--budget 10] [--cache DIR] [--request JSON] [--database JSON] [--baselines] [--bodies 0,-0.01]`` from the project
 root (needs ../shared/data/cmu-salsa; ``--database`` adds database spec fields).
 
 The protocol of ``../shared/acceptance/control.py``, run in process: for each held-out dance ``NN``
@@ -12,6 +12,10 @@ BVH file's units, as the check's ``yaw_transform``); the follower is generated f
 leader (the engine's best solution within ``--budget`` seconds; default the requests' 10 s, as the
 check's ``segue synth``; ``--request`` adds request fields such as ``k``), and compared with the
 moved real follower, output frame ``i`` against the follower frame nearest in time.
+
+``--bodies T1,T2,...`` tells every request where the real follower's body stands at those times
+(seconds, negative from the end; request ``bodies``): the accuracy a user gets who says where the
+follower starts and ends, which the leader's motion does not say.
 
 ``--settings`` compares several request settings (name -> request fields) on the same databases;
 every figure is given per dance and per setting.
@@ -334,12 +338,21 @@ def output_measures(solution: Any) -> dict[str, Any]:
 
 def run_dance(
     job: tuple[
-        str, float, float, float, float | None, str | None, dict[str, dict[str, Any]], bool, dict[str, Any]
+        str,
+        float,
+        float,
+        float,
+        float | None,
+        str | None,
+        dict[str, dict[str, Any]],
+        bool,
+        dict[str, Any],
+        list[float],
     ],
 ) -> tuple[str, dict[str, Any]]:
     """One held-out dance: build (or load), move, then for every setting synthesize and measure
     (and the baselines, on the first setting's output)."""
-    held, yaw, tx, tz, budget, cache, settings, with_baselines, db_extra = job
+    held, yaw, tx, tz, budget, cache, settings, with_baselines, db_extra, body_times = job
     engine, build_s = engine_for(held, None if cache is None else Path(cache), db_extra)
     leader = moved(parse_bvh((SALSA / f"60_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
     follower = moved(parse_bvh((SALSA / f"61_{held}_scaled.bvh").read_bytes()), yaw, tx, tz)
@@ -347,8 +360,9 @@ def run_dance(
         "build_s": None if build_s is None else round(build_s, 1),
         "instances": int(engine.kept_.size),
     }
+    bodies = follower_bodies(follower, body_times)
     for k, (name, extra) in enumerate(settings.items()):
-        solution, synth_s = synthesize(engine, leader, extra, budget)
+        solution, synth_s = synthesize(engine, leader, {**extra, **bodies}, budget)
         out = solution.motion
         ratio = (out.num_frames / out.fps) / (follower.num_frames / follower.fps)  # as the check
         if abs(ratio - 1.0) > 0.02:
@@ -364,6 +378,22 @@ def run_dance(
         log(f"dance {held} [{name}]: {json.dumps(entry)}")
         result[name] = entry
     return held, result
+
+
+def follower_bodies(follower: Motion, times: list[float]) -> dict[str, Any]:
+    """Request fields placing the target's body where the real (moved) follower's hips are at
+    ``times`` (seconds; negative ones count from the end): what a user who knows where the follower
+    stands would give (``{}`` for no times)."""
+    if not times:
+        return {}
+    hips = _points(follower, ("hip",))[:, 0]
+    duration = (follower.num_frames - 1) / follower.fps
+    bodies = []
+    for t in times:
+        at = min(max(duration + t if t < 0 else t, 0.0), duration)
+        frame = min(int(round(at * follower.fps)), follower.num_frames - 1)
+        bodies.append({"time_s": round(at, 4), "position": [float(hips[frame, 0]), float(hips[frame, 2])]})
+    return {"bodies": bodies}
 
 
 def json_object(ap: argparse.ArgumentParser, option: str, text: str) -> dict[str, Any]:
@@ -404,6 +434,12 @@ def main(argv: list[str] | None = None) -> int:
         help="also measure the nearest-frame and average-partner baselines and the jerk of each",
     )
     ap.add_argument("--cache", type=Path, default=None, help="directory to keep built databases in")
+    ap.add_argument(
+        "--bodies",
+        default="",
+        help="comma-separated times (s; negative from the end) at which every request is told where the "
+        "real follower's body stands (request 'bodies'), e.g. '0,-0.01' for the start and end spots",
+    )
     args = ap.parse_args(argv)
     tune_process()
     if not SALSA.exists():
@@ -430,7 +466,13 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--settings takes a JSON object of name -> request fields (objects)")
     db_extra = json_object(ap, "--database", args.database)
     cache = None if args.cache is None else str(args.cache.resolve())
-    jobs = [(h, args.yaw, tx, tz, args.budget, cache, settings, args.baselines, db_extra) for h in held]
+    try:
+        body_times = [float(v) for v in args.bodies.split(",") if v.strip()]
+    except ValueError:
+        ap.error(f"--bodies takes comma-separated seconds, got {args.bodies!r}")
+    jobs = [
+        (h, args.yaw, tx, tz, args.budget, cache, settings, args.baselines, db_extra, body_times) for h in held
+    ]
     log(f"{len(jobs)} held-out dance(s): {','.join(held)}; {args.jobs} process(es)")
     if args.jobs == 1:
         results = [run_dance(job) for job in jobs]

@@ -223,6 +223,21 @@ class ControlInput(Strict):
         return self
 
 
+class BodyPlacement(Strict):
+    """Where the target's body (its hips on the floor) stands at a time: ``position`` ``[x, z]``
+    metres in the control's world frame (a soft cost in the search, then met by a floor correction
+    within the examples' limits; reported as ``body[i]``)."""
+
+    time_s: float = Field(ge=0, le=86_400, description="seconds from the control's start")
+    position: tuple[float, float] = Field(description="[x, z] metres, the control's world frame")
+
+    @model_validator(mode="after")
+    def _on_the_floor(self) -> BodyPlacement:
+        if max(abs(self.position[0]), abs(self.position[1])) > 1e5:
+            raise ValueError("position: metres from the origin, at most 100 km")
+        return self
+
+
 class InstanceConstraint(Strict):
     """Hard: the output at ``time_s`` comes from a given instance (the paper's illegal cells).
 
@@ -297,6 +312,20 @@ class ControlRequest(JobRequestBase):
     )
     exact: bool = Field(default=True, description="finish the anytime schedule with the exact optimum")
     constraints: list[InstanceConstraint] = Field(default_factory=list, max_length=1000)
+    bodies: list[BodyPlacement] = Field(
+        default_factory=list,
+        max_length=1000,
+        description="where the target's body stands at given times (e.g. a follower's start and end "
+        "spots, which a leader's motion does not say); each is a soft cost in the search, then met "
+        "within the examples' speed limits and reported as body[i]",
+    )
+    body_weight: float = Field(
+        default=1.0,
+        ge=0,
+        le=1e6,
+        description="seconds: weight of a placement's squared distance (m^2) against the interpretation "
+        "distance (m^2 x s)",
+    )
     smoothing_s: float = Field(default=0.15, ge=0, le=2, description="blend half-width across boundaries")
     footskate: bool = Field(default=True, description="clean up foot skate where a cleanup is available")
     hold_hands: bool = Field(

@@ -25,7 +25,9 @@ from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
 from motion import Motion, MotionError
 from motion.bvh import parse_bvh
-from motion.goals import FootplantGoal, Goal, HandholdGoal, LengthGoal, PathGoal, planted_speeds
+from motion.floorfit import faded_shifts
+from motion.goals import BodyGoal, FootplantGoal, Goal, HandholdGoal, LengthGoal, PathGoal, planted_speeds
+from motion.ground import apply_floor_transform, body_root, ground_frames, static_reference_root
 from motion.quality import QualityInputs
 from motion.reach import reach, smooth_weights
 
@@ -50,6 +52,7 @@ from .dp import (
 
 if TYPE_CHECKING:
     from .session import LiveControl
+from .placement import add_body_costs
 from .points import derived_control, joint_cloud, resample_cloud, trajectory_control
 
 Array = npt.NDArray[np.float64]
@@ -76,6 +79,9 @@ QUICK_CELLS = (16, 128)
 BEAM_WIDTH = 10.0
 BEAM_CELLS = (64, 256)
 
+
+BODY_FADE_S = 2.0
+"""A body placement's correction fades in and out over this long before and after it, seconds."""
 
 PATH_TOLERANCE_CM = 10.0
 """How far (RMS) a walker's body may be from a performed path and still follow it: the hips sway
@@ -125,7 +131,18 @@ class ControlEngine(Engine):
         self.local_of_[kept] = np.arange(kept.size)
         self._targets: dict[str, tuple[Motion, int]] = {}
         self._planted_slide: float | None = None
+        self.body_column_ = self._body_column()
         self.solver_instances_ = self.instances_for(0.0)
+
+    def _body_column(self) -> int | None:
+        """The column of the target clouds that holds the target's body (the body root of the first
+        target clip's skeleton), or ``None`` when it is not among the target joints."""
+        names = list(self.db.meta["target_joints"])
+        if not self.db.pairs:
+            return None
+        skeleton = self.library.clip(self.db.pairs[0][1]).skeleton
+        root = skeleton.names[body_root(skeleton)]
+        return names.index(root) if root in names else None
 
     def instances_for(self, continuity_s: float) -> Instances:
         """The kept instances for the solver; heads and tails hold the target points at the segment
@@ -339,6 +356,16 @@ class ControlEngine(Engine):
         apply_constraints(
             interp.D, cell_inst, cell_dur, [(s, int(np.floor(t * rate))) for s, t in constraints]
         )
+        if request.bodies:
+            add_body_costs(
+                interp,
+                inst,
+                cell_inst,
+                cell_dur,
+                self.db.target[:, self._body_placement_column()],
+                self._body_placements(request, ctl, rate, x.shape[0]),
+                float(request.body_weight),
+            )
         to_go = cost_to_go(interp.D, cell_dur)
         if not np.isfinite(to_go[0]):
             shortest = float(lengths_s.min())
@@ -359,6 +386,48 @@ class ControlEngine(Engine):
             k=self.continuity_weight(request),
             window=int(np.ceil(rate_full / rate)),
         )
+
+    def _body_placement_column(self) -> int:
+        """:attr:`body_column_`, or an error naming what a request's ``bodies`` need."""
+        if self.body_column_ is None:
+            raise EngineError(
+                "bodies: the database's target joints do not include the target's body root "
+                f"({', '.join(self.db.meta['target_joints'])}); rebuild it with the hips among target_joints"
+            )
+        return self.body_column_
+
+    def _body_placements(
+        self, request: Any, ctl: ControlInputCloud, rate: float, frames: int
+    ) -> list[tuple[int, Array]]:
+        """``(solve frame, xz)`` of the request's body placements; an error names one after the
+        control's end."""
+        duration = (ctl.cloud.shape[0] - 1) / ctl.fps
+        out = []
+        for i, b in enumerate(request.bodies):
+            if b.time_s > duration + 1e-6:
+                raise EngineError(
+                    f"bodies[{i}]: time {b.time_s} s is after the end of the control ({duration:.2f} s)"
+                )
+            frame = min(int(round(b.time_s * rate)), frames - 1)
+            out.append((frame, np.asarray(b.position, dtype=np.float64)))
+        return out
+
+    def _place_bodies(self, motion: Motion, request: Any) -> Motion:
+        """The motion moved on the floor so that its body passes through the request's placements:
+        each placement's remaining distance (what the search's choice of examples left) is faded in
+        over the :data:`BODY_FADE_S` before it and out over the same time after it
+        (:func:`motion.floorfit.faded_shifts`); elsewhere the motion keeps its place next to the
+        control. The report measures each placement (``body[i]``) and the speeds it costs."""
+        if not request.bodies:
+            return motion
+        n = motion.num_frames
+        times = np.array([b.time_s for b in request.bodies], dtype=np.float64)
+        frames = np.clip(np.round(times * motion.fps).astype(np.intp), 0, n - 1)
+        xz, _ = ground_frames(motion)
+        targets = np.array([b.position for b in request.bodies], dtype=np.float64)
+        residuals = targets - xz[frames] * motion.metres_per_unit
+        shift = faded_shifts(frames, residuals, n, max(1, int(round(BODY_FADE_S * motion.fps))))
+        return apply_floor_transform(motion, np.zeros(n), shift, static_reference_root([motion]))
 
     def _solve_stage(
         self,
@@ -412,11 +481,12 @@ class ControlEngine(Engine):
             ctl.fps,
             request.smoothing_s,
         )
+        out.motion = self._place_bodies(out.motion, request)
         motion = self._cleanup(out, request)
         if request.hold_hands:
             motion = self._hold_hands(out, motion, ctl, timed)
         timings["post_s"] = time.perf_counter() - t2
-        return self._solution(out, motion, timed, res, stage, ctl, timings, pb.cell_inst.size)
+        return self._solution(out, motion, timed, res, stage, ctl, timings, pb.cell_inst.size, request.bodies)
 
     def _retime(
         self,
@@ -589,6 +659,7 @@ class ControlEngine(Engine):
         ctl: ControlInputCloud,
         timings: dict[str, float],
         n_cells: int,
+        bodies: Any = (),
     ) -> Solution:
         db = self.db
         kept = self.kept_
@@ -648,6 +719,9 @@ class ControlEngine(Engine):
         hold_goal = self._handhold_goal(hold, ctl, motion)
         if hold_goal is not None:
             goals.append(hold_goal)
+        for i, b in enumerate(bodies):
+            frame = min(int(round(b.time_s * motion.fps)), motion.num_frames - 1)
+            goals.append(BodyGoal(f"body[{i}]", frame, np.asarray(b.position, dtype=np.float64)))
         plant_goal = self._footplant_goal(contacts, motion)
         if plant_goal is not None:
             goals.append(plant_goal)

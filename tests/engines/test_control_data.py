@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -60,6 +61,25 @@ def follower_error(out: Motion, truth: Motion) -> float:
 @pytest.fixture(scope="module")
 def sample_couple() -> tuple[bytes, bytes]:
     return sample_path("salsa-leader").read_bytes(), sample_path("salsa-follower").read_bytes()
+
+
+@pytest.fixture(scope="module")
+def three_couples(sample_couple: tuple[bytes, bytes]) -> ControlEngine:
+    """A dance database of three bundled couples (beats segmentation, 2 beats per segment)."""
+    pairs = [sample_couple] + [
+        (sample_path(f"salsa-leader-{t}").read_bytes(), sample_path(f"salsa-follower-{t}").read_bytes())
+        for t in ("02", "04")
+    ]
+    return engine_of(pairs, {"method": "beats", "beats_per_segment": 2})
+
+
+def synth(engine: ControlEngine, lead: Motion, **fields: object) -> Any:
+    """The engine's last (best) solution for the control ``lead`` with request ``fields``."""
+    req = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}, **fields})
+    req.attach_inputs({"lead.bvh": bvh_text(lead).encode()})
+    out = Collect()
+    engine.search(req, 5.0, out, lambda: False)
+    return out.solutions[-1]
 
 
 def test_the_follower_of_a_known_dance_is_recovered_where_it_stood(sample_couple) -> None:  # type: ignore[no-untyped-def]
@@ -158,16 +178,14 @@ def test_pairs_build_and_synth_through_the_cli_runtime(tmp_path: Path, sample_co
     assert report.annotations["segments"] and "foot_slide_m_s" in report.metrics and report.ok is not None
 
 
-def test_the_report_says_whether_the_feet_stay_where_the_examples_plant_them(sample_couple) -> None:  # type: ignore[no-untyped-def]
+def test_the_report_says_whether_the_feet_stay_where_the_examples_plant_them(
+    three_couples: ControlEngine,
+) -> None:
     """The foot contacts carried over from the examples are a goal of the report, measured on the
     output: met with the foot clean-up (the default), not met without it (the pieces slide more
     than the examples' own feet do)."""
-    pairs = [sample_couple] + [
-        (sample_path(f"salsa-leader-{t}").read_bytes(), sample_path(f"salsa-follower-{t}").read_bytes())
-        for t in ("02", "04")
-    ]
-    engine = engine_of(pairs, {"method": "beats", "beats_per_segment": 2})
-    lead = parse_bvh(sample_path("salsa-leader-12").read_bytes()).with_units("m").slice(0, 960)  # 8 s
+    engine = three_couples
+    lead = parse_bvh(sample_path("salsa-leader-12").read_bytes()).with_units("m")
     examples = engine.examples_planted_slide()
     assert examples is not None and 0.02 < examples < 0.5  # salsa feet swivel while planted
     entries = {}
@@ -186,3 +204,64 @@ def test_the_report_says_whether_the_feet_stay_where_the_examples_plant_them(sam
     assert kept["tolerance_m_s"] == pytest.approx(examples, abs=1e-4)
     assert not slid["satisfied"] and slid["slide_m_s"] > examples
     assert any(r.startswith("footplants:") for r in reasons)
+
+
+def test_body_placements_put_the_follower_where_asked(three_couples: ControlEngine) -> None:
+    """``bodies`` say where the follower stands at a few times (what the leader's motion does not
+    say): the output's hips are there (measured here by FK), the report says so, and 2 s away from
+    a placement the output is where the examples put it. A time after the control's end is an
+    error naming the placement."""
+    lead = parse_bvh(sample_path("salsa-leader-12").read_bytes()).with_units("m")
+    lead = lead.slice(0, int(8 * lead.fps) + 1)  # 8 s
+    free = synth(three_couples, lead)
+    hip = free.motion.skeleton.names.index("hip")
+    where = free.motion.global_positions()[:, hip][:, [0, 2]]
+    fps = free.motion.fps
+    spots = {0.0: where[0] + [0.8, -0.5], 7.5: where[round(7.5 * fps)] + [-0.4, 0.3]}
+    placed = synth(three_couples, lead, bodies=[{"time_s": t, "position": list(p)} for t, p in spots.items()])
+    got = placed.motion.global_positions()[:, hip][:, [0, 2]]
+    for i, (t, p) in enumerate(spots.items()):
+        frame = round(t * fps)
+        assert np.linalg.norm(got[frame] - p) < 0.05
+        entry = placed.quality.constraint_errors[f"body[{i}]"]
+        assert entry["satisfied"] and entry["frame"] == frame and entry["position_cm"] < 5.0
+    # between the placements' fades the follower stands where its examples put it, next to the leader
+    lead_hip = lead.global_positions()[:, 0][:, [0, 2]]
+    middle = slice(round(2.5 * fps), round(5.0 * fps))
+    gap = np.linalg.norm(got[middle] - lead_hip[middle], axis=-1)
+    assert np.median(gap) < 1.2
+    with pytest.raises(EngineError, match=r"bodies\[0\]: time 9.0 s is after the end"):
+        synth(three_couples, lead, bodies=[{"time_s": 9.0, "position": [0.0, 0.0]}])
+
+
+def test_a_body_placement_costs_the_cells_that_cover_its_time(three_couples: ControlEngine) -> None:
+    """The search's side of ``bodies``: every cell whose segment covers the placement's time pays
+    ``body_weight`` x the squared floor distance of its placed body there; no other cell pays."""
+    engine = three_couples
+    lead = parse_bvh(sample_path("salsa-leader-12").read_bytes()).with_units("m")
+    fields = {"engine": "control", "control": {"bvh": "lead.bvh"}}
+    plain = parse_job_request(fields)
+    asked = parse_job_request(
+        {**fields, "bodies": [{"time_s": 3.0, "position": [0.5, -0.2]}], "body_weight": 2.0}
+    )
+    for req in (plain, asked):
+        req.attach_inputs({"lead.bvh": bvh_text(lead).encode()})
+    base = engine._interpret(plain, engine.control_cloud(plain))
+    pb = engine._interpret(asked, engine.control_cloud(asked))
+    finite = np.isfinite(base.interp.D)
+    assert np.array_equal(finite, np.isfinite(pb.interp.D))  # a soft cost: no cell becomes illegal
+    extra = np.where(finite, pb.interp.D, 0.0) - np.where(finite, base.interp.D, 0.0)
+    f = round(3.0 * pb.rate)
+    ends = np.arange(pb.interp.D.shape[1])[None, :]
+    covers = (ends - pb.cell_dur[:, None] <= f) & (f < ends) & finite
+    assert np.all(extra[finite & ~covers] == 0.0)
+    assert np.all(extra[covers] > 0.0)
+    c, e = (int(v[0]) for v in np.nonzero(covers))
+    d = int(pb.cell_dur[c])
+    s_ = int(pb.cell_inst[c])
+    src = pb.inst.start[s_] + pb.inst.length[s_] * (f - (e - d)) / d
+    lo = int(np.floor(src))
+    hips = engine.db.target[:, engine.body_column_]
+    point = hips[lo] + (src - lo) * (hips[lo + 1] - hips[lo])
+    placed = pb.interp.place(point[None, None, :], np.array([c]), np.array([e]))[0, 0]
+    assert extra[c, e] == pytest.approx(2.0 * ((placed[0] - 0.5) ** 2 + (placed[2] + 0.2) ** 2))

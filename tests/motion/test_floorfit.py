@@ -7,7 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from motion.floorfit import CorrectionLimits, FloorGoal, floor_correction, water_fill
+from motion.errors import MotionError
+from motion.floorfit import CorrectionLimits, FloorGoal, faded_shifts, floor_correction, water_fill
 
 FPS = 30.0
 
@@ -78,3 +79,20 @@ def test_offset_goals_aim_another_point_and_the_first_goal_is_rigid() -> None:
     out = corrected(xz, fix.theta, fix.shift)
     assert np.allclose(out[150], [0.6, 6.0])
     assert np.allclose(np.diff(out, axis=0), np.diff(xz, axis=0))  # rigid: speeds unchanged
+
+
+def test_faded_shifts_meet_each_goal_and_vanish_away_from_them() -> None:
+    frames = np.array([0, 150, 180])
+    residuals = np.array([[1.0, -0.5], [0.2, 0.0], [-0.3, 0.4]])
+    shift = faded_shifts(frames, residuals, 300, 60)
+    np.testing.assert_allclose(shift[frames], residuals, atol=1e-12)  # overlapping bumps solved together
+    np.testing.assert_array_equal(shift[240:], 0.0)  # beyond the last bump
+    np.testing.assert_array_equal(shift[60:91], 0.0)  # between the first bump and the second
+    single = faded_shifts(frames[:1], residuals[:1], 300, 60)
+    step = np.linalg.norm(np.diff(single, axis=0), axis=-1).max()
+    assert step == pytest.approx(np.pi / 2 * np.linalg.norm(residuals[0]) / 60, rel=1e-3)  # the stated peak
+    assert faded_shifts(np.zeros(0, dtype=np.intp), np.zeros((0, 2)), 5, 3).shape == (5, 2)
+    with pytest.raises(MotionError, match="residual per frame"):
+        faded_shifts(frames, residuals[:2], 300, 60)
+    with pytest.raises(MotionError, match="at least one frame"):
+        faded_shifts(frames, residuals, 300, 0)
