@@ -27,7 +27,8 @@ Prints one JSON object on stdout (progress lines go to stderr)::
                                      "jerk_m_s3", "foot_slide_m_s", "handhold_held", "synth_s",
                                      "frames"}, ...}, ...},
      "settings": {"<setting>": {"mean_error_x_height", "worst_error_x_height", "dances_over_0_17",
-                                "mean_jerk_m_s3", "mean_foot_slide_m_s", "median_synth_s"}},
+                                "mean_jerk_m_s3", "mean_foot_slide_m_s", "median_synth_s",
+                                "reports_ok"}},
      "load_avg"}
 
 * ``error_x_height``: the check's figure — mean distance between the generated and the real
@@ -333,6 +334,8 @@ def output_measures(solution: Any) -> dict[str, Any]:
         "jerk_m_s3": round(points_jerk(_points(out, POINTS), out.fps), 1),
         "foot_slide_m_s": round(foot_slip(out, contacts=flags, joints=joints), 4),
         "handhold_held": None if hold is None else hold.get("held_fraction"),
+        "ok": None if solution.quality is None else bool(solution.quality.ok),
+        "reasons": [] if solution.quality is None else list(solution.quality.reasons),
     }
 
 
@@ -491,6 +494,7 @@ def main(argv: list[str] | None = None) -> int:
             "mean_jerk_m_s3": round(float(np.mean([e["jerk_m_s3"] for e in per.values()])), 1),
             "mean_foot_slide_m_s": round(float(np.mean([e["foot_slide_m_s"] for e in per.values()])), 4),
             "median_synth_s": round(float(np.median([e["synth_s"] for e in per.values()])), 2),
+            "reports_ok": sum(1 for e in per.values() if e["ok"]),
         }
     load = [round(x, 2) for x in os.getloadavg()]
     print(json.dumps({"dances": dances, "settings": summary, "load_avg": load}))

@@ -419,6 +419,34 @@ def test_partner_follower(page: Any, segue: SegueClient) -> None:
     assert page.text_content("#sol-info") == "no result yet"
 
 
+def test_partner_follower_spots(page: Any, segue: SegueClient) -> None:
+    """Click where the follower starts and where she ends on the Partner pad (beside the leader's
+    drawn path): the request carries them as ``bodies`` at the control's start and end, and the
+    follower drawn back starts and ends on them."""
+    needs_engine("control")
+    db = segue.build_database(DEMOS["control"].spec).id
+    clip = segue.upload_clip(sample_path("salsa-leader-12"))
+    reload_databases(page)
+    page.click("#tabs button[data-tool='partner']")
+    select_database(page, "partner-db", db)
+    page.select_option("#partner-clip", LEADER12)
+    wait(page, "document.querySelector('#partner-spots-info').textContent === 'no spots'", 5_000)
+    box = page.locator("#partner-pad").bounding_box()
+    for fx, fy in ((0.3, 0.35), (0.7, 0.6)):
+        page.mouse.click(box["x"] + fx * box["width"], box["y"] + fy * box["height"])
+    spots = state(page, ".partner.spots")
+    assert len(spots) == 2 and "end" in page.text_content("#partner-spots-info")
+    page.fill("#partner-budget", "2")
+    page.click("#partner-go")
+    wait(page, f"['done', 'cancelled'].includes(s.job.status) && {BEST_DRAWN}", 30_000)
+    s = state(page)
+    bodies = s["partner"]["bodies"]
+    assert [b["time_s"] for b in bodies] == [0, pytest.approx((clip.frames - 1) / clip.fps, abs=1e-3)]
+    root = s["current"]["root"]
+    assert root[0] == pytest.approx(spots[0], abs=0.05) and root[-1] == pytest.approx(spots[1], abs=0.05)
+    screenshot(page, "partner-spots")
+
+
 def test_timeline_paint(page: Any, segue: SegueClient) -> None:
     """On an annotated database built through the API (no spec in this page), the label tracks come
     from its summary; paint do / don't labels on two tracks and receive a motion; correct a clip's

@@ -736,30 +736,86 @@ tools.path = (() => {
 
 // -- Partner: a leader clip -> the follower (control engine with the leader as the control motion)
 tools.partner = (() => {
+  // the follower's start and end spots (request `bodies`), clicked on a floor pad beside the
+  // leader's path: the first click is the start, the second the end (later clicks move the end)
+  const pad = new FloorPad($('partner-pad'), 3);
+  const canvas = $('partner-pad');
+  let leaderPath = [];
+  let result = [];
+  state.partner = { spots: [], bodies: null };
+  const info = (name) => state.clips.find((c) => clipName(c) === name);
+  // the leader in metres: parsed in this page when it was uploaded here, else its bytes from the
+  // API (GET /v1/clips/{id}/bvh: clips uploaded by any client); null when it is not a clip
+  const leaderMotion = async (name) => {
+    let motion = clipMotions.get(name);
+    const c = info(name);
+    if (!motion && c) {
+      const scale = METRES_PER_UNIT[c.units] || 1;
+      motion = parseBvhText(await bvhText(await api.clipBytes(c.id)), name, scale);
+      clipMotions.set(name, motion);
+    }
+    return motion || null;
+  };
+  const redraw = () => {
+    const ctx = pad.clear();
+    if (leaderPath.length) {
+      pad.polyline(ctx, leaderPath, '#4aa3ff', 2);
+      pad.dot(ctx, leaderPath[0], '#4aa3ff', 4);
+    }
+    if (result.length) pad.polyline(ctx, result, '#f0a030', 2);
+    state.partner.spots.forEach((p, i) => pad.dot(ctx, p, i ? '#e06060' : '#7ccf7c', 6));
+    const [a, b] = state.partner.spots;
+    const at = (p) => `[${p[0].toFixed(2)}, ${p[1].toFixed(2)}]`;
+    $('partner-spots-info').textContent = a ? `start ${at(a)}${b ? ` · end ${at(b)}` : ''} m` : 'no spots';
+  };
+  const showLeader = async () => {
+    const name = $('partner-clip').value;
+    const motion = name ? await leaderMotion(name) : null;
+    leaderPath = motion ? rootPath(motion) : [];
+    if (leaderPath.length) {
+      const mean = (k) => leaderPath.reduce((acc, p) => acc + p[k], 0) / leaderPath.length;
+      pad.center = [mean(0), mean(1)];
+    }
+    redraw();
+  };
+  $('partner-clip').addEventListener('change', () => guarded('partner', showLeader));
+  canvas.addEventListener('click', (ev) => {
+    const spots = state.partner.spots;
+    const p = pad.toFloor(ev.clientX, ev.clientY);
+    if (spots.length < 2) spots.push(p);
+    else spots[1] = p;
+    redraw();
+  });
+  $('partner-spots-clear').onclick = () => { state.partner.spots = []; redraw(); };
   $('partner-go').onclick = () =>
     guarded('partner', async () => {
       const db = dbOf('partner-db');
       const leader = $('partner-clip').value;
       if (!leader) throw new ApiError(0, 'no_clip', 'upload a leader clip first');
       viewer.clear();
-      const info = state.clips.find((c) => clipName(c) === leader);
-      const job = runJob('partner', { engine: 'control', database: db, budget_s: numberOf('partner-budget', 'budget', 0.1, 600), control: { bvh: info ? info.name : leader } });
-      // the leader is drawn beside the follower: parsed in this page when it was uploaded here, else
-      // its bytes from the API (GET /v1/clips/{id}/bvh: clips uploaded by any client), in metres
-      let motion = clipMotions.get(leader);
-      if (!motion && info) {
-        const scale = METRES_PER_UNIT[info.units] || 1;
-        motion = parseBvhText(await bvhText(await api.clipBytes(info.id)), leader, scale);
+      const c = info(leader);
+      const request = { engine: 'control', database: db, budget_s: numberOf('partner-budget', 'budget', 0.1, 600), control: { bvh: c ? c.name : leader } };
+      const spots = state.partner.spots;
+      if (spots.length) {
+        // the control's length, for the end spot: the clip's frames at its rate, as the API lists it
+        const length = c ? (c.frames - 1) / c.fps : null;
+        if (length === null) throw new ApiError(0, 'no_length', 'the leader is not an uploaded clip: its length (for the end spot) is unknown');
+        const place = (p) => [+p[0].toFixed(4), +p[1].toFixed(4)];
+        request.bodies = [{ time_s: 0, position: place(spots[0]) }];
+        if (spots[1]) request.bodies.push({ time_s: Math.floor(length * 1000) / 1000, position: place(spots[1]) });
       }
+      state.partner.bodies = request.bodies || null;
+      const job = runJob('partner', request);
+      const motion = await leaderMotion(leader);
       if (motion) {
-        clipMotions.set(leader, motion);
         viewer.set('leader', motion, undefined, { frame: !viewer.has('result') });
       } else {
         $('err-partner').textContent = `(the leader ${leader} is not an uploaded clip: it is not drawn)`;
       }
       await job;
     });
-  return {};
+  redraw();
+  return { redraw, onResult: (motion, root) => { result = rootPath(motion, root); redraw(); }, clearResult: () => { result = []; redraw(); } };
 })();
 
 // -- Constraints: body arrows (position + heading) and a length -> graph search with alternatives
