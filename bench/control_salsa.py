@@ -1,8 +1,8 @@
 """Accuracy of the control-by-example engine: leave-one-dance-out on the CMU salsa couples.
 
 Usage: ``python bench/control_salsa.py [--held 07,12] [--jobs 2] [--yaw 25] [--move 0.8,-1.1]
-[--budget 10] [--cache DIR] [--request JSON] [--database JSON] [--baselines] [--bodies 0,-0.01]`` from the project
-root (needs ../shared/data/cmu-salsa; ``--database`` adds database spec fields).
+[--budget 10] [--cache DIR] [--request JSON] [--database JSON] [--baselines] [--bodies 0,-0.01]``
+from the project root (needs ../shared/data/cmu-salsa; ``--database`` adds database spec fields).
 
 The protocol of ``../shared/acceptance/control.py``, run in process: for each held-out dance ``NN``
 of the 14 couples (``60_NN`` leader, ``61_NN`` follower), a ``control`` database is built from the
@@ -473,9 +473,8 @@ def main(argv: list[str] | None = None) -> int:
         body_times = [float(v) for v in args.bodies.split(",") if v.strip()]
     except ValueError:
         ap.error(f"--bodies takes comma-separated seconds, got {args.bodies!r}")
-    jobs = [
-        (h, args.yaw, tx, tz, args.budget, cache, settings, args.baselines, db_extra, body_times) for h in held
-    ]
+    common = (args.budget, cache, settings, args.baselines, db_extra, body_times)
+    jobs = [(h, args.yaw, tx, tz, *common) for h in held]
     log(f"{len(jobs)} held-out dance(s): {','.join(held)}; {args.jobs} process(es)")
     if args.jobs == 1:
         results = [run_dance(job) for job in jobs]
