@@ -25,9 +25,11 @@ from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
 from motion import Motion, MotionError
 from motion.bvh import parse_bvh
+from motion.fastfk import fast_fk
 from motion.goals import Goal, HandholdGoal, LengthGoal, PathGoal
 from motion.quality import QualityInputs
 from motion.reach import reach, smooth_weights
+from motion.vectors import norms
 
 from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
 from ..library import MotionLibrary
@@ -221,7 +223,7 @@ class ControlEngine(Engine):
         motion = motion.to_units("m") if motion.units != "unknown" else motion.with_units("m")
         if motion.num_frames < 2:
             raise EngineError("the control motion needs at least 2 frames")
-        pos = motion.global_positions()
+        pos = fast_fk(motion)[0]
         if self.db.derived:
             cloud = derived_control(motion, sep, pos)
         else:
@@ -458,6 +460,8 @@ class ControlEngine(Engine):
             raise EngineError(str(exc)) from None
 
     def _cleanup(self, out: Assembled, request: Any) -> Motion:
+        """The assembled motion with its feet kept planted where the examples' contacts say
+        (:func:`motion.footskate.remove_foot_skate`, above the examples' floor)."""
         motion = out.motion
         if not request.footskate or not self.db.contact_joints:
             return motion
@@ -472,7 +476,7 @@ class ControlEngine(Engine):
         if floor and all(int(j) in floor for j in joints):
             lowest = np.array([floor[int(j)][1] for j in joints]) / motion.metres_per_unit
         try:
-            return remove_foot_skate(motion, (joints, flags), floor=lowest)
+            return remove_foot_skate(motion, (joints, flags), floor=lowest, fk=fast_fk(motion))
         except MotionError:
             return motion
 
@@ -496,7 +500,8 @@ class ControlEngine(Engine):
         g = out.global_frames
         src_f = db.target[g][:, tcols]  # (F, Ht, 3) the example's follower hands
         src_l = db.control[g][:, cj]  # (F, Hc, 3) the example's leader hands
-        nearest = np.linalg.norm(src_f[:, :, None] - src_l[:, None], axis=-1).argmin(axis=2)  # (F, Ht)
+        apart = norms(src_f[:, :, None] - src_l[:, None])  # (F, Ht, Hc) follower hand to leader hand
+        nearest = apart.argmin(axis=2)  # (F, Ht)
         rows = np.arange(g.size)[:, None]
         offset = src_f - src_l[rows, nearest]  # (F, Ht, 3) example frame
         seg = out.segment_of_frame
@@ -510,14 +515,14 @@ class ControlEngine(Engine):
             axis=-1,
         )
         targets = (ctl.cloud[:, cj][rows, nearest] + turned) / motion.metres_per_unit
-        dist = np.linalg.norm(src_f[:, :, None] - src_l[:, None], axis=-1).min(axis=2)  # (F, Ht)
+        dist = apart.min(axis=2)  # (F, Ht)
         holding = hold[:, None] & (dist < float(db.meta.get("handhold_m", 0.2)))
         blend = int(round(HOLD_BLEND_S * motion.fps))
         weights = np.stack([smooth_weights(holding[:, k], blend) for k in range(len(tcols))], axis=-1)
         joints = np.array([motion.skeleton.names.index(n) for n in names], dtype=np.intp)
         # the correction, not the target, is smoothed in time: the control's hands carry capture
         # noise and the example offsets change at segment boundaries
-        fk = motion.fk()
+        fk = fast_fk(motion)
         hands = fk[0][:, joints]
         corr = gaussian_filter1d(weights[..., None] * (targets - hands), HOLD_SMOOTH_S * motion.fps, axis=0)
         moving = (np.abs(corr).max(axis=-1) > 0).astype(np.float64)
@@ -593,7 +598,8 @@ class ControlEngine(Engine):
                     "first_output_frame": int(first_out[i]) if i < first_out.size else None,
                 }
             )
-        provenance = [(c, int(round(f))) for c, f in zip(out.clips, out.source_frames, strict=True)]
+        source = np.round(out.source_frames).astype(np.int64).tolist()  # half to even, as round()
+        provenance = list(zip(out.clips, source, strict=True))
         contacts = db.contacts[out.global_frames]
         annotations: dict[str, Any] = {
             "stage": stage,
@@ -629,4 +635,4 @@ class ControlEngine(Engine):
             annotations=annotations,
         )
         joins = np.asarray([c for c in out.cuts if 0 < c < motion.num_frames], dtype=np.intp)
-        return self.finish(solution, QualityInputs(goals=tuple(goals), joins=joins))
+        return self.finish(solution, QualityInputs(goals=tuple(goals), joins=joins), fast_fk(motion)[0])
