@@ -3,7 +3,7 @@
 The reader accepts any per-joint channel order and count (position channels on any joint), End
 Sites, tabs or spaces, CRLF or LF line ends, and gzip-compressed files (``.bvh.gz``, detected by
 content). Every problem is a :class:`~motion.errors.BvhError` naming the line. The MOTION block is
-parsed by :func:`motion.numparse.parse_decimals` (vectorised, exact); files outside its plain
+parsed by :func:`motion.numparse.parse_decimals` (one compiled pass, exact); files outside its plain
 decimal grammar take a line-by-line path that also pinpoints bad lines.
 
 Rotation channels are intrinsic Euler angles in file order, in degrees; position channels replace
@@ -440,7 +440,7 @@ def _parse_table(
 ) -> Array:
     """``(F, C)`` channel values from the MOTION block starting at byte ``start``."""
     expected = n_frames * n_channels
-    values = parse_decimals(data, start, row_length=n_channels) if start >= 8 else None
+    values = parse_decimals(data, start, row_length=n_channels, max_values=expected)
     if values is None:  # exponents, '+' signs, long mantissas...: the general C parser
         lines = [line.split() for line in data[start:].split(b"\n")]
         lines = [t for t in lines if t]
