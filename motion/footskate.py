@@ -46,7 +46,7 @@ from .contacts import detect_contacts
 from .errors import MotionError
 from .motion import Motion
 from .skeleton import Skeleton
-from .vectors import norms
+from .vectors import cross, norms
 
 Array = npt.NDArray[np.float64]
 
@@ -293,14 +293,14 @@ def _arc(a: Array, b: Array) -> Array:
     na = norms(a)
     nb = norms(b)
     q = np.empty((a.shape[0], 4))
-    q[:, :3] = np.cross(a, b)
+    q[:, :3] = cross(a, b)
     q[:, 3] = na * nb + np.einsum("ij,ij->i", a, b)
     norm = norms(q)
     bad = norm <= 1e-12 * np.maximum(na * nb, 1e-300)
     if bad.any():  # opposite (or zero) vectors: a half turn about any axis perpendicular to a
-        perp = np.cross(a[bad], np.array([1.0, 0.0, 0.0]))
+        perp = cross(a[bad], np.array([1.0, 0.0, 0.0]))
         weak = norms(perp) < 1e-6 * np.maximum(na[bad], 1e-300)
-        perp[weak] = np.cross(a[bad][weak], np.array([0.0, 1.0, 0.0]))
+        perp[weak] = cross(a[bad][weak], np.array([0.0, 1.0, 0.0]))
         pn = norms(perp)[..., None]
         q[bad] = np.concatenate((perp / np.maximum(pn, 1e-300), np.zeros((perp.shape[0], 1))), axis=-1)
         q[bad & (na * nb == 0)] = rot.IDENTITY
@@ -350,11 +350,11 @@ def _solve_leg(
     phi_cur = np.arccos(np.clip(cos_cur, -1.0, 1.0))
     cos_des = (dist**2 - l1**2 - l2**2) / np.maximum(2.0 * l1 * l2, 1e-300)
     phi_des = np.arccos(np.clip(cos_des, -1.0, 1.0))
-    axis = np.cross(thigh, shin)
+    axis = cross(thigh, shin)
     an = norms(axis)
     straight = an <= 1e-4 * np.maximum(l1 * l2, 1e-300)
     if straight.any():  # no bending plane: bend the knee forward (shin swings back)
-        axis[straight] = np.cross(thigh[straight], -forward[frames][straight])
+        axis[straight] = cross(thigh[straight], -forward[frames][straight])
         an[straight] = norms(axis[straight])
     axis = axis / np.maximum(an, 1e-300)[:, None]
     q_knee = rot.from_axis_angle(axis, phi_des - phi_cur)

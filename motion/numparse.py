@@ -34,8 +34,8 @@ def _kernel() -> Callable[..., int]:
     """The compiled scanner (numba is imported and the kernel loaded on first use)."""
     from numba import njit
 
-    @njit(cache=True, nogil=True)  # type: ignore[misc]
-    def scan(b: Any, start: int, row_length: int, out: Any, pow10: Any, limit: int) -> int:  # pragma: no cover
+    @njit(cache=True, nogil=True)
+    def scan(b: Any, start: int, row_length: int, out: Any, pow10: Any, limit: int) -> int:
         """Write the values of ``b[start:]`` into ``out``; their count, -1 for a token outside
         the grammar (or a non-blank line with another count than ``row_length``, when that is
         ``>= 0``), -2 when ``out`` is full."""
@@ -84,7 +84,7 @@ def _kernel() -> Callable[..., int]:
             return -1
         return k
 
-    return scan  # type: ignore[no-any-return]
+    return scan
 
 
 def parse_decimals(

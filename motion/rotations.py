@@ -15,7 +15,7 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from .errors import MotionError
-from .vectors import norms
+from .vectors import cross, norms
 
 Array = npt.NDArray[np.float64]
 
@@ -66,8 +66,8 @@ def rotate(q: Array, v: Array) -> Array:
     """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)`` (broadcasting)."""
     u = q[..., :3]
     w = q[..., 3:4]
-    t = 2.0 * np.cross(u, v)
-    return np.asarray(v + w * t + np.cross(u, t))
+    t = 2.0 * cross(u, v)
+    return np.asarray(v + w * t + cross(u, t))
 
 
 def to_matrix(q: Array) -> Array:

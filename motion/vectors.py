@@ -24,3 +24,14 @@ def norms(x: Array) -> Array:
     for k in range(1, n):
         s = s + v[..., k] * v[..., k]
     return np.asarray(np.sqrt(s))
+
+
+def cross(a: Array, b: Array) -> Array:
+    """``np.cross(a, b)`` of 3-vectors ``(..., 3)`` (broadcasting): the same products and
+    differences, so the same bits, without ``np.cross``'s axis bookkeeping (which costs more than
+    the arithmetic for a few thousand vectors)."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
+    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx), axis=-1)

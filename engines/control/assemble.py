@@ -17,8 +17,8 @@ import numpy.typing as npt
 
 from motion import Motion
 from motion import rotations as rot
+from motion.compiled import sample_into
 from motion.ground import body_root
-from motion.resample import sample_arrays_at
 from motion.smoothing import smooth_cuts
 
 from .build import ControlDatabase
@@ -103,7 +103,7 @@ def assemble(
     # every piece of one clip is sampled at once (the pieces of a clip differ only in the frames)
     for pair in np.unique(pairs):
         idx = np.flatnonzero(pairs == pair)
-        root[idx], q[idx], jt[idx] = sample_arrays_at(clip_motion(db.pairs[int(pair)][1])[0], src[idx])
+        sample_into(clip_motion(db.pairs[int(pair)][1])[0], src[idx], idx, root, q, jt)
     # each frame moved by its segment's alignment
     p = jt[:, k_tr] if carrier else root
     if timed.rot is not None and timed.trans is not None:  # full 3-D rigid alignment

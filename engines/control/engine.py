@@ -16,16 +16,17 @@ from __future__ import annotations
 import re
 import time
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import gaussian_filter1d
-from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+from threadpoolctl import ThreadpoolController, threadpool_limits  # type: ignore[import-untyped]
 
 from motion import Motion, MotionError
 from motion.bvh import parse_bvh
-from motion.fastfk import fast_fk
+from motion.compiled import fast_fk
 from motion.goals import Goal, HandholdGoal, LengthGoal, PathGoal
 from motion.quality import QualityInputs
 from motion.reach import reach, smooth_weights
@@ -110,6 +111,14 @@ class _Interpreted:
     d_unit: float  # typical cost of interpreting one segment
     k: float  # continuity weight
     window: int  # full-rate frames per solve frame (re-timing window)
+
+
+@lru_cache(maxsize=1)
+def _thread_pools() -> ThreadpoolController:
+    """The process's thread pools (BLAS, OpenMP), found once: ``threadpool_limits`` looks for the
+    loaded libraries again at every call (reading the process's memory map, ~4 ms per request once
+    numba and its LLVM are loaded)."""
+    return ThreadpoolController()
 
 
 class ControlEngine(Engine):
@@ -265,7 +274,7 @@ class ControlEngine(Engine):
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
         # the solver's matrices are small: BLAS threads only contend (10-50x slower on a busy machine)
-        with threadpool_limits(limits=1):
+        with _thread_pools().limit(limits=1):
             self._search(request, budget_s, emit, should_stop)
 
     def _search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:

@@ -11,7 +11,7 @@ import pytest
 
 from motion import Motion, MotionError, Skeleton
 from motion import rotations as rot
-from motion.fastfk import fast_fk
+from motion.compiled import euler_to_quaternions, fast_fk, sample_into
 from motion.footskate import remove_foot_skate
 from motion.ground import facing_pairs
 from motion.mirror import mirror_map
@@ -190,3 +190,49 @@ def test_cleanups_take_the_pose_they_would_compute() -> None:
     )
     r1, r2 = assess(m), assess(m, positions=fk[0])
     assert r1.metrics == pytest.approx(r2.metrics, rel=1e-9)
+
+
+def test_sample_into_writes_sample_at_into_rows() -> None:
+    m = _translated_biped()
+    frames = np.array([0.0, 0.25, 3.5, 41.0, 298.9, 299.0, 150.5])
+    rows = np.array([6, 0, 2, 1, 3, 5, 4])
+    root = np.full((7, 3), np.nan)
+    q = np.full((7, m.num_joints, 4), np.nan)
+    jt = np.full((7, 1, 3), np.nan)
+    sample_into(m, frames, rows, root, q, jt)
+    ref = sample_at(m, frames)
+    np.testing.assert_allclose(root[rows], ref.root_positions, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(jt[rows], ref.joint_translations, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(q[rows], ref.rotations, rtol=0, atol=1e-15)
+    # opposite hemispheres take the shorter arc, and equal rotations stay put
+    flipped = replace(
+        m, rotations=np.where(np.arange(m.num_frames)[:, None, None] % 2 == 1, -m.rotations, m.rotations)
+    )
+    sample_into(flipped, frames, rows, root, q, jt)
+    np.testing.assert_allclose(q[rows], sample_at(flipped, frames).rotations, rtol=0, atol=1e-15)
+    with pytest.raises(MotionError):
+        sample_into(m, np.array([299.5]), np.array([0]), root, q, jt)
+    with pytest.raises(MotionError):
+        sample_into(m, frames, rows, np.asfortranarray(root), q, jt)
+    with pytest.raises(MotionError):
+        sample_into(m, frames, rows[:3], root, q, jt)
+
+
+@pytest.mark.parametrize("order", ["ZXY", "XYZ", "ZYX", "YXZ", "XZY", "YZX", "ZX", "Y", "XX", "ZXZ"])
+def test_euler_to_quaternions_is_from_euler_components(order: str) -> None:
+    rng = np.random.default_rng(len(order))
+    n = len(order)
+    table = rng.uniform(-400, 400, size=(64, 2 + 2 * n))
+    table[:8] = rng.choice([-180.0, 180.0, 0.0, 90.0, -90.0, 179.99, 540.0], size=(8, table.shape[1]))
+    cols = [[2 + k for k in range(n)], [2 + n + k for k in range(n)]]
+    out = np.zeros((4, 4, 64))
+    out[3] = 1.0
+    euler_to_quaternions(table, {order: ([1, 3], cols)}, out)
+    for joint, c in zip([1, 3], cols, strict=True):
+        ref = rot.from_euler_components(order, [table[:, k] for k in c])
+        assert all(np.array_equal(out[a, joint], ref[a]) for a in range(4))
+    assert np.array_equal(out[:, [0, 2]], np.stack([np.zeros((2, 64))] * 3 + [np.ones((2, 64))]))
+    with pytest.raises(MotionError):
+        euler_to_quaternions(table, {"ZQ": ([0], [[0, 1]])}, out)
+    with pytest.raises(MotionError):
+        euler_to_quaternions(table, {"ZXY": ([0], [[0, 1]])}, out)
