@@ -29,6 +29,7 @@ import numpy.typing as npt
 
 from . import rotations as rot
 from .errors import BvhError, ExportError, MotionError
+from .kinematics import FRAME_BLOCK
 from .motion import Motion
 from .numparse import parse_decimals
 from .skeleton import VALID_CHANNELS, Skeleton
@@ -541,14 +542,17 @@ def _motion_from_channels(skeleton: Skeleton, table: Array, fps: float, name: st
             root_pos[:, axis] = table[:, col]
         else:
             jt[:, slot[j], axis] = table[:, col]
-    # Quaternions are written in a (4, J, F) layout by one compiled pass (the arithmetic of
-    # rotations.from_euler_components); the motion keeps the (F, J, 4) transposed view, which FK
-    # reads for free. Imported here: numba is loaded on the first parse, not with the package.
-    from .compiled import euler_to_quaternions
-
+    # Quaternions are written in a (4, J, F) layout, frame block by frame block (small, cached
+    # temporaries); the motion keeps the (F, J, 4) transposed view, which FK reads for free.
     q_soa = np.zeros((4, skeleton.num_joints, n_frames))
     q_soa[3] = 1.0
-    euler_to_quaternions(table, groups, q_soa)
+    compiled = [(order, joints, np.array(cols)) for order, (joints, cols) in groups.items()]
+    for f0 in range(0, n_frames, FRAME_BLOCK):
+        block_t = np.ascontiguousarray(table[f0 : f0 + FRAME_BLOCK].T)  # (C, B)
+        for order, joints, col_idx in compiled:
+            comps = rot.from_euler_components(order, [block_t[col_idx[:, k]] for k in range(len(order))])
+            for axis in range(4):
+                q_soa[axis, joints, f0 : f0 + FRAME_BLOCK] = comps[axis]
     quats = np.transpose(q_soa, (2, 1, 0))
     return Motion(skeleton, root_pos, quats, fps, jt, "unknown", name)
 

@@ -12,9 +12,6 @@ without numpy's temporaries:
   arrays (linear positions, slerp rotations; ~1 ms instead of ~6 ms for 2000 frames of 43
   joints). The same formulas; ``arccos`` is the C library's rather than numpy's (they differ in
   the last bit for some inputs), so rotations agree to ~1e-16.
-* :func:`euler_to_quaternions` -- the quaternions of a BVH frame table's rotation channels, as
-  :func:`motion.rotations.from_euler_components` computes them (the same operations in the same
-  order with the same ``sin``/``cos``/``sqrt``: the same bits; ~0.5 ms instead of ~4 ms).
 
 Compiled with ``cache=True``: the first call in a fresh environment compiles (a few seconds),
 later processes load the machine code from ``__pycache__`` (numba's import and the load take a
@@ -174,85 +171,3 @@ def sample_into(
             raise MotionError("output arrays must be C-contiguous float64")
     jt = motion.joint_translations if motion.joint_translations.shape[1] else np.zeros((n, 0, 3))
     _sample_kernel(motion.root_positions, jt, motion.rotations, f, idx, root, joint_translations, rotations)
-
-
-@njit(cache=True, nogil=True)
-def _euler_kernel(
-    table: np.ndarray, cols: np.ndarray, axes: np.ndarray, joints: np.ndarray, out: np.ndarray
-) -> None:  # pragma: no cover - compiled; tested through euler_to_quaternions
-    """``out[:, joints[i], f]`` (x, y, z, w) = the rotation of intrinsic Euler angles (degrees)
-    ``table[f, cols[i, k]]`` about axes ``axes[i, k]`` (0 = X, 1 = Y, 2 = Z; ``cols[i, k] < 0``
-    past the joint's last channel), as :func:`motion.rotations.from_euler_components`."""
-    half_deg = np.pi / 360.0
-    c = np.empty(3)
-    s = np.empty(3)
-    q = np.empty(4)
-    for i in range(joints.size):
-        j = joints[i]
-        n_ch = 0
-        while n_ch < 3 and cols[i, n_ch] >= 0:
-            n_ch += 1
-        for f in range(table.shape[0]):
-            for k in range(n_ch):
-                a = table[f, cols[i, k]]
-                if abs(a) > 180.0:
-                    a = a - 360.0 * np.rint(a / 360.0)
-                sh = np.sin(a * half_deg)
-                ch = np.sqrt((1.0 - sh) * (1.0 + sh))
-                if abs(sh) > 0.999:
-                    ch = np.cos(a * half_deg)
-                s[k] = sh
-                c[k] = ch
-            q[0], q[1], q[2], q[3] = 0.0, 0.0, 0.0, c[0]
-            q[axes[i, 0]] = s[0]
-            start = 1
-            if n_ch >= 2 and axes[i, 1] != axes[i, 0]:
-                a0, a1 = axes[i, 0], axes[i, 1]
-                third = 3 - a0 - a1
-                q[0], q[1], q[2] = 0.0, 0.0, 0.0
-                q[3] = c[0] * c[1]
-                q[a0] = s[0] * c[1]
-                q[a1] = c[0] * s[1]
-                q[third] = s[0] * s[1] if (a1 - a0) % 3 == 1 else -(s[0] * s[1])
-                start = 2
-            for k in range(start, n_ch):
-                ax = axes[i, k]
-                b1, b2 = (ax + 1) % 3, (ax + 2) % 3
-                q3, qa, q1, q2 = q[3], q[ax], q[b1], q[b2]
-                q[3] = c[k] * q3 - s[k] * qa
-                q[ax] = c[k] * qa + s[k] * q3
-                q[b1] = c[k] * q1 + s[k] * q2
-                q[b2] = c[k] * q2 - s[k] * q1
-            for comp in range(4):
-                out[comp, j, f] = q[comp]
-
-
-def euler_to_quaternions(
-    table: Array, groups: dict[str, tuple[list[int], list[list[int]]]], out: Array
-) -> None:
-    """Fill ``out (4, J, F)`` (x, y, z, w) for the joints of ``groups`` (``{order: (joints, their
-    columns of table (F, C))}``, Euler orders such as ``"ZXY"`` of intrinsic rotations in degrees,
-    as :func:`motion.bvh._channel_layout` groups a BVH's rotation channels); other joints keep
-    what ``out`` holds."""
-    joints: list[int] = []
-    cols: list[list[int]] = []
-    axes: list[list[int]] = []
-    for order, (group_joints, group_cols) in groups.items():
-        up = order.upper()
-        if not 1 <= len(up) <= 3 or any(a not in "XYZ" for a in up):
-            raise MotionError(f"invalid Euler order {order!r}")
-        for j, jc in zip(group_joints, group_cols, strict=True):
-            if len(jc) != len(up):
-                raise MotionError(f"invalid Euler order {order!r} for {len(jc)} angle columns")
-            joints.append(j)
-            cols.append(list(jc) + [-1] * (3 - len(jc)))
-            axes.append(["XYZ".index(a) for a in up] + [0] * (3 - len(up)))
-    if not joints:
-        return
-    _euler_kernel(
-        np.ascontiguousarray(table, dtype=np.float64),
-        np.array(cols, dtype=np.int64),
-        np.array(axes, dtype=np.int64),
-        np.array(joints, dtype=np.int64),
-        out,
-    )

@@ -11,7 +11,7 @@ import pytest
 
 from motion import Motion, MotionError, Skeleton
 from motion import rotations as rot
-from motion.compiled import euler_to_quaternions, fast_fk, sample_into
+from motion.compiled import fast_fk, sample_into
 from motion.footskate import remove_foot_skate
 from motion.ground import facing_pairs
 from motion.mirror import mirror_map
@@ -216,23 +216,3 @@ def test_sample_into_writes_sample_at_into_rows() -> None:
         sample_into(m, frames, rows, np.asfortranarray(root), q, jt)
     with pytest.raises(MotionError):
         sample_into(m, frames, rows[:3], root, q, jt)
-
-
-@pytest.mark.parametrize("order", ["ZXY", "XYZ", "ZYX", "YXZ", "XZY", "YZX", "ZX", "Y", "XX", "ZXZ"])
-def test_euler_to_quaternions_is_from_euler_components(order: str) -> None:
-    rng = np.random.default_rng(len(order))
-    n = len(order)
-    table = rng.uniform(-400, 400, size=(64, 2 + 2 * n))
-    table[:8] = rng.choice([-180.0, 180.0, 0.0, 90.0, -90.0, 179.99, 540.0], size=(8, table.shape[1]))
-    cols = [[2 + k for k in range(n)], [2 + n + k for k in range(n)]]
-    out = np.zeros((4, 4, 64))
-    out[3] = 1.0
-    euler_to_quaternions(table, {order: ([1, 3], cols)}, out)
-    for joint, c in zip([1, 3], cols, strict=True):
-        ref = rot.from_euler_components(order, [table[:, k] for k in c])
-        assert all(np.array_equal(out[a, joint], ref[a]) for a in range(4))
-    assert np.array_equal(out[:, [0, 2]], np.stack([np.zeros((2, 64))] * 3 + [np.ones((2, 64))]))
-    with pytest.raises(MotionError):
-        euler_to_quaternions(table, {"ZQ": ([0], [[0, 1]])}, out)
-    with pytest.raises(MotionError):
-        euler_to_quaternions(table, {"ZXY": ([0], [[0, 1]])}, out)
