@@ -225,8 +225,12 @@ class ControlEngine(Engine):
             data = request.input_bytes(ctl.bvh)
         except KeyError as exc:
             raise EngineError(str(exc.args[0])) from None
+        # a motion database reads only its control joints (and their ancestors) of the control
+        names = None if self.db.derived else list(self.db.meta["control_joints"])
         try:
-            motion = parse_bvh(data, units=ctl.units, source=ctl.bvh, name="control")
+            motion = parse_bvh(data, units=ctl.units, source=ctl.bvh, name="control", joints=names)
+            if names is not None and any(n not in motion.skeleton.names for n in names):
+                motion = parse_bvh(data, units=ctl.units, source=ctl.bvh, name="control")  # for the message
         except MotionError as exc:
             raise EngineError(f"control {ctl.bvh!r}: {exc}") from None
         motion = motion.to_units("m") if motion.units != "unknown" else motion.with_units("m")

@@ -11,6 +11,7 @@ import pytest
 
 from motion import Motion, MotionError, Skeleton
 from motion import rotations as rot
+from motion.bvh import bvh_text, parse_bvh
 from motion.compiled import fast_fk, sample_into
 from motion.footskate import remove_foot_skate
 from motion.ground import facing_pairs
@@ -216,3 +217,22 @@ def test_sample_into_writes_sample_at_into_rows() -> None:
         sample_into(m, frames, rows, np.asfortranarray(root), q, jt)
     with pytest.raises(MotionError):
         sample_into(m, frames, rows[:3], root, q, jt)
+
+
+def test_parse_bvh_of_a_few_joints_is_their_part_of_the_whole() -> None:
+    whole_motion = _translated_biped()
+    data = bvh_text(whole_motion).encode()
+    whole = parse_bvh(data)
+    names = ["lHand", "lFoot", "no such joint"]
+    part = parse_bvh(data, joints=names, name="part")
+    kept = part.skeleton.names
+    assert set(kept) < set(whole.skeleton.names) and {"lHand", "lFoot", whole.skeleton.names[0]} <= set(kept)
+    assert part.units == whole.units and part.fps == whole.fps and part.name == "part"
+    assert part.skeleton.end_site_parents.size == 0
+    idx = [whole.skeleton.names.index(n) for n in kept]
+    np.testing.assert_allclose(part.global_positions(), whole.global_positions()[:, idx], rtol=0, atol=1e-12)
+    # a joint with position channels keeps them (the knee of _translated_biped is an ancestor here)
+    knee = whole.skeleton.names[2]
+    assert knee in kept and part.skeleton.translated_joints.tolist() == [kept.index(knee)]
+    # declared units pass through
+    assert parse_bvh(data, joints=names, units="cm").units == "cm"
