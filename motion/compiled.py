@@ -110,18 +110,27 @@ def _sample_kernel(
     """``out_*[rows[k]]`` = the clip ``(root (F, 3), jt (F, K, 3), q (F, J, 4))`` at fractional
     frame ``frames[k]`` (linear positions, shorter-arc slerp, as :func:`motion.rotations.slerp`)."""
     n = q.shape[0]
-    for k in range(frames.size):
+    m = frames.size
+    lo = np.empty(m, dtype=np.int64)
+    hi = np.empty(m, dtype=np.int64)
+    w = np.empty(m)
+    for k in range(m):
         f = frames[k]
-        i0 = min(int(np.floor(f)), max(n - 2, 0))
-        i1 = min(i0 + 1, n - 1)
-        t = f - i0
+        lo[k] = min(int(np.floor(f)), max(n - 2, 0))
+        hi[k] = min(lo[k] + 1, n - 1)
+        w[k] = f - lo[k]
         r = rows[k]
+        t = w[k]
         for c in range(3):
-            out_root[r, c] = root[i0, c] * (1 - t) + root[i1, c] * t
+            out_root[r, c] = root[lo[k], c] * (1 - t) + root[hi[k], c] * t
         for j in range(jt.shape[1]):
             for c in range(3):
-                out_jt[r, j, c] = jt[i0, j, c] * (1 - t) + jt[i1, j, c] * t
-        for j in range(q.shape[1]):
+                out_jt[r, j, c] = jt[lo[k], j, c] * (1 - t) + jt[hi[k], j, c] * t
+    # joint by joint: consecutive frames of one joint are near each other in a BVH clip's
+    # (4, J, F) rotations, while one frame's joints are far apart
+    for j in range(q.shape[1]):
+        for k in range(m):
+            i0, i1, t, r = lo[k], hi[k], w[k], rows[k]
             ax, ay, az, aw = q[i0, j, 0], q[i0, j, 1], q[i0, j, 2], q[i0, j, 3]
             bx, by, bz, bw = q[i1, j, 0], q[i1, j, 1], q[i1, j, 2], q[i1, j, 3]
             dot = ((ax * bx + ay * by) + az * bz) + aw * bw
