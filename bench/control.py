@@ -20,11 +20,20 @@ hip controls, footplant segmentation; a held-out walk's hip path drives it). For
 * ``cpu_x_realtime``: the same ratios from the median CPU time of this process (steadier than wall
   time on a shared machine: it leaves out the time other processes hold the cores);
 * ``request_stages_cpu_ms``: median CPU milliseconds of each stage of a request (parse, interpret,
-  quick DP, beam DP, re-time, assemble with clean-up, hand hold and quality report);
+  quick DP, beam DP, re-time, assemble with clean-up, hand hold and quality report), and
+  ``first_solution`` = parse + interpret + quick + re-time + assemble (what the first solution
+  costs, the beam stage left out);
+* ``first_solution_x_realtime``: input seconds per second from the request's start until the
+  engine emits its first solution (parse -> interpret -> quick DP -> re-time -> assemble, foot
+  clean-up, hand hold, quality report: the first complete answer a client receives), ``wall``
+  (best of ``--repeat``) and ``cpu`` (median CPU time of this process), with ``first_solution_ms``
+  (the same times in milliseconds; goal: >= 300x realtime);
 * ``first_call_s``: the first DP call in a fresh process, compiling the numba kernel (empty cache)
   and loading it from ``__pycache__`` (the cost a fresh worker pays once).
 
-Prints one JSON object. Timings are best-of ``--repeat`` (the machine is shared).
+Prints one JSON object. Timings are best-of ``--repeat`` (the machine is shared). The process is
+set up as Segue's servers and workers are (:func:`motion.allocator.tune_process`: freed memory kept
+for reuse, one BLAS thread).
 """
 
 from __future__ import annotations
@@ -45,7 +54,7 @@ from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import CollectingEmitter  # noqa: E402
+from engines.base import CollectingEmitter, Solution  # noqa: E402
 from engines.control.dp import (  # noqa: E402
     cost_to_go,
     interpretation,
@@ -62,6 +71,7 @@ from engines.control.engine import (  # noqa: E402
 )
 from engines.control.points import resample_cloud  # noqa: E402
 from engines.library import ClipInput, build_library, library_to_arrays  # noqa: E402
+from motion.allocator import tune_process  # noqa: E402
 from motion.bvh import parse_bvh  # noqa: E402
 from motion.ground import ground_frames  # noqa: E402
 from schemas.databases import parse_database_spec  # noqa: E402
@@ -125,6 +135,42 @@ def first_call_s() -> dict[str, float]:
     return out
 
 
+class FirstSolution(CollectingEmitter):
+    """An emitter that notes the wall and CPU time of the first solution and then asks the engine
+    to stop (:meth:`stop`, its ``should_stop``)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.c0 = time.process_time()
+        self.first: tuple[float, float] | None = None  # (wall s, CPU s) since the emitter was made
+
+    def solution(self, solution: Solution) -> str:
+        if self.first is None:
+            self.first = (time.perf_counter() - self.t0, time.process_time() - self.c0)
+        return super().solution(solution)
+
+    def stop(self) -> bool:
+        return self.first is not None
+
+
+def first_solution(engine: ControlEngine, request: Any, input_s: float, repeat: int) -> dict[str, Any]:
+    """Wall (best of ``repeat``) and CPU (median) time from the start of ``engine.search`` until its
+    first solution is emitted, as milliseconds and as input seconds per second."""
+    wall, cpu = [], []
+    for _ in range(repeat):
+        emit = FirstSolution()
+        engine.search(request, 60.0, emit, emit.stop)
+        if emit.first is None:
+            raise RuntimeError("the engine emitted no solution")
+        wall.append(emit.first[0])
+        cpu.append(emit.first[1])
+    t_wall, t_cpu = min(wall), float(np.median(cpu))
+    return {
+        "first_solution_x_realtime": {"wall": round(input_s / t_wall, 1), "cpu": round(input_s / t_cpu, 1)},
+        "first_solution_ms": {"wall": round(1000 * t_wall, 2), "cpu": round(1000 * t_cpu, 2)},
+    }
+
+
 def stage_costs(engine: ControlEngine, request: Any, repeat: int) -> dict[str, float]:
     """Median CPU milliseconds of each stage of a request (the quick stage's solution): parse the
     control, interpret it (every cell and end time), the quick DP, the default beam stage, re-time
@@ -149,6 +195,7 @@ def stage_costs(engine: ControlEngine, request: Any, repeat: int) -> dict[str, f
         ),
     )
     run("assemble", lambda: engine._assembled(pb, ctl, res, steps["timed"], "quick", request, {}))
+    t["first_solution"] = round(sum(t[k] for k in ("parse", "interpret", "quick", "retime", "assemble")), 2)
     return t
 
 
@@ -223,6 +270,7 @@ def measure(engine: ControlEngine, request: Any, input_s: float, repeat: int) ->
         "search_beam": round(input_s / c["search_beam"], 1),
         "search_exact": round(input_s / c["search_exact"], 1),
     }
+    out.update(first_solution(engine, fast, input_s, repeat))
     with threadpool_limits(limits=1):
         out["request_stages_cpu_ms"] = stage_costs(engine, fast, repeat)
     return out
@@ -287,6 +335,7 @@ def main() -> None:
         help="rate of the downsampled solve (default: the request's 10)",
     )
     args = parser.parse_args()
+    tune_process()  # as in every Segue server and worker (see motion/allocator.py)
     if args.solve_fps is not None and args.solve_fps <= 0:
         parser.error("--solve-fps must be positive")
     if not DATA.exists():

@@ -38,6 +38,7 @@ Arrays = dict[str, npt.NDArray[Any]]
 ShouldStop = Callable[[], bool]
 DatabaseArrays = Mapping[str, npt.NDArray[Any]]
 """A database's arrays by name, possibly read lazily (:func:`open_database`)."""
+Array = npt.NDArray[np.float64]
 
 
 @contextmanager
@@ -287,10 +288,13 @@ class Engine(ABC):
         options); raises :class:`EngineError` for engines without live control."""
         raise EngineError(f"engine {self.name!r} has no live control sessions; the 'control' engine has")
 
-    def finish(self, solution: Solution, inputs: QualityInputs | None = None) -> Solution:
+    def finish(
+        self, solution: Solution, inputs: QualityInputs | None = None, positions: Array | None = None
+    ) -> Solution:
         """``solution`` with its quality report against this database's examples
-        (:func:`finish_solution`)."""
-        return finish_solution(solution, inputs, self.quality_reference)
+        (:func:`finish_solution`; ``positions``: the motion's global joint positions ``(F, J, 3)``
+        when the engine has them)."""
+        return finish_solution(solution, inputs, self.quality_reference, positions)
 
     @abstractmethod
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
@@ -340,11 +344,15 @@ def foot_floor_arrays(library: MotionLibrary, examples: list[int]) -> Arrays:
 
 
 def finish_solution(
-    solution: Solution, inputs: QualityInputs | None, reference: Reference | None
+    solution: Solution,
+    inputs: QualityInputs | None,
+    reference: Reference | None,
+    positions: Array | None = None,
 ) -> Solution:
     """``solution`` with its quality report: :func:`motion.quality.assess` of its motion against
-    the request's goals (``inputs``) and the database's examples (``reference``)."""
-    report = assess(solution.motion, inputs, reference)
+    the request's goals (``inputs``) and the database's examples (``reference``); ``positions``:
+    the motion's global joint positions ``(F, J, 3)`` in its units when the caller has them."""
+    report = assess(solution.motion, inputs, reference, positions)
     solution.quality = report
     solution.constraint_errors = report.constraint_errors
     return solution

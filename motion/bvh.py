@@ -3,7 +3,7 @@
 The reader accepts any per-joint channel order and count (position channels on any joint), End
 Sites, tabs or spaces, CRLF or LF line ends, and gzip-compressed files (``.bvh.gz``, detected by
 content). Every problem is a :class:`~motion.errors.BvhError` naming the line. The MOTION block is
-parsed by :func:`motion.numparse.parse_decimals` (vectorised, exact); files outside its plain
+parsed by :func:`motion.numparse.parse_decimals` (one compiled pass, exact); files outside its plain
 decimal grammar take a line-by-line path that also pinpoints bad lines.
 
 Rotation channels are intrinsic Euler angles in file order, in degrees; position channels replace
@@ -18,7 +18,7 @@ import math
 import os
 import re
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from itertools import takewhile
 from pathlib import Path
@@ -113,8 +113,14 @@ def parse_bvh(
     limits: BvhLimits | None = None,
     source: str = "<bytes>",
     name: str = "",
+    joints: Sequence[str] | None = None,
 ) -> Motion:
-    """Parse BVH content (bytes, plain or gzip). See :func:`read_bvh` for the parameters."""
+    """Parse BVH content (bytes, plain or gzip). See :func:`read_bvh` for the parameters.
+
+    ``joints``: when given, the motion of only these joints (those the file has) and their
+    ancestors, a sub-skeleton without End Sites, for callers that need a few joints of a long clip
+    (the other joints' rotations are never computed); the file is checked as a whole and the units
+    are guessed from the whole skeleton, as without ``joints``."""
     lim = limits or BvhLimits()
     if units is not None and units not in METRES_PER_UNIT:
         raise BvhError(f"unknown units {units!r}; use one of {', '.join(METRES_PER_UNIT)}", source=source)
@@ -139,14 +145,58 @@ def parse_bvh(
     fps = 1.0 / frame_time
     if abs(fps - round(fps)) <= _FPS_SNAP * fps:
         fps = float(round(fps))
-    motion = _motion_from_channels(skeleton, table, fps, name, source)
-    return motion.with_units(units if units is not None else detect_units(motion).units)
+    if joints is None:
+        motion = _motion_from_channels(skeleton, table, fps, name, source)
+        return motion.with_units(units if units is not None else detect_units(motion).units)
+    if units is None:  # from the whole skeleton, on the frames detect_units would sample
+        sample = _motion_from_channels(skeleton, table[:: _unit_step(n_frames)], fps, name, source)
+        units = _units_of_sample(sample)
+    sub, columns = _sub_skeleton(skeleton, [skeleton.names.index(j) for j in joints if j in skeleton.names])
+    return _motion_from_channels(sub, table[:, columns], fps, name, source).with_units(units)
+
+
+def _sub_skeleton(skeleton: Skeleton, joints: list[int]) -> tuple[Skeleton, npt.NDArray[np.intp]]:
+    """The skeleton of ``joints`` and their ancestors (joint order kept, End Sites dropped) and the
+    columns of a frame table that hold their channels."""
+    keep = np.zeros(skeleton.num_joints, dtype=bool)
+    keep[0] = True
+    for j in joints:
+        while j >= 0 and not keep[j]:
+            keep[j] = True
+            j = int(skeleton.parents[j])
+    chosen = np.flatnonzero(keep)
+    index = np.full(skeleton.num_joints, -1, dtype=np.intp)
+    index[chosen] = np.arange(chosen.size)
+    first = np.concatenate(([0], np.cumsum([len(c) for c in skeleton.channels])))
+    columns = np.concatenate([np.arange(first[j], first[j + 1]) for j in chosen]).astype(np.intp)
+    parents = np.where(skeleton.parents[chosen] >= 0, index[skeleton.parents[chosen]], -1)
+    sub = Skeleton(
+        tuple(skeleton.names[j] for j in chosen),
+        parents,
+        skeleton.offsets[chosen],
+        tuple(skeleton.channels[j] for j in chosen),
+    )
+    return sub, columns
+
+
+def _unit_step(num_frames: int) -> int:
+    """Every how many frames :func:`detect_units` samples a motion (about 240 frames in all)."""
+    return max(1, num_frames // 240)
 
 
 def detect_units(motion: Motion) -> UnitGuess:
     """Standing height of a motion (its own unit) and the unit guess (see :mod:`motion.units`)."""
-    step = max(1, motion.num_frames // 240)
+    step = _unit_step(motion.num_frames)
     sample = motion if step == 1 else _subsample(motion, step)
+    return _guess_of_sample(sample)
+
+
+def _units_of_sample(sample: Motion) -> str:
+    """:func:`detect_units`' unit of a motion already sampled (every :func:`_unit_step` frames)."""
+    return _guess_of_sample(sample).units
+
+
+def _guess_of_sample(sample: Motion) -> UnitGuess:
     pos, grot = sample.fk()
     frame_points = np.concatenate((pos, sample.end_site_positions(pos, grot)), axis=1)
     return guess_units(standing_height(frame_points))
@@ -440,7 +490,7 @@ def _parse_table(
 ) -> Array:
     """``(F, C)`` channel values from the MOTION block starting at byte ``start``."""
     expected = n_frames * n_channels
-    values = parse_decimals(data, start, row_length=n_channels) if start >= 8 else None
+    values = parse_decimals(data, start, row_length=n_channels, max_values=expected)
     if values is None:  # exponents, '+' signs, long mantissas...: the general C parser
         lines = [line.split() for line in data[start:].split(b"\n")]
         lines = [t for t in lines if t]

@@ -46,6 +46,7 @@ from .contacts import detect_contacts
 from .errors import MotionError
 from .motion import Motion
 from .skeleton import Skeleton
+from .vectors import cross, norms
 
 Array = npt.NDArray[np.float64]
 
@@ -189,8 +190,9 @@ def widen_jumps(
         return col
     sums = np.add.reduceat(np.where(col[:, None], positions, 0.0), starts, axis=0)
     targets = sums / (ends - starts)[:, None]
+    travels = norms(np.diff(targets, axis=0))
     for i in range(1, starts.size):
-        travel = float(np.linalg.norm(targets[i] - targets[i - 1]))
+        travel = float(travels[i - 1])
         gap = int(starts[i] - ends[i - 1])
         if travel * frames_per_metre < 1.0 and gap <= max_gap // 2:
             col[ends[i - 1] : starts[i]] = True  # a flicker: the foot stays where it is
@@ -288,21 +290,21 @@ def pin_corrections(
 
 def _arc(a: Array, b: Array) -> Array:
     """Shortest-arc unit quaternions ``(N, 4)`` rotating directions ``a`` onto ``b`` (``(N, 3)``)."""
-    na = np.linalg.norm(a, axis=-1)
-    nb = np.linalg.norm(b, axis=-1)
+    na = norms(a)
+    nb = norms(b)
     q = np.empty((a.shape[0], 4))
-    q[:, :3] = np.cross(a, b)
+    q[:, :3] = cross(a, b)
     q[:, 3] = na * nb + np.einsum("ij,ij->i", a, b)
-    norm = np.linalg.norm(q, axis=-1)
+    norm = norms(q)
     bad = norm <= 1e-12 * np.maximum(na * nb, 1e-300)
     if bad.any():  # opposite (or zero) vectors: a half turn about any axis perpendicular to a
-        perp = np.cross(a[bad], np.array([1.0, 0.0, 0.0]))
-        weak = np.linalg.norm(perp, axis=-1) < 1e-6 * np.maximum(na[bad], 1e-300)
-        perp[weak] = np.cross(a[bad][weak], np.array([0.0, 1.0, 0.0]))
-        pn = np.linalg.norm(perp, axis=-1, keepdims=True)
+        perp = cross(a[bad], np.array([1.0, 0.0, 0.0]))
+        weak = norms(perp) < 1e-6 * np.maximum(na[bad], 1e-300)
+        perp[weak] = cross(a[bad][weak], np.array([0.0, 1.0, 0.0]))
+        pn = norms(perp)[..., None]
         q[bad] = np.concatenate((perp / np.maximum(pn, 1e-300), np.zeros((perp.shape[0], 1))), axis=-1)
         q[bad & (na * nb == 0)] = rot.IDENTITY
-        norm = np.linalg.norm(q, axis=-1)
+        norm = norms(q)
     return np.asarray(q / norm[:, None])
 
 
@@ -331,14 +333,14 @@ def _solve_leg(
     a = pos[frames, leg.ankle]
     thigh = k - h
     shin = a - k
-    l1 = np.linalg.norm(thigh, axis=-1)
-    l2 = np.linalg.norm(shin, axis=-1)
+    l1 = norms(thigh)
+    l2 = norms(shin)
     to_target = ankle_target - h
-    dist = np.linalg.norm(to_target, axis=-1)
+    dist = norms(to_target)
     lo = np.abs(l1 - l2) * (1.0 + 1e-6) + 1e-9 * (l1 + l2)
     hi = (l1 + l2) * (1.0 - 1e-6)
     # soft IK: past the frame's own extension (or 97% of full reach), ease towards full reach
-    base = np.minimum(np.maximum(np.linalg.norm(a - h, axis=-1), SOFT_IK_START * hi), hi)
+    base = np.minimum(np.maximum(norms(a - h), SOFT_IK_START * hi), hi)
     room = np.maximum(hi - base, 1e-12)
     over = dist > base
     dist = np.where(over, base + room * (1.0 - np.exp(-np.maximum(dist - base, 0.0) / room)), dist)
@@ -348,12 +350,12 @@ def _solve_leg(
     phi_cur = np.arccos(np.clip(cos_cur, -1.0, 1.0))
     cos_des = (dist**2 - l1**2 - l2**2) / np.maximum(2.0 * l1 * l2, 1e-300)
     phi_des = np.arccos(np.clip(cos_des, -1.0, 1.0))
-    axis = np.cross(thigh, shin)
-    an = np.linalg.norm(axis, axis=-1)
+    axis = cross(thigh, shin)
+    an = norms(axis)
     straight = an <= 1e-4 * np.maximum(l1 * l2, 1e-300)
     if straight.any():  # no bending plane: bend the knee forward (shin swings back)
-        axis[straight] = np.cross(thigh[straight], -forward[frames][straight])
-        an[straight] = np.linalg.norm(axis[straight], axis=-1)
+        axis[straight] = cross(thigh[straight], -forward[frames][straight])
+        an[straight] = norms(axis[straight])
     axis = axis / np.maximum(an, 1e-300)[:, None]
     q_knee = rot.from_axis_angle(axis, phi_des - phi_cur)
     a1 = k + rot.rotate(q_knee, shin)
@@ -388,13 +390,13 @@ def _toe_direction(to_target: Array, foot: Array) -> Array:
     toe ends more than a tenth of the foot's length below the target's height (an ankle that could
     not reach its own place, e.g. a leg that cannot stretch as far as a smoothed cut asks, would
     otherwise drive the toe into the floor). A smooth maximum keeps the direction continuous."""
-    length = np.maximum(np.linalg.norm(foot, axis=-1), 1e-12)
-    norm = np.maximum(np.linalg.norm(to_target, axis=-1), 1e-12)
+    length = np.maximum(norms(foot), 1e-12)
+    norm = np.maximum(norms(to_target), 1e-12)
     point = to_target[:, 1] / norm
     floor = np.clip(to_target[:, 1] / length - 0.1, -1.0, 1.0)
     uy = np.clip(0.5 * (point + floor + np.sqrt((point - floor) ** 2 + 0.05**2)), -1.0, 1.0)
     h = to_target[:, [0, 2]]
-    hn = np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-12)
+    hn = np.maximum(norms(h)[..., None], 1e-12)
     horizontal = h / hn * np.sqrt(np.maximum(1.0 - uy**2, 0.0))[:, None]
     return np.stack((horizontal[:, 0], uy, horizontal[:, 1]), axis=-1)
 
@@ -451,7 +453,7 @@ def _solve_all(
         errors[frames, li] = target - reached
         if has_a:
             full = wa[frames] >= 1.0
-            residual[frames[full], leg.ankle_slot] = np.linalg.norm(errors[frames[full], li], axis=-1)
+            residual[frames[full], leg.ankle_slot] = norms(errors[frames[full], li])
         if toe_target is not None and toe_reached is not None:
             full = wt[frames] >= 1.0
             residual[frames[full], leg.toe_slot] = np.linalg.norm(
@@ -469,6 +471,7 @@ def solve_foot_skate(
     max_root_shift_m: float = 0.05,
     heights: Array | None = None,
     floor: Array | None = None,
+    fk: tuple[Array, Array] | None = None,
 ) -> FootSkateResult:
     """Pin feet during contacts by leg IK; the full result (see :func:`remove_foot_skate`).
 
@@ -495,6 +498,9 @@ def solve_foot_skate(
         joint that would go lower (a blended or smoothed leg swinging through the floor) is lifted
         to it by the same leg IK, height only. The lift is zero where the joint is above, so it
         fades in and out with the joint's own motion.
+    fk:
+        The motion's :meth:`Motion.fk` (``positions (F, J, 3)``, ``rotations (F, J, 4)``) when the
+        caller has it already.
     """
     if not (np.isfinite(blend_s) and blend_s >= 0):
         raise MotionError(f"blend_s must be a non-negative number of seconds, got {blend_s}")
@@ -514,7 +520,7 @@ def solve_foot_skate(
     no_shift = np.zeros((n, 3))
     if not flags.any() and floor is None:
         return FootSkateResult(motion, leg_chains(motion, joints), np.zeros(flags.shape), no_shift)
-    pos, grot = motion.fk()  # (F, J, 3) and (F, J, 4) views of joint-major arrays: gathered per joint
+    pos, grot = motion.fk() if fk is None else fk  # (F, J, 3), (F, J, 4): gathered per joint
     legs = leg_chains(motion, joints, pos[0])
     if not legs:
         return FootSkateResult(motion, legs, np.zeros(flags.shape), no_shift)
@@ -566,14 +572,14 @@ def _root_shift(errors: Array, blend: int, limit: float) -> Array:
     """``(F, 3)`` the root translation that moves the body towards the largest unreached error
     of each frame (``errors (F, K, 3)``), smoothed over ``blend`` frames and at most ``limit``."""
     n = errors.shape[0]
-    mag = np.linalg.norm(errors, axis=-1)
+    mag = norms(errors)
     worst = errors[np.arange(n), np.argmax(mag, axis=1)]
     width = max(blend, 1)
     kernel = _smoothstep(1.0 - np.abs(np.arange(-width, width + 1)) / (width + 1))
     kernel /= kernel.sum()
     padded = np.pad(worst, ((width, width), (0, 0)), mode="edge")
     shift = np.stack([np.convolve(padded[:, c], kernel, mode="valid") for c in range(3)], axis=-1)
-    norm = np.linalg.norm(shift, axis=-1, keepdims=True)
+    norm = norms(shift)[..., None]
     shift *= np.minimum(1.0, limit / np.maximum(norm, 1e-300))
     return shift
 
@@ -587,6 +593,7 @@ def remove_foot_skate(
     max_root_shift_m: float = 0.05,
     heights: Array | None = None,
     floor: Array | None = None,
+    fk: tuple[Array, Array] | None = None,
 ) -> Motion:
     """The motion with planted feet kept in place (a pure function; the input is not modified).
 
@@ -608,6 +615,8 @@ def remove_foot_skate(
     heights, floor:
         ``(F, K)`` rest heights and ``(K,)`` lowest heights of the contact joints (see
         :func:`solve_foot_skate`).
+    fk:
+        The motion's :meth:`Motion.fk` when the caller has it already.
 
     Raises
     ------
@@ -629,4 +638,5 @@ def remove_foot_skate(
         max_root_shift_m=max_root_shift_m,
         heights=heights,
         floor=floor,
+        fk=fk,
     ).motion

@@ -10,6 +10,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import replace
+from functools import lru_cache
 
 import numpy as np
 import numpy.typing as npt
@@ -35,19 +36,27 @@ def facing_pairs(skeleton: Skeleton) -> list[tuple[int, int]]:
     when their names say so, else the shoulders, else the paired joints nearest the root.
 
     The hips alone define the facing: the shoulders counter-rotate against the pelvis by several
-    degrees at every step, and the pelvis is what carries the body (and root motion)."""
-    partner, side = mirror_map(skeleton.names)
-    lefts = [j for j in range(skeleton.num_joints) if side[j] == 1]
+    degrees at every step, and the pelvis is what carries the body (and root motion). Found once
+    per joint hierarchy (names and parents)."""
+    return list(_facing_pairs(skeleton.names, tuple(int(p) for p in skeleton.parents)))
+
+
+@lru_cache(maxsize=256)
+def _facing_pairs(names: tuple[str, ...], parents: tuple[int, ...]) -> tuple[tuple[int, int], ...]:
+    partner, side = mirror_map(names)
+    lefts = [j for j in range(len(names)) if side[j] == 1]
     if not lefts:
-        return []
-    depth = skeleton.depth()
+        return ()
+    depth = [0] * len(parents)
+    for j in range(1, len(parents)):
+        depth[j] = depth[parents[j]] + 1
     for pattern in (_THIGH_NAMES, _HIP_NAMES, _SHOULDER_NAMES):
-        named = [j for j in lefts if pattern.search(skeleton.names[j])]
+        named = [j for j in lefts if pattern.search(names[j])]
         if named:
             j = min(named, key=lambda k: (depth[k], k))
-            return [(j, int(partner[j]))]
+            return ((j, int(partner[j])),)
     j = min(lefts, key=lambda k: (depth[k], k))
-    return [(j, int(partner[j]))]
+    return ((j, int(partner[j])),)
 
 
 def body_root(skeleton: Skeleton) -> int:

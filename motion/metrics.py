@@ -17,6 +17,7 @@ import numpy.typing as npt
 from .contacts import detect_contacts
 from .errors import MotionError
 from .motion import Motion
+from .vectors import norms
 
 Array = npt.NDArray[np.float64]
 
@@ -58,7 +59,7 @@ def points_jerk(points: Array, fps: float) -> float:
     if p.shape[0] < 4:
         return 0.0
     third = np.diff(p, n=3, axis=0) * fps**3
-    return float(np.linalg.norm(third, axis=-1).mean())
+    return float(norms(third).mean())
 
 
 def cut_discontinuity(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import replace
+from functools import lru_cache
 
 import numpy as np
 import numpy.typing as npt
@@ -33,7 +34,7 @@ _PAIR_PATTERNS: tuple[tuple[str, dict[str, str]], ...] = (
 
 
 def mirror_map(names: tuple[str, ...] | list[str]) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.int8]]:
-    """Pair left and right joints by name.
+    """Pair left and right joints by name (found once per list of names; fresh arrays every call).
 
     Returns
     -------
@@ -46,6 +47,12 @@ def mirror_map(names: tuple[str, ...] | list[str]) -> tuple[npt.NDArray[np.intp]
     ``L``/``R`` (``lShldr``, ``L_Foot``, ``lhand``), and a trailing or
     separated ``l``/``r`` (``hand_l``, ``Hand.L``).
     """
+    partner, side = _mirror_map(tuple(names))
+    return partner.copy(), side.copy()
+
+
+@lru_cache(maxsize=256)
+def _mirror_map(names: tuple[str, ...]) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.int8]]:
     index = {n: i for i, n in enumerate(names)}
     partner = np.arange(len(names), dtype=np.intp)
     side = np.zeros(len(names), dtype=np.int8)

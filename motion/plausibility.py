@@ -38,6 +38,7 @@ from .ground import body_root, facing_from_positions
 from .metrics import points_jerk
 from .skeleton import Skeleton
 from .units import standing_height
+from .vectors import norms
 
 Array = npt.NDArray[np.float64]
 
@@ -106,11 +107,11 @@ def profile(positions: Array, skeleton: Skeleton, fps: float) -> Profile:
         raise MotionError(f"positions {pos.shape} do not match a {skeleton.num_joints}-joint skeleton")
     w = _window(fps, SPEED_WINDOW_S)
     xz = pos[:, body_root(skeleton)][:, [0, 2]]
-    root_speed = np.linalg.norm(xz[w:] - xz[:-w], axis=-1) * fps / w if n > w else np.zeros(0)
+    root_speed = norms(xz[w:] - xz[:-w]) * fps / w if n > w else np.zeros(0)
     yaw = facing_from_positions(skeleton, pos) if n > w else None
     turn = np.abs(yaw[w:] - yaw[:-w]) * fps / w if yaw is not None else np.zeros(0)
     if n > 1:
-        steps = np.linalg.norm(np.diff(pos, axis=0), axis=-1)  # (F-1, J)
+        steps = norms(np.diff(pos, axis=0))  # (F-1, J)
         step_joint = np.argmax(steps, axis=1).astype(np.intp)
         joint_speed = steps[np.arange(n - 1), step_joint] * fps
     else:
@@ -119,7 +120,7 @@ def profile(positions: Array, skeleton: Skeleton, fps: float) -> Profile:
     accel = np.full(n, np.nan)
     if n > 2 * h:
         a = pos[2 * h :] - 2.0 * pos[h:-h] + pos[: -2 * h]
-        accel[h:-h] = np.linalg.norm(a, axis=-1).max(axis=1) * (fps / h) ** 2
+        accel[h:-h] = norms(a).max(axis=1) * (fps / h) ** 2
     try:
         feet = foot_joints(skeleton)
     except MotionError:
@@ -127,7 +128,7 @@ def profile(positions: Array, skeleton: Skeleton, fps: float) -> Profile:
     if feet.size and n > 1:
         low = np.argmin(pos[1:, feet, 1], axis=1)
         fxz = pos[:, feet][:, :, [0, 2]]
-        speed = np.linalg.norm(np.diff(fxz, axis=0), axis=-1) * fps  # (F-1, K)
+        speed = norms(np.diff(fxz, axis=0)) * fps  # (F-1, K)
         foot_speed = speed[np.arange(n - 1), low]
     else:
         foot_speed = np.zeros(0)

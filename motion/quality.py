@@ -82,7 +82,11 @@ def default_characters(motion: Motion) -> tuple[Character, ...]:
 
 def character_profiles(positions_m: Array, fps: float, characters: Sequence[Character]) -> list[Profile]:
     """:func:`motion.plausibility.profile` of each character of an output (positions in metres)."""
-    return [profile(positions_m[:, c.joints], c.skeleton, fps) for c in characters]
+    every = np.arange(positions_m.shape[1])  # the whole skeleton needs no copy of its columns
+    return [
+        profile(positions_m if np.array_equal(c.joints, every) else positions_m[:, c.joints], c.skeleton, fps)
+        for c in characters
+    ]
 
 
 def assess(
@@ -107,7 +111,9 @@ def assess(
     """
     inputs = inputs or QualityInputs()
     pos = motion.global_positions() if positions is None else positions
-    pos_m = np.asarray(pos, dtype=np.float64) * motion.metres_per_unit
+    pos_m = np.asarray(pos, dtype=np.float64)
+    if motion.metres_per_unit != 1.0:
+        pos_m = pos_m * motion.metres_per_unit
     characters = inputs.characters or default_characters(motion)
     reasons: list[str] = []
     errors: dict[str, Any] = {}

@@ -62,7 +62,7 @@ def reach(
     if targets.shape != (n, joints.size, 3) or weights.shape != (n, joints.size):
         raise MotionError(f"targets must be (F, K, 3) and weights (F, K) for F={n}, K={joints.size}")
     sk = motion.skeleton
-    rest = _rest_positions(motion)
+    rest = _rest_positions(motion) if fk is None else np.asarray(fk[0][0])
     scale = float(np.abs(sk.offsets[1:]).max(initial=0.0)) or 1.0
     chains: list[Leg] = []
     used: set[int] = set()

@@ -20,6 +20,15 @@ def sample_at(motion: Motion, frames: Array) -> Motion:
     Root positions and animated translations are interpolated linearly, rotations by slerp along
     the shorter arc. The result keeps ``motion.fps``; callers set the rate they mean.
     """
+    root, q, jt = sample_arrays_at(motion, frames)
+    return replace(motion, root_positions=root, rotations=q, joint_translations=jt)
+
+
+def sample_arrays_at(motion: Motion, frames: Array) -> tuple[Array, Array, Array]:
+    """The arrays of :func:`sample_at` without making a motion of them: ``root_positions (N, 3)``,
+    ``rotations (N, J, 4)`` and ``joint_translations (N, K, 3)`` at fractional frame indices
+    ``frames (N,)`` in ``[0, F-1]`` (for callers that write pieces of several clips into one
+    output)."""
     f = np.asarray(frames, dtype=np.float64)
     n = motion.num_frames
     if f.ndim != 1 or f.size == 0:
@@ -36,7 +45,7 @@ def sample_at(motion: Motion, frames: Array) -> Motion:
         + motion.joint_translations[i1] * a[:, None, None]
     )
     q = rot.slerp(motion.rotations[i0], motion.rotations[i1], a[:, None])
-    return replace(motion, root_positions=root, rotations=q, joint_translations=jt)
+    return root, q, jt
 
 
 def resampled_frames(num_frames: int, fps: float, new_fps: float) -> int:

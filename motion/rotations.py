@@ -15,6 +15,7 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from .errors import MotionError
+from .vectors import cross, norms
 
 Array = npt.NDArray[np.float64]
 
@@ -30,7 +31,7 @@ def identity(shape: tuple[int, ...] = ()) -> Array:
 
 def normalize(q: Array) -> Array:
     """Quaternions scaled to unit length; zero quaternions raise :class:`MotionError`."""
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    n = norms(q)[..., None]
     if np.any(n < 1e-12):
         raise MotionError("zero-length quaternion cannot be normalised")
     return np.asarray(q / n)
@@ -50,23 +51,20 @@ def multiply(a: Array, b: Array) -> Array:
     """Hamilton product ``a * b`` (apply ``b`` then ``a``), broadcasting leading axes."""
     ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
     bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    return np.stack(
-        (
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ),
-        axis=-1,
-    )
+    out = np.empty(np.broadcast_shapes(np.shape(a), np.shape(b)), dtype=np.result_type(a, b, np.float64))
+    out[..., 0] = aw * bx + ax * bw + ay * bz - az * by
+    out[..., 1] = aw * by - ax * bz + ay * bw + az * bx
+    out[..., 2] = aw * bz + ax * by - ay * bx + az * bw
+    out[..., 3] = aw * bw - ax * bx - ay * by - az * bz
+    return out
 
 
 def rotate(q: Array, v: Array) -> Array:
     """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)`` (broadcasting)."""
     u = q[..., :3]
     w = q[..., 3:4]
-    t = 2.0 * np.cross(u, v)
-    return np.asarray(v + w * t + np.cross(u, t))
+    t = 2.0 * cross(u, v)
+    return np.asarray(v + w * t + cross(u, t))
 
 
 def to_matrix(q: Array) -> Array:
@@ -120,9 +118,10 @@ def make_continuous(q: Array, axis: int = 0) -> Array:
     """Flip signs along ``axis`` (time) so consecutive quaternions lie in the same hemisphere."""
     q = np.moveaxis(np.array(q, dtype=np.float64, copy=True), axis, 0)
     if q.shape[0] > 1:
-        dots = np.sum(q[1:] * q[:-1], axis=-1)
+        dots = _dot4(q[1:], q[:-1])
         flips = np.cumsum(dots < 0, axis=0) % 2 == 1
-        q[1:][flips] *= -1.0
+        if flips.any():
+            q[1:] *= np.where(flips, -1.0, 1.0)[..., None]
     return np.moveaxis(q, 0, axis)
 
 
@@ -130,7 +129,7 @@ def log(q: Array) -> Array:
     """Rotation vectors ``(..., 3)`` (axis * angle, radians; angle in [0, pi]) of unit quaternions."""
     q = standardize(q)
     v = q[..., :3]
-    s = np.linalg.norm(v, axis=-1)
+    s = norms(v)
     angle = 2.0 * np.arctan2(s, q[..., 3])
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = np.where(s > 1e-12, angle / np.where(s > 1e-12, s, 1.0), 2.0)
@@ -139,7 +138,7 @@ def log(q: Array) -> Array:
 
 def exp(r: Array) -> Array:
     """Unit quaternions of rotation vectors ``r (..., 3)`` (inverse of :func:`log`)."""
-    angle = np.linalg.norm(r, axis=-1)
+    angle = norms(r)
     half = 0.5 * angle
     with np.errstate(invalid="ignore", divide="ignore"):
         k = np.where(angle > 1e-12, np.sin(half) / np.where(angle > 1e-12, angle, 1.0), 0.5)
@@ -155,7 +154,7 @@ def angle_between(a: Array, b: Array) -> Array:
 def slerp(a: Array, b: Array, t: Array | float) -> Array:
     """Spherical interpolation from ``a`` (t=0) to ``b`` (t=1) along the shorter arc (broadcasting)."""
     t = np.asarray(t, dtype=np.float64)
-    dot = np.sum(a * b, axis=-1)
+    dot = _dot4(a, b)
     b = np.where((dot < 0)[..., None], -b, b)
     dot = np.abs(dot)
     theta = np.arccos(np.clip(dot, -1.0, 1.0))
@@ -165,7 +164,14 @@ def slerp(a: Array, b: Array, t: Array | float) -> Array:
     wa = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / safe)
     wb = np.where(small, t, np.sin(t * theta) / safe)
     out = wa[..., None] * a + wb[..., None] * b
-    return np.asarray(out / np.linalg.norm(out, axis=-1, keepdims=True))
+    return np.asarray(out / norms(out)[..., None])
+
+
+def _dot4(a: Array, b: Array) -> Array:
+    """``np.sum(a * b, axis=-1)`` of quaternions (the products summed in the same order)."""
+    return np.asarray(
+        ((a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]) + a[..., 2] * b[..., 2]) + a[..., 3] * b[..., 3]
+    )
 
 
 def from_euler(order: str, angles_deg: Array) -> Array:

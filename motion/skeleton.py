@@ -43,6 +43,7 @@ class Skeleton:
     channels: tuple[tuple[str, ...], ...]
     end_site_parents: npt.NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
     end_site_offsets: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    _translated: npt.NDArray[np.intp] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         j = len(self.names)
@@ -78,6 +79,9 @@ class Skeleton:
         object.__setattr__(self, "end_site_offsets", es_off)
         object.__setattr__(self, "channels", tuple(tuple(c) for c in self.channels))
         object.__setattr__(self, "names", tuple(self.names))
+        translated = np.array([k for k in range(1, j) if self.position_axes(k)], dtype=np.intp)
+        translated.setflags(write=False)
+        object.__setattr__(self, "_translated", translated)
 
     @property
     def num_joints(self) -> int:
@@ -104,8 +108,9 @@ class Skeleton:
 
     @property
     def translated_joints(self) -> npt.NDArray[np.intp]:
-        """Indices of non-root joints with position channels (animated translations), ``(K,)``."""
-        return np.array([j for j in range(1, self.num_joints) if self.position_axes(j)], dtype=np.intp)
+        """Indices of non-root joints with position channels (animated translations), ``(K,)``
+        (read-only; found once, when the skeleton is made: motions ask for it at every step)."""
+        return self._translated
 
     def children(self, joint: int) -> list[int]:
         return [int(c) for c in np.flatnonzero(self.parents == joint)]

@@ -17,8 +17,8 @@ import numpy.typing as npt
 
 from motion import Motion
 from motion import rotations as rot
+from motion.compiled import sample_into
 from motion.ground import body_root
-from motion.resample import sample_at
 from motion.smoothing import smooth_cuts
 
 from .build import ControlDatabase
@@ -100,32 +100,32 @@ def assemble(
     root = np.empty((n_out, 3))
     q = np.empty((n_out, base.num_joints, 4))
     jt = np.empty((n_out, *base.joint_translations.shape[1:]))
-    clips: list[str] = []
-    for i in np.unique(seg):
-        idx = np.flatnonzero(seg == i)
-        clip = db.pairs[int(pairs[idx[0]])][1]
-        piece = sample_at(clip_motion(clip)[0], src[idx])
-        c, s = timed.cos[i], timed.sin[i]
-        ri = piece.root_positions.copy()
-        jti = piece.joint_translations.copy()
-        p = jti[:, k_tr] if carrier else ri
-        if timed.rot is not None and timed.trans is not None:  # full 3-D rigid alignment
-            moved = p @ timed.rot[i].T + timed.trans[i]
-            turn = rot.from_matrix(timed.rot[i])
-        else:
-            moved = np.stack(
-                (c * p[:, 0] + s * p[:, 2] + timed.tx[i], p[:, 1], -s * p[:, 0] + c * p[:, 2] + timed.tz[i]),
-                -1,
-            )
-            turn = rot.from_yaw(np.float64(np.arctan2(s, c)))
-        if carrier:
-            jti[:, k_tr] = moved
-        else:
-            ri = moved
-        qi = piece.rotations.copy()
-        qi[:, carrier] = rot.multiply(turn, qi[:, carrier])
-        root[idx], q[idx], jt[idx] = ri, qi, jti
-    clips = [db.pairs[int(p)][1] for p in pairs]
+    # every piece of one clip is sampled at once (the pieces of a clip differ only in the frames)
+    for pair in np.unique(pairs):
+        idx = np.flatnonzero(pairs == pair)
+        sample_into(clip_motion(db.pairs[int(pair)][1])[0], src[idx], idx, root, q, jt)
+    # each frame moved by its segment's alignment
+    p = jt[:, k_tr] if carrier else root
+    if timed.rot is not None and timed.trans is not None:  # full 3-D rigid alignment
+        moved = np.empty_like(p)
+        for i in np.unique(seg):
+            idx = np.flatnonzero(seg == i)
+            moved[idx] = p[idx] @ timed.rot[i].T + timed.trans[i]
+        turn = rot.from_matrix(timed.rot)[seg]
+    else:
+        c, s = timed.cos[seg], timed.sin[seg]
+        moved = np.stack(
+            (c * p[:, 0] + s * p[:, 2] + timed.tx[seg], p[:, 1], -s * p[:, 0] + c * p[:, 2] + timed.tz[seg]),
+            -1,
+        )
+        turn = rot.from_yaw(np.arctan2(timed.sin, timed.cos))[seg]
+    if carrier:
+        jt[:, k_tr] = moved
+    else:
+        root = moved
+    q[:, carrier] = rot.multiply(turn, q[:, carrier])
+    names = np.array([target for _, target in db.pairs], dtype=object)
+    clips: list[str] = names[pairs].tolist()
     motion = replace(
         base, root_positions=root, rotations=q, joint_translations=jt, fps=float(fps_out), name="control"
     )

@@ -16,20 +16,23 @@ from __future__ import annotations
 import re
 import time
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import gaussian_filter1d
-from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+from threadpoolctl import ThreadpoolController, threadpool_limits  # type: ignore[import-untyped]
 
 from motion import Motion, MotionError
 from motion.bvh import parse_bvh
+from motion.compiled import fast_fk
 from motion.floorfit import faded_shifts
 from motion.goals import BodyGoal, FootplantGoal, Goal, HandholdGoal, LengthGoal, PathGoal, planted_speeds
 from motion.ground import apply_floor_transform, body_root, ground_frames, static_reference_root
 from motion.quality import QualityInputs
 from motion.reach import reach, smooth_weights
+from motion.vectors import norms
 
 from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
 from ..library import MotionLibrary
@@ -114,6 +117,14 @@ class _Interpreted:
     d_unit: float  # typical cost of interpreting one segment
     k: float  # continuity weight
     window: int  # full-rate frames per solve frame (re-timing window)
+
+
+@lru_cache(maxsize=1)
+def _thread_pools() -> ThreadpoolController:
+    """The process's thread pools (BLAS, OpenMP), found once: ``threadpool_limits`` looks for the
+    loaded libraries again at every call (reading the process's memory map, ~4 ms per request once
+    numba and its LLVM are loaded)."""
+    return ThreadpoolController()
 
 
 class ControlEngine(Engine):
@@ -232,14 +243,18 @@ class ControlEngine(Engine):
             data = request.input_bytes(ctl.bvh)
         except KeyError as exc:
             raise EngineError(str(exc.args[0])) from None
+        # a motion database reads only its control joints (and their ancestors) of the control
+        names = None if self.db.derived else list(self.db.meta["control_joints"])
         try:
-            motion = parse_bvh(data, units=ctl.units, source=ctl.bvh, name="control")
+            motion = parse_bvh(data, units=ctl.units, source=ctl.bvh, name="control", joints=names)
+            if names is not None and any(n not in motion.skeleton.names for n in names):
+                motion = parse_bvh(data, units=ctl.units, source=ctl.bvh, name="control")  # for the message
         except MotionError as exc:
             raise EngineError(f"control {ctl.bvh!r}: {exc}") from None
         motion = motion.to_units("m") if motion.units != "unknown" else motion.with_units("m")
         if motion.num_frames < 2:
             raise EngineError("the control motion needs at least 2 frames")
-        pos = motion.global_positions()
+        pos = fast_fk(motion)[0]
         if self.db.derived:
             cloud = derived_control(motion, sep, pos)
         else:
@@ -281,7 +296,7 @@ class ControlEngine(Engine):
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
         # the solver's matrices are small: BLAS threads only contend (10-50x slower on a busy machine)
-        with threadpool_limits(limits=1):
+        with _thread_pools().limit(limits=1):
             self._search(request, budget_s, emit, should_stop)
 
     def _search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
@@ -529,6 +544,8 @@ class ControlEngine(Engine):
             raise EngineError(str(exc)) from None
 
     def _cleanup(self, out: Assembled, request: Any) -> Motion:
+        """The assembled motion with its feet kept planted where the examples' contacts say
+        (:func:`motion.footskate.remove_foot_skate`, above the examples' floor)."""
         motion = out.motion
         if not request.footskate or not self.db.contact_joints:
             return motion
@@ -543,7 +560,7 @@ class ControlEngine(Engine):
         if floor and all(int(j) in floor for j in joints):
             lowest = np.array([floor[int(j)][1] for j in joints]) / motion.metres_per_unit
         try:
-            return remove_foot_skate(motion, (joints, flags), floor=lowest)
+            return remove_foot_skate(motion, (joints, flags), floor=lowest, fk=fast_fk(motion))
         except MotionError:
             return motion
 
@@ -567,7 +584,8 @@ class ControlEngine(Engine):
         g = out.global_frames
         src_f = db.target[g][:, tcols]  # (F, Ht, 3) the example's follower hands
         src_l = db.control[g][:, cj]  # (F, Hc, 3) the example's leader hands
-        nearest = np.linalg.norm(src_f[:, :, None] - src_l[:, None], axis=-1).argmin(axis=2)  # (F, Ht)
+        apart = norms(src_f[:, :, None] - src_l[:, None])  # (F, Ht, Hc) follower hand to leader hand
+        nearest = apart.argmin(axis=2)  # (F, Ht)
         rows = np.arange(g.size)[:, None]
         offset = src_f - src_l[rows, nearest]  # (F, Ht, 3) example frame
         seg = out.segment_of_frame
@@ -581,14 +599,14 @@ class ControlEngine(Engine):
             axis=-1,
         )
         targets = (ctl.cloud[:, cj][rows, nearest] + turned) / motion.metres_per_unit
-        dist = np.linalg.norm(src_f[:, :, None] - src_l[:, None], axis=-1).min(axis=2)  # (F, Ht)
+        dist = apart.min(axis=2)  # (F, Ht)
         holding = hold[:, None] & (dist < float(db.meta.get("handhold_m", 0.2)))
         blend = int(round(HOLD_BLEND_S * motion.fps))
         weights = np.stack([smooth_weights(holding[:, k], blend) for k in range(len(tcols))], axis=-1)
         joints = np.array([motion.skeleton.names.index(n) for n in names], dtype=np.intp)
         # the correction, not the target, is smoothed in time: the control's hands carry capture
         # noise and the example offsets change at segment boundaries
-        fk = motion.fk()
+        fk = fast_fk(motion)
         hands = fk[0][:, joints]
         corr = gaussian_filter1d(weights[..., None] * (targets - hands), HOLD_SMOOTH_S * motion.fps, axis=0)
         moving = (np.abs(corr).max(axis=-1) > 0).astype(np.float64)
@@ -695,7 +713,8 @@ class ControlEngine(Engine):
                     "first_output_frame": int(first_out[i]) if i < first_out.size else None,
                 }
             )
-        provenance = [(c, int(round(f))) for c, f in zip(out.clips, out.source_frames, strict=True)]
+        source = np.round(out.source_frames).astype(np.int64).tolist()  # half to even, as round()
+        provenance = list(zip(out.clips, source, strict=True))
         contacts = db.contacts[out.global_frames]
         annotations: dict[str, Any] = {
             "stage": stage,
@@ -737,4 +756,4 @@ class ControlEngine(Engine):
             annotations=annotations,
         )
         joins = np.asarray([c for c in out.cuts if 0 < c < motion.num_frames], dtype=np.intp)
-        return self.finish(solution, QualityInputs(goals=tuple(goals), joins=joins))
+        return self.finish(solution, QualityInputs(goals=tuple(goals), joins=joins), fast_fk(motion)[0])

@@ -268,3 +268,18 @@ def test_grammar_decides_between_values_and_none(case: tuple[bytes, list[bytes]]
 @pytest.mark.parametrize("ctrl", [b"\x00", b"\x01", b"\x1b", b"\x1f"])
 def test_control_characters_are_not_separators(ctrl: bytes) -> None:
     assert parse_decimals(b"1.0" + ctrl + b"2.0\n") is None
+
+
+def test_max_values_bounds_the_count() -> None:
+    data = b"1 2 3\n4 5 6\n"
+    assert parse_decimals(data, max_values=6).tolist() == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]  # type: ignore[union-attr]
+    assert parse_decimals(data, max_values=5) is None
+    assert parse_decimals(data, max_values=0) is None
+    assert parse_decimals(b" \n", max_values=0).tolist() == []  # type: ignore[union-attr]
+
+
+def test_row_length_zero_allows_only_blank_lines() -> None:
+    assert parse_decimals(b"\n \n", row_length=0).tolist() == []  # type: ignore[union-attr]
+    assert parse_decimals(b"\n1\n", row_length=0) is None
+    assert parse_decimals(b"1 2\n3 4", row_length=2).tolist() == [1.0, 2.0, 3.0, 4.0]  # type: ignore[union-attr]
+    assert parse_decimals(b"1 2\n3", row_length=2) is None
