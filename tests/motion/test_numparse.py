@@ -1,4 +1,4 @@
-"""``motion.numparse.parse_decimals`` against Python's ``float``.
+"""``motion.numparse.parse_decimals`` (both implementations) against Python's ``float``.
 
 Inside the plain grammar ``-?[0-9]{0,8}(\\.[0-9]{0,8})?`` (at least one digit) the values must be
 bit-identical to ``float(token)``; anything else must give ``None``. The one documented escape:
@@ -16,6 +16,21 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from motion.numparse import parse_decimals
+
+
+def parse(
+    data: bytes, start: int = 0, row_length: int | None = None, max_values: int | None = None
+) -> np.ndarray | None:
+    """``parse_decimals`` by both implementations (compiled, numpy passes), which must agree bit for
+    bit (or both give ``None``); their common answer."""
+    compiled = parse_decimals(data, start, row_length, max_values, compiled=True)
+    vectorized = parse_decimals(data, start, row_length, max_values, compiled=False)
+    assert (compiled is None) == (vectorized is None), (compiled, vectorized)
+    if compiled is not None and vectorized is not None:
+        assert compiled.dtype == vectorized.dtype and compiled.shape == vectorized.shape
+        assert np.array_equal(compiled.view(np.uint64), vectorized.view(np.uint64))
+    return compiled
+
 
 PLAIN = re.compile(rb"-?[0-9]{0,8}(\.[0-9]{0,8})?")
 SEPARATORS = [" ", "\t", "\n", "\r\n", "  ", " \t", "\t\r\n", "\n\n"]
@@ -47,7 +62,7 @@ def assert_bit_identical(got: np.ndarray | None, tokens: list[bytes]) -> None:
 
 def check_plain(data: bytes, tokens: list[bytes]) -> None:
     """``data`` holds exactly ``tokens`` (all plain): bit-identical, or None only for huge mantissas."""
-    got = parse_decimals(data)
+    got = parse(data)
     if got is None and not all(mantissa_fits(t) for t in tokens):
         return
     assert_bit_identical(got, tokens)
@@ -134,7 +149,7 @@ def test_fixed_width_columns_as_in_mocap_files(k: int, xs: list[float], sep: str
     ],
 )
 def test_edge_cases(text: bytes, expected: list[float]) -> None:
-    got = parse_decimals(text)
+    got = parse(text)
     assert got is not None
     exp = np.array(expected)
     assert np.array_equal(got.view(np.uint64), exp.view(np.uint64)), f"{text!r}: {got} vs {exp}"
@@ -142,7 +157,7 @@ def test_edge_cases(text: bytes, expected: list[float]) -> None:
 
 @pytest.mark.parametrize("text", [b"", b" ", b"\n\r\n\t  \n"], ids=["empty", "space", "blank-lines"])
 def test_no_numbers_gives_an_empty_array(text: bytes) -> None:
-    got = parse_decimals(text)
+    got = parse(text)
     assert got is not None and got.shape == (0,) and got.dtype == np.float64
 
 
@@ -166,7 +181,7 @@ def test_long_files_spanning_several_pieces(n_lines: int, per_line: int, decimal
     rng = np.random.default_rng(n_lines)
     text, tokens = _long_text(rng, n_lines, per_line, decimals, newline)
     assert len(text) > 2.5 * PIECE, "the input should span several pieces"
-    assert_bit_identical(parse_decimals(text), tokens)
+    assert_bit_identical(parse(text), tokens)
 
 
 @pytest.mark.parametrize("where", ["first", "middle", "last"])
@@ -175,8 +190,8 @@ def test_a_bad_token_in_any_piece_gives_none(where: str) -> None:
     assert len(text) > 2.5 * PIECE
     pos = {"first": 100, "middle": len(text) // 2, "last": len(text) - 20}[where]
     cut = text.index(b" ", pos)
-    assert parse_decimals(text) is not None
-    assert parse_decimals(text[:cut] + b" 1e-5" + text[cut:]) is None
+    assert parse(text) is not None
+    assert parse(text[:cut] + b" 1e-5" + text[cut:]) is None
 
 
 @settings(max_examples=200, deadline=None)
@@ -188,7 +203,7 @@ def test_bytes_before_start_are_ignored(prefix: bytes, case: tuple[bytes, list[b
     # Whatever precedes `start` (digits, '-', letters, non-ASCII) is context only; a '.' right
     # before `start` is tested below.
     data, tokens = case
-    got = parse_decimals(prefix + data, start=len(prefix))
+    got = parse(prefix + data, start=len(prefix))
     if got is None and not all(mantissa_fits(t) for t in tokens):
         return
     assert_bit_identical(got, tokens)
@@ -196,7 +211,7 @@ def test_bytes_before_start_are_ignored(prefix: bytes, case: tuple[bytes, list[b
 
 def test_a_dot_just_before_start_is_ignored() -> None:
     data = b"Frame Time: 1." + b"5 2"
-    got = parse_decimals(data, start=len(b"Frame Time: 1."))
+    got = parse(data, start=len(b"Frame Time: 1."))
     assert got is not None and got.tolist() == [5.0, 2.0]
 
 
@@ -248,14 +263,14 @@ def test_tokens_outside_the_grammar_give_none(bad: bytes, position: str) -> None
         "middle": b"1.5 " + bad + b"\t2.5\n",
         "last": b"1.5 2.5\n" + bad,
     }[position]
-    assert parse_decimals(context) is None, f"{context!r} should be rejected"
+    assert parse(context) is None, f"{context!r} should be rejected"
 
 
 @settings(max_examples=500, deadline=None)
 @given(joined(st.lists(st.one_of(plain_tokens(), odd_tokens), min_size=1, max_size=20)))
 def test_grammar_decides_between_values_and_none(case: tuple[bytes, list[bytes]]) -> None:
     data, tokens = case
-    got = parse_decimals(data)
+    got = parse(data)
     if all(is_plain(t) for t in tokens):
         if got is None and not all(mantissa_fits(t) for t in tokens):
             return
@@ -267,19 +282,19 @@ def test_grammar_decides_between_values_and_none(case: tuple[bytes, list[bytes]]
 
 @pytest.mark.parametrize("ctrl", [b"\x00", b"\x01", b"\x1b", b"\x1f"])
 def test_control_characters_are_not_separators(ctrl: bytes) -> None:
-    assert parse_decimals(b"1.0" + ctrl + b"2.0\n") is None
+    assert parse(b"1.0" + ctrl + b"2.0\n") is None
 
 
 def test_max_values_bounds_the_count() -> None:
     data = b"1 2 3\n4 5 6\n"
-    assert parse_decimals(data, max_values=6).tolist() == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]  # type: ignore[union-attr]
-    assert parse_decimals(data, max_values=5) is None
-    assert parse_decimals(data, max_values=0) is None
-    assert parse_decimals(b" \n", max_values=0).tolist() == []  # type: ignore[union-attr]
+    assert parse(data, max_values=6).tolist() == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]  # type: ignore[union-attr]
+    assert parse(data, max_values=5) is None
+    assert parse(data, max_values=0) is None
+    assert parse(b" \n", max_values=0).tolist() == []  # type: ignore[union-attr]
 
 
 def test_row_length_zero_allows_only_blank_lines() -> None:
-    assert parse_decimals(b"\n \n", row_length=0).tolist() == []  # type: ignore[union-attr]
-    assert parse_decimals(b"\n1\n", row_length=0) is None
-    assert parse_decimals(b"1 2\n3 4", row_length=2).tolist() == [1.0, 2.0, 3.0, 4.0]  # type: ignore[union-attr]
-    assert parse_decimals(b"1 2\n3", row_length=2) is None
+    assert parse(b"\n \n", row_length=0).tolist() == []  # type: ignore[union-attr]
+    assert parse(b"\n1\n", row_length=0) is None
+    assert parse(b"1 2\n3 4", row_length=2).tolist() == [1.0, 2.0, 3.0, 4.0]  # type: ignore[union-attr]
+    assert parse(b"1 2\n3", row_length=2) is None
