@@ -35,7 +35,8 @@ import numpy.typing as npt
 
 from motion.align import kabsch, rotation_from_covariance
 
-from .kernels import forward
+from .kernels import cost_to_go as kernel_cost_to_go
+from .kernels import forward, residual_block
 from .points import sample_cloud
 
 Array = npt.NDArray[np.float64]
@@ -185,20 +186,22 @@ def pad_edges(x: Array, context: int) -> Array:
 
 @dataclass(slots=True)
 class Interpretation:
-    """Per cell and end time ``t`` (``(C, T + 1)``; infinite where illegal): the distance ``D``
-    (m²·s) of the stretched control segment to the input window ``[t - d, t)``, and what its optimal
-    alignment (rotation about +Y, floor translation) is made of, evaluated on demand by
-    :meth:`alignment` (the solver only needs the alignments of the cells it expands).
+    """Per cell and end time ``t`` (stored time-major, ``(T + 1, C)``: a boundary's cells are one
+    contiguous row for the DP kernel; :attr:`D`, :attr:`c`, :attr:`s` are the ``(C, T + 1)``
+    views; infinite where illegal): the distance ``D`` (m²·s) of the stretched control segment to
+    the input window ``[t - d, t)``, and what its optimal alignment (rotation about +Y, floor
+    translation) is made of, evaluated on demand by :meth:`alignment` (the solver only needs the
+    alignments of the cells it expands).
 
-    ``c``, ``s``: ``(C, T + 1)`` the centred planar cross-correlations (the rotation is
-    ``atan2(s, c)``); ``sum_a``: ``(C, 2)`` the stretched template's summed ``x``, ``z``; ``n_pts``:
-    ``(C,)`` points per comparison; ``dur``: ``(C,)`` durations; ``context``: frames of context on
-    each side; ``cs``: ``(T + 2 context + 1, 2)`` cumulative sums of the padded input's ``x``, ``z``
-    (summed over points)."""
+    ``DT``, ``CT``, ``ST``: ``(T + 1, C)`` the distances and the centred planar cross-correlations
+    (the rotation is ``atan2(s, c)``); ``sum_a``: ``(C, 2)`` the stretched template's summed ``x``,
+    ``z``; ``n_pts``: ``(C,)`` points per comparison; ``dur``: ``(C,)`` durations; ``context``:
+    frames of context on each side; ``cs``: ``(T + 2 context + 1, 2)`` cumulative sums of the padded
+    input's ``x``, ``z`` (summed over points)."""
 
-    D: Array
-    c: Array
-    s: Array
+    DT: Array
+    CT: Array
+    ST: Array
     sum_a: Array
     n_pts: Array
     dur: IntArray
@@ -206,6 +209,21 @@ class Interpretation:
     cs: Array
     rot: Array | None = None  # (C, T + 1, 3, 3) rigid (3-D) alignment rotations
     trans: Array | None = None  # (C, T + 1, 3) rigid alignment translations
+
+    @property
+    def D(self) -> Array:  # noqa: N802 (the paper's name)
+        """``(C, T + 1)`` the distances (a view of :attr:`DT`: writes reach the solver)."""
+        return self.DT.T
+
+    @property
+    def c(self) -> Array:
+        """``(C, T + 1)`` the centred cross-correlations ``ax.wx + az.wz`` (a view)."""
+        return self.CT.T
+
+    @property
+    def s(self) -> Array:
+        """``(C, T + 1)`` the centred cross-correlations ``az.wx - ax.wz`` (a view)."""
+        return self.ST.T
 
     @property
     def rigid(self) -> bool:
@@ -222,7 +240,7 @@ class Interpretation:
     def alignment(self, cells: IntArray, ends: IntArray) -> Array:
         """``(4, n)``: ``cos, sin, tx, tz`` of the transform taking the stretched control segment of
         ``cells (n,)`` onto the input window ending at ``ends (n,)`` (``ends >= `` the durations)."""
-        c, s = self.c[cells, ends], self.s[cells, ends]
+        c, s = self.CT[ends, cells], self.ST[ends, cells]
         r = np.hypot(c, s)
         pos = r > 0
         inv = np.divide(1.0, r, out=np.zeros_like(r), where=pos)
@@ -242,7 +260,7 @@ class Interpretation:
     @property
     def alignments(self) -> Array:
         """``(4, C, T + 1)``: the alignment of every cell at every end time (see :meth:`alignment`)."""
-        cells, t1 = self.D.shape
+        t1, cells = self.DT.shape
         ci = np.repeat(np.arange(cells), t1)
         ti = np.tile(np.arange(t1), cells)
         out = self.alignment(ci, ti)
@@ -289,9 +307,9 @@ def interpretation(
     cells = cell_inst.shape[0]
     # written once below: the first d columns of a duration-d row (no window yet) and rows longer
     # than the input are infinite in D and zero in the cross-correlations (identity alignment)
-    D = np.empty((cells, t_len + 1))
-    Cc = np.empty((cells, t_len + 1))
-    Ss = np.empty((cells, t_len + 1))
+    DT = np.empty((t_len + 1, cells))
+    CT = np.empty((t_len + 1, cells))
+    ST = np.empty((t_len + 1, cells))
     sum_a = np.zeros((cells, 2))
     n_pts_c = ((cell_dur + 2 * context) * p).astype(np.float64)
     sums = _WindowSums.of(x)
@@ -301,17 +319,17 @@ def interpretation(
         # cells sorted by duration: the rows of one duration are a contiguous block (basic slices)
         blk = slice(int(rows[0]), int(rows[-1]) + 1) if rows[-1] - rows[0] + 1 == rows.size else rows
         head = min(d, t_len + 1)
-        D[blk, :head] = np.inf
-        Cc[blk, :head] = 0.0
-        Ss[blk, :head] = 0.0
+        DT[:head, blk] = np.inf
+        CT[:head, blk] = 0.0
+        ST[:head, blk] = 0.0
         if d > t_len:
             continue
         a = stretched_templates(inst, cell_inst[rows], d, rate, context)  # (n, d + 2c, P, 3)
-        D[blk, d:], sum_a[blk] = _duration_block(
-            x, sums, a, d, t_len, rate, context, Cc[blk, d:], Ss[blk, d:]
+        sum_a[blk] = _duration_block(
+            x, sums, a, d, t_len, rate, context, DT[d:, blk], CT[d:, blk], ST[d:, blk]
         )
     return Interpretation(
-        D, Cc, Ss, sum_a, n_pts_c, cell_dur.astype(np.intp), context, np.stack((sums.x, sums.z), -1)
+        DT, CT, ST, sum_a, n_pts_c, cell_dur.astype(np.intp), context, np.stack((sums.x, sums.z), -1)
     )
 
 
@@ -343,13 +361,14 @@ def _duration_block(
     t_len: int,
     rate: float,
     context: int,
+    d_out: Array,
     c_out: Array,
     s_out: Array,
-) -> tuple[Array, Array]:
+) -> Array:
     """Eq. 1-2 for the ``n`` cells of duration ``d`` (templates ``a (n, d + 2c, P, 3)``) against every
-    window of the padded input ``x``: the distances ``(n, T + 1 - d)`` (m²·s) after the best
-    rotation about +Y and floor translation, whose cross-correlations go into ``c_out`` and
-    ``s_out``; and the templates' floor sums ``(n, 2)``."""
+    window of the padded input ``x``: into ``d_out`` the distances ``(T + 1 - d, n)`` (m²·s,
+    time-major) after the best rotation about +Y and floor translation, into ``c_out`` and ``s_out``
+    (same shape) their cross-correlations; returns the templates' floor sums ``(n, 2)``."""
     n, p = a.shape[0], x.shape[1]
     c2 = 2 * context
     n_pts = (d + c2) * p
@@ -370,8 +389,6 @@ def _duration_block(
     lhs = centred.transpose(2, 0, 1).reshape(2 * n, n_pts) * scale
     rhs = win[..., [0, 2]].transpose(2, 0, 1).reshape(2 * nw, n_pts)
     g = lhs @ rhs.T  # (2n, 2nw)
-    np.add(g[:n, :nw], g[n:, nw:], out=c_out)  # ax.wx + az.wz
-    np.subtract(g[n:, :nw], g[:n, nw:], out=s_out)  # az.wx - ax.wz
     # the rest of the residual in one more product: -2 ay.wy + the template's and the
     # window's own centred sums of squares (extra columns of ones)
     own_a = (centred**2).sum((1, 2)) + (a[..., 1] ** 2).sum(1)
@@ -384,13 +401,9 @@ def _duration_block(
     rhs_y[:, :n_pts] = win[..., 1]
     rhs_y[:, n_pts] = 1.0
     rhs_y[:, n_pts + 1] = own_w
-    res = c_out * c_out
-    res += s_out * s_out
-    np.sqrt(res, out=res)  # |(c, s)| (np.hypot is several times slower)
-    res *= -2.0
-    res += lhs_y @ rhs_y.T
-    np.maximum(res, 0.0, out=res)
-    return res, sa[:, [0, 2]]
+    # c = ax.wx + az.wz, s = az.wx - ax.wz and D = max(0, rest - 2 |(c, s)|) in one compiled pass
+    residual_block(g, lhs_y @ rhs_y.T, d_out, c_out, s_out)
+    return np.asarray(sa[:, [0, 2]])
 
 
 def _rigid_interpretation(
@@ -401,7 +414,8 @@ def _rigid_interpretation(
     c2 = 2 * context
     x = pad_edges(x, context)
     cells = cell_inst.shape[0]
-    D = np.full((cells, t_len + 1), np.inf)
+    DT = np.full((t_len + 1, cells), np.inf)
+    D = DT.T
     rot = np.zeros((cells, t_len + 1, 3, 3))
     rot[...] = np.eye(3)
     trans = np.zeros((cells, t_len + 1, 3))
@@ -436,9 +450,9 @@ def _rigid_interpretation(
         D[rows, d:] = res / (p * rate)
         rot[rows, d:] = r
         trans[rows, d:] = sw[None] / n_pts - np.einsum("ctij,cj->cti", r, sa / n_pts)
-    empty = np.zeros((cells, t_len + 1))
+    empty = np.zeros((t_len + 1, cells))
     return Interpretation(
-        D,
+        DT,
         empty,
         empty,
         np.zeros((cells, 2)),
@@ -468,18 +482,14 @@ def apply_constraints(
 
 def cost_to_go(D: Array, cell_dur: IntArray) -> Array:
     """``(T + 1,)`` an admissible bound of the cost from frame ``t`` to the end: the best tiling of
-    ``[t, T)`` by interpretation distance alone (continuity is never negative)."""
-    t_len = D.shape[1] - 1
-    durs = np.unique(cell_dur)
-    best_d = np.stack([D[cell_dur == d].min(axis=0) for d in durs])  # (nd, T+1) by end time
-    F = np.full(t_len + 1, np.inf)
-    F[t_len] = 0.0
-    for t in range(t_len - 1, -1, -1):
-        ends = t + durs
-        ok = ends <= t_len
-        if ok.any():
-            F[t] = np.min(best_d[ok, ends[ok]] + F[ends[ok]])
-    return F
+    ``[t, T)`` by interpretation distance alone (continuity is never negative). ``D``: ``(C, T + 1)``
+    (:attr:`Interpretation.D`, whose transpose is contiguous: no copy); ``cell_dur``: ``(C,)``
+    sorted ascending."""
+    if np.any(np.diff(cell_dur) < 0):
+        raise ValueError("cells must be sorted by duration (see legal_cells)")
+    return np.asarray(
+        kernel_cost_to_go(np.ascontiguousarray(D.T, dtype=np.float64), np.asarray(cell_dur, dtype=np.int64))
+    )
 
 
 @dataclass(slots=True)
@@ -528,9 +538,9 @@ def solve(
         raise InterruptedError
     expanded = int(
         forward(
-            D,
-            interp.c,
-            interp.s,
+            np.ascontiguousarray(interp.DT),
+            np.ascontiguousarray(interp.CT),
+            np.ascontiguousarray(interp.ST),
             interp.sum_a,
             interp.n_pts,
             interp.dur.astype(np.int64),

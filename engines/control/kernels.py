@@ -57,8 +57,8 @@ def _aligned(
     end: int,
     pts: np.ndarray,
     p: int,
-    C: np.ndarray,
-    S: np.ndarray,
+    CT: np.ndarray,
+    ST: np.ndarray,
     sum_a: np.ndarray,
     n_pts: np.ndarray,
     dur: np.ndarray,
@@ -86,14 +86,133 @@ def _aligned(
     inv = 1.0 / n_pts[cell]
     wx = (cs[end + 2 * context, 0] - cs[lo, 0]) * inv
     wz = (cs[end + 2 * context, 1] - cs[lo, 1]) * inv
-    _place(pts, p, C[cell, end], S[cell, end], sum_a[cell, 0] * inv, sum_a[cell, 1] * inv, wx, wz, out, o)
+    _place(pts, p, CT[end, cell], ST[end, cell], sum_a[cell, 0] * inv, sum_a[cell, 1] * inv, wx, wz, out, o)
+
+
+BLOCK = 32
+"""Predecessors screened at once by their centroid bound (one vectorized pass, no branches)."""
+
+SLACK = 1e-9
+"""Relative slack of that screen (no division): it passes a superset of the predecessors the exact
+centroid test passes, which then runs unchanged."""
+
+
+@njit(cache=True, nogil=True)
+def cost_to_go(DT: np.ndarray, dur: np.ndarray) -> np.ndarray:
+    """``(T + 1,)`` the best tiling of ``[t, T)`` by interpretation distance alone: ``DT (T + 1, C)``
+    time-major distances (m²·s), ``dur (C,)`` the cells' durations sorted ascending (frames)."""
+    t1, cells = DT.shape
+    t_len = t1 - 1
+    g_lo, g_hi = _runs(dur)
+    ng = g_lo.shape[0]
+    best = np.full((ng, t1), INF)  # per distinct duration, the best cell ending at each time
+    for e in range(t1):
+        for g in range(ng):
+            m = INF
+            for c in range(g_lo[g], g_hi[g]):
+                if DT[e, c] < m:
+                    m = DT[e, c]
+            best[g, e] = m
+    F = np.full(t1, INF)
+    F[t_len] = 0.0
+    for t in range(t_len - 1, -1, -1):
+        m = INF
+        for g in range(ng):
+            e = t + dur[g_lo[g]]
+            if e <= t_len:
+                v = best[g, e] + F[e]
+                if v < m:
+                    m = v
+        F[t] = m
+    return F
+
+
+@njit(cache=True, nogil=True)
+def residual_block(
+    g: np.ndarray, rest: np.ndarray, d_out: np.ndarray, c_out: np.ndarray, s_out: np.ndarray
+) -> None:
+    """The interpretation distances of one duration from its products (one pass, no temporaries).
+
+    ``g (2 n, 2 nw)``: centred templates ``[ax; az]`` (scaled) times windows ``[wx | wz]``;
+    ``rest (n, nw)``: the residual without the rotation term (m²·s). Writes, time-major ``(nw, n)``,
+    ``c_out = ax.wx + az.wz``, ``s_out = az.wx - ax.wz`` and ``d_out = max(0, rest - 2 |(c, s)|)``
+    (the operations, in their order, of the NumPy expression this replaces: equal to the bit)."""
+    n, nw = rest.shape
+    for a in range(n):
+        for w in range(nw):
+            c = g[a, w] + g[n + a, nw + w]
+            s = g[n + a, w] - g[a, nw + w]
+            c_out[w, a] = c
+            s_out[w, a] = s
+            r = np.sqrt(c * c + s * s) * -2.0 + rest[a, w]
+            d_out[w, a] = r if r > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def _runs(dur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, end)`` cell of each run of equal durations in ``dur (C,)`` (sorted ascending)."""
+    cells = dur.shape[0]
+    ng = 0
+    for c in range(cells):
+        if c == 0 or dur[c] != dur[c - 1]:
+            ng += 1
+    lo = np.empty(ng, dtype=np.int64)
+    hi = np.empty(ng, dtype=np.int64)
+    g = -1
+    for c in range(cells):
+        if c == 0 or dur[c] != dur[c - 1]:
+            g += 1
+            lo[g] = c
+        hi[g] = c + 1
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def _kth(values: np.ndarray, n: int, k: int, work: np.ndarray) -> float:
+    """The ``k``-th smallest (0-based) of ``values[:n]`` (no NaN), by quickselect on ``work``."""
+    for i in range(n):
+        work[i] = values[i]
+    lo, hi = 0, n - 1
+    while lo < hi:
+        pivot = work[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while work[i] < pivot:
+                i += 1
+            while work[j] > pivot:
+                j -= 1
+            if i <= j:
+                work[i], work[j] = work[j], work[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return float(work[k])
+
+
+@njit(cache=True, nogil=True)
+def _transform(
+    c: float, s: float, ma0: float, ma1: float, wx: float, wz: float
+) -> tuple[float, float, float, float]:
+    """``cos, sin, tx, tz`` of the alignment with cross terms ``(c, s)`` taking the template's floor
+    mean ``(ma0, ma1)`` onto the window's ``(wx, wz)`` (as :func:`_place`)."""
+    r = np.hypot(c, s)
+    if r > 0:
+        cth, sth = c / r, s / r
+    else:
+        cth, sth = 1.0, 0.0
+    return cth, sth, wx - (cth * ma0 + sth * ma1), wz - (cth * ma1 - sth * ma0)
 
 
 @njit(cache=True, nogil=True)
 def forward(
-    D: np.ndarray,
-    C: np.ndarray,
-    S: np.ndarray,
+    DT: np.ndarray,
+    CT: np.ndarray,
+    ST: np.ndarray,
     sum_a: np.ndarray,
     n_pts: np.ndarray,
     dur: np.ndarray,
@@ -115,36 +234,52 @@ def forward(
     back: np.ndarray,
 ) -> int:
     """Fill ``Q (T + 1, C)`` (best score of a tiling of ``[0, t)`` whose last cell is ``c``; ``inf``
-    when none is kept) and ``back`` (its predecessor cell, -1 first) and return the pairs evaluated.
+    when none is kept) and ``back`` (its predecessor cell, -1 first) and return the pairs evaluated
+    (point sums begun).
 
-    ``D (C, T + 1)``, ``C``/``S`` cross terms, ``sum_a``, ``n_pts``, ``dur``, ``context``, ``cs``,
-    ``rot``, ``trans``, ``rigid``: the interpretation (:class:`engines.control.dp.Interpretation`);
-    ``tails``/``heads`` ``(N, Q, 3)``;
-    ``kq`` the continuity weight per point; ``beam`` the width (``inf``: none); ``max_pred``,
-    ``max_succ`` the caps per boundary (0: none); ``ub`` the upper bound (``inf``: none); ``F`` the
-    admissible cost to go ``(T + 1,)``."""
-    cells, t1 = D.shape
+    ``DT (T + 1, C)``, ``CT``/``ST`` the time-major distances and cross terms (a boundary's cells
+    are one contiguous row), ``sum_a``, ``n_pts``, ``dur``, ``context``, ``cs``, ``rot``,
+    ``trans``, ``rigid``: the interpretation (:class:`engines.control.dp.Interpretation`);
+    ``tails``/``heads`` ``(N, Q, 3)``; ``kq`` the continuity weight per point; ``beam`` the width
+    (``inf``: none); ``max_pred``, ``max_succ`` the caps per boundary (0: none); ``ub`` the upper
+    bound (``inf``: none); ``F`` the admissible cost to go ``(T + 1,)``. ``Q`` must hold ``inf``
+    on entry; ``back`` is written where ``Q`` is finite and read nowhere else.
+
+    The hot loops call no function taking arrays (each such call costs atomic reference counts)."""
+    t1, cells = DT.shape
     t_len = t1 - 1
     nq = tails.shape[1]
-    # end-time-major copy of D: a boundary's successors of one duration read one contiguous row
-    DT = np.ascontiguousarray(D.T)
+    # runs of equal duration: a boundary's successors of one duration are one slice of a row of DT
+    g_lo, g_hi = _runs(dur)
+    ng = g_lo.shape[0]
+    # per cell, 1 / points and the template's floor mean (the alignment's translation)
+    inv_n = np.empty(cells)
+    ma = np.empty((cells, 2))
+    for c in range(cells):
+        inv_n[c] = 1.0 / n_pts[c]
+        ma[c, 0] = sum_a[c, 0] * inv_n[c]
+        ma[c, 1] = sum_a[c, 1] * inv_n[c]
     colmin = np.full(t1, INF)
     for c in range(cells):
         d = dur[c]
-        if d <= t_len and D[c, d] < INF:
-            Q[d, c] = D[c, d]
+        if d <= t_len and DT[d, c] < INF:
+            Q[d, c] = DT[d, c]
             back[d, c] = -1
-            if D[c, d] < colmin[d]:
-                colmin[d] = D[c, d]
+            if DT[d, c] < colmin[d]:
+                colmin[d] = DT[d, c]
     pairs = 0
     pred = np.empty(cells, dtype=np.int64)
     pq = np.empty(cells)
     succ = np.empty(cells, dtype=np.int64)
     skey = np.empty(cells)
+    work = np.empty(cells)
     ytab = np.empty((cells, nq, 3))
     hbuf = np.empty((1, nq, 3))
     ybar = np.empty((cells, 3))
-    hbar = np.empty(3)
+    # the predecessors' centroids by coordinate (score order), for the vectorized screen
+    yx, yy, yz = np.empty(cells), np.empty(cells), np.empty(cells)
+    passed = np.empty(BLOCK, dtype=np.bool_)
+    kn = kq * nq
     for t in range(1, t_len):
         # predecessors: cells ending at t with a score within the bound and the beam
         qmin = INF
@@ -154,9 +289,11 @@ def forward(
         if qmin == INF:
             continue
         npred = 0
+        ft = F[t]
+        qcap = qmin + beam
         for c in range(cells):
             q = Q[t, c]
-            if q < INF and q + F[t] <= ub and q <= qmin + beam:
+            if q < INF and q + ft <= ub and q <= qcap:
                 pred[npred] = c
                 pq[npred] = q
                 npred += 1
@@ -164,7 +301,7 @@ def forward(
             continue
         if max_pred > 0 and npred > max_pred:
             # the max_pred best by score (a selection, not a sort, of all of them)
-            cut = np.partition(pq[:npred], max_pred - 1)[max_pred - 1]
+            cut = _kth(pq, npred, max_pred - 1, work)
             m = 0
             for j in range(npred):
                 if pq[j] <= cut and m < max_pred:
@@ -177,78 +314,149 @@ def forward(
         qs = pq[order]
         qkept = qs[0]
         # successors: cells starting at t that can still improve a score within the limits
+        # (branch-free compaction over one contiguous row slice per duration)
         nsucc = 0
-        for c in range(cells):
-            e = t + dur[c]
+        for g in range(ng):
+            e = t + dur[g_lo[g]]
             if e > t_len:
-                continue
-            dc = DT[e, c]
-            if dc == INF:
-                continue
-            lower = qkept + dc
-            if lower + F[e] > ub or lower > colmin[e] + beam:
-                continue
-            succ[nsucc] = c
-            skey[nsucc] = dc + F[e]
-            nsucc += 1
+                break
+            fe = F[e]
+            cb = colmin[e] + beam
+            for c in range(g_lo[g], g_hi[g]):
+                dc = DT[e, c]
+                lower = qkept + dc
+                keep = dc != INF and not (lower + fe > ub) and not (lower > cb)
+                succ[nsucc] = c
+                skey[nsucc] = dc + fe
+                nsucc += 1 if keep else 0
         if nsucc == 0:
             continue
         if max_succ > 0 and nsucc > max_succ:
-            cut = np.partition(skey[:nsucc], max_succ - 1)[max_succ - 1]
+            cut = _kth(skey, nsucc, max_succ - 1, work)
             m = 0
             for i in range(nsucc):
                 if skey[i] <= cut and m < max_succ:
                     succ[m] = succ[i]
                     m += 1
             nsucc = m
-        ss = succ[:nsucc]
+        # the predecessors' placed tails and their centroids
         for j in range(npred):
             c = ps[j]
-            p = cell_inst[c]
-            _aligned(c, t, tails, p, C, S, sum_a, n_pts, dur, context, cs, rot, trans, rigid, ytab, j)
-        for j in range(npred):
+            if rigid:
+                _aligned(
+                    c,
+                    t,
+                    tails,
+                    cell_inst[c],
+                    CT,
+                    ST,
+                    sum_a,
+                    n_pts,
+                    dur,
+                    context,
+                    cs,
+                    rot,
+                    trans,
+                    rigid,
+                    ytab,
+                    j,
+                )
+            else:
+                lo = max(t - dur[c], 0)
+                wx = (cs[t + 2 * context, 0] - cs[lo, 0]) * inv_n[c]
+                wz = (cs[t + 2 * context, 1] - cs[lo, 1]) * inv_n[c]
+                cth, sth, tx, tz = _transform(CT[t, c], ST[t, c], ma[c, 0], ma[c, 1], wx, wz)
+                p = cell_inst[c]
+                for a in range(nq):
+                    x, z = tails[p, a, 0], tails[p, a, 2]
+                    ytab[j, a, 0] = cth * x + sth * z + tx
+                    ytab[j, a, 1] = tails[p, a, 1]
+                    ytab[j, a, 2] = -sth * x + cth * z + tz
             for b in range(3):
                 ybar[j, b] = 0.0
                 for a in range(nq):
                     ybar[j, b] += ytab[j, a, b] / nq
+            yx[j], yy[j], yz[j] = ybar[j, 0], ybar[j, 1], ybar[j, 2]
         for i in range(nsucc):
-            c = ss[i]
+            c = succ[i]
             e = t + dur[c]
             p = cell_inst[c]
-            _aligned(c, e, heads, p, C, S, sum_a, n_pts, dur, context, cs, rot, trans, rigid, hbuf, 0)
+            if rigid:
+                _aligned(c, e, heads, p, CT, ST, sum_a, n_pts, dur, context, cs, rot, trans, rigid, hbuf, 0)
+            else:
+                lo = max(e - dur[c], 0)
+                wx = (cs[e + 2 * context, 0] - cs[lo, 0]) * inv_n[c]
+                wz = (cs[e + 2 * context, 1] - cs[lo, 1]) * inv_n[c]
+                cth, sth, tx, tz = _transform(CT[e, c], ST[e, c], ma[c, 0], ma[c, 1], wx, wz)
+                for a in range(nq):
+                    x, z = heads[p, a, 0], heads[p, a, 2]
+                    hbuf[0, a, 0] = cth * x + sth * z + tx
+                    hbuf[0, a, 1] = heads[p, a, 1]
+                    hbuf[0, a, 2] = -sth * x + cth * z + tz
             dc = DT[e, c]
-            hbar[:] = 0.0
+            h0, h1, h2 = 0.0, 0.0, 0.0
             for a in range(nq):
-                for b in range(3):
-                    hbar[b] += hbuf[0, a, b] / nq
+                h0 += hbuf[0, a, 0] / nq
+                h1 += hbuf[0, a, 1] / nq
+                h2 += hbuf[0, a, 2] / nq
             limit = ub - dc - F[e]  # a total above the bound is pruned anyway
+            # this successor's best predecessor: a scan in increasing score; since continuity is
+            # never negative, it stops at the first score at or above the best total so far (or
+            # above what the bound leaves). Blocks of predecessors are screened at once by their
+            # centroid bound; those passing go through the exact tests in order.
             best = INF
             arg = -1
-            for j in range(npred):
-                q = qs[j]
+            j0 = 0
+            stop = False
+            while j0 < npred and not stop:
+                q = qs[j0]
                 if q >= best or q > limit:
                     break
-                # early abandon: stop adding points once the partial total cannot win; first the
-                # centroids (sum_q |y_q - h_q|^2 >= Q |mean y - mean h|^2), 3 numbers instead of 3 Q
-                room = (min(best, limit) - q) / kq if kq > 0 else INF
-                d0 = ybar[j, 0] - hbar[0]
-                d1 = ybar[j, 1] - hbar[1]
-                d2 = ybar[j, 2] - hbar[2]
-                if nq * (d0 * d0 + d1 * d1 + d2 * d2) > room:
-                    continue
-                acc = 0.0
-                for a in range(nq):
-                    for b in range(3):
-                        diff = ytab[j, a, b] - hbuf[0, a, b]
-                        acc += diff * diff
-                    if acc > room:
+                n_blk = min(BLOCK, npred - j0)
+                cap = min(best, limit)
+                n_pass = 0
+                base = max(j0, 0)  # known non-negative: contiguous vector loads, no gathers
+                for u in range(n_blk):
+                    d0 = yx[base + u] - h0
+                    d1 = yy[base + u] - h1
+                    d2 = yz[base + u] - h2
+                    ok = not (kn * (d0 * d0 + d1 * d1 + d2 * d2) > (cap - qs[base + u]) * (1.0 + SLACK))
+                    passed[u] = ok
+                    n_pass += ok
+                u = 0
+                while n_pass > 0:
+                    if not passed[u]:
+                        u += 1
+                        continue
+                    n_pass -= 1
+                    j = j0 + u
+                    u += 1
+                    q = qs[j]
+                    if q >= best or q > limit:
+                        stop = True
                         break
-                pairs += 1
-                if acc <= room:
-                    tot = q + kq * acc
-                    if tot < best:
-                        best = tot
-                        arg = j
+                    # early abandon: stop adding points once the partial total cannot win; first
+                    # the centroids (sum_q |y_q - h_q|^2 >= Q |mean y - mean h|^2)
+                    room = (min(best, limit) - q) / kq if kq > 0 else INF
+                    d0 = ybar[j, 0] - h0
+                    d1 = ybar[j, 1] - h1
+                    d2 = ybar[j, 2] - h2
+                    if nq * (d0 * d0 + d1 * d1 + d2 * d2) > room:
+                        continue
+                    acc = 0.0
+                    for a in range(nq):
+                        for b in range(3):
+                            diff = ytab[j, a, b] - hbuf[0, a, b]
+                            acc += diff * diff
+                        if acc > room:
+                            break
+                    pairs += 1
+                    if acc <= room:
+                        tot = q + kq * acc
+                        if tot < best:
+                            best = tot
+                            arg = j
+                j0 += n_blk
             if arg < 0:
                 continue
             val = dc + best
