@@ -27,6 +27,7 @@ stretched within the stretch bound. A cell *ending at* ``t`` covers input frames
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -36,7 +37,7 @@ import numpy.typing as npt
 from motion.align import kabsch, rotation_from_covariance
 
 from .kernels import cost_to_go as kernel_cost_to_go
-from .kernels import forward, residual_block
+from .kernels import forward, residual_block, sample_frames
 from .points import sample_cloud
 
 Array = npt.NDArray[np.float64]
@@ -174,6 +175,8 @@ def stretched_templates(inst: Instances, which: IntArray, d: int, rate: float, c
     if context and inst.pair_bounds is not None:
         b = inst.pair_bounds[which]
         pos = np.clip(pos, b[:, :1], b[:, 1:])
+    if inst.control.ndim == 3 and inst.control.dtype == np.float64:
+        return np.asarray(sample_frames(np.ascontiguousarray(inst.control), np.ascontiguousarray(pos)))
     return sample_cloud(inst.control, pos)
 
 
@@ -530,8 +533,7 @@ def solve(
     cells, t1 = D.shape
     t_len = t1 - 1
     # time-major (T + 1, C): a boundary's cells are one contiguous row
-    Q = np.full((t1, cells), np.inf)
-    back = np.full((t1, cells), -1, dtype=np.int64)  # read only where a score was written
+    Q, back = _workspace(t1, cells)
     if np.any(np.diff(cell_dur) < 0):
         raise ValueError("cells must be sorted by duration (see legal_cells)")
     if should_stop is not None and should_stop():
@@ -566,6 +568,23 @@ def solve(
     score = float(Q[t_len, cells_arr[-1]])
     interp_term = float(D[cells_arr, ends_arr].sum())
     return DPResult(score, cells_arr, ends_arr, expanded, interp_term, score - interp_term)
+
+
+_WORK = threading.local()
+
+
+def _workspace(t1: int, cells: int) -> tuple[Array, npt.NDArray[np.int64]]:
+    """This thread's score and back-pointer tables ``(T + 1, C)`` for :func:`solve`: ``Q`` all
+    ``inf``, ``back`` as left (the kernel writes it wherever it writes a score, and only those
+    entries are read). Kept between calls: fresh 2-5 MB tables cost more in page faults than a fill."""
+    q = getattr(_WORK, "q", None)
+    b = getattr(_WORK, "back", None)
+    if q is None or b is None or q.shape != (t1, cells):
+        q = np.empty((t1, cells))
+        b = np.empty((t1, cells), dtype=np.int64)
+        _WORK.q, _WORK.back = q, b
+    q.fill(np.inf)
+    return q, b
 
 
 def _best_path(Q: Array, back: npt.NDArray[np.int64], cell_dur: IntArray) -> tuple[IntArray, IntArray]:

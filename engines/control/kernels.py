@@ -128,6 +128,32 @@ def cost_to_go(DT: np.ndarray, dur: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
+def sample_frames(cloud: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """``cloud (F, P, 3)`` at fractional frame indices ``frames (n, L)``: ``(n, L, P, 3)``, linear
+    and clamped (:func:`engines.control.points.sample_cloud`'s operations, to the bit, without its
+    temporaries)."""
+    nf, npt = cloud.shape[0], cloud.shape[1]
+    n, length = frames.shape
+    out = np.empty((n, length, npt, 3))
+    top = max(nf - 2, 0)
+    for r in range(n):
+        for i in range(length):
+            f = min(max(frames[r, i], 0.0), float(nf - 1))
+            i0 = min(int(np.floor(f)), top)
+            i1 = min(i0 + 1, nf - 1)
+            a = f - i0
+            b = 1 - a
+            for p in range(npt):
+                for k in range(3):
+                    out[r, i, p, k] = cloud[i0, p, k] * b + cloud[i1, p, k] * a
+    return out
+
+
+TILE = 8
+"""Cells per tile of :func:`residual_block` (computed along time, then written time-major)."""
+
+
+@njit(cache=True, nogil=True)
 def residual_block(
     g: np.ndarray, rest: np.ndarray, d_out: np.ndarray, c_out: np.ndarray, s_out: np.ndarray
 ) -> None:
@@ -138,14 +164,25 @@ def residual_block(
     ``c_out = ax.wx + az.wz``, ``s_out = az.wx - ax.wz`` and ``d_out = max(0, rest - 2 |(c, s)|)``
     (the operations, in their order, of the NumPy expression this replaces: equal to the bit)."""
     n, nw = rest.shape
-    for a in range(n):
-        for w in range(nw):
-            c = g[a, w] + g[n + a, nw + w]
-            s = g[n + a, w] - g[a, nw + w]
-            c_out[w, a] = c
-            s_out[w, a] = s
-            r = np.sqrt(c * c + s * s) * -2.0 + rest[a, w]
-            d_out[w, a] = r if r > 0.0 else 0.0
+    tc = np.empty((TILE, nw))
+    ts = np.empty((TILE, nw))
+    td = np.empty((TILE, nw))
+    for a0 in range(0, n, TILE):
+        a1 = min(a0 + TILE, n)
+        for u in range(a1 - a0):  # along time: contiguous, vectorized
+            a = a0 + u
+            for w in range(nw):
+                c = g[a, w] + g[n + a, nw + w]
+                s = g[n + a, w] - g[a, nw + w]
+                r = np.sqrt(c * c + s * s) * -2.0 + rest[a, w]
+                tc[u, w] = c
+                ts[u, w] = s
+                td[u, w] = r if r >= 0.0 else 0.0  # np.maximum(r, 0.0) for finite r
+        for w in range(nw):  # then the tile's rows, time-major
+            for u in range(a1 - a0):
+                c_out[w, a0 + u] = tc[u, w]
+                s_out[w, a0 + u] = ts[u, w]
+                d_out[w, a0 + u] = td[u, w]
 
 
 @njit(cache=True, nogil=True)
@@ -168,10 +205,8 @@ def _runs(dur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True, nogil=True)
-def _kth(values: np.ndarray, n: int, k: int, work: np.ndarray) -> float:
-    """The ``k``-th smallest (0-based) of ``values[:n]`` (no NaN), by quickselect on ``work``."""
-    for i in range(n):
-        work[i] = values[i]
+def _select(work: np.ndarray, n: int, k: int) -> float:
+    """The ``k``-th smallest (0-based) of ``work[:n]`` (no NaN), by quickselect in place."""
     lo, hi = 0, n - 1
     while lo < hi:
         pivot = work[(lo + hi) // 2]
@@ -192,6 +227,35 @@ def _kth(values: np.ndarray, n: int, k: int, work: np.ndarray) -> float:
         else:
             break
     return float(work[k])
+
+
+SAMPLE = 64
+"""Values sampled by :func:`_kth` to guess a threshold below which the wanted ones lie."""
+
+
+@njit(cache=True, nogil=True)
+def _kth(values: np.ndarray, n: int, k: int, work: np.ndarray) -> float:
+    """The ``k``-th smallest (0-based) of ``values[:n]`` (no NaN); ``work`` ``(>= n,)`` scratch.
+
+    For a small ``k`` of many values: a threshold from every ``n / SAMPLE``-th value (about twice the
+    wanted fraction), the values at or below it gathered without branches, and the selection run on
+    those alone when there are enough of them (else on all)."""
+    if n >= 4 * SAMPLE and (k + 1) * 4 <= n:
+        step = n // SAMPLE
+        for i in range(SAMPLE):
+            work[i] = values[i * step]
+        rank = min(SAMPLE - 1, (2 * (k + 1) * SAMPLE) // n + 1)
+        cut = _select(work, SAMPLE, rank)
+        m = 0
+        for i in range(n):
+            v = values[i]
+            work[m] = v
+            m += 1 if v <= cut else 0
+        if m > k:
+            return _select(work, m, k)
+    for i in range(n):
+        work[i] = values[i]
+    return _select(work, n, k)
 
 
 @njit(cache=True, nogil=True)
@@ -273,9 +337,10 @@ def forward(
     succ = np.empty(cells, dtype=np.int64)
     skey = np.empty(cells)
     work = np.empty(cells)
-    ytab = np.empty((cells, nq, 3))
+    kept = cells if max_pred <= 0 else min(cells, max_pred)  # predecessors kept at most
+    ytab = np.empty((kept, nq, 3))
     hbuf = np.empty((1, nq, 3))
-    ybar = np.empty((cells, 3))
+    ybar = np.empty((kept, 3))
     # the predecessors' centroids by coordinate (score order), for the vectorized screen
     yx, yy, yz = np.empty(cells), np.empty(cells), np.empty(cells)
     passed = np.empty(BLOCK, dtype=np.bool_)
