@@ -346,11 +346,9 @@ def forward(
     passed = np.empty(BLOCK, dtype=np.bool_)
     kn = kq * nq
     for t in range(1, t_len):
-        # predecessors: cells ending at t with a score within the bound and the beam
-        qmin = INF
-        for c in range(cells):
-            if Q[t, c] < qmin:
-                qmin = Q[t, c]
+        # predecessors: cells ending at t with a score within the bound and the beam (every
+        # score at t is written once, and colmin[t] follows each: it is the row's minimum)
+        qmin = colmin[t]
         if qmin == INF:
             continue
         npred = 0
