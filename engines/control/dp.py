@@ -37,7 +37,7 @@ import numpy.typing as npt
 from motion.align import kabsch, rotation_from_covariance
 
 from .kernels import cost_to_go as kernel_cost_to_go
-from .kernels import forward, residual_block, sample_frames
+from .kernels import duration_operands, forward, residual_block, sample_frames
 from .points import sample_cloud
 
 Array = npt.NDArray[np.float64]
@@ -356,6 +356,20 @@ class _WindowSums:
         )
 
 
+_SCRATCH = threading.local()
+
+
+def _scratch(name: str, shape: tuple[int, int]) -> Array:
+    """A C-contiguous ``shape`` view of this thread's scratch buffer ``name``, kept between calls
+    (the products of :func:`_duration_block` are 1-3 MB each: fresh ones cost page faults)."""
+    size = shape[0] * shape[1]
+    buf = getattr(_SCRATCH, name, None)
+    if buf is None or buf.size < size:
+        buf = np.empty(max(size, 1 << 18))
+        setattr(_SCRATCH, name, buf)
+    return np.asarray(buf[:size].reshape(shape))
+
+
 def _duration_block(
     x: Array,
     sums: _WindowSums,
@@ -379,33 +393,31 @@ def _duration_block(
     scale = 1.0 / (p * rate)
     a = a.reshape(n, n_pts, 3)
     sa = a.sum(1)  # (n, 3)
-    # templates centred on the floor: their cross-correlation with any window is the centred one
-    centred = a[..., [0, 2]] - (sa[:, [0, 2]] / n_pts)[:, None, :]  # (n, N, 2)
-    # windows (nw, N, 3) flattened like the templates: frame-major, then point
-    win = np.lib.stride_tricks.sliding_window_view(x, d + c2, axis=0)  # (nw, P, 3, L)
-    win = win.transpose(0, 3, 1, 2).reshape(win.shape[0], n_pts, 3)
-    nw = win.shape[0]
+    # templates centred on the floor (their cross-correlation with any window is the centred one)
+    # and the windows (nw, N) flattened like the templates: frame-major, then point
+    nw = x.shape[0] - (d + c2) + 1
+    # centred (n, N, 2) laid out (2, n, N), as NumPy's gather of [x, z] gives it (its reduction
+    # below then sums in the same order)
+    centred = np.empty((2, n, n_pts)).transpose(1, 2, 0)
+    lhs, rhs = np.empty((2 * n, n_pts)), np.empty((2 * nw, n_pts))
+    lhs_y, rhs_y = np.empty((n, n_pts + 2)), np.empty((nw, n_pts + 2))
+    duration_operands(a, sa, np.ascontiguousarray(x), scale, centred, lhs, rhs, lhs_y, rhs_y)
     ends = np.arange(d, t_len + 1)
     e2 = ends + c2
     sx, sz = sums.x[e2] - sums.x[ends - d], sums.z[e2] - sums.z[ends - d]
     # one product gives the four planar cross terms: rows [ax; az], columns [wx | wz]
-    lhs = centred.transpose(2, 0, 1).reshape(2 * n, n_pts) * scale
-    rhs = win[..., [0, 2]].transpose(2, 0, 1).reshape(2 * nw, n_pts)
-    g = lhs @ rhs.T  # (2n, 2nw)
+    g = np.matmul(lhs, rhs.T, out=_scratch("g", (2 * n, 2 * nw)))  # (2n, 2nw)
     # the rest of the residual in one more product: -2 ay.wy + the template's and the
     # window's own centred sums of squares (extra columns of ones)
     own_a = (centred**2).sum((1, 2)) + (a[..., 1] ** 2).sum(1)
     own_w = sums.sq[e2] - sums.sq[ends - d] - (sx**2 + sz**2) / n_pts
-    lhs_y = np.empty((n, n_pts + 2))
-    lhs_y[:, :n_pts] = a[..., 1] * (-2.0 * scale)
     lhs_y[:, n_pts] = own_a * scale
     lhs_y[:, n_pts + 1] = scale
-    rhs_y = np.empty((nw, n_pts + 2))
-    rhs_y[:, :n_pts] = win[..., 1]
     rhs_y[:, n_pts] = 1.0
     rhs_y[:, n_pts + 1] = own_w
     # c = ax.wx + az.wz, s = az.wx - ax.wz and D = max(0, rest - 2 |(c, s)|) in one compiled pass
-    residual_block(g, lhs_y @ rhs_y.T, d_out, c_out, s_out)
+    rest = np.matmul(lhs_y, rhs_y.T, out=_scratch("rest", (n, nw)))
+    residual_block(g, rest, d_out, c_out, s_out)
     return np.asarray(sa[:, [0, 2]])
 
 

@@ -149,7 +149,54 @@ def sample_frames(cloud: np.ndarray, frames: np.ndarray) -> np.ndarray:
     return out
 
 
-TILE = 8
+@njit(cache=True, nogil=True)
+def duration_operands(
+    a: np.ndarray,
+    sa: np.ndarray,
+    x: np.ndarray,
+    scale: float,
+    centred: np.ndarray,
+    lhs: np.ndarray,
+    rhs: np.ndarray,
+    lhs_y: np.ndarray,
+    rhs_y: np.ndarray,
+) -> None:
+    """The operands of one duration's products (:func:`engines.control.dp._duration_block`), built
+    in one pass each (the NumPy gathers and transposes they replace, to the bit).
+
+    ``a (n, N, 3)``: the stretched templates (``N`` = frames x points, frame-major); ``sa (n, 3)``
+    their sums; ``x (T', P, 3)``: the padded input, windows of ``N / P`` frames. Fills ``centred
+    (n, N, 2)`` (the templates' ``x``, ``z`` minus their means), ``lhs (2n, N)`` (``[ax; az]``
+    centred, times ``scale``), ``rhs (2 nw, N)`` (the windows' ``[wx; wz]``), and the first ``N``
+    columns of ``lhs_y (n, N + 2)`` and ``rhs_y (nw, N + 2)`` (``-2 scale ay`` and ``wy``). The
+    caller allocates them (NumPy's reductions and BLAS may sum in another order at another
+    alignment)."""
+    n, npt_all = a.shape[0], a.shape[1]
+    p = x.shape[1]
+    length = npt_all // p
+    nw = x.shape[0] - length + 1
+    m2 = -2.0 * scale
+    for r in range(n):
+        mx = sa[r, 0] / npt_all
+        mz = sa[r, 2] / npt_all
+        for k in range(npt_all):
+            cx = a[r, k, 0] - mx
+            cz = a[r, k, 2] - mz
+            centred[r, k, 0] = cx
+            centred[r, k, 1] = cz
+            lhs[r, k] = cx * scale
+            lhs[n + r, k] = cz * scale
+            lhs_y[r, k] = a[r, k, 1] * m2
+    for w in range(nw):
+        for f in range(length):
+            for q in range(p):
+                k = f * p + q
+                rhs[w, k] = x[w + f, q, 0]
+                rhs[nw + w, k] = x[w + f, q, 2]
+                rhs_y[w, k] = x[w + f, q, 1]
+
+
+TILE = 64
 """Cells per tile of :func:`residual_block` (computed along time, then written time-major)."""
 
 
