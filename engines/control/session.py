@@ -102,6 +102,14 @@ class LiveControl:
         self.frame = 0  # target frames sent
         self.solves = 0
         self.solve_s: list[float] = []
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Solve one window of the database's own control once and drop it: the compiled kernels
+        load (~0.4 s in a fresh process) while the session opens, not when its first frames are due."""
+        window = self.db.control[: 2 * self.min_window]
+        if window.shape[0] >= self.min_window:
+            self._solve(np.ascontiguousarray(window))
 
     @property
     def latency_s(self) -> float:

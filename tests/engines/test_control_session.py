@@ -94,3 +94,20 @@ def test_bad_frames_and_settings_are_refused() -> None:
     with pytest.raises(EngineError, match="finite"):
         session.push(np.full((2, 2), np.nan))
     assert session.finish()["root"] == []  # nothing received, nothing to send
+
+
+def test_opening_a_session_loads_the_solver_and_leaves_it_fresh(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The session solves one window of the database's own control while it opens (the compiled
+    kernels load then, not when the first frames are due) and keeps nothing of it."""
+    engine = pair_engine()
+    solved: list[int] = []
+    original = engine.live_control().__class__._solve
+
+    def counting(self, window):  # type: ignore[no-untyped-def]
+        solved.append(int(window.shape[0]))
+        return original(self, window)
+
+    monkeypatch.setattr(engine.live_control().__class__, "_solve", counting)
+    session = engine.live_control(latency_s=1.0)
+    assert len(solved) == 1 and solved[0] >= session.min_window
+    assert session.received == 0 and session.frame == 0 and session.solves == 0 and not session.plan.rows
