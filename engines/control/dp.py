@@ -821,6 +821,7 @@ class _StateAlignments:
                 durs.astype(np.int64),
                 int(context),
                 float(p * rate),
+                np.lexsort((start, durs, state_inst)).astype(np.int64),
                 out,
             )
             return cls(out[0], out[1], out[2], out[3], out[4], None, None)

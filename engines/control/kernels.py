@@ -650,6 +650,7 @@ def state_alignments(
     dur: np.ndarray,
     context: int,
     scale: float,
+    order: np.ndarray,
     out: np.ndarray,
 ) -> None:
     """The floor alignment of every re-timing state (:meth:`engines.control.dp._StateAlignments.of`,
@@ -660,7 +661,9 @@ def state_alignments(
     instance's pair's first and last frame (source positions are clamped to them when ``context > 0``;
     ``(0, 2)``: no clamping), ``start`` its first input frame and ``dur`` its duration (full-rate
     frames); ``xp (T + 2 context, P, 3)`` the padded input; ``scale = P rate`` (the distance's unit:
-    m²·s). Writes ``out (5, m)``: ``D``, ``cos``, ``sin``, ``tx``, ``tz``."""
+    m²·s); ``order (m,)`` the states in an order where those of one template (instance and
+    duration) follow each other: a template is sampled and centred once. Writes ``out (5, m)``:
+    ``D``, ``cos``, ``sin``, ``tx``, ``tz``."""
     nf, npt = control.shape[0], control.shape[1]
     m = start.shape[0]
     top = max(nf - 2, 0)
@@ -677,39 +680,55 @@ def state_alignments(
     buf = np.empty(n_max)
     tasks = np.empty((64, 3), dtype=np.int64)
     vals = np.empty(64)
-    for r in range(m):
+    max_, maz, sa = 0.0, 0.0, 0.0
+    for j in range(m):
+        r = order[j]
         d = dur[r]
         length = d + 2 * context
         n = length * npt
-        s0 = float(seg_start[r])
-        ln = float(seg_length[r])
+        fresh = j == 0
+        if not fresh:
+            r0 = order[j - 1]
+            fresh = seg_start[r] != seg_start[r0] or seg_length[r] != seg_length[r0] or d != dur[r0]
+            if clamp and not fresh:
+                fresh = bounds[r, 0] != bounds[r0, 0] or bounds[r, 1] != bounds[r0, 1]
+        if fresh:  # this state's stretched template, centred on the floor (shared by the next ones)
+            s0 = float(seg_start[r])
+            ln = float(seg_length[r])
+            for f in range(length):
+                pos = s0 + ln * (float(f - context) / d)
+                if clamp:
+                    pos = min(max(pos, float(bounds[r, 0])), float(bounds[r, 1]))
+                fr = min(max(pos, 0.0), float(nf - 1))
+                i0 = min(int(np.floor(fr)), top)
+                i1 = min(i0 + 1, nf - 1)
+                a = fr - i0
+                b = 1 - a
+                for q in range(npt):
+                    k = f * npt + q
+                    ax[k] = control[i0, q, 0] * b + control[i1, q, 0] * a
+                    ay[k] = control[i0, q, 1] * b + control[i1, q, 1] * a
+                    az[k] = control[i0, q, 2] * b + control[i1, q, 2] * a
+            max_ = _pairwise(ax, 0, n, tasks, vals) / n
+            maz = _pairwise(az, 0, n, tasks, vals) / n
+            for k in range(n):
+                ax[k] -= max_
+                az[k] -= maz
+            for k in range(n):
+                buf[k] = ax[k] * ax[k] + az[k] * az[k]
+            sa = _pairwise(buf, 0, n, tasks, vals)
         for f in range(length):
-            pos = s0 + ln * (float(f - context) / d)
-            if clamp:
-                pos = min(max(pos, float(bounds[r, 0])), float(bounds[r, 1]))
-            fr = min(max(pos, 0.0), float(nf - 1))
-            i0 = min(int(np.floor(fr)), top)
-            i1 = min(i0 + 1, nf - 1)
-            a = fr - i0
-            b = 1 - a
             w = start[r] + f
             for q in range(npt):
                 k = f * npt + q
-                ax[k] = control[i0, q, 0] * b + control[i1, q, 0] * a
-                ay[k] = control[i0, q, 1] * b + control[i1, q, 1] * a
-                az[k] = control[i0, q, 2] * b + control[i1, q, 2] * a
                 wx[k] = xp[w, q, 0]
                 wy[k] = xp[w, q, 1]
                 wz[k] = xp[w, q, 2]
         mwx = _pairwise(wx, 0, n, tasks, vals) / n
         mwz = _pairwise(wz, 0, n, tasks, vals) / n
-        max_ = _pairwise(ax, 0, n, tasks, vals) / n
-        maz = _pairwise(az, 0, n, tasks, vals) / n
-        for k in range(n):  # centred in place (the sums below read the centred values)
+        for k in range(n):
             wx[k] -= mwx
             wz[k] -= mwz
-            ax[k] -= max_
-            az[k] -= maz
         for k in range(n):
             buf[k] = ax[k] * wx[k] + az[k] * wz[k]
         c = _pairwise(buf, 0, n, tasks, vals)
@@ -719,9 +738,6 @@ def state_alignments(
         for k in range(n):
             buf[k] = wx[k] * wx[k] + wz[k] * wz[k]
         sw = _pairwise(buf, 0, n, tasks, vals)
-        for k in range(n):
-            buf[k] = ax[k] * ax[k] + az[k] * az[k]
-        sa = _pairwise(buf, 0, n, tasks, vals)
         for k in range(n):
             e = wy[k] - ay[k]
             buf[k] = e * e
