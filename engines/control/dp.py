@@ -37,7 +37,7 @@ import numpy.typing as npt
 from motion.align import kabsch, rotation_from_covariance
 
 from .kernels import cost_to_go as kernel_cost_to_go
-from .kernels import duration_operands, forward, residual_block, sample_frames
+from .kernels import duration_operands, forward, residual_block, retime_chain, sample_frames, state_alignments
 from .points import sample_cloud
 
 Array = npt.NDArray[np.float64]
@@ -668,15 +668,12 @@ def retime(
     ``x``: ``(T, P, 3)`` the input at ``rate``; ``constraints``: ``(segment index, frame)`` pairs the
     segment must keep covering; ``rigid``: full 3-D rigid alignments (see :func:`interpretation`)."""
     n_seg = seq.shape[0]
-    states = _retime_states(
+    flat_seg, flat_a, flat_b = _retime_states(
         x.shape[0], inst, seq, coarse_bounds, rate, stretch_s, stretch_ratio, window, constraints
     )
-    # interpretation of every state, grouped by duration
-    flat_seg = np.concatenate([np.full(s[0].size, i) for i, s in enumerate(states)])
-    flat_a = np.concatenate([s[0] for s in states])
-    flat_b = np.concatenate([s[1] for s in states])
+    # interpretation of every state
     al = _StateAlignments.of(x, inst, seq[flat_seg], flat_a, flat_b, rate, context, rigid)
-    offs = np.concatenate(([0], np.cumsum([s[0].size for s in states])))
+    offs = np.searchsorted(flat_seg, np.arange(n_seg + 1)).astype(np.intp)
     score, idx = _chain(al, inst, seq, offs, flat_a, flat_b, k)
     bounds = np.concatenate((flat_a[idx], flat_b[idx[-1:]]))
     # per-boundary continuity of the chosen states
@@ -720,33 +717,56 @@ def _retime_states(
     stretch_ratio: float | None,
     window: int,
     constraints: list[tuple[int, float]] | None,
-) -> list[tuple[IntArray, IntArray]]:
-    """Per segment of ``seq``, its states: ``(start, end)`` full-rate frames with each boundary within
-    ``+-window`` of the coarse one, a legal duration (else the coarse one's own) and every
-    constraint on the segment covered."""
+) -> tuple[IntArray, IntArray, IntArray]:
+    """Every segment's states, segment by segment, each segment's ordered by start then end:
+    ``(segment, start, end)`` ``(m,)`` full-rate frames with each boundary within ``+-window`` of the
+    coarse one, a legal duration (else the coarse one's own) and every constraint on the segment
+    covered. All segments at once: a ``(L, W, W)`` grid of (start, end) options (``W = 2 window + 1``)."""
     n_seg = seq.shape[0]
     cb = np.round(np.asarray(coarse_bounds, dtype=np.float64)).astype(np.intp)
     cb[0], cb[-1] = 0, t_len
-    options = [np.array([0])]
-    for i in range(1, n_seg):
-        lo, hi = max(1, cb[i] - window), min(t_len - 1, cb[i] + window)
-        options.append(np.arange(lo, hi + 1))
-    options.append(np.array([t_len]))
+    width = 2 * window + 1
+    # (L + 1, W) the options of each boundary (padded with -1): the first and last are fixed
+    lo = np.maximum(1, cb - window)
+    hi = np.minimum(t_len - 1, cb + window)
+    lo[0], hi[0], lo[-1], hi[-1] = 0, 0, t_len, t_len
+    opt = lo[:, None] + np.arange(width)[None, :]
+    valid = opt <= hi[:, None]
+    a = np.broadcast_to(opt[:-1, :, None], (n_seg, width, width))
+    b = np.broadcast_to(opt[1:, None, :], (n_seg, width, width))
+    both = valid[:-1, :, None] & valid[1:, None, :]
+    d = b - a
+    # the legal durations of each segment's instance (legal_cells' bounds, all segments at once)
     lengths_s = inst.length[seq] / inst.fps
-    states: list[tuple[IntArray, IntArray]] = []
-    for i in range(n_seg):
-        a, b = np.meshgrid(options[i], options[i + 1], indexing="ij")
-        a, b = a.ravel(), b.ravel()
-        d = b - a
-        ci, cd = legal_cells(lengths_s[i : i + 1], rate, stretch_s, stretch_ratio)
-        ok = (d >= cd.min()) & (d <= cd.max())
-        if not ok.any():  # the coarse solution's own duration stays possible
-            ok = d == d[np.argmin(np.abs(d - (cb[i + 1] - cb[i])))]
-        for seg_i, frame in constraints or []:
-            if seg_i == i:
-                ok &= (a <= frame) & (frame < b)
-        states.append((a[ok], b[ok]))
-    return states
+    d_lo, d_hi = _legal_range(lengths_s, rate, stretch_s, stretch_ratio)
+    ok = both & (d >= d_lo[:, None, None]) & (d <= d_hi[:, None, None])
+    for i in np.flatnonzero(~ok.any(axis=(1, 2))):  # the coarse solution's own duration stays possible
+        di = d[i][both[i]]
+        if di.size == 0:
+            continue  # no boundary options at all: no state (Infeasible in the chain)
+        ok[i] = both[i] & (d[i] == di[np.argmin(np.abs(di - (cb[i + 1] - cb[i])))])
+    for seg_i, frame in constraints or []:
+        if 0 <= seg_i < n_seg:
+            ok[seg_i] &= (a[seg_i] <= frame) & (frame < b[seg_i])
+    seg, ia, ib = np.nonzero(ok)
+    return seg.astype(np.intp), a[seg, ia, ib].astype(np.intp), b[seg, ia, ib].astype(np.intp)
+
+
+def _legal_range(
+    lengths_s: Array, rate: float, stretch_s: float | None, stretch_ratio: float | None
+) -> tuple[IntArray, IntArray]:
+    """``(N,)`` the shortest and longest legal durations (frames at ``rate``) of segments of
+    ``lengths_s (N,)`` seconds: the bounds of :func:`legal_cells`' durations, same arithmetic."""
+    nominal = lengths_s * rate
+    if stretch_ratio is not None:
+        lo, hi = nominal * (1 - stretch_ratio), nominal * (1 + stretch_ratio)
+    else:
+        s = 0.15 if stretch_s is None else stretch_s
+        lo, hi = nominal - s * rate, nominal + s * rate
+    lo_i = np.maximum(1, np.ceil(lo - 1e-9)).astype(np.intp)
+    hi_i = np.floor(hi + 1e-9).astype(np.intp)
+    near = np.maximum(1, np.round(nominal)).astype(np.intp)
+    return np.minimum(lo_i, near), np.maximum(hi_i, near)
 
 
 @dataclass(slots=True)
@@ -776,14 +796,38 @@ class _StateAlignments:
         context: int,
         rigid: bool,
     ) -> _StateAlignments:
-        """Align every state's stretched template to its input window, one duration at a time."""
+        """Align every state's stretched template to its input window: the floor alignment in one
+        compiled pass over the states (:func:`engines.control.kernels.state_alignments`), the rigid
+        one (or a control cloud not ``(F, P, 3)`` float64) one duration at a time."""
         m = start.size
-        al = cls(np.full(m, np.inf), np.ones(m), np.zeros(m), np.zeros(m), np.zeros(m), None, None)
-        if rigid:
-            al.rot, al.trans = np.repeat(np.eye(3)[None], m, 0), np.zeros((m, 3))
         xp = pad_edges(x, context)
         p = x.shape[1]
         durs = end - start
+        ctl = inst.control
+        if not rigid and ctl.ndim == 3 and ctl.dtype == np.float64 and ctl.shape[1] == p:
+            out = np.empty((5, m))
+            bounds = (
+                inst.pair_bounds[state_inst].astype(np.int64)
+                if context and inst.pair_bounds is not None
+                else np.zeros((0, 2), dtype=np.int64)
+            )
+            state_alignments(
+                np.ascontiguousarray(ctl),
+                inst.start[state_inst].astype(np.int64),
+                inst.length[state_inst].astype(np.int64),
+                bounds,
+                np.ascontiguousarray(xp, dtype=np.float64),
+                start.astype(np.int64),
+                durs.astype(np.int64),
+                int(context),
+                float(p * rate),
+                np.lexsort((start, durs, state_inst)).astype(np.int64),
+                out,
+            )
+            return cls(out[0], out[1], out[2], out[3], out[4], None, None)
+        al = cls(np.full(m, np.inf), np.ones(m), np.zeros(m), np.zeros(m), np.zeros(m), None, None)
+        if rigid:
+            al.rot, al.trans = np.repeat(np.eye(3)[None], m, 0), np.zeros((m, 3))
         for d in np.unique(durs):
             rows = np.flatnonzero(durs == d)
             tmpl = stretched_templates(inst, state_inst[rows], int(d), rate, context)
@@ -822,33 +866,40 @@ def _chain(
     end: IntArray,
     k: float,
 ) -> tuple[float, IntArray]:
-    """The DP over the segments' states (``offs``: where each segment's states begin): distance plus
-    continuity between consecutive aligned segments, a state following one that ends where it
-    starts. Returns the best score and the chosen state of every segment."""
+    """The DP over the segments' states (``offs (L + 1,)``: where each segment's states begin):
+    distance plus continuity between consecutive aligned segments, a state following one that ends
+    where it starts. Returns the best score and the chosen state of every segment.
+
+    The placed tails and heads of all states at once; per boundary one matrix product ``2 Y H^T``
+    (BLAS, as ever: the continuity to the bit); the DP itself compiled
+    (:func:`engines.control.kernels.retime_chain`)."""
     n_seg = seq.shape[0]
     q_pts = inst.tails.shape[1]
-    Q = al.D[offs[0] : offs[1]].copy()
-    backs: list[IntArray] = []
-    for i in range(1, n_seg):
-        prev = np.arange(offs[i - 1], offs[i])
-        cur = np.arange(offs[i], offs[i + 1])
-        if prev.size == 0 or cur.size == 0:
-            raise Infeasible("re-timing found no legal boundaries")
-        y = al.place(inst.tails[seq[i - 1]][None].repeat(prev.size, 0), prev)
-        h = al.place(inst.heads[seq[i]][None].repeat(cur.size, 0), cur)
-        y2, h2 = y.reshape(prev.size, -1), h.reshape(cur.size, -1)
-        cont = (y2**2).sum(1)[:, None] + (h2**2).sum(1)[None] - 2 * y2 @ h2.T
-        total = Q[:, None] + (k / q_pts) * np.maximum(cont, 0.0)
-        total[end[prev][:, None] != start[cur][None, :]] = np.inf
-        j = np.argmin(total, axis=0)
-        Q = total[j, np.arange(cur.size)] + al.D[cur]
-        backs.append(j)
-    if not np.isfinite(Q).any():
+    if np.any(np.diff(offs) == 0):
         raise Infeasible("re-timing found no legal boundaries")
-    last = int(np.argmin(Q))
-    score = float(Q[last])
-    chosen = [offs[n_seg - 1] + last]
-    for i in range(n_seg - 1, 0, -1):
-        last = int(backs[i - 1][last])
-        chosen.append(offs[i - 1] + last)
-    return score, np.array(chosen[::-1], dtype=np.intp)
+    seg = np.repeat(np.arange(n_seg), np.diff(offs))
+    m = seg.size
+    y = al.place(inst.tails[seq[seg]], np.arange(m)).reshape(m, -1)
+    h = al.place(inst.heads[seq[seg]], np.arange(m)).reshape(m, -1)
+    yn, hn = (y**2).sum(1), (h**2).sum(1)
+    blocks = [2 * y[offs[i - 1] : offs[i]] @ h[offs[i] : offs[i + 1]].T for i in range(1, n_seg)]
+    G = np.concatenate([g.ravel() for g in blocks]) if blocks else np.zeros(0)
+    g_offs = np.concatenate(([0], np.cumsum([g.size for g in blocks], dtype=np.int64)))
+    chosen = np.empty(n_seg, dtype=np.int64)
+    score = float(
+        retime_chain(
+            np.ascontiguousarray(al.D, dtype=np.float64),
+            offs.astype(np.int64),
+            start.astype(np.int64),
+            end.astype(np.int64),
+            yn,
+            hn,
+            G,
+            g_offs,
+            k / q_pts,
+            chosen,
+        )
+    )
+    if not np.isfinite(score):
+        raise Infeasible("re-timing found no legal boundaries")
+    return score, chosen.astype(np.intp)

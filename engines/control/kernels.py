@@ -577,3 +577,240 @@ def forward(
             if val < colmin[e]:
                 colmin[e] = val
     return pairs
+
+
+# ----------------------------------------------------------------------------------- re-timing
+
+
+PW_BLOCK = 128
+"""NumPy's pairwise summation block (``PW_BLOCKSIZE`` of its ``pairwise_sum``)."""
+
+
+@njit(cache=True, nogil=True)
+def _pairwise(a: np.ndarray, lo: int, n: int, tasks: np.ndarray, vals: np.ndarray) -> float:
+    """``a[lo:lo + n].sum()`` in NumPy's order (its ``pairwise_sum``: eight partial sums up to
+    :data:`PW_BLOCK` values, else the sums of two halves, the first a multiple of 8 long), so a
+    reduction along a row equals NumPy's to the bit.
+
+    Without recursion (a recursive function loaded from numba's cache crashed): the halves are
+    walked depth first on the scratch stacks ``tasks (64, 3)`` (int64 ``lo, n, combine``) and
+    ``vals (64,)``."""
+    nt, nv = 1, 0
+    tasks[0, 0], tasks[0, 1], tasks[0, 2] = lo, n, 0
+    while nt > 0:
+        nt -= 1
+        lo_, n_, combine = tasks[nt, 0], tasks[nt, 1], tasks[nt, 2]
+        if combine:
+            nv -= 1
+            vals[nv - 1] = vals[nv - 1] + vals[nv]
+        elif n_ > PW_BLOCK:
+            n2 = n_ // 2
+            n2 -= n2 % 8
+            tasks[nt, 0], tasks[nt, 1], tasks[nt, 2] = 0, 0, 1
+            tasks[nt + 1, 0], tasks[nt + 1, 1], tasks[nt + 1, 2] = lo_ + n2, n_ - n2, 0
+            tasks[nt + 2, 0], tasks[nt + 2, 1], tasks[nt + 2, 2] = lo_, n2, 0
+            nt += 3
+        elif n_ < 8:
+            res = 0.0
+            for i in range(n_):
+                res += a[lo_ + i]
+            vals[nv] = res
+            nv += 1
+        else:
+            r0, r1, r2, r3 = a[lo_], a[lo_ + 1], a[lo_ + 2], a[lo_ + 3]
+            r4, r5, r6, r7 = a[lo_ + 4], a[lo_ + 5], a[lo_ + 6], a[lo_ + 7]
+            i = 8
+            while i < n_ - (n_ % 8):
+                r0 += a[lo_ + i]
+                r1 += a[lo_ + i + 1]
+                r2 += a[lo_ + i + 2]
+                r3 += a[lo_ + i + 3]
+                r4 += a[lo_ + i + 4]
+                r5 += a[lo_ + i + 5]
+                r6 += a[lo_ + i + 6]
+                r7 += a[lo_ + i + 7]
+                i += 8
+            res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+            while i < n_:
+                res += a[lo_ + i]
+                i += 1
+            vals[nv] = res
+            nv += 1
+    return float(vals[0])
+
+
+@njit(cache=True, nogil=True)
+def state_alignments(
+    control: np.ndarray,
+    seg_start: np.ndarray,
+    seg_length: np.ndarray,
+    bounds: np.ndarray,
+    xp: np.ndarray,
+    start: np.ndarray,
+    dur: np.ndarray,
+    context: int,
+    scale: float,
+    order: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """The floor alignment of every re-timing state (:meth:`engines.control.dp._StateAlignments.of`,
+    the operations of ``stretched_templates`` + ``paired_alignment`` in their order: equal to the bit).
+
+    ``control (F, P, 3)``: the database's control cloud; per state ``(m,)``: ``seg_start``,
+    ``seg_length`` its instance's first source frame and length (frames), ``bounds (m, 2)`` the
+    instance's pair's first and last frame (source positions are clamped to them when ``context > 0``;
+    ``(0, 2)``: no clamping), ``start`` its first input frame and ``dur`` its duration (full-rate
+    frames); ``xp (T + 2 context, P, 3)`` the padded input; ``scale = P rate`` (the distance's unit:
+    m²·s); ``order (m,)`` the states in an order where those of one template (instance and
+    duration) follow each other: a template is sampled and centred once. Writes ``out (5, m)``:
+    ``D``, ``cos``, ``sin``, ``tx``, ``tz``."""
+    nf, npt = control.shape[0], control.shape[1]
+    m = start.shape[0]
+    top = max(nf - 2, 0)
+    clamp = context > 0 and bounds.shape[0] == m
+    n_max = 0
+    for r in range(m):
+        n_max = max(n_max, (dur[r] + 2 * context) * npt)
+    wx = np.empty(n_max)
+    wz = np.empty(n_max)
+    wy = np.empty(n_max)
+    ax = np.empty(n_max)
+    az = np.empty(n_max)
+    ay = np.empty(n_max)
+    buf = np.empty(n_max)
+    tasks = np.empty((64, 3), dtype=np.int64)
+    vals = np.empty(64)
+    max_, maz, sa = 0.0, 0.0, 0.0
+    for j in range(m):
+        r = order[j]
+        d = dur[r]
+        length = d + 2 * context
+        n = length * npt
+        fresh = j == 0
+        if not fresh:
+            r0 = order[j - 1]
+            fresh = seg_start[r] != seg_start[r0] or seg_length[r] != seg_length[r0] or d != dur[r0]
+            if clamp and not fresh:
+                fresh = bounds[r, 0] != bounds[r0, 0] or bounds[r, 1] != bounds[r0, 1]
+        if fresh:  # this state's stretched template, centred on the floor (shared by the next ones)
+            s0 = float(seg_start[r])
+            ln = float(seg_length[r])
+            for f in range(length):
+                pos = s0 + ln * (float(f - context) / d)
+                if clamp:
+                    pos = min(max(pos, float(bounds[r, 0])), float(bounds[r, 1]))
+                fr = min(max(pos, 0.0), float(nf - 1))
+                i0 = min(int(np.floor(fr)), top)
+                i1 = min(i0 + 1, nf - 1)
+                a = fr - i0
+                b = 1 - a
+                for q in range(npt):
+                    k = f * npt + q
+                    ax[k] = control[i0, q, 0] * b + control[i1, q, 0] * a
+                    ay[k] = control[i0, q, 1] * b + control[i1, q, 1] * a
+                    az[k] = control[i0, q, 2] * b + control[i1, q, 2] * a
+            max_ = _pairwise(ax, 0, n, tasks, vals) / n
+            maz = _pairwise(az, 0, n, tasks, vals) / n
+            for k in range(n):
+                ax[k] -= max_
+                az[k] -= maz
+            for k in range(n):
+                buf[k] = ax[k] * ax[k] + az[k] * az[k]
+            sa = _pairwise(buf, 0, n, tasks, vals)
+        for f in range(length):
+            w = start[r] + f
+            for q in range(npt):
+                k = f * npt + q
+                wx[k] = xp[w, q, 0]
+                wy[k] = xp[w, q, 1]
+                wz[k] = xp[w, q, 2]
+        mwx = _pairwise(wx, 0, n, tasks, vals) / n
+        mwz = _pairwise(wz, 0, n, tasks, vals) / n
+        for k in range(n):
+            wx[k] -= mwx
+            wz[k] -= mwz
+        for k in range(n):
+            buf[k] = ax[k] * wx[k] + az[k] * wz[k]
+        c = _pairwise(buf, 0, n, tasks, vals)
+        for k in range(n):
+            buf[k] = az[k] * wx[k] - ax[k] * wz[k]
+        s = _pairwise(buf, 0, n, tasks, vals)
+        for k in range(n):
+            buf[k] = wx[k] * wx[k] + wz[k] * wz[k]
+        sw = _pairwise(buf, 0, n, tasks, vals)
+        for k in range(n):
+            e = wy[k] - ay[k]
+            buf[k] = e * e
+        sy = _pairwise(buf, 0, n, tasks, vals)
+        rr = np.hypot(c, s)
+        if rr > 0:
+            cth, sth = c / rr, s / rr
+        else:
+            cth, sth = 1.0, 0.0
+        res = sw + sa - 2 * rr + sy
+        out[0, r] = (res if res >= 0.0 else 0.0) / scale
+        out[1, r] = cth
+        out[2, r] = sth
+        out[3, r] = mwx - (cth * max_ + sth * maz)
+        out[4, r] = mwz - (-sth * max_ + cth * maz)
+
+
+@njit(cache=True, nogil=True)
+def retime_chain(
+    D: np.ndarray,
+    offs: np.ndarray,
+    start: np.ndarray,
+    end: np.ndarray,
+    yn: np.ndarray,
+    hn: np.ndarray,
+    G: np.ndarray,
+    g_offs: np.ndarray,
+    kq: float,
+    chosen: np.ndarray,
+) -> float:
+    """The re-timing DP over the segments' states (:func:`engines.control.dp._chain`, its operations
+    in their order: equal to the bit). Returns the best score (``inf``: none) and writes the chosen
+    state of every segment into ``chosen (L,)``.
+
+    Per state ``(m,)``: ``D`` its distance, ``start``/``end`` its frames, ``yn``/``hn`` the squared
+    norms of its placed tail and head points; ``offs (L + 1,)`` where each segment's states begin;
+    ``G`` flat, for boundary ``i`` (from ``g_offs[i - 1]``) the ``(n_{i-1}, n_i)`` matrix ``2 Y H^T``
+    of the placed tails of segment ``i - 1`` and heads of segment ``i``; ``kq = k / Q``."""
+    n_seg = offs.shape[0] - 1
+    m = D.shape[0]
+    Q = np.empty(m)
+    back = np.zeros(m, dtype=np.int64)
+    for r in range(offs[0], offs[1]):
+        Q[r] = D[r]
+    for i in range(1, n_seg):
+        p0, p1, c0, c1 = offs[i - 1], offs[i], offs[i], offs[i + 1]
+        nc = c1 - c0
+        g0 = g_offs[i - 1]
+        for u in range(nc):
+            cur = c0 + u
+            best = INF
+            arg = 0
+            first = True
+            for v in range(p1 - p0):
+                prev = p0 + v
+                if end[prev] != start[cur]:
+                    tot = INF
+                else:
+                    cont = yn[prev] + hn[cur] - G[g0 + v * nc + u]
+                    tot = Q[prev] + kq * (cont if cont >= 0.0 else 0.0)
+                if first or tot < best:
+                    best = tot
+                    arg = v
+                    first = False
+            Q[cur] = best + D[cur]
+            back[cur] = p0 + arg
+    last = offs[n_seg - 1]
+    score = Q[last]
+    for r in range(offs[n_seg - 1] + 1, offs[n_seg]):
+        if Q[r] < score:
+            score = Q[r]
+            last = r
+    for i in range(n_seg - 1, -1, -1):
+        chosen[i] = last
+        last = back[last]
+    return float(score)
