@@ -741,10 +741,11 @@ def _retime_states(
     d_lo, d_hi = _legal_range(lengths_s, rate, stretch_s, stretch_ratio)
     ok = both & (d >= d_lo[:, None, None]) & (d <= d_hi[:, None, None])
     for i in np.flatnonzero(~ok.any(axis=(1, 2))):  # the coarse solution's own duration stays possible
-        di = d[i][both[i]]
+        forward = both[i] & (d[i] >= 1)  # a segment lasts at least one frame
+        di = d[i][forward]
         if di.size == 0:
             continue  # no boundary options at all: no state (Infeasible in the chain)
-        ok[i] = both[i] & (d[i] == di[np.argmin(np.abs(di - (cb[i + 1] - cb[i])))])
+        ok[i] = forward & (d[i] == di[np.argmin(np.abs(di - (cb[i + 1] - cb[i])))])
     for seg_i, frame in constraints or []:
         if 0 <= seg_i < n_seg:
             ok[seg_i] &= (a[seg_i] <= frame) & (frame < b[seg_i])
