@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from control_salsa import POINTS, SALSA, engine_for, follower_errors, moved, trials  # noqa: E402
+from control_salsa import POINTS, SALSA, engine_for, follower_errors, held_dances, moved  # noqa: E402
 
 from engines.base import CollectingEmitter  # noqa: E402
 from engines.control.engine import ControlEngine  # noqa: E402
@@ -158,10 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     if not SALSA.exists():
         print(json.dumps({"error": f"{SALSA} not found"}))
         return 1
-    held = [h.strip().zfill(2) for h in args.held.split(",") if h.strip()]
-    unknown = [h for h in held if h not in trials()]
-    if unknown or not held:
-        ap.error(f"--held: unknown dance(s) {', '.join(unknown) or '(none)'}; have {','.join(trials())}")
+    held = held_dances(ap, args.held)
     try:
         latencies = [float(v) for v in args.latency.split(",")]
     except ValueError:

@@ -46,7 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from control_salsa import POINTS, SALSA, engine_for, log, moved, synthesize, trials  # noqa: E402
+from control_salsa import POINTS, SALSA, engine_for, held_dances, log, moved, synthesize  # noqa: E402
 
 from engines.control.dp import align_points, paired_alignment, stretched_templates  # noqa: E402
 from engines.control.engine import ControlEngine  # noqa: E402
@@ -175,12 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     if not SALSA.exists():
         print(json.dumps({"error": f"{SALSA} not found"}))
         return 1
-    available = trials()
-    held = available if args.held is None else [h.strip().zfill(2) for h in args.held.split(",") if h.strip()]
-    unknown = [h for h in held if h not in available]
-    if unknown or not held:
-        named = ", ".join(unknown) or "(none given)"
-        ap.error(f"--held: unknown dance(s) {named}; have {','.join(available)}")
+    held = held_dances(ap, args.held)
     if args.jobs < 1:
         ap.error("--jobs must be at least 1")
     cache = None if args.cache is None else str(args.cache.resolve())

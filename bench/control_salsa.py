@@ -399,6 +399,18 @@ def follower_bodies(follower: Motion, times: list[float]) -> dict[str, Any]:
     return {"bodies": bodies}
 
 
+def held_dances(ap: argparse.ArgumentParser, text: str | None) -> list[str]:
+    """The dances a ``--held`` option names (``"07,10"``; ``None``: all of them); a usage error
+    naming any that is not in the data."""
+    available = trials()
+    held = available if text is None else [h.strip().zfill(2) for h in text.split(",") if h.strip()]
+    unknown = [h for h in held if h not in available]
+    if unknown or not held:
+        named = ", ".join(unknown) or "(none given)"
+        ap.error(f"--held: unknown dance(s) {named}; have {','.join(available)}")
+    return held
+
+
 def json_object(ap: argparse.ArgumentParser, option: str, text: str) -> dict[str, Any]:
     """The JSON object given to ``option``; a usage error naming the option otherwise."""
     try:
@@ -448,13 +460,7 @@ def main(argv: list[str] | None = None) -> int:
     if not SALSA.exists():
         print(json.dumps({"error": f"{SALSA} not found"}))
         return 1
-    available = trials()
-    held = available if args.held is None else [h.strip().zfill(2) for h in args.held.split(",") if h.strip()]
-    unknown = [h for h in held if h not in available]
-    if unknown or not held:
-        ap.error(
-            f"--held: unknown dance(s) {', '.join(unknown) or '(none given)'}; have {','.join(available)}"
-        )
+    held = held_dances(ap, args.held)
     try:
         tx, tz = (float(v) for v in args.move.split(","))
     except ValueError:

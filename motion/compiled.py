@@ -26,6 +26,7 @@ from numba import njit
 
 from .errors import MotionError
 from .motion import Motion
+from .resample import checked_frames
 
 Array = npt.NDArray[np.float64]
 
@@ -166,12 +167,8 @@ def sample_into(
     ``rows (N,)`` of ``root (M, 3)``, ``rotations (M, J, 4)`` and ``joint_translations (M, K, 3)``
     (C-contiguous float64; :func:`motion.resample.sample_arrays_at` for pieces of several clips
     written into one output)."""
-    f = np.asarray(frames, dtype=np.float64)
+    f = checked_frames(motion, frames)
     n = motion.num_frames
-    if f.ndim != 1 or f.size == 0:
-        raise MotionError("frames must be a non-empty 1-D array of frame indices")
-    if not np.all(np.isfinite(f)) or f.min() < 0 or f.max() > n - 1:
-        raise MotionError(f"frame indices must lie in [0, {n - 1}]")
     idx = np.asarray(rows, dtype=np.int64)
     if idx.shape != f.shape:
         raise MotionError(f"{idx.size} rows for {f.size} frames")

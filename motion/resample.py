@@ -24,17 +24,25 @@ def sample_at(motion: Motion, frames: Array) -> Motion:
     return replace(motion, root_positions=root, rotations=q, joint_translations=jt)
 
 
-def sample_arrays_at(motion: Motion, frames: Array) -> tuple[Array, Array, Array]:
-    """The arrays of :func:`sample_at` without making a motion of them: ``root_positions (N, 3)``,
-    ``rotations (N, J, 4)`` and ``joint_translations (N, K, 3)`` at fractional frame indices
-    ``frames (N,)`` in ``[0, F-1]`` (for callers that write pieces of several clips into one
-    output)."""
+def checked_frames(motion: Motion, frames: Array) -> Array:
+    """``frames`` as a float64 ``(N,)`` array of fractional frame indices of ``motion``; an error
+    unless it is non-empty, 1-D and within ``[0, F-1]``."""
     f = np.asarray(frames, dtype=np.float64)
     n = motion.num_frames
     if f.ndim != 1 or f.size == 0:
         raise MotionError("frames must be a non-empty 1-D array of frame indices")
     if not np.all(np.isfinite(f)) or f.min() < 0 or f.max() > n - 1:
         raise MotionError(f"frame indices must lie in [0, {n - 1}]")
+    return f
+
+
+def sample_arrays_at(motion: Motion, frames: Array) -> tuple[Array, Array, Array]:
+    """The arrays of :func:`sample_at` without making a motion of them: ``root_positions (N, 3)``,
+    ``rotations (N, J, 4)`` and ``joint_translations (N, K, 3)`` at fractional frame indices
+    ``frames (N,)`` in ``[0, F-1]`` (for callers that write pieces of several clips into one
+    output)."""
+    f = checked_frames(motion, frames)
+    n = motion.num_frames
     i0 = np.minimum(np.floor(f).astype(np.intp), max(n - 2, 0))
     i1 = np.minimum(i0 + 1, n - 1)
     a = f - i0

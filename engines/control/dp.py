@@ -149,16 +149,7 @@ def legal_cells(
     ``|d / rate - L| <= stretch_s`` (or ``|d - L rate| <= stretch_ratio L rate``); the nearest
     duration to the unstretched length is always legal. Returns ``(instance (C,), duration (C,))``
     sorted by duration."""
-    nominal = lengths_s * rate
-    if stretch_ratio is not None:
-        lo, hi = nominal * (1 - stretch_ratio), nominal * (1 + stretch_ratio)
-    else:
-        s = 0.15 if stretch_s is None else stretch_s
-        lo, hi = nominal - s * rate, nominal + s * rate
-    lo_i = np.maximum(1, np.ceil(lo - 1e-9)).astype(np.intp)
-    hi_i = np.floor(hi + 1e-9).astype(np.intp)
-    near = np.maximum(1, np.round(nominal)).astype(np.intp)
-    lo_i, hi_i = np.minimum(lo_i, near), np.maximum(hi_i, near)
+    lo_i, hi_i = _legal_range(lengths_s, rate, stretch_s, stretch_ratio)
     counts = hi_i - lo_i + 1
     inst = np.repeat(np.arange(lengths_s.shape[0]), counts)
     dur = lo_i[inst] + (np.arange(inst.size) - np.repeat(np.cumsum(counts) - counts, counts))
@@ -757,7 +748,7 @@ def _legal_range(
     lengths_s: Array, rate: float, stretch_s: float | None, stretch_ratio: float | None
 ) -> tuple[IntArray, IntArray]:
     """``(N,)`` the shortest and longest legal durations (frames at ``rate``) of segments of
-    ``lengths_s (N,)`` seconds: the bounds of :func:`legal_cells`' durations, same arithmetic."""
+    ``lengths_s (N,)`` seconds (:func:`legal_cells` takes every duration between them)."""
     nominal = lengths_s * rate
     if stretch_ratio is not None:
         lo, hi = nominal * (1 - stretch_ratio), nominal * (1 + stretch_ratio)
