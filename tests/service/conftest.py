@@ -10,13 +10,17 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from fastapi import FastAPI
+from fastapi import APIRouter, FastAPI
 from fastapi.testclient import TestClient
 
 from motion.samples import sample_path
 from service.app import create_app
 from service.deps import app_settings
+from service.errors import install_error_handlers
+from service.limits import SessionQuota
 from service.settings import Settings
+from workers.execute import EngineCache
+from workers.store import Store
 
 REPO = Path(__file__).resolve().parents[2]
 PLUGINS = "tests.workers.scripted_engine"
@@ -111,3 +115,18 @@ def ready_database(client: TestClient, spec: dict[str, Any]) -> dict[str, Any]:
     db = client.get(f"/v1/databases/{db['id']}").json()
     assert db["status"] == "ready", db
     return dict(db)
+
+
+@contextmanager
+def session_client(data: Path, store: Store, router: APIRouter) -> Iterator[TestClient]:
+    """A client of a bare app serving one live-session ``router`` on ``store`` (data dir ``data``):
+    error handlers, a quota of 2 sessions and an engine cache, as the real app wires them."""
+    app = FastAPI()
+    app.state.settings = Settings(data_dir=data, allowed_hosts=("localhost", "testserver"))
+    app.state.store = store
+    app.state.session_quota = SessionQuota(2)
+    app.state.engines = EngineCache()
+    install_error_handlers(app)
+    app.include_router(router)
+    with TestClient(app, base_url="http://localhost") as c:
+        yield c

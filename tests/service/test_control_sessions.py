@@ -8,7 +8,6 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from fastapi import FastAPI
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
@@ -19,13 +18,10 @@ from motion.ground import ground_frames
 from schemas import DatabaseStatus
 from schemas.control import ControlRequest
 from schemas.databases import DatabaseInfo
-from service.errors import install_error_handlers
-from service.limits import SessionQuota
 from service.routes import control_sessions
-from service.settings import Settings
 from tests.engines.test_control import walk_engine
 from tests.motion.synthetic import walking_biped
-from workers.execute import EngineCache
+from tests.service.conftest import session_client
 from workers.store import Store, now, npz_bytes
 
 DB = "walktest"
@@ -44,14 +40,7 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     store.put_database_info(info)
     store.put_database_arrays(DB, npz_bytes(arrays))
     store.put_database_info(info.model_copy(update={"id": "rhythmdb", "kind": "rhythm"}))
-    app = FastAPI()
-    app.state.settings = Settings(data_dir=data, allowed_hosts=("localhost", "testserver"))
-    app.state.store = store
-    app.state.session_quota = SessionQuota(2)
-    app.state.engines = EngineCache()
-    install_error_handlers(app)
-    app.include_router(control_sessions.router)
-    with TestClient(app, base_url="http://localhost") as c:
+    with session_client(data, store, control_sessions.router) as c:
         yield c
 
 

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fastapi import FastAPI
 from fastapi.testclient import TestClient
 from starlette.testclient import WebSocketDenialResponse
 from starlette.websockets import WebSocketDisconnect
@@ -22,12 +21,10 @@ from schemas import DatabaseStatus
 from schemas.databases import DatabaseInfo
 from schemas.rhythm import RhythmDatabaseSpec
 from service.app import create_app
-from service.errors import install_error_handlers
-from service.limits import SessionQuota
 from service.routes import sessions
 from service.settings import Settings
 from tests.engines.rhythm_synthetic import library
-from workers.execute import EngineCache
+from tests.service.conftest import session_client
 from workers.store import Store, now, npz_bytes
 
 DB = "rhythmtest"
@@ -62,14 +59,7 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     store.put_database_info(info)
     store.put_database_arrays(DB, npz_bytes(arrays))
     store.put_database_info(info.model_copy(update={"id": "notready", "status": DatabaseStatus.building}))
-    app = FastAPI()
-    app.state.settings = Settings(data_dir=data, allowed_hosts=("localhost", "testserver"))
-    app.state.store = store
-    app.state.session_quota = SessionQuota(2)
-    app.state.engines = EngineCache()
-    install_error_handlers(app)
-    app.include_router(sessions.router)
-    with TestClient(app, base_url="http://localhost") as c:
+    with session_client(data, store, sessions.router) as c:
         yield c
 
 
