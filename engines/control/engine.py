@@ -34,7 +34,7 @@ from motion.quality import QualityInputs
 from motion.reach import reach, smooth_weights
 from motion.vectors import norms
 
-from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
+from ..base import Arrays, Emitter, Engine, EngineError, Run, ShouldStop, Solution, Stopped
 from ..library import MotionLibrary
 from .assemble import Assembled, assemble, body_rooted
 from .build import ControlDatabase, build_control_database
@@ -294,15 +294,22 @@ class ControlEngine(Engine):
 
     # ----------------------------------------------------------------------------------- search
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+        """The stages of :meth:`_search` (the search's work: fixed by the request, so the same
+        request gives the same bytes on any machine); ``budget_s`` and ``should_stop()`` only cut
+        the stages after the first short. BLAS runs single-threaded (one reduction order)."""
+        run = Run(budget_s, should_stop)
         # the solver's matrices are small: BLAS threads only contend (10-50x slower on a busy machine)
         with _thread_pools().limit(limits=1):
-            self._search(request, budget_s, emit, should_stop)
+            self._search(request, run, emit)
+        return run.outcome()
 
-    def _search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+    def _search(self, request: Any, run: Run, emit: Emitter) -> None:
         """The anytime schedule: interpret the control (:meth:`_interpret`), then solve the segment
         DP with a quick beam, a wider beam and (``exact``) the optimum, re-time every better solution
-        at the full rate and emit it when that improves the score too."""
+        at the full rate and emit it when that improves the score too. Every stage runs (the
+        work); the time cap and a cancel stop the stages after the first (the first always
+        answers)."""
         t_start = time.perf_counter()
         ctl = self.control_cloud(request)
         pb = self._interpret(request, ctl)
@@ -312,12 +319,12 @@ class ControlEngine(Engine):
         seg_unit = pb.d_unit
         best_score = np.inf
         for stage_i, stage in enumerate(stages):
-            if stage_i > 0 and (should_stop() or time.perf_counter() - t_start > budget_s):
+            if stage_i > 0 and run.over():
                 break
             t0 = time.perf_counter()
             try:
                 res = self._solve_stage(
-                    pb, stage, seg_unit, best_coarse, request, should_stop if stage_i else None
+                    pb, stage, seg_unit, best_coarse, request, run.over if stage_i else None
                 )
             except InterruptedError:
                 break

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..base import Arrays, Emitter, Engine, ShouldStop
+from ..base import Arrays, Emitter, Engine, ShouldStop, Stopped
 from ..library import MotionLibrary
 from .build import build_graph
 from .model import EdgeTree, FootContacts, RootTracks
@@ -39,10 +39,10 @@ class GraphEngine(Engine):
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         return build_graph(spec, library, emit, should_stop)
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
         # several characters with shared constraints are searched jointly (engines.graph.shared)
         searcher = CoupledSearch if getattr(request, "characters", None) else GraphSearch
-        searcher(
+        return searcher(
             self.library,
             self.tree,
             self.tracks,
