@@ -437,6 +437,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
+    if not args.no_warm and not settings.redis_url:
+        start_warming()  # the embedded workers run jobs: compile their kernels off the request path
     uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level)
     return 0
 
@@ -458,7 +460,34 @@ def cmd_worker(args: argparse.Namespace) -> int:
     from workers.settings import get_settings, with_options
 
     return serve(
-        with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name)
+        with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name),
+        warm=not args.no_warm,
+    )
+
+
+def cmd_warm(args: argparse.Namespace) -> int:
+    from engines.registry import warm_compiled
+    from motion.jitcache import configure
+
+    print(f"numba cache: {configure()}")
+    warm_compiled(print)
+    return 0
+
+
+def start_warming() -> None:
+    """``segue warm`` in a background process (niced, output to this terminal): the compiled
+    kernels are ready before the first control job, without holding this process's GIL."""
+    import os
+    import subprocess
+
+    def lower_priority() -> None:
+        os.nice(5)
+
+    subprocess.Popen(
+        [sys.executable, "-m", "service.cli", "warm"],
+        stdout=sys.stderr,
+        stdin=subprocess.DEVNULL,
+        preexec_fn=lower_priority if hasattr(os, "nice") else None,
     )
 
 
@@ -615,13 +644,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--redis", help="Redis URL: queue jobs for `segue worker` processes instead")
     p.add_argument("--workers", type=int, help="embedded worker processes (default 2)")
     p.add_argument("--log-level", default="info")
+    p.add_argument(
+        "--no-warm", action="store_true", help="do not compile the control kernels in the background at start"
+    )
     p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser("worker", help="a job worker consuming the Redis queue")
     p.add_argument("--redis", required=True, help="Redis URL, e.g. redis://127.0.0.1:6379/0")
     p.add_argument("--data", help="data directory shared with the API (default $SEGUE_DATA_DIR)")
     p.add_argument("--name", help="worker name (default host-pid)")
+    p.add_argument(
+        "--no-warm", action="store_true", help="do not compile the control kernels before the first job"
+    )
     p.set_defaults(func=cmd_worker)
+
+    p = sub.add_parser(
+        "warm",
+        help="compile the control engine's kernels into numba's cache (~15 s of CPU once per install; "
+        "serve and worker do it at start)",
+    )
+    p.set_defaults(func=cmd_warm)
     return ap
 
 

@@ -5,8 +5,9 @@ per boundary (select the predecessors and successors a beam or a bound keeps, al
 points, find each successor's best predecessor with an early exit), and in numpy their per-call
 overhead dominated (about 15 ms per anytime stage on the salsa database). Compiled with
 ``cache=True``: the first call in a fresh environment compiles (a few seconds, see
-``bench/control.py``'s ``first_call_s``), later processes load the machine code from
-``__pycache__``.
+``bench/control.py``'s ``first_call_s``), later processes load the machine code from numba's
+cache (:mod:`motion.jitcache`); ``segue warm`` (:mod:`engines.control.warm`) compiles them ahead of
+the first request.
 
 Exactness: every successor ``i`` scans its predecessors in increasing score ``q_j``; since
 continuity is never negative, once ``q_j`` reaches its best total so far (or what the upper bound
@@ -17,7 +18,12 @@ the candidates kept (all of them when neither beam nor caps are given).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from motion.jitcache import configure
+
+configure()  # numba's cache outside the package, before numba is imported
+
+from numba import njit  # noqa: E402
 
 INF = np.inf
 

@@ -190,7 +190,9 @@ def test_control_same_bytes_beside_a_cpu_hog(control: ControlEngine) -> None:
     assert fingerprint(busy) == fingerprint(first)
 
 
-def test_control_same_bytes_at_any_clock_speed(control: ControlEngine, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_control_same_bytes_at_any_clock_speed(
+    control: ControlEngine, monkeypatch: pytest.MonkeyPatch
+) -> None:
     req = control_request(budget_s=3600)
     first, _ = search(control, req)
     monkeypatch.setattr(engines.base, "CLOCK", slow_clock(50.0))
