@@ -106,12 +106,13 @@ def kind_class(kind: str) -> type[Engine]:
         ) from None
 
 
-def warm_compiled(say: Callable[[str], None] | None = None) -> float:
+def warm_compiled(say: Callable[[str], None] | None = None, force: bool = False) -> float:
     """Compile (or load from numba's cache) the kernels of the engines that have them (the control
     engine's, :mod:`engines.control.warm`) so that no request pays the compile; returns seconds.
-    ``say`` gets a line before and after."""
+    ``say`` gets a line before and after; once done for this installation and cache it returns at
+    once unless ``force``."""
     try:
         from .control.warm import warm
     except ModuleNotFoundError:  # an installation without the control engine
         return 0.0
-    return warm(say)
+    return warm(say, force)

@@ -470,7 +470,7 @@ def cmd_warm(args: argparse.Namespace) -> int:
     from motion.jitcache import configure
 
     print(f"numba cache: {configure()}")
-    warm_compiled(print)
+    warm_compiled(print, force=args.force)
     return 0
 
 
@@ -663,6 +663,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="compile the control engine's kernels into numba's cache (~15 s of CPU once per install; "
         "serve and worker do it at start)",
     )
+    p.add_argument("--force", action="store_true", help="run the kernels even if this cache was warmed")
     p.set_defaults(func=cmd_warm)
     return ap
 

@@ -6,20 +6,26 @@ for everything a control request runs, ``bench/cold_start.py``) and writes the m
 numba's cache (:func:`motion.jitcache.cache_dir`); every later process loads it in a fraction of a
 second. :func:`warm` pays that compile off the request path: it runs two tiny control requests
 on bundled samples (a salsa pair driven by a leader's motion, and walks driven by a floor
-trajectory), which call every kernel with the argument types real requests use. ``segue warm``,
+trajectory), which call every kernel with the argument types real requests use, then leaves a
+stamp in the cache (:func:`stamp`) so that later starts skip it (numba would only load the code,
+but the two tiny requests still cost ~3 CPU-s). ``segue warm``,
 ``segue serve`` and ``segue worker`` run it (the server in a background thread, a worker before
 its first job); the Docker image runs it at build time.
 """
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
 from motion import parse_bvh
 from motion.bvh import bvh_text
+from motion.jitcache import cache_dir
 from motion.samples import resolve_path
 from schemas.databases import parse_database_spec
 from schemas.jobs import parse_job_request
@@ -98,17 +104,45 @@ def _layouts() -> None:
         sample_into(m, frames, np.arange(8), root, rot, jt)
 
 
-def warm(say: Say | None = None) -> float:
+def stamp() -> Path:
+    """The file that says this cache holds the kernels of these sources: named by a hash of the
+    compiled modules' paths, sizes and modification times (what numba keys its entries by) and the
+    numba and Python versions."""
+    import sys
+
+    import numba
+
+    from motion import compiled, numparse
+
+    from . import kernels
+
+    h = hashlib.sha256(f"{numba.__version__} {sys.version}".encode())
+    for module in (kernels, compiled, numparse, sys.modules[__name__]):
+        path = Path(str(module.__file__)).resolve()
+        st = path.stat()
+        h.update(f"{path} {st.st_size} {st.st_mtime_ns}".encode())
+    return cache_dir() / f"segue-warm-{h.hexdigest()[:16]}"
+
+
+def warm(say: Say | None = None, force: bool = False) -> float:
     """Compile (or load from numba's cache) every kernel a control request runs; returns the
-    seconds it took (a fraction of a second once the cache is warm). ``say`` gets one line
-    before and one after."""
+    seconds it took. Once done for these sources and this cache (:func:`stamp`), it returns at
+    once unless ``force``. ``say`` gets one line before and one after."""
     t0 = time.perf_counter()
+    done = stamp()
+    if done.exists() and not force:
+        if say is not None:
+            say(f"compiled kernels ready (numba cache {done.parent})")
+        return time.perf_counter() - t0
     if say is not None:
-        say("preparing the compiled kernels (the first time after an install compiles them: ~15 s of CPU)")
+        say("compiling the control kernels (once per install: about 15 s of CPU)")
     _salsa()
     _walk()
     _layouts()
+    with contextlib.suppress(OSError):  # a read-only cache: warm again next time, no harm
+        done.parent.mkdir(parents=True, exist_ok=True)
+        done.write_text(f"{time.time()}\n", encoding="utf-8")
     elapsed = time.perf_counter() - t0
     if say is not None:
-        say(f"compiled kernels ready in {elapsed:.1f} s")
+        say(f"compiled kernels ready in {elapsed:.1f} s (numba cache {done.parent})")
     return elapsed

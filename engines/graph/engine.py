@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
 from ..base import Arrays, Emitter, Engine, ShouldStop, Stopped
 from ..library import MotionLibrary
 from .build import build_graph
@@ -40,8 +42,20 @@ class GraphEngine(Engine):
         return build_graph(spec, library, emit, should_stop)
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
-        # several characters with shared constraints are searched jointly (engines.graph.shared)
+        # several characters with shared constraints are searched jointly (engines.graph.shared);
+        # one BLAS thread: matrix products reduce in one order whatever the machine's cores
         searcher = CoupledSearch if getattr(request, "characters", None) else GraphSearch
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._run(searcher, request, budget_s, emit, should_stop)
+
+    def _run(
+        self,
+        searcher: type[GraphSearch] | type[CoupledSearch],
+        request: Any,
+        budget_s: float,
+        emit: Emitter,
+        should_stop: ShouldStop,
+    ) -> Stopped:
         return searcher(
             self.library,
             self.tree,
