@@ -151,7 +151,7 @@ class EndConstraint(Strict):
     weight: float = Field(default=1.0, ge=0, le=1000)
 
 
-DEFAULT_PASSES = 40
+DEFAULT_PASSES = 80
 """Coarse-to-fine passes of an annotation search by default (``bench/convergence.py``)."""
 MAX_PASSES = 10_000
 
