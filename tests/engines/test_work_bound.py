@@ -88,7 +88,7 @@ def graph_run(graph: Any, req: GraphRequest) -> tuple[Collect, Stopped]:
 
 
 def test_graph_same_bytes_on_a_slow_machine(graph: Any, monkeypatch: pytest.MonkeyPatch) -> None:
-    req = graph_request(rounds=8, budget_s=3600)
+    req = graph_request(rounds=3, alternatives=2, budget_s=3600)
     first, stopped = graph_run(graph, req)
     assert stopped is Stopped.work and len(first.solutions) >= 2
     monkeypatch.setattr(engines.base, "CLOCK", slow_clock(50.0))
@@ -98,7 +98,7 @@ def test_graph_same_bytes_on_a_slow_machine(graph: Any, monkeypatch: pytest.Monk
 
 
 def test_graph_same_bytes_beside_a_cpu_hog(graph: Any) -> None:
-    req = graph_request(rounds=6, alternatives=1, budget_s=3600)
+    req = graph_request(rounds=2, alternatives=1, budget_s=3600)
     first, _ = graph_run(graph, req)
     proc = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
