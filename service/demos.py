@@ -133,7 +133,6 @@ DEMOS: dict[str, Demo] = {
                 "frames": 240,
                 "seed": 1,
                 "alternatives": 3,
-                "budget_s": 2,
                 "constraints": [
                     {"type": "body", "frame": 0, "position": [0, 0], "heading_deg": 0},
                     {"type": "body", "frame": 239, "position": [1.0, 8.0], "heading_deg": 10},
@@ -166,7 +165,6 @@ DEMOS: dict[str, Demo] = {
                 "engine": "annotations",
                 "frames": 240,
                 "seed": 3,
-                "budget_s": 1.5,
                 "timeline": [
                     {"label": "walk", "start": 0, "end": 150, "value": 1},
                     {"label": "run", "start": 150, "end": 240, "value": 1},
