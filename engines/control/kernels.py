@@ -28,7 +28,12 @@ from numba import njit  # noqa: E402
 INF = np.inf
 
 
-@njit(cache=True, nogil=True)
+@njit(
+    "void(float64[:, :, ::1], int64, float64, float64, float64, float64, float64, float64, "
+    "float64[:, :, ::1], int64)",
+    cache=True,
+    nogil=True,
+)  # one signature: no literal-argument copies
 def _place(
     pts: np.ndarray,
     p: int,
@@ -257,7 +262,7 @@ def _runs(dur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-@njit(cache=True, nogil=True)
+@njit("void(float64[::1], int64, int64[::1], int64[::1])", cache=True, nogil=True)
 def _argsort_stable(keys: np.ndarray, n: int, order: np.ndarray, tmp: np.ndarray) -> None:
     """``order[:n]`` = the indices of ``keys[:n]`` (no NaN) in increasing key order, ties in index
     order: the order ``np.argsort(keys[:n], kind="stable")`` gives, by a bottom-up merge sort
@@ -297,7 +302,9 @@ def _argsort_stable(keys: np.ndarray, n: int, order: np.ndarray, tmp: np.ndarray
             order[i] = tmp[i]
 
 
-@njit(cache=True, nogil=True)
+@njit(
+    "float64(float64[::1], int64, int64)", cache=True, nogil=True
+)  # one signature: no literal-argument copies
 def _select(work: np.ndarray, n: int, k: int) -> float:
     """The ``k``-th smallest (0-based) of ``work[:n]`` (no NaN), by quickselect in place."""
     lo, hi = 0, n - 1
@@ -326,7 +333,9 @@ SAMPLE = 64
 """Values sampled by :func:`_kth` to guess a threshold below which the wanted ones lie."""
 
 
-@njit(cache=True, nogil=True)
+@njit(
+    "float64(float64[::1], int64, int64, float64[::1])", cache=True, nogil=True
+)  # one signature: no literal-argument copies
 def _kth(values: np.ndarray, n: int, k: int, work: np.ndarray) -> float:
     """The ``k``-th smallest (0-based) of ``values[:n]`` (no NaN); ``work`` ``(>= n,)`` scratch.
 
@@ -427,6 +436,7 @@ def forward(
     pairs = 0
     pred = np.empty(cells, dtype=np.int64)
     order_buf = np.empty(cells, dtype=np.int64)
+    row0 = cells - cells  # 0 as a run-time int64: a literal 0 would compile another copy of _aligned
     tmp_buf = np.empty(cells, dtype=np.int64)
     pq = np.empty(cells)
     succ = np.empty(cells, dtype=np.int64)
@@ -541,7 +551,9 @@ def forward(
             e = t + dur[c]
             p = cell_inst[c]
             if rigid:
-                _aligned(c, e, heads, p, CT, ST, sum_a, n_pts, dur, context, cs, rot, trans, rigid, hbuf, 0)
+                _aligned(
+                    c, e, heads, p, CT, ST, sum_a, n_pts, dur, context, cs, rot, trans, rigid, hbuf, row0
+                )
             else:
                 lo = max(e - dur[c], 0)
                 wx = (cs[e + 2 * context, 0] - cs[lo, 0]) * inv_n[c]
@@ -635,7 +647,9 @@ PW_BLOCK = 128
 """NumPy's pairwise summation block (``PW_BLOCKSIZE`` of its ``pairwise_sum``)."""
 
 
-@njit(cache=True, nogil=True)
+@njit(
+    "float64(float64[::1], int64, int64, int64[:, ::1], float64[::1])", cache=True, nogil=True
+)  # one signature: no literal-argument copies
 def _pairwise(a: np.ndarray, lo: int, n: int, tasks: np.ndarray, vals: np.ndarray) -> float:
     """``a[lo:lo + n].sum()`` in NumPy's order (its ``pairwise_sum``: eight partial sums up to
     :data:`PW_BLOCK` values, else the sums of two halves, the first a multiple of 8 long), so a
