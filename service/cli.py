@@ -617,7 +617,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output motion: " + ", ".join(OUTPUT_SUFFIXES))
     p.add_argument("--report", help="write the report JSON here")
     p.add_argument("--events", help="write the events as JSON lines here")
-    p.add_argument("--budget", type=float, help="search budget in seconds (overrides the request's budget_s)")
+    p.add_argument(
+        "--budget",
+        type=float,
+        help="time cap of the search, seconds (overrides the request's budget_s; the request sets the work)",
+    )
     p.add_argument("--quiet", "-q", action="store_true")
     p.set_defaults(func=cmd_synth)
 
