@@ -457,16 +457,45 @@ def cmd_worker(args: argparse.Namespace) -> int:
     from workers.redis_worker import serve
     from workers.settings import get_settings, with_options
 
-    return serve(
-        with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name)
-    )
+    settings = with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name)
+    if not settings.redis_url:
+        print(
+            "segue: error: a worker needs a Redis URL: give --redis URL or set SEGUE_REDIS_URL",
+            file=sys.stderr,
+        )
+        return 2
+    return serve(settings)
+
+
+class _Version(argparse.Action):
+    """``--version``: the installed distribution's version, looked up only when asked."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: object) -> None:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            text = version("segue")
+        except PackageNotFoundError:
+            text = "unknown (not installed; run pip install -e .)"
+        print(f"segue {text}")
+        parser.exit()
 
 
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="segue", description="Segue: motion synthesis by example from motion capture."
     )
+    ap.add_argument(
+        "--version", action=_Version, help="print the installed version of Segue and exit"
+    )
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, help: str, description: str | None = None) -> argparse.ArgumentParser:
+        """A subcommand whose ``--help`` opens with a description (its one-line ``help`` unless given)."""
+        return sub.add_parser(name, help=help, description=description or help[0].upper() + help[1:] + ".")
 
     def limits(p: argparse.ArgumentParser) -> None:
         p.add_argument(
@@ -477,14 +506,14 @@ def build_parser() -> argparse.ArgumentParser:
     from .demos import DEMOS
 
     units = sorted(UNITS)
-    p = sub.add_parser("inspect", help="frames, fps, joints, height and units guess of a BVH file")
+    p = command("inspect", help="frames, fps, joints, height and units guess of a BVH file")
     p.add_argument("file", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--units", choices=units, help="declare the file's length unit instead of guessing")
     limits(p)
     p.set_defaults(func=cmd_inspect)
 
-    p = sub.add_parser(
+    p = command(
         "beats",
         help="motion beats of a BVH file (Kim et al. 2003) or music beats of a recording (WAV FLAC Ogg MP3)",
     )
@@ -507,7 +536,7 @@ def build_parser() -> argparse.ArgumentParser:
     limits(p)
     p.set_defaults(func=cmd_beats)
 
-    p = sub.add_parser("convert", help="convert a BVH file by output extension: " + " ".join(OUTPUT_SUFFIXES))
+    p = command("convert", help="convert a BVH file by output extension: " + " ".join(OUTPUT_SUFFIXES))
     p.add_argument("input", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument("output", help="output file: " + ", ".join(OUTPUT_SUFFIXES))
     p.add_argument("--fps", type=float, help="resample to this frame rate (slerp rotations)")
@@ -535,7 +564,7 @@ def build_parser() -> argparse.ArgumentParser:
     limits(p)
     p.set_defaults(func=cmd_convert)
 
-    p = sub.add_parser("retarget", help="put a motion on another character (BVH or GLB/glTF skin)")
+    p = command("retarget", help="put a motion on another character (BVH or GLB/glTF skin)")
     p.add_argument("motion", help="the motion: BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument(
         "--to", required=True, help="the character: BVH (.bvh, .bvh.gz, sample:NAME) or .glb/.gltf skin"
@@ -556,10 +585,15 @@ def build_parser() -> argparse.ArgumentParser:
     limits(p)
     p.set_defaults(func=cmd_retarget)
 
-    p = sub.add_parser("samples", help="list the bundled sample clips")
+    p = command(
+        "samples",
+        help="list the bundled sample clips",
+        description="List the bundled samples (motion clips and a MIDI song) as sample:NAME and their paths; "
+        "every FILE argument, spec and request accepts sample:NAME.",
+    )
     p.set_defaults(func=cmd_samples)
 
-    p = sub.add_parser(
+    p = command(
         "demo",
         help="without ENGINE: convert a bundled salsa clip to GLB, JSON and NPZ and dance it to 120 BPM; "
         "with ENGINE: that engine end to end on bundled clips, into DIR/ENGINE/",
@@ -575,29 +609,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-synth", action="store_true", help="without ENGINE: only convert the clip (no dance)")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("build", help="build a database from a spec file (clip paths relative to it)")
+    p = command("build", help="build a database from a spec file (clip paths relative to it)")
     p.add_argument("spec", help='database spec JSON, e.g. {"kind": "clips", "clips": [{"bvh": "a.bvh"}]}')
     p.add_argument("--out", required=True, help="database directory to write")
     p.add_argument("--events", help="also write the job's events as JSON lines here")
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     p.set_defaults(func=cmd_build)
 
-    p = sub.add_parser("synth", help="run a synthesis request against a database directory")
+    p = command("synth", help="run a synthesis request against a database directory")
     p.add_argument("request", help='job request JSON, e.g. {"engine": "clip", "clip": "a"}')
     p.add_argument("--db", required=True, help="database directory from segue build")
     p.add_argument("--out", required=True, help="output motion: " + ", ".join(OUTPUT_SUFFIXES))
     p.add_argument("--report", help="write the report JSON here")
     p.add_argument("--events", help="write the events as JSON lines here")
     p.add_argument("--budget", type=float, help="search budget in seconds (overrides the request's budget_s)")
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     p.set_defaults(func=cmd_synth)
 
-    p = sub.add_parser("graph", help="a rhythm database's movement transition graph (groups, transitions)")
+    p = command("graph", help="a rhythm database's movement transition graph (groups, transitions)")
     p.add_argument("db", help="rhythm database directory from segue build (or segue graph-edit)")
     p.add_argument("--json", action="store_true", help="print the graph as JSON (GET /v1/databases/ID/graph)")
     p.set_defaults(func=cmd_graph)
 
-    p = sub.add_parser(
+    p = command(
         "graph-edit", help="derive a rhythm database whose movement graph is edited (connect, cut, weight)"
     )
     p.add_argument("db", help="rhythm database directory")
@@ -605,20 +639,35 @@ def build_parser() -> argparse.ArgumentParser:
         "edits", help='edits JSON: {"edits": [{"op": "cut", "source": 0, "target": 3}, ...]} or the list'
     )
     p.add_argument("--out", required=True, help="derived database directory to write")
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     p.set_defaults(func=cmd_graph_edit)
 
-    p = sub.add_parser("serve", help="run the HTTP/WebSocket API (embedded workers unless --redis)")
-    p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=8000)
+    p = command("serve", help="run the HTTP/WebSocket API (embedded workers unless --redis)")
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to listen on (default 127.0.0.1; another needs SEGUE_API_TOKENS)",
+    )
+    p.add_argument("--port", type=int, default=8000, help="TCP port to listen on (default 8000)")
     p.add_argument("--data", help="data directory (default $SEGUE_DATA_DIR or ./segue-data)")
     p.add_argument("--redis", help="Redis URL: queue jobs for `segue worker` processes instead")
     p.add_argument("--workers", type=int, help="embedded worker processes (default 2)")
-    p.add_argument("--log-level", default="info")
+    p.add_argument(
+        "--log-level",
+        default="info",
+        choices=("critical", "error", "warning", "info", "debug", "trace"),
+        help="server log level (default info)",
+    )
     p.set_defaults(func=cmd_serve)
 
-    p = sub.add_parser("worker", help="a job worker consuming the Redis queue")
-    p.add_argument("--redis", required=True, help="Redis URL, e.g. redis://127.0.0.1:6379/0")
+    p = command(
+        "worker",
+        help="a job worker consuming the Redis queue",
+        description="A job worker consuming the Redis queue that `segue serve --redis` feeds.",
+    )
+    p.add_argument(
+        "--redis", help="Redis URL, e.g. redis://127.0.0.1:6379/0 (default $SEGUE_REDIS_URL; one is needed)"
+    )
     p.add_argument("--data", help="data directory shared with the API (default $SEGUE_DATA_DIR)")
     p.add_argument("--name", help="worker name (default host-pid)")
     p.set_defaults(func=cmd_worker)
@@ -649,6 +698,24 @@ def _user_error(exc: Exception) -> str | None:
     return str(exc) if isinstance(exc, tuple(known)) else None
 
 
+SIGPIPE_STATUS = 128 + 13
+"""The exit status of a Unix tool whose reader went away (``yes | head``: SIGPIPE)."""
+
+
+def _reader_gone() -> int:
+    """Stdout's reader closed the pipe (``segue graph DB | head -4``): end quietly, as Unix tools do.
+    Stdout is pointed at /dev/null so that the interpreter's final flush does not fail again (the
+    recipe of the Python docs, "Note on SIGPIPE")."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # stdout is not a file (an embedding program's stream)
+        pass
+    return SIGPIPE_STATUS
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -656,7 +723,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     tune_process()
     try:
-        return int(args.func(args))
+        status = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe shows here, not at exit
+        return status
+    except BrokenPipeError:
+        return _reader_gone()
     except Exception as exc:
         message = _user_error(exc)
         if message is None:

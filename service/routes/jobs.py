@@ -114,13 +114,15 @@ async def _check_joints(store: Store, job_request: JobRequestBase) -> None:
         return
     npz = str(store.db_dir(str(job_request.database)) / "data.npz")
     names = (await run_in_threadpool(database_facts, npz)).joint_names
-    missing = [f"{where}: {joint!r}" for where, joint in named() if names and joint not in names]
+    missing = [(where, joint) for where, joint in named() if names and joint not in names]
     if missing:
+        shown = ", ".join(names[:16]) + (f", ... (+{len(names) - 16})" if len(names) > 16 else "")
+        problems = [f"{where}: the database's skeleton has no joint named {joint!r}" for where, joint in missing]
         raise ApiError(
             422,
             "unknown_joint",
-            f"the database's skeleton has no joint named {'; '.join(missing)}",
-            {"unknown": missing, "joints": list(names)},
+            f"{'; '.join(problems)} (joints: {shown})",
+            {"unknown": [f"{where}: {joint!r}" for where, joint in missing], "joints": list(names)},
         )
 
 

@@ -154,3 +154,11 @@ def test_spans_use_the_clip_names_of_the_spec(tmp_path: Path, capsys: pytest.Cap
         "no clip 'salsa-leader-02' among the database's examples (first dance, salsa-leader-04)"
         in capsys.readouterr().err
     )
+
+
+def test_graph_into_a_closed_pipe_ends_quietly(db_dir: Path) -> None:
+    """``segue graph DB | head -4`` (docs/rhythm.md): no ``Broken pipe`` error once head has gone."""
+    from tests.service.test_cli_help import _into_closed_pipe
+
+    r = _into_closed_pipe("graph", str(db_dir / "db"))
+    assert r.stderr == "" and r.returncode == 141
