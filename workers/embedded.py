@@ -32,7 +32,7 @@ from typing import Any
 from schemas import DatabaseStatus, EventType, JobEvent, JobInfo, JobStatus
 from schemas.jobs import JobKind
 
-from .backend import BackendUnavailable, EventHub
+from .backend import BackendUnavailable, EventHub, JobNotFinished
 from .budget import shortfall
 from .execute import apply_event
 from .settings import Settings
@@ -306,6 +306,13 @@ class EmbeddedBackend:
                 if process.cancel(job_id):
                     break
         return await self.status(job_id)
+
+    async def delete(self, job_id: str) -> None:
+        info = await self.status(job_id)
+        if not info.status.finished or job_id in self._running:
+            raise JobNotFinished(f"job {job_id} is {info.status.value}")
+        self.hub.forget(job_id)
+        await asyncio.to_thread(self.store.delete_job, job_id)
 
     async def _replay_from_disk(self, job_id: str) -> None:
         """The events a previous server process archived (read in a worker thread; a concurrent

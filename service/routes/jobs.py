@@ -16,7 +16,7 @@ from motion.resample import resample
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
 from schemas.bases import JobRequestBase
 from schemas.jobs import JobKind, JobStatus
-from workers.backend import JobBackend
+from workers.backend import JobBackend, JobNotFinished
 from workers.budget import check_work, database_facts, estimate_work
 from workers.inputs import InputError, attach_from_store, resolve_inputs
 from workers.store import Store
@@ -35,7 +35,7 @@ from ..deps import (
 from ..errors import ApiError, conflict, responses
 from ..exports import MEDIA_TYPES, ExportTarget, ExportUnits, ResultFormat, export_bytes, result_events
 from ..jobs_common import submit_job
-from ..jsonbody import JsonIntent, json_body, json_body_doc
+from ..jsonbody import BodylessWrite, delete_route, json_body, json_body_doc
 from ..owners import database_for, job_for, visible
 from ..settings import Settings
 
@@ -176,13 +176,33 @@ async def get_job(job_id: str, backend: BackendDep, principal: PrincipalDep) -> 
     "/{job_id}/cancel",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=JobInfo,
-    dependencies=[JsonIntent],
+    dependencies=[BodylessWrite],
     responses=responses(401, 404, 415, 422, 503),
 )
 async def cancel(job_id: str, backend: BackendDep, principal: PrincipalDep) -> JobInfo:
-    """Ask a job to stop; it ends with a ``cancelled`` event carrying its best result so far."""
+    """Ask a job to stop; it ends with a ``cancelled`` event carrying its best result so far (no
+    body needed: ``curl -X POST .../cancel``)."""
     await owned_job(backend, principal, job_id)
     return await backend.cancel(job_id)
+
+
+@router.delete("/{job_id}", **delete_route(409, 503))
+async def delete_job(job_id: str, backend: BackendDep, principal: PrincipalDep) -> Response:
+    """Delete a finished job (``done``, ``failed`` or ``cancelled``): its record, events, results and
+    reports. A job still queued or running is 409 ``job_not_finished``: cancel it first (``POST
+    /v1/jobs/{id}/cancel``) and delete it once its terminal event has come. Databases the job built
+    stay."""
+    info = await owned_job(backend, principal, job_id)
+    try:
+        await backend.delete(job_id)
+    except JobNotFinished:
+        raise conflict(
+            "job_not_finished",
+            f"job {job_id} is {info.status.value}; cancel it first (POST /v1/jobs/{job_id}/cancel), then "
+            "delete it once it has ended",
+            {"job": job_id, "status": info.status.value},
+        ) from None
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 async def _result_id(backend: JobBackend, principal: Principal, job_id: str, result: str | None) -> str:
