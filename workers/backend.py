@@ -49,6 +49,11 @@ class JobBackend(Protocol):
     def events(self, job_id: str, after: int = 0) -> AsyncIterator[JobEvent]:
         """The job's events with id > ``after``, waiting for new ones, ending after the terminal one."""
 
+    async def backlog(self, job_id: str, after: int = 0) -> list[JobEvent]:
+        """The job's events with id > ``after`` recorded so far, loaded from wherever they are kept
+        (the store's archive, Redis) when this process has not got them yet; never waits for new
+        ones. How long the loading takes never changes the answer (``GET .../events``)."""
+
     async def delete(self, job_id: str) -> None:
         """Remove a *finished* job everywhere (store, event log, Redis keys); raises
         :class:`JobNotFinished` while it is queued or running, ``NotFoundError`` when unknown."""

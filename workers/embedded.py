@@ -314,10 +314,16 @@ class EmbeddedBackend:
         self.hub.forget(job_id)
         await asyncio.to_thread(self.store.delete_job, job_id)
 
+    async def backlog(self, job_id: str, after: int = 0) -> list[JobEvent]:
+        await self.status(job_id)  # NotFoundError for unknown jobs
+        await self._replay_from_disk(job_id)
+        return [e for e in self.hub.log(job_id).events if e.id > after]
+
     async def _replay_from_disk(self, job_id: str) -> None:
         """The events a previous server process archived (read in a worker thread; a concurrent
-        replay's duplicates are ignored by the hub)."""
-        if self.hub.has(job_id):
+        replay's duplicates are ignored by the hub). A log this process holds events in is whole:
+        its jobs record every event in the hub first."""
+        if self.hub.has(job_id) and self.hub.log(job_id).events:
             return
         for event in await asyncio.to_thread(self._archived, job_id):
             await self.hub.append(event)

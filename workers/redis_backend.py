@@ -326,6 +326,13 @@ class RedisBackend:
         await asyncio.to_thread(self.store.delete_job, job_id)
 
     # -- events ------------------------------------------------------------------------------------
+    async def backlog(self, job_id: str, after: int = 0) -> list[JobEvent]:
+        await self.status(job_id)  # NotFoundError for unknown jobs
+        job_log = self.hub.log(job_id)
+        if not job_log.terminal:
+            await self._ensure_reader(job_id).wait()  # set once the reader caught up (XRANGE, archive)
+        return [e for e in job_log.events if e.id > after]
+
     async def events(self, job_id: str, after: int = 0) -> AsyncIterator[JobEvent]:
         await self.status(job_id)  # NotFoundError for unknown jobs
         job_log = self.hub.log(job_id)
