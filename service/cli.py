@@ -15,7 +15,8 @@ Commands::
     segue synth REQUEST.json --db DIR --out OUT   run a job in-process (same JSON as POST /v1/jobs)
     segue graph DIR [--json]                      a rhythm database's movement transition graph
     segue graph-edit DIR EDITS.json --out DIR2    derive a database with an edited movement graph
-    segue serve [--host H] [--port P] [--redis URL]   the HTTP/WebSocket API (+ embedded workers)
+    segue serve [--host H] [--port P] [--redis URL] [--import DIR]   the HTTP/WebSocket API (+ embedded
+                                                  workers), serving database folders segue build wrote
     segue worker --redis URL                      a Redis job worker
 
 ``FILE``/``IN`` may be ``sample:NAME`` for a bundled sample (see ``segue samples``), as may clip and
@@ -437,8 +438,29 @@ def cmd_serve(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
+    if args.imports:
+        import_databases(settings, [Path(d) for d in args.imports])
     uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level)
     return 0
+
+
+def import_databases(settings: Any, folders: list[Path]) -> None:
+    """``segue serve --import DIR``: put databases ``segue build`` wrote into the server's store, under
+    the id the API gives the same clips and spec, held by every principal (the tokenless user and
+    each ``SEGUE_API_TOKENS`` name). Raises ``workers.imports.ImportFailure`` naming a bad folder."""
+    from service.deps import LOCAL, token_table
+    from workers.imports import import_database_dir
+    from workers.store import Store
+
+    store = Store(settings.data_dir)
+    owners = [LOCAL, *(name for name, _ in token_table(settings))]
+    for folder in folders:
+        info, new = import_database_dir(store, folder, owners)
+        done = "imported" if new else "already held"
+        print(
+            f"segue: {done} {info.kind} database {info.id[:12]} ({len(info.clips)} clips) from {folder}",
+            file=sys.stderr,
+        )
 
 
 def is_loopback(host: str) -> bool:
@@ -488,9 +510,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="segue", description="Segue: motion synthesis by example from motion capture."
     )
-    ap.add_argument(
-        "--version", action=_Version, help="print the installed version of Segue and exit"
-    )
+    ap.add_argument("--version", action=_Version, help="print the installed version of Segue and exit")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def command(name: str, help: str, description: str | None = None) -> argparse.ArgumentParser:
@@ -653,6 +673,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--redis", help="Redis URL: queue jobs for `segue worker` processes instead")
     p.add_argument("--workers", type=int, help="embedded worker processes (default 2)")
     p.add_argument(
+        "--import",
+        dest="imports",
+        action="append",
+        metavar="DIR",
+        help="serve a database folder that `segue build` wrote (under the same id the API gives it); "
+        "repeat for more",
+    )
+    p.add_argument(
         "--log-level",
         default="info",
         choices=("critical", "error", "warning", "info", "debug", "trace"),
@@ -692,6 +720,7 @@ def _user_error(exc: Exception) -> str | None:
         ("engines.registry", "UnavailableError"),
         ("engines.base", "EngineError"),
         ("workers.inputs", "InputError"),
+        ("workers.imports", "ImportFailure"),
     ):
         if module in mods:
             known.append(getattr(mods[module], name))

@@ -318,7 +318,9 @@ class RedisBackend:
         keys = self.keys
         try:
             # the terminal marker stays (until it expires): a stale attempt still cannot publish
-            await client.delete(keys.job(job_id), keys.events(job_id), keys.event_seq(job_id), keys.cancel(job_id))
+            await client.delete(
+                keys.job(job_id), keys.events(job_id), keys.event_seq(job_id), keys.cancel(job_id)
+            )
         except (redis.ConnectionError, redis.TimeoutError) as exc:
             raise BackendUnavailable(f"Redis is unreachable: {exc}") from None
         self._unfinished.discard(job_id)

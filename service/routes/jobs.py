@@ -117,7 +117,9 @@ async def _check_joints(store: Store, job_request: JobRequestBase) -> None:
     missing = [(where, joint) for where, joint in named() if names and joint not in names]
     if missing:
         shown = ", ".join(names[:16]) + (f", ... (+{len(names) - 16})" if len(names) > 16 else "")
-        problems = [f"{where}: the database's skeleton has no joint named {joint!r}" for where, joint in missing]
+        problems = [
+            f"{where}: the database's skeleton has no joint named {joint!r}" for where, joint in missing
+        ]
         raise ApiError(
             422,
             "unknown_joint",

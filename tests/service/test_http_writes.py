@@ -73,7 +73,9 @@ def test_a_finished_job_is_deleted_a_running_one_is_409(client: TestClient, walk
         ("GET", "/v1/jobs/abc/cancel", ["POST"]),
     ],
 )
-def test_405_names_every_allowed_method(client: TestClient, method: str, path: str, allowed: list[str]) -> None:
+def test_405_names_every_allowed_method(
+    client: TestClient, method: str, path: str, allowed: list[str]
+) -> None:
     r = client.request(method, path)
     body = error_of(r, 405, "method_not_allowed")
     assert sorted(r.headers["allow"].split(", ")) == sorted(allowed)

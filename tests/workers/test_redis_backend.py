@@ -350,7 +350,9 @@ def test_reclaim_hung_worker_and_own_leftovers(redis_url: str, rclient: redis.Re
         assert [e.data for e in events if e.type == EventType.started] == [{"worker": "t1", "attempt": 2}]
 
 
-def test_delete_a_finished_job_refuse_a_running_one(redis_url: str, rclient: redis.Redis, store: Store) -> None:
+def test_delete_a_finished_job_refuse_a_running_one(
+    redis_url: str, rclient: redis.Redis, store: Store
+) -> None:
     """``DELETE /v1/jobs/{id}`` on the Redis backend: a finished job goes from Redis and the store;
     a running one is refused (cancel it first)."""
     from workers.backend import JobNotFinished
