@@ -8,6 +8,7 @@ files and nothing else. ``GET /`` returns ``web/index.html``.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from fastapi import FastAPI
 from fastapi.responses import FileResponse
@@ -17,6 +18,7 @@ from starlette.types import Receive, Scope, Send
 import web
 from motion.samples import SAMPLES, is_clip_sample, sample_path
 
+from .demos import DEMOS
 from .errors import ApiError
 
 WEB_DIR = Path(web.__file__).resolve().parent
@@ -48,13 +50,22 @@ def sample_files() -> dict[str, str]:
 
 
 def mount_web(app: FastAPI) -> None:
-    """Add ``/samples`` (list and files) and serve ``web/`` at ``/`` for every path no route
+    """Add ``/samples`` (list and files), ``/demos`` and serve ``web/`` at ``/`` for every path no route
     matches (``/`` is ``index.html``)."""
 
     @app.get("/samples", include_in_schema=False)
     async def list_samples() -> dict[str, str]:
         """The bundled samples the page offers: file name -> sample name (not part of the API)."""
         return sample_files()
+
+    @app.get("/demos", include_in_schema=False)
+    async def list_demos() -> list[dict[str, Any]]:
+        """The databases ``segue demo ENGINE`` builds (on bundled samples), for the page's one-click
+        "try it" on a first visit: name, title, the browser tool, the spec and the demo's request."""
+        return [
+            {"name": d.name, "title": d.title, "tool": d.tool, "spec": d.spec, "request": d.request}
+            for d in DEMOS.values()
+        ]
 
     @app.get("/samples/{name}", include_in_schema=False)
     async def get_sample(name: str) -> FileResponse:
