@@ -570,6 +570,7 @@ function showJobState(job) {
   el.textContent = text;
   el.title = end && end.message ? end.message : '';
   job.label = text;
+  job.labels = [...(job.labels || []), text]; // every state shown, for tests
 }
 
 // The result's quality report in one badge: "ok", or "not ok" with the first reason (all on hover).
