@@ -8,10 +8,10 @@ files and nothing else. ``GET /`` returns ``web/index.html``.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 from fastapi import FastAPI
 from fastapi.responses import FileResponse
+from pydantic import BaseModel, Field, JsonValue
 from starlette.staticfiles import StaticFiles
 from starlette.types import Receive, Scope, Send
 
@@ -43,6 +43,16 @@ class WebFiles(StaticFiles):
         await super().__call__(scope, receive, send)
 
 
+class DemoOffer(BaseModel):
+    """One ``segue demo ENGINE`` database as the page offers it on a first visit."""
+
+    name: str
+    title: str
+    tool: str = Field(description="the browser tool that uses it (Path, Partner, ...)")
+    spec: dict[str, JsonValue] = Field(description="the database spec (bundled samples as sample:NAME)")
+    request: dict[str, JsonValue] = Field(description="the demo's job request")
+
+
 def sample_files() -> dict[str, str]:
     """The bundled sample clips: file name (``*.bvh.gz``) -> sample name (:data:`motion.samples.SAMPLES`;
     the MIDI song is not a clip, and requests name it ``sample:song``)."""
@@ -59,11 +69,11 @@ def mount_web(app: FastAPI) -> None:
         return sample_files()
 
     @app.get("/demos", include_in_schema=False)
-    async def list_demos() -> list[dict[str, Any]]:
+    async def list_demos() -> list[DemoOffer]:
         """The databases ``segue demo ENGINE`` builds (on bundled samples), for the page's one-click
         "try it" on a first visit: name, title, the browser tool, the spec and the demo's request."""
         return [
-            {"name": d.name, "title": d.title, "tool": d.tool, "spec": d.spec, "request": d.request}
+            DemoOffer(name=d.name, title=d.title, tool=d.tool, spec=d.spec, request=d.request)
             for d in DEMOS.values()
         ]
 

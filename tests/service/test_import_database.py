@@ -19,7 +19,8 @@ from workers.store import Store
 from .conftest import wait_events
 from .test_api import submit
 
-SPEC = {"kind": "clips", "clips": [{"bvh": "sample:run-09-01"}], "fps": 30}
+SPEC = {"kind": "clips", "clips": [{"bvh": "sample:run-09-01"}], "fps": 24}
+"""A spec no other test builds (the import must be the first to hold it)."""
 
 
 @pytest.fixture(scope="module")
