@@ -15,7 +15,8 @@ Commands::
     segue synth REQUEST.json --db DIR --out OUT   run a job in-process (same JSON as POST /v1/jobs)
     segue graph DIR [--json]                      a rhythm database's movement transition graph
     segue graph-edit DIR EDITS.json --out DIR2    derive a database with an edited movement graph
-    segue serve [--host H] [--port P] [--redis URL]   the HTTP/WebSocket API (+ embedded workers)
+    segue serve [--host H] [--port P] [--redis URL] [--import DIR]   the HTTP/WebSocket API (+ embedded
+                                                  workers), serving database folders segue build wrote
     segue worker --redis URL                      a Redis job worker
 
 ``FILE``/``IN`` may be ``sample:NAME`` for a bundled sample (see ``segue samples``), as may clip and
@@ -437,10 +438,31 @@ def cmd_serve(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
+    if args.imports:
+        import_databases(settings, [Path(d) for d in args.imports])
     if not args.no_warm and not settings.redis_url:
         start_warming()  # the embedded workers run jobs: compile their kernels off the request path
     uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level)
     return 0
+
+
+def import_databases(settings: Any, folders: list[Path]) -> None:
+    """``segue serve --import DIR``: put databases ``segue build`` wrote into the server's store, under
+    the id the API gives the same clips and spec, held by every principal (the tokenless user and
+    each ``SEGUE_API_TOKENS`` name). Raises ``workers.imports.ImportFailure`` naming a bad folder."""
+    from service.deps import LOCAL, token_table
+    from workers.imports import import_database_dir
+    from workers.store import Store
+
+    store = Store(settings.data_dir)
+    owners = [LOCAL, *(name for name, _ in token_table(settings))]
+    for folder in folders:
+        info, new = import_database_dir(store, folder, owners)
+        done = "imported" if new else "already held"
+        print(
+            f"segue: {done} {info.kind} database {info.id[:12]} ({len(info.clips)} clips) from {folder}",
+            file=sys.stderr,
+        )
 
 
 def is_loopback(host: str) -> bool:
@@ -459,10 +481,14 @@ def cmd_worker(args: argparse.Namespace) -> int:
     from workers.redis_worker import serve
     from workers.settings import get_settings, with_options
 
-    return serve(
-        with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name),
-        warm=not args.no_warm,
-    )
+    settings = with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name)
+    if not settings.redis_url:
+        print(
+            "segue: error: a worker needs a Redis URL: give --redis URL or set SEGUE_REDIS_URL",
+            file=sys.stderr,
+        )
+        return 2
+    return serve(settings, warm=not args.no_warm)
 
 
 def cmd_warm(args: argparse.Namespace) -> int:
@@ -491,11 +517,33 @@ def start_warming() -> None:
     )
 
 
+class _Version(argparse.Action):
+    """``--version``: the installed distribution's version, looked up only when asked."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: object) -> None:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            text = version("segue")
+        except PackageNotFoundError:
+            text = "unknown (not installed; run pip install -e .)"
+        print(f"segue {text}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="segue", description="Segue: motion synthesis by example from motion capture."
     )
+    ap.add_argument("--version", action=_Version, help="print the installed version of Segue and exit")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, help: str, description: str | None = None) -> argparse.ArgumentParser:
+        """A subcommand whose ``--help`` opens with a description (its one-line ``help`` unless given)."""
+        return sub.add_parser(name, help=help, description=description or help[0].upper() + help[1:] + ".")
 
     def limits(p: argparse.ArgumentParser) -> None:
         p.add_argument(
@@ -506,14 +554,14 @@ def build_parser() -> argparse.ArgumentParser:
     from .demos import DEMOS
 
     units = sorted(UNITS)
-    p = sub.add_parser("inspect", help="frames, fps, joints, height and units guess of a BVH file")
+    p = command("inspect", help="frames, fps, joints, height and units guess of a BVH file")
     p.add_argument("file", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--units", choices=units, help="declare the file's length unit instead of guessing")
     limits(p)
     p.set_defaults(func=cmd_inspect)
 
-    p = sub.add_parser(
+    p = command(
         "beats",
         help="motion beats of a BVH file (Kim et al. 2003) or music beats of a recording (WAV FLAC Ogg MP3)",
     )
@@ -536,7 +584,7 @@ def build_parser() -> argparse.ArgumentParser:
     limits(p)
     p.set_defaults(func=cmd_beats)
 
-    p = sub.add_parser("convert", help="convert a BVH file by output extension: " + " ".join(OUTPUT_SUFFIXES))
+    p = command("convert", help="convert a BVH file by output extension: " + " ".join(OUTPUT_SUFFIXES))
     p.add_argument("input", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument("output", help="output file: " + ", ".join(OUTPUT_SUFFIXES))
     p.add_argument("--fps", type=float, help="resample to this frame rate (slerp rotations)")
@@ -564,7 +612,7 @@ def build_parser() -> argparse.ArgumentParser:
     limits(p)
     p.set_defaults(func=cmd_convert)
 
-    p = sub.add_parser("retarget", help="put a motion on another character (BVH or GLB/glTF skin)")
+    p = command("retarget", help="put a motion on another character (BVH or GLB/glTF skin)")
     p.add_argument("motion", help="the motion: BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument(
         "--to", required=True, help="the character: BVH (.bvh, .bvh.gz, sample:NAME) or .glb/.gltf skin"
@@ -585,10 +633,15 @@ def build_parser() -> argparse.ArgumentParser:
     limits(p)
     p.set_defaults(func=cmd_retarget)
 
-    p = sub.add_parser("samples", help="list the bundled sample clips")
+    p = command(
+        "samples",
+        help="list the bundled sample clips",
+        description="List the bundled samples (motion clips and a MIDI song) as sample:NAME and their paths; "
+        "every FILE argument, spec and request accepts sample:NAME.",
+    )
     p.set_defaults(func=cmd_samples)
 
-    p = sub.add_parser(
+    p = command(
         "demo",
         help="without ENGINE: convert a bundled salsa clip to GLB, JSON and NPZ and dance it to 120 BPM; "
         "with ENGINE: that engine end to end on bundled clips, into DIR/ENGINE/",
@@ -604,14 +657,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-synth", action="store_true", help="without ENGINE: only convert the clip (no dance)")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("build", help="build a database from a spec file (clip paths relative to it)")
+    p = command("build", help="build a database from a spec file (clip paths relative to it)")
     p.add_argument("spec", help='database spec JSON, e.g. {"kind": "clips", "clips": [{"bvh": "a.bvh"}]}')
     p.add_argument("--out", required=True, help="database directory to write")
     p.add_argument("--events", help="also write the job's events as JSON lines here")
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     p.set_defaults(func=cmd_build)
 
-    p = sub.add_parser("synth", help="run a synthesis request against a database directory")
+    p = command("synth", help="run a synthesis request against a database directory")
     p.add_argument("request", help='job request JSON, e.g. {"engine": "clip", "clip": "a"}')
     p.add_argument("--db", required=True, help="database directory from segue build")
     p.add_argument("--out", required=True, help="output motion: " + ", ".join(OUTPUT_SUFFIXES))
@@ -622,15 +675,15 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         help="time cap of the search, seconds (overrides the request's budget_s; the request sets the work)",
     )
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     p.set_defaults(func=cmd_synth)
 
-    p = sub.add_parser("graph", help="a rhythm database's movement transition graph (groups, transitions)")
+    p = command("graph", help="a rhythm database's movement transition graph (groups, transitions)")
     p.add_argument("db", help="rhythm database directory from segue build (or segue graph-edit)")
     p.add_argument("--json", action="store_true", help="print the graph as JSON (GET /v1/databases/ID/graph)")
     p.set_defaults(func=cmd_graph)
 
-    p = sub.add_parser(
+    p = command(
         "graph-edit", help="derive a rhythm database whose movement graph is edited (connect, cut, weight)"
     )
     p.add_argument("db", help="rhythm database directory")
@@ -638,23 +691,46 @@ def build_parser() -> argparse.ArgumentParser:
         "edits", help='edits JSON: {"edits": [{"op": "cut", "source": 0, "target": 3}, ...]} or the list'
     )
     p.add_argument("--out", required=True, help="derived database directory to write")
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     p.set_defaults(func=cmd_graph_edit)
 
-    p = sub.add_parser("serve", help="run the HTTP/WebSocket API (embedded workers unless --redis)")
-    p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=8000)
+    p = command("serve", help="run the HTTP/WebSocket API (embedded workers unless --redis)")
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to listen on (default 127.0.0.1; another needs SEGUE_API_TOKENS)",
+    )
+    p.add_argument("--port", type=int, default=8000, help="TCP port to listen on (default 8000)")
     p.add_argument("--data", help="data directory (default $SEGUE_DATA_DIR or ./segue-data)")
     p.add_argument("--redis", help="Redis URL: queue jobs for `segue worker` processes instead")
     p.add_argument("--workers", type=int, help="embedded worker processes (default 2)")
-    p.add_argument("--log-level", default="info")
+    p.add_argument(
+        "--import",
+        dest="imports",
+        action="append",
+        metavar="DIR",
+        help="serve a database folder that `segue build` wrote (under the same id the API gives it); "
+        "repeat for more",
+    )
+    p.add_argument(
+        "--log-level",
+        default="info",
+        choices=("critical", "error", "warning", "info", "debug", "trace"),
+        help="server log level (default info)",
+    )
     p.add_argument(
         "--no-warm", action="store_true", help="do not compile the control kernels in the background at start"
     )
     p.set_defaults(func=cmd_serve)
 
-    p = sub.add_parser("worker", help="a job worker consuming the Redis queue")
-    p.add_argument("--redis", required=True, help="Redis URL, e.g. redis://127.0.0.1:6379/0")
+    p = command(
+        "worker",
+        help="a job worker consuming the Redis queue",
+        description="A job worker consuming the Redis queue that `segue serve --redis` feeds.",
+    )
+    p.add_argument(
+        "--redis", help="Redis URL, e.g. redis://127.0.0.1:6379/0 (default $SEGUE_REDIS_URL; one is needed)"
+    )
     p.add_argument("--data", help="data directory shared with the API (default $SEGUE_DATA_DIR)")
     p.add_argument("--name", help="worker name (default host-pid)")
     p.add_argument(
@@ -662,7 +738,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=cmd_worker)
 
-    p = sub.add_parser(
+    p = command(
         "warm",
         help="compile the control engine's kernels into numba's cache (~15 s of CPU once per install; "
         "serve and worker do it at start)",
@@ -690,10 +766,29 @@ def _user_error(exc: Exception) -> str | None:
         ("engines.registry", "UnavailableError"),
         ("engines.base", "EngineError"),
         ("workers.inputs", "InputError"),
+        ("workers.imports", "ImportFailure"),
     ):
         if module in mods:
             known.append(getattr(mods[module], name))
     return str(exc) if isinstance(exc, tuple(known)) else None
+
+
+SIGPIPE_STATUS = 128 + 13
+"""The exit status of a Unix tool whose reader went away (``yes | head``: SIGPIPE)."""
+
+
+def _reader_gone() -> int:
+    """Stdout's reader closed the pipe (``segue graph DB | head -4``): end quietly, as Unix tools do.
+    Stdout is pointed at /dev/null so that the interpreter's final flush does not fail again (the
+    recipe of the Python docs, "Note on SIGPIPE")."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # stdout is not a file (an embedding program's stream)
+        pass
+    return SIGPIPE_STATUS
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -703,7 +798,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     tune_process()
     try:
-        return int(args.func(args))
+        status = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe shows here, not at exit
+        return status
+    except BrokenPipeError:
+        return _reader_gone()
     except Exception as exc:
         message = _user_error(exc)
         if message is None:

@@ -225,7 +225,11 @@ def run_demo(name: str, out_root: Path, say: Say = print) -> DemoResult:
     t0 = time.perf_counter()
     info = build_to_dir(folder / "db.json", folder / "db", EventWriter("build"))
     build_s = time.perf_counter() - t0
-    say(f"  built a {info.kind} database: {len(info.clips)} clips, {info.frames} frames, {build_s:.1f} s")
+    article = "an" if info.kind[:1] in "aeiou" else "a"
+    say(
+        f"  built {article} {info.kind} database: {len(info.clips)} clips, {info.frames} frames, "
+        f"{build_s:.1f} s"
+    )
     _write_json(folder / "job.json", {**demo.request, "database": info.id})
     t0 = time.perf_counter()
     writer = EventWriter("synth")

@@ -139,6 +139,8 @@ class SolutionRecorder:
                 "result": rid,
                 "ok": quality.ok,
                 "reasons": quality.reasons,
+                "frames": motion.num_frames,
+                "fps": motion.fps,
             },
         )
         return rid

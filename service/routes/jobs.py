@@ -16,7 +16,7 @@ from motion.resample import resample
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
 from schemas.bases import JobRequestBase
 from schemas.jobs import JobKind, JobStatus
-from workers.backend import JobBackend
+from workers.backend import JobBackend, JobNotFinished
 from workers.budget import check_work, database_facts, estimate_work
 from workers.inputs import InputError, attach_from_store, resolve_inputs
 from workers.store import Store
@@ -35,7 +35,7 @@ from ..deps import (
 from ..errors import ApiError, conflict, responses
 from ..exports import MEDIA_TYPES, ExportTarget, ExportUnits, ResultFormat, export_bytes, result_events
 from ..jobs_common import submit_job
-from ..jsonbody import JsonIntent, json_body, json_body_doc
+from ..jsonbody import BodylessWrite, delete_route, json_body, json_body_doc
 from ..owners import database_for, job_for, visible
 from ..settings import Settings
 
@@ -114,13 +114,17 @@ async def _check_joints(store: Store, job_request: JobRequestBase) -> None:
         return
     npz = str(store.db_dir(str(job_request.database)) / "data.npz")
     names = (await run_in_threadpool(database_facts, npz)).joint_names
-    missing = [f"{where}: {joint!r}" for where, joint in named() if names and joint not in names]
+    missing = [(where, joint) for where, joint in named() if names and joint not in names]
     if missing:
+        shown = ", ".join(names[:16]) + (f", ... (+{len(names) - 16})" if len(names) > 16 else "")
+        problems = [
+            f"{where}: the database's skeleton has no joint named {joint!r}" for where, joint in missing
+        ]
         raise ApiError(
             422,
             "unknown_joint",
-            f"the database's skeleton has no joint named {'; '.join(missing)}",
-            {"unknown": missing, "joints": list(names)},
+            f"{'; '.join(problems)} (joints: {shown})",
+            {"unknown": [f"{where}: {joint!r}" for where, joint in missing], "joints": list(names)},
         )
 
 
@@ -174,13 +178,33 @@ async def get_job(job_id: str, backend: BackendDep, principal: PrincipalDep) -> 
     "/{job_id}/cancel",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=JobInfo,
-    dependencies=[JsonIntent],
+    dependencies=[BodylessWrite],
     responses=responses(401, 404, 415, 422, 503),
 )
 async def cancel(job_id: str, backend: BackendDep, principal: PrincipalDep) -> JobInfo:
-    """Ask a job to stop; it ends with a ``cancelled`` event carrying its best result so far."""
+    """Ask a job to stop; it ends with a ``cancelled`` event carrying its best result so far (no
+    body needed: ``curl -X POST .../cancel``)."""
     await owned_job(backend, principal, job_id)
     return await backend.cancel(job_id)
+
+
+@router.delete("/{job_id}", **delete_route(409, 503))
+async def delete_job(job_id: str, backend: BackendDep, principal: PrincipalDep) -> Response:
+    """Delete a finished job (``done``, ``failed`` or ``cancelled``): its record, events, results and
+    reports. A job still queued or running is 409 ``job_not_finished``: cancel it first (``POST
+    /v1/jobs/{id}/cancel``) and delete it once its terminal event has come. Databases the job built
+    stay."""
+    info = await owned_job(backend, principal, job_id)
+    try:
+        await backend.delete(job_id)
+    except JobNotFinished:
+        raise conflict(
+            "job_not_finished",
+            f"job {job_id} is {info.status.value}; cancel it first (POST /v1/jobs/{job_id}/cancel), then "
+            "delete it once it has ended",
+            {"job": job_id, "status": info.status.value},
+        ) from None
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 async def _result_id(backend: JobBackend, principal: Principal, job_id: str, result: str | None) -> str:

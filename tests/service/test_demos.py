@@ -43,6 +43,8 @@ def test_each_demo_writes_an_ok_result_its_files_and_how_to_repeat_it(demo_root:
     out = (demo_root / "stdout.txt").read_text()
     block = out[out.index(f"segue demo {name}:") :]
     assert "quality: ok" in block.split("segue demo ", 2)[1]
+    kind = demo.spec["kind"]
+    assert f"built {'an' if kind == 'annotated' else 'a'} {kind} database:" in block
     report = json.loads((folder / "report.json").read_text())
     assert report["ok"] is True and report["reasons"] == [] and report["engine"] == demo.engine
     bvh = parse_bvh((folder / f"{demo.output}.bvh").read_bytes(), source=demo.output)
