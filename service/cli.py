@@ -370,6 +370,8 @@ def cmd_graph(args: argparse.Namespace) -> int:
         f"{len(graph.transitions)} transitions, {graph.beats_per_movement} beats per movement"
         + ("" if graph.strongly_connected else " (NOT strongly connected)")
     )
+    if graph.start_only_groups or graph.unreachable_groups:
+        print(f"start-only groups {graph.start_only_groups}, unreachable groups {graph.unreachable_groups}")
     for g in graph.groups:
         r = g.representative
         mirror = " mirrored" if r.mirrored else ""
