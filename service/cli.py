@@ -136,7 +136,8 @@ def _beats_audio(path: Path, args: argparse.Namespace) -> int:
     print(f"{path}")
     beats = info["beats_s"]
     print(f"  duration   {info['duration_s']:.2f} s")
-    print(f"  tempo      {info['tempo_bpm']:.1f} bpm")
+    sure = "" if info["tempo_confidence"] is None else f" (confidence {info['tempo_confidence']:.2f})"
+    print(f"  tempo      {info['tempo_bpm']:.1f} bpm{sure}")
     down = "none found" if info["downbeat_s"] is None else f"first at {info['downbeat_s']:.3f} s"
     print(f"  beats      {len(beats)}, downbeat {down}")
     shown = ", ".join(f"{t:.3f}" for t in beats[:16])
