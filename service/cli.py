@@ -2,7 +2,7 @@
 
 Commands::
 
-    segue inspect FILE [--json] [--units U]       frames, fps, joints, height and units guess
+    segue inspect FILE [--json] [--units U] [--up A]  frames, fps, joints, height, units, up axis (BVH, GLB)
     segue beats FILE [--json] [--joints A,B] [--positions] [--tempo LO:HI]   motion beats (Kim et al. 2003)
     segue beats SONG.wav [--json] [--tempo-bpm X]      music beats of a recording (WAV, FLAC, Ogg, MP3)
     segue convert IN OUT [--fps N] [--target T]   BVH -> .bvh/.bvh.gz/.glb/.json/.npz
@@ -63,24 +63,44 @@ def _limits(args: argparse.Namespace) -> BvhLimits:
     return BvhLimits(max_joints=args.max_joints, max_frames=args.max_frames)
 
 
-def inspect_summary(path: Path, motion: Motion, declared: str | None) -> dict[str, Any]:
-    """The facts ``segue inspect`` reports, JSON-ready."""
-    from motion.bvh import detect_units
+def inspect_summary(
+    path: Path,
+    motion: Motion,
+    declared: str | None,
+    up: str = "auto",
+    timing: tuple[int, float] | None = None,
+) -> dict[str, Any]:
+    """The facts ``segue inspect`` reports, JSON-ready. ``declared``: the unit the user gave (else
+    the sample catalogue's, :func:`motion.samples.declared_units`, else guessed); ``up``: ``y``,
+    ``z`` or ``auto`` (detected: :func:`motion.units.up_axis`); ``timing``: ``(frames, fps)`` of a
+    glTF file's animation (``motion`` is then its one-frame bind pose)."""
+    from motion.bvh import detect_units, detect_up_axis
+    from motion.samples import declared_units
+    from motion.units import METRES_PER_UNIT
 
-    guess = detect_units(motion)
-    mpu = motion.metres_per_unit
+    axis = {"y": 1, "z": 2}.get(up) or detect_up_axis(motion)
+    guess = detect_units(motion, axis)
+    frames, fps = timing if timing is not None else (motion.num_frames, motion.fps)
+    source = "declared" if declared else "sample" if declared_units(path) else "guess"
+    if path.name.lower().endswith((".glb", ".gltf")):
+        source = "gltf"  # metres, by glTF's rule
+    # a guessed unit comes from the height along the up axis (the reader guessed it along Y)
+    units = guess.units if source == "guess" else motion.units
+    mpu = METRES_PER_UNIT.get(units, motion.metres_per_unit)
     return {
         "file": str(path),
         "name": motion.name,
-        "frames": motion.num_frames,
-        "fps": motion.fps,
-        "duration_s": round(motion.duration_s, 6),
+        "frames": frames,
+        "fps": fps,
+        "duration_s": round((frames - 1) / fps if timing is not None and fps > 0 else motion.duration_s, 6),
         "joints": list(motion.skeleton.names),
         "parents": [int(p) for p in motion.skeleton.parents],
         "channels": motion.skeleton.num_channels,
         "end_sites": int(motion.skeleton.end_site_parents.size),
-        "units": motion.units,
-        "units_source": "declared" if declared else "guess",
+        "units": units,
+        "units_source": source,
+        "up": "yz"[axis - 1],
+        "up_source": "declared" if up != "auto" else "detected",
         "height": round(guess.height, 6),
         "height_m": round(guess.height * mpu, 4),
         "units_guess": {
@@ -91,12 +111,34 @@ def inspect_summary(path: Path, motion: Motion, declared: str | None) -> dict[st
     }
 
 
+UNITS_SOURCES = {
+    "declared": "declared",
+    "sample": "declared by the sample catalogue",
+    "gltf": "glTF files are in metres",
+}
+
+
 def cmd_inspect(args: argparse.Namespace) -> int:
+    from motion import MotionError
     from motion.io import load_motion
+    from motion.retarget.character import GLTF_SUFFIXES, gltf_character, gltf_timing
 
     path = _resolve(args.file)
-    motion = load_motion(path, units=args.units, limits=_limits(args))
-    info = inspect_summary(path, motion, args.units)
+    timing = None
+    if path.name.lower().endswith(GLTF_SUFFIXES):
+        if args.units not in (None, "m"):
+            raise MotionError(
+                f"{path}: a glTF file is in metres (glTF's rule); --units {args.units} does not apply"
+            )
+        try:
+            raw = path.read_bytes()
+        except OSError as exc:
+            raise MotionError(f"{path}: {exc.strerror or exc}") from None
+        motion = gltf_character(raw, name=path.name.rsplit(".", 1)[0])  # the skin's bind pose
+        timing = gltf_timing(raw)
+    else:
+        motion = load_motion(path, units=args.units, limits=_limits(args))
+    info = inspect_summary(path, motion, args.units, args.up, timing)
     if args.json:
         print(json.dumps(info))
         return 0
@@ -104,13 +146,20 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     shown = ", ".join(joints[:12]) + (f", ... (+{len(joints) - 12})" if len(joints) > 12 else "")
     guess = info["units_guess"]
     print(f"{path}")
-    print(f"  frames     {info['frames']} at {info['fps']:g} fps ({info['duration_s']:.2f} s)")
+    if timing is None and path.name.lower().endswith(GLTF_SUFFIXES):
+        print("  frames     none (no animation): the skin's bind pose")
+    else:
+        print(f"  frames     {info['frames']} at {info['fps']:g} fps ({info['duration_s']:.2f} s)")
     print(f"  joints     {len(joints)}: {shown}")
     print(f"  channels   {info['channels']}, end sites {info['end_sites']}")
-    print(f"  height     {info['height']:.4g} file units = {info['height_m']:.2f} m in {info['units']}")
+    where = " (the bind pose)" if timing is not None or info["units_source"] == "gltf" else ""
+    print(
+        f"  height     {info['height']:.4g} file units = {info['height_m']:.2f} m in {info['units']}{where}"
+    )
     note = "" if guess["plausible"] else " (implausible: declare --units)"
-    src = "declared" if args.units else f"guessed from height{note}"
+    src = UNITS_SOURCES.get(info["units_source"], f"guessed from height{note}")
     print(f"  units      {info['units']} ({src})")
+    print(f"  up axis    {info['up'].upper()} ({info['up_source']})")
     return 0
 
 
@@ -137,7 +186,8 @@ def _beats_audio(path: Path, args: argparse.Namespace) -> int:
     print(f"{path}")
     beats = info["beats_s"]
     print(f"  duration   {info['duration_s']:.2f} s")
-    print(f"  tempo      {info['tempo_bpm']:.1f} bpm")
+    sure = "" if info["tempo_confidence"] is None else f" (confidence {info['tempo_confidence']:.2f})"
+    print(f"  tempo      {info['tempo_bpm']:.1f} bpm{sure}")
     down = "none found" if info["downbeat_s"] is None else f"first at {info['downbeat_s']:.3f} s"
     print(f"  beats      {len(beats)}, downbeat {down}")
     shown = ", ".join(f"{t:.3f}" for t in beats[:16])
@@ -371,6 +421,8 @@ def cmd_graph(args: argparse.Namespace) -> int:
         f"{len(graph.transitions)} transitions, {graph.beats_per_movement} beats per movement"
         + ("" if graph.strongly_connected else " (NOT strongly connected)")
     )
+    if graph.start_only_groups or graph.unreachable_groups:
+        print(f"start-only groups {graph.start_only_groups}, unreachable groups {graph.unreachable_groups}")
     for g in graph.groups:
         r = g.representative
         mirror = " mirrored" if r.mirrored else ""
@@ -554,10 +606,16 @@ def build_parser() -> argparse.ArgumentParser:
     from .demos import DEMOS
 
     units = sorted(UNITS)
-    p = command("inspect", help="frames, fps, joints, height and units guess of a BVH file")
-    p.add_argument("file", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
+    p = command("inspect", help="frames, fps, joints, height, units and up axis of a BVH or glTF/GLB file")
+    p.add_argument("file", help="BVH file (.bvh, .bvh.gz), glTF file (.glb, .gltf) or sample:NAME")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--units", choices=units, help="declare the file's length unit instead of guessing")
+    p.add_argument(
+        "--up",
+        choices=("auto", "y", "z"),
+        default="auto",
+        help="the file's vertical axis, for the height (default: detected; Segue's Unreal BVH is Z up)",
+    )
     limits(p)
     p.set_defaults(func=cmd_inspect)
 

@@ -263,9 +263,9 @@ def _build(
                     "invalid_request", f"clip {source.display_name()!r} was not resolved to an upload"
                 )
             labels = [lb.model_dump() for lb in source.labels]
-            clips.append(
-                ClipInput(source.display_name(), store.clip_bytes(source.clip), source.units, labels)
-            )
+            # the spec's unit, else the clip's own (declared at upload, e.g. a bundled sample's, or guessed)
+            units = source.units if source.units is not None else store.clip_info(source.clip).units
+            clips.append(ClipInput(source.display_name(), store.clip_bytes(source.clip), units, labels))
         data, library = build_database_bytes(spec, clips, publish, should_stop)
         store.put_database_arrays(db_id, data)
         if save is not None:

@@ -20,7 +20,9 @@ def test_inspect_json_on_sample(capsys: pytest.CaptureFixture[str]) -> None:
     info = json.loads(capsys.readouterr().out)
     assert info["frames"] == 2242 and len(info["joints"]) == 43 and info["fps"] == 120.0
     assert info["units_guess"]["plausible"]
-    assert 1.0 < info["height_m"] < 1.3
+    # the sample catalogue declares the salsa samples' unit (cmu-scaled, 1.28 m): 1.46 m, not 1.15 m
+    assert info["units"] == "cmu-scaled" and info["units_source"] == "sample"
+    assert 1.4 < info["height_m"] < 1.5
 
 
 def test_inspect_text_and_declared_units(capsys: pytest.CaptureFixture[str]) -> None:
