@@ -200,6 +200,15 @@ def test_crowd_has_one_skin_per_character_and_grows_linearly() -> None:
             np.testing.assert_allclose(
                 g[skin["joints"][1:], :3, 3], person.global_positions()[f] * 0.01, atol=TOL_M
             )
+    # each rig under its own plain node (one armature / Skeleton each), one animation each
+    parent = {c: i for i, n in enumerate(nodes) for c in n.get("children", [])}
+    groups = [parent[s["joints"][0]] for s in skins]
+    assert [nodes[g]["name"] for g in groups] == ["c0", "c1", "c2"]
+    assert all(g in gltf["scenes"][0]["nodes"] and "mesh" not in nodes[g] for g in groups)
+    anims = gltf["animations"]
+    assert [a["name"] for a in anims] == [f"{combined.name or 'motion'}_c{k}" for k in range(3)]
+    for anim, skin in zip(anims, skins, strict=True):
+        assert {c["target"]["node"] for c in anim["channels"]} == set(skin["joints"])
     sizes = [len(glb_bytes(crowd(n)[0])) for n in (1, 2, 4)]
     per = (sizes[2] - sizes[1]) / 2
     assert per == pytest.approx(sizes[1] - sizes[0], rel=0.02)  # linear in the number of characters
@@ -262,3 +271,16 @@ def test_bandai_in_place_under_a_static_file_root() -> None:
     for f in (0, 59):
         g = node_globals(glb, f)
         np.testing.assert_allclose(g[skin["joints"][2:], :3, 3], local[f], atol=TOL_M)
+
+
+def test_crowd_events_reach_each_dancer_and_the_scene() -> None:
+    combined, _ = crowd(2)
+    evs = contact_events_of(combined) + [{"type": "beat", "index": 0, "time_s": 0.1}]
+    gltf = read_glb(glb_bytes(combined, events=evs)).gltf
+    assert gltf["scenes"][0]["extras"]["events"] == evs
+    nodes = gltf["nodes"]
+    for k, anim in enumerate(gltf["animations"]):
+        mine = [e for e in evs if e.get("character", f"c{k}") == f"c{k}"]
+        assert anim["extras"]["events"] == mine and any(e["type"] == "contact" for e in mine)
+        group = next(n for n in nodes if n.get("name") == f"c{k}")
+        assert group["extras"]["events"] == mine  # Blender: the armature's custom property
