@@ -275,7 +275,7 @@ def test_bandai_in_place_under_a_static_file_root() -> None:
 
 def test_crowd_events_reach_each_dancer_and_the_scene() -> None:
     combined, _ = crowd(2)
-    evs = contact_events_of(combined) + [{"type": "beat", "index": 0, "time_s": 0.1}]
+    evs = [*contact_events_of(combined), {"type": "beat", "index": 0, "time_s": 0.1}]
     gltf = read_glb(glb_bytes(combined, events=evs)).gltf
     assert gltf["scenes"][0]["extras"]["events"] == evs
     nodes = gltf["nodes"]
