@@ -15,10 +15,17 @@ from motion import ExportError
 from motion import rotations as rot
 from motion.contacts import detect_contacts
 from motion.export.characters import combine_characters, split_characters
-from motion.export.events import contact_events, contact_events_of, parse_kinds, result_events
+from motion.export.events import (
+    contact_events,
+    contact_events_of,
+    parse_kinds,
+    result_events,
+    sorted_events,
+)
 from motion.export.glb import glb_bytes
 from motion.ground import ground_frames, to_ground_frame
 from motion.io import save_motion
+from motion.resample import resample
 from motion.samples import sample_path
 
 from .synthetic import walking_biped
@@ -125,12 +132,13 @@ def test_contact_events_in_animation_extras() -> None:
     evs = contact_events(m)
     glb = read_glb(glb_bytes(m, events=evs))
     got = glb.gltf["animations"][0]["extras"]["events"]
-    assert got == evs and len(got) >= 4
+    # 1.7 s of walk: right, left, right plants, one event each
+    assert got == evs and [e["joint"] for e in sorted_events(got)] == ["rFoot", "lFoot", "rFoot"]
     joints, flags = detect_contacts(m)
-    names = {m.skeleton.names[j] for j in joints}
-    assert {e["joint"] for e in got} <= names
-    total = sum(e["duration_s"] for e in got)
-    assert total == pytest.approx(flags.sum() / m.fps, abs=1e-6)  # one event per run of contact frames
+    for e in got:  # each plant holds contact frames of the quality report's detector
+        k = [m.skeleton.names[j] for j in joints].index(e["joint"])
+        a = round(e["time_s"] * m.fps)
+        assert flags[a : a + round(e["duration_s"] * m.fps), k].any()
     assert all(0 <= e["time_s"] <= m.duration_s for e in got)
 
 
@@ -153,7 +161,7 @@ def test_json_frames_carry_events(tmp_path: Path) -> None:
     m = walking_biped(frames=60)
     save_motion(m, tmp_path / "a.json", events=["contacts"])
     doc = json.loads((tmp_path / "a.json").read_text())
-    assert doc["events"] == contact_events(m)
+    assert doc["events"] == sorted_events(contact_events(m)) and doc["events"]
     with pytest.raises(ExportError, match="events"):
         save_motion(m, tmp_path / "a.bvh", events=["contacts"])
     with pytest.raises(ExportError, match="in-place"):
@@ -284,3 +292,17 @@ def test_crowd_events_reach_each_dancer_and_the_scene() -> None:
         assert anim["extras"]["events"] == mine and any(e["type"] == "contact" for e in mine)
         group = next(n for n in nodes if n.get("name") == f"c{k}")
         assert group["extras"]["events"] == mine  # Blender: the armature's custom property
+
+
+@pytest.mark.parametrize("name", ["walk", "walk-05-01", "run-09-01"])
+def test_contact_count_does_not_depend_on_the_frame_rate(name: str) -> None:
+    """One plant is one event: the issue's sample:walk gave 12 contacts at 120 fps, 5 at 30."""
+    m = motion.read_bvh(sample_path(name))
+    counts = {fps: len(contact_events(resample(m, fps))) for fps in (24.0, 30.0, 60.0, 120.0)}
+    assert len(set(counts.values())) == 1 and counts[30.0] > 0, counts
+
+
+def test_contact_count_of_a_dance_barely_depends_on_the_frame_rate() -> None:
+    m = motion.read_bvh(sample_path("salsa-follower-02"))
+    counts = [len(contact_events(resample(m, fps))) for fps in (24.0, 30.0, 60.0, 120.0)]
+    assert max(counts) - min(counts) <= 0.05 * max(counts), counts
