@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import MotionError
 from ..motion import Motion
-from .legik import plant_feet
+from .legik import plant_feet, settle
 from .names import PRESETS, ROLES, Correspondence, correspond, detect_roles
 from .rootmotion import ROOT_MOTION_MODES, apply_root_motion
 from .transfer import Pose, hips_path, place_hips, transfer_rotations
@@ -109,7 +109,7 @@ def retarget(
     path, _ = hips_path(motion, character, corr, src_pose, out)
     out = place_hips(out, corr.target_roles["Hips"], path)
     if plant and n > 1:
-        out = plant_feet(out, corr.target_roles)
+        out = plant_feet(settle(out, corr.target_roles, rest), corr.target_roles, rest)
     if not np.all(np.isfinite(out.rotations)) or not np.all(np.isfinite(out.root_positions)):
         raise MotionError("retargeting produced non-finite values (degenerate bones in a skeleton?)")
     if root_motion is not None:

@@ -31,6 +31,7 @@ from .. import rotations as rot
 from ..errors import MotionError
 from ..motion import Motion
 from ..skeleton import Skeleton
+from .transfer import floor_heading
 
 Array = npt.NDArray[np.float64]
 
@@ -48,14 +49,6 @@ def default_root_motion(target: str, hips: int) -> str:
     skeleton starting at its hips has no joint above them to carry it: ``"hips"``)."""
     mode = TARGET_ROOT_MOTION.get(target.lower(), "root")
     return "hips" if mode == "root" and hips == 0 else mode
-
-
-def floor_heading(positions: Array, left: int, right: int) -> Array:
-    """``(F,)`` the body's heading (radians about +Y, 0 = +Z, unwrapped) from the floor direction
-    of ``left - right`` joint positions ``(F, J, 3)`` crossed with up."""
-    across = positions[:, left] - positions[:, right]
-    forward = np.cross(across, np.array([0.0, 1.0, 0.0]))
-    return np.asarray(np.unwrap(np.arctan2(forward[:, 0], forward[:, 2])))
 
 
 def apply_root_motion(motion: Motion, rest: Motion, roles: dict[str, int], mode: str) -> Motion:
