@@ -186,15 +186,30 @@ def cmd_beats(args: argparse.Namespace) -> int:
     return 0
 
 
+def _reference_note(dropped: int) -> list[str]:
+    """What to tell about the reference-pose frames dropped from a motion (:mod:`motion.refpose`)."""
+    if not dropped:
+        return []
+    s = "s" if dropped > 1 else ""
+    return [
+        f"dropped the first {dropped} frame{s} "
+        "(a reference pose and the blend out of it; --keep-reference keeps them)"
+    ]
+
+
 def cmd_convert(args: argparse.Namespace) -> int:
     from motion import MotionError
     from motion.export.events import parse_kinds
     from motion.ground import add_ground_root
     from motion.io import load_motion, save_motion
+    from motion.refpose import without_reference_lead
     from motion.resample import resample
 
     src = _resolve(args.input)
     motion = load_motion(src, units=args.in_units, limits=_limits(args))
+    dropped = 0
+    if not args.frames and not args.keep_reference:
+        motion, dropped = without_reference_lead(motion)
     if args.frames:
         start, _, stop = args.frames.partition(":")
         try:
@@ -212,7 +227,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     notes = save_motion(
         motion, args.output, target=args.target, units=args.units, in_place=args.in_place, events=events
     )
-    for note in notes:
+    for note in _reference_note(dropped) + notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
         print(
@@ -228,6 +243,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     from motion.export.events import contact_events, parse_kinds
     from motion.export.glb import write_glb
     from motion.io import load_motion, save_motion
+    from motion.refpose import without_reference_lead
     from motion.retarget import correspond, retarget
     from motion.retarget.character import GLTF_SUFFIXES, load_character
     from motion.retarget.rootmotion import default_root_motion
@@ -252,6 +268,9 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     if set(kinds) - {"contacts"}:
         raise MotionError("a retargeted motion has contact events only; beats and labels come with results")
     motion = load_motion(_resolve(args.motion), units=args.in_units, limits=_limits(args))
+    dropped = 0
+    if not args.keep_reference:
+        motion, dropped = without_reference_lead(motion)
     character = load_character(to, rest=args.rest, limits=_limits(args))
     t0 = time.perf_counter()
     corr = correspond(motion.skeleton, character.skeleton, name_map)
@@ -274,7 +293,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
         # the character's own units, exactly
         keep = out.units in METRES_PER_UNIT
         notes = save_motion(out, args.out, units=out.units if keep else None, events=kinds)
-    for note in notes:
+    for note in _reference_note(dropped) + notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
         root = (
@@ -567,6 +586,12 @@ def build_parser() -> argparse.ArgumentParser:
         help=".glb: the body stays over the origin; the root motion stays on the ground joint",
     )
     p.add_argument("--events", help="contacts: foot-contact events in .glb extras / .json events")
+    p.add_argument(
+        "--keep-reference",
+        action="store_true",
+        help="keep the reference-pose frames a clip starts with (CMU-Daz: a T-pose blending into "
+        "the capture; dropped by default, and never with --frames)",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
     p.set_defaults(func=cmd_convert)
@@ -607,6 +632,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="glTF character to .glb: the skeleton and animation only (binds by bone names), no mesh",
     )
     p.add_argument("--events", help="contacts: foot-contact events in .glb extras / .json events")
+    p.add_argument(
+        "--keep-reference",
+        action="store_true",
+        help="keep the reference-pose frames the motion starts with (dropped by default)",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
     p.set_defaults(func=cmd_retarget)
