@@ -214,6 +214,7 @@ def test_godot_binds_the_walk_and_its_root_motion_recipe_ends_where_root_ends(
     forward = np.array(recipe["forward"])
     got_turn = float(np.arctan2(forward[0], forward[2]))
     assert abs((got_turn - turn + np.pi) % (2 * np.pi) - np.pi) < np.radians(1.0)
+    assert got["events"] == files["events"]  # read from the file by the documented GDScript
     # the recipe the docs gave before (each step turned by the body's heading) ends elsewhere
     assert np.abs(np.array(recipe["end_turned_each_step"]) - travel).max() > 0.1
 

@@ -38,10 +38,25 @@ func _init():
 	quit()
 
 
+# The events, as docs/game-engines.md reads them in Godot 3.2 (its importer drops glTF extras):
+# from the GLB's JSON chunk.
+func read_events(path):
+	var f = File.new()
+	f.open(path, File.READ)
+	f.seek(12)
+	var n = f.get_32()
+	f.seek(20)
+	var gltf = JSON.parse(f.get_buffer(n).get_string_from_utf8()).result
+	f.close()
+	var scene = gltf["scenes"][gltf.get("scene", 0)]
+	return scene.get("extras", {}).get("events", [])
+
+
 func _check(path, times, root_track):
 	var scene = load(path).instance()
 	get_root().add_child(scene)
-	var out = {"file": path.get_file(), "skeletons": [], "meshes": [], "animations": []}
+	var out = {"file": path.get_file(), "skeletons": [], "meshes": [], "animations": [],
+		"events": read_events(path)}
 	var skels = []
 	_find(scene, "Skeleton", skels)
 	for s in skels:
