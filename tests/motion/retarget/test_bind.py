@@ -126,3 +126,23 @@ def test_root_motion_on_root_needs_a_joint_above_the_hips(walk: Any) -> None:
         retarget(walk, mixamo_like, root_motion="root")
     with pytest.raises(MotionError, match="root motion 'feet'"):
         retarget(walk, mixamo_like, root_motion="feet")
+
+
+def test_a_gltf_character_with_its_buffer_beside_it_or_inline(hero: bytes, walk: Any, tmp_path: Any) -> None:
+    import base64
+    import json
+
+    doc, binary = read_glb(hero)
+    (tmp_path / "hero.bin").write_bytes(binary)
+    out = retarget(walk, gltf_character(hero), root_motion="root")
+    for uri in ("hero.bin", "data:application/octet-stream;base64," + base64.b64encode(binary).decode()):
+        text = json.dumps(dict(doc, buffers=[{"byteLength": len(binary), "uri": uri}])).encode()
+        got, got_bin = read_glb(bound_glb(text, out, base_dir=tmp_path))
+        assert got["nodes"] == doc["nodes"] and got_bin[: len(binary)] == binary
+        assert _fk_error(out, got, got_bin) < FK_TOLERANCE_M
+    with pytest.raises(ExportError, match="cannot read"):
+        bound_glb(
+            json.dumps(dict(doc, buffers=[{"byteLength": 4, "uri": "gone.bin"}])).encode(),
+            out,
+            base_dir=tmp_path,
+        )
