@@ -7,7 +7,9 @@ Commands::
     segue beats SONG.wav [--json] [--tempo-bpm X]      music beats of a recording (WAV, FLAC, Ogg, MP3)
     segue convert IN OUT [--fps N] [--target T]   BVH -> .bvh/.bvh.gz/.glb/.json/.npz
     segue retarget MOTION --to CHARACTER --out OUT [--map MAP.json] [--rest first|zero]
-                                                  the motion on another character (BVH or GLB/glTF skin)
+           [--target T] [--root-motion root|hips|none] [--animation-only] [--events contacts]
+                                                  the motion on another character (BVH or GLB/glTF skin;
+                                                  a GLB character's own file with the animation added)
     segue samples                                 list the bundled samples (clips and a MIDI song)
     segue demo [--out DIR]                        convert a bundled clip and dance it (rhythm)
     segue demo ENGINE [--out DIR]                 one engine end to end on bundled clips (service.demos)
@@ -235,15 +237,30 @@ def cmd_beats(args: argparse.Namespace) -> int:
     return 0
 
 
+def _reference_note(dropped: int) -> list[str]:
+    """What to tell about the reference-pose frames dropped from a motion (:mod:`motion.refpose`)."""
+    if not dropped:
+        return []
+    s = "s" if dropped > 1 else ""
+    return [
+        f"dropped the first {dropped} frame{s} "
+        "(a reference pose and the blend out of it; --keep-reference keeps them)"
+    ]
+
+
 def cmd_convert(args: argparse.Namespace) -> int:
     from motion import MotionError
     from motion.export.events import parse_kinds
     from motion.ground import add_ground_root
     from motion.io import load_motion, save_motion
+    from motion.refpose import without_reference_lead
     from motion.resample import resample
 
     src = _resolve(args.input)
     motion = load_motion(src, units=args.in_units, limits=_limits(args))
+    dropped = 0
+    if not args.frames and not args.keep_reference:
+        motion, dropped = without_reference_lead(motion)
     if args.frames:
         start, _, stop = args.frames.partition(":")
         try:
@@ -261,7 +278,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     notes = save_motion(
         motion, args.output, target=args.target, units=args.units, in_place=args.in_place, events=events
     )
-    for note in notes:
+    for note in _reference_note(dropped) + notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
         print(
@@ -273,9 +290,14 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 def cmd_retarget(args: argparse.Namespace) -> int:
     from motion import MotionError
+    from motion.export.bind import bound_glb
+    from motion.export.events import contact_events, parse_kinds
+    from motion.export.glb import write_glb
     from motion.io import load_motion, save_motion
+    from motion.refpose import without_reference_lead
     from motion.retarget import correspond, retarget
-    from motion.retarget.character import load_character
+    from motion.retarget.character import GLTF_SUFFIXES, load_character
+    from motion.retarget.rootmotion import default_root_motion
     from motion.units import METRES_PER_UNIT
 
     name_map = None
@@ -288,22 +310,55 @@ def cmd_retarget(args: argparse.Namespace) -> int:
             raise MotionError(
                 f"{args.map}: the joint map must be a JSON object {{source joint: character joint}}"
             )
+    to = _resolve(args.to)
+    gltf_character = to.name.lower().endswith(GLTF_SUFFIXES)
+    glb_out = args.out.lower().endswith(".glb")
+    if args.animation_only and not (gltf_character and glb_out):
+        raise MotionError("--animation-only is for a glTF/GLB character written to a .glb")
+    kinds = parse_kinds(args.events) if args.events else ()
+    if set(kinds) - {"contacts"}:
+        raise MotionError("a retargeted motion has contact events only; beats and labels come with results")
     motion = load_motion(_resolve(args.motion), units=args.in_units, limits=_limits(args))
-    character = load_character(_resolve(args.to), rest=args.rest, limits=_limits(args))
+    dropped = 0
+    if not args.keep_reference:
+        motion, dropped = without_reference_lead(motion)
+    character = load_character(to, rest=args.rest, limits=_limits(args))
     t0 = time.perf_counter()
-    out = retarget(motion, character, name_map=name_map, plant=not args.no_plant)
-    # the character's own units, exactly (GLB is metres by glTF's rule)
-    keep = out.units in METRES_PER_UNIT and not args.out.lower().endswith(".glb")
-    notes = save_motion(out, args.out, units=out.units if keep else None)
-    for note in notes:
+    corr = correspond(motion.skeleton, character.skeleton, name_map)
+    mode = args.root_motion or default_root_motion(args.target, corr.target_roles["Hips"])
+    out = retarget(motion, character, name_map=name_map, plant=not args.no_plant, root_motion=mode)
+    notes: list[str] = []
+    if glb_out:
+        events = contact_events(out) if kinds else None
+        if gltf_character:  # the character's own file, with the animation added
+            data = bound_glb(
+                to.read_bytes(), out, animation_only=args.animation_only, events=events, base_dir=to.parent
+            )
+            try:
+                Path(args.out).write_bytes(data)
+            except OSError as exc:
+                raise MotionError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+        else:  # exactly the BVH character's hierarchy (no ground joint added)
+            write_glb(out, args.out, ground_root=False, events=events)
+    else:
+        # the character's own units, exactly
+        keep = out.units in METRES_PER_UNIT
+        notes = save_motion(out, args.out, units=out.units if keep else None, events=kinds)
+    for note in _reference_note(dropped) + notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
-        corr = correspond(motion.skeleton, character.skeleton, name_map)
+        root = (
+            character.skeleton.names[0]
+            if mode in ("root", "none")
+            else character.skeleton.names[corr.target_roles["Hips"]]
+        )
         print(
             f"wrote {args.out}: {out.num_frames} frames at {out.fps:g} fps on {character.name or args.to} "
             f"({out.num_joints} joints, {len(corr.pairs)} driven; "
             f"{corr.source_preset} -> {corr.target_preset}, "
-            f"units {out.units}; {time.perf_counter() - t0:.2f} s)"
+            f"units {out.units}; root motion {mode}"
+            + ("" if mode == "none" else f" on {root!r}")
+            + f"; {time.perf_counter() - t0:.2f} s)"
         )
     return 0
 
@@ -666,6 +721,12 @@ def build_parser() -> argparse.ArgumentParser:
         help=".glb: the body stays over the origin; the root motion stays on the ground joint",
     )
     p.add_argument("--events", help="contacts: foot-contact events in .glb extras / .json events")
+    p.add_argument(
+        "--keep-reference",
+        action="store_true",
+        help="keep the reference-pose frames a clip starts with (CMU-Daz: a T-pose blending into "
+        "the capture; dropped by default, and never with --frames)",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
     p.set_defaults(func=cmd_convert)
@@ -687,6 +748,30 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--in-units", choices=units, help="declare the motion's length unit instead of guessing")
     p.add_argument("--no-plant", action="store_true", help="skip the leg IK that keeps planted feet planted")
+    p.add_argument(
+        "--target",
+        default="gltf",
+        choices=sorted((*TARGETS, "blender")),
+        help="the engine whose root-motion convention to follow: unreal, godot, blender, gltf on the "
+        "root bone at the floor; unity on the hips (the file keeps the character's axes and units)",
+    )
+    p.add_argument(
+        "--root-motion",
+        choices=("root", "hips", "none"),
+        help="where the root motion goes: the bone above the hips (root), the hips, or none (in place); "
+        "default: the --target's convention",
+    )
+    p.add_argument(
+        "--animation-only",
+        action="store_true",
+        help="glTF character to .glb: the skeleton and animation only (binds by bone names), no mesh",
+    )
+    p.add_argument("--events", help="contacts: foot-contact events in .glb extras / .json events")
+    p.add_argument(
+        "--keep-reference",
+        action="store_true",
+        help="keep the reference-pose frames the motion starts with (dropped by default)",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
     p.set_defaults(func=cmd_retarget)

@@ -10,7 +10,7 @@ from fastapi import APIRouter, Depends, Query, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from engines.registry import engine_kind
-from motion import ExportError, MotionError
+from motion import ExportError, Motion, MotionError
 from motion.export.events import parse_kinds
 from motion.resample import resample
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
@@ -21,7 +21,7 @@ from workers.budget import check_work, database_facts, estimate_work
 from workers.inputs import InputError, attach_from_store, resolve_inputs
 from workers.store import Store
 
-from ..characters import RestPose, load_character
+from ..characters import RestPose, RootMotion, load_character
 from ..deps import (
     BackendDep,
     JobQuotaDep,
@@ -251,7 +251,10 @@ async def download_result(
     format: Annotated[ResultFormat, Query(description="bvh, glb, json frames or npz")] = ResultFormat.bvh,
     result: ResultQuery = None,
     target: Annotated[
-        ExportTarget, Query(description="axis/unit convention (not for glb)")
+        ExportTarget,
+        Query(
+            description="axis/unit convention (not for glb); with character, also its root-motion convention"
+        ),
     ] = ExportTarget.gltf,
     fps: Annotated[
         float | None,
@@ -277,6 +280,12 @@ async def download_result(
     in_place: Annotated[
         bool, Query(description="glb: body over the origin, root motion on the ground joint")
     ] = False,
+    root_motion: Annotated[
+        RootMotion | None,
+        Query(
+            description="with character: root motion on the root bone, the hips or none (default: target's)"
+        ),
+    ] = None,
     events: Annotated[
         str | None,
         Query(max_length=40, description="glb/json: contacts,beats,labels or all (glTF extras / events)"),
@@ -287,12 +296,22 @@ async def download_result(
     ``retarget_failed`` when the character's joints do not correspond."""
     rid = await _result_id(backend, principal, job_id, result)
     motion = await run_in_threadpool(store.result_motion, job_id, rid)
+    rig: bytes | None = None
     if character is not None:
-        from motion.retarget import retarget  # imported on first use: most downloads do not retarget
+        from motion.retarget import correspond, retarget  # imported on first use: most downloads do not
+        from motion.retarget.rootmotion import default_root_motion
 
         char = await run_in_threadpool(load_character, store, principal, character, rest, settings.bvh_limits)
+        rig = char.gltf
+        mode = "none" if in_place else None if root_motion is None else root_motion.value
+        in_place = False  # a character's root motion is placed by the retargeting
+
+        def retargeted() -> Motion:
+            hips = correspond(motion.skeleton, char.motion.skeleton).target_roles["Hips"]
+            return retarget(motion, char.motion, root_motion=mode or default_root_motion(target.value, hips))
+
         try:
-            motion = await run_in_threadpool(retarget, motion, char)
+            motion = await run_in_threadpool(retargeted)
         except MotionError as exc:
             raise ApiError(
                 422, "retarget_failed", f"cannot retarget result {rid} onto {character}: {exc}"
@@ -331,7 +350,16 @@ async def download_result(
             annotations = (await run_in_threadpool(store.result_report, job_id, rid)).annotations
             evs = await run_in_threadpool(result_events, motion, annotations, kinds, result_fps)
         data = await run_in_threadpool(
-            lambda: export_bytes(motion, format, target, units=units, in_place=in_place, events=evs)
+            lambda: export_bytes(
+                motion,
+                format,
+                target,
+                units=units,
+                in_place=in_place,
+                events=evs,
+                rig=rig,
+                ground_root=character is None,
+            )
         )
     except (ExportError, MotionError) as exc:
         raise ApiError(422, "export_failed", f"cannot export result {rid} as {format.value}: {exc}") from None
