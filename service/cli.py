@@ -237,14 +237,30 @@ def cmd_beats(args: argparse.Namespace) -> int:
     return 0
 
 
-def _reference_note(dropped: int) -> list[str]:
-    """What to tell about the reference-pose frames dropped from a motion (:mod:`motion.refpose`)."""
-    if not dropped:
-        return []
-    s = "s" if dropped > 1 else ""
-    return [
-        f"dropped the first {dropped} frame{s} "
-        "(a reference pose and the blend out of it; --keep-reference keeps them)"
+def _without_reference(motion: Any, source: str, args: argparse.Namespace) -> tuple[Any, list[str]]:
+    """The motion without the reference-pose frames it starts with (:mod:`motion.refpose`), and the
+    note to print. Bundled ``sample:`` clips are cleaned by default (``--keep-reference`` keeps the
+    frames); a user's file keeps its frame count unless ``--drop-reference`` asks (a note says when
+    such frames were found)."""
+    from motion.refpose import reference_lead, without_reference_lead
+
+    drop = args.drop_reference or (source.startswith("sample:") and not args.keep_reference)
+    if drop:
+        motion, dropped = without_reference_lead(motion)
+        if not dropped:
+            return motion, []
+        s = "s" if dropped > 1 else ""
+        return motion, [
+            f"dropped the first {dropped} frame{s} (a reference pose and the blend out of it; "
+            "--keep-reference keeps them)"
+        ]
+    found = reference_lead(motion)
+    if not found:
+        return motion, []
+    s = "s" if found > 1 else ""
+    return motion, [
+        f"the first {found} frame{s} look like a reference pose blending into the capture: kept "
+        "(--drop-reference drops them)"
     ]
 
 
@@ -253,14 +269,13 @@ def cmd_convert(args: argparse.Namespace) -> int:
     from motion.export.events import parse_kinds
     from motion.ground import add_ground_root
     from motion.io import load_motion, save_motion
-    from motion.refpose import without_reference_lead
     from motion.resample import resample
 
     src = _resolve(args.input)
     motion = load_motion(src, units=args.in_units, limits=_limits(args))
-    dropped = 0
-    if not args.frames and not args.keep_reference:
-        motion, dropped = without_reference_lead(motion)
+    reference: list[str] = []
+    if not args.frames:
+        motion, reference = _without_reference(motion, args.input, args)
     if args.frames:
         start, _, stop = args.frames.partition(":")
         try:
@@ -278,7 +293,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     notes = save_motion(
         motion, args.output, target=args.target, units=args.units, in_place=args.in_place, events=events
     )
-    for note in _reference_note(dropped) + notes:
+    for note in reference + notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
         print(
@@ -294,7 +309,6 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     from motion.export.events import contact_events, parse_kinds
     from motion.export.glb import write_glb
     from motion.io import load_motion, save_motion
-    from motion.refpose import without_reference_lead
     from motion.retarget import correspond, retarget
     from motion.retarget.character import GLTF_SUFFIXES, load_character
     from motion.retarget.rootmotion import default_root_motion
@@ -319,9 +333,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     if set(kinds) - {"contacts"}:
         raise MotionError("a retargeted motion has contact events only; beats and labels come with results")
     motion = load_motion(_resolve(args.motion), units=args.in_units, limits=_limits(args))
-    dropped = 0
-    if not args.keep_reference:
-        motion, dropped = without_reference_lead(motion)
+    motion, reference = _without_reference(motion, args.motion, args)
     character = load_character(to, rest=args.rest, limits=_limits(args))
     t0 = time.perf_counter()
     corr = correspond(motion.skeleton, character.skeleton, name_map)
@@ -344,7 +356,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
         # the character's own units, exactly
         keep = out.units in METRES_PER_UNIT
         notes = save_motion(out, args.out, units=out.units if keep else None, events=kinds)
-    for note in _reference_note(dropped) + notes:
+    for note in reference + notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
         root = (
@@ -652,6 +664,21 @@ def build_parser() -> argparse.ArgumentParser:
         """A subcommand whose ``--help`` opens with a description (its one-line ``help`` unless given)."""
         return sub.add_parser(name, help=help, description=description or help[0].upper() + help[1:] + ".")
 
+    def reference_options(p: argparse.ArgumentParser) -> None:
+        ref = p.add_mutually_exclusive_group()
+        ref.add_argument(
+            "--keep-reference",
+            action="store_true",
+            help="keep the reference-pose frames a sample:NAME clip starts with (CMU-Daz: a T-pose "
+            "blending into the capture; dropped from samples by default)",
+        )
+        ref.add_argument(
+            "--drop-reference",
+            action="store_true",
+            help="drop the reference-pose frames a file starts with (a file keeps its frame count by "
+            "default; a note says when it starts with such frames)",
+        )
+
     def limits(p: argparse.ArgumentParser) -> None:
         p.add_argument(
             "--max-joints", type=int, default=1024, help="refuse files with more joints (default 1024)"
@@ -721,12 +748,7 @@ def build_parser() -> argparse.ArgumentParser:
         help=".glb: the body stays over the origin; the root motion stays on the ground joint",
     )
     p.add_argument("--events", help="contacts: foot-contact events in .glb extras / .json events")
-    p.add_argument(
-        "--keep-reference",
-        action="store_true",
-        help="keep the reference-pose frames a clip starts with (CMU-Daz: a T-pose blending into "
-        "the capture; dropped by default, and never with --frames)",
-    )
+    reference_options(p)
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
     p.set_defaults(func=cmd_convert)
@@ -767,11 +789,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="glTF character to .glb: the skeleton and animation only (binds by bone names), no mesh",
     )
     p.add_argument("--events", help="contacts: foot-contact events in .glb extras / .json events")
-    p.add_argument(
-        "--keep-reference",
-        action="store_true",
-        help="keep the reference-pose frames the motion starts with (dropped by default)",
-    )
+    reference_options(p)
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
     p.set_defaults(func=cmd_retarget)

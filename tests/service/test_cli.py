@@ -47,6 +47,25 @@ def test_convert_all_formats(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     np.testing.assert_allclose(read_bvh(tmp_path / "c.bvh").slice(1, 61).global_positions(), ref, atol=1e-4)
 
 
+def test_a_file_keeps_its_reference_frames_unless_asked(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A user's file keeps its frame count (a note names the reference-pose lead); --drop-reference
+    drops it; a bundled sample is cleaned by default."""
+    src = sample_path("walk")
+    frames = read_bvh(src).num_frames
+    assert main(["convert", str(src), str(tmp_path / "kept.bvh"), "-q"]) == 0
+    assert read_bvh(tmp_path / "kept.bvh").num_frames == frames
+    assert "the first 4 frames look like a reference pose" in capsys.readouterr().err
+    assert main(["convert", str(src), str(tmp_path / "dropped.bvh"), "--drop-reference", "-q"]) == 0
+    assert read_bvh(tmp_path / "dropped.bvh").num_frames == frames - 4
+    assert "dropped the first 4 frames" in capsys.readouterr().err
+    assert main(["convert", "sample:walk", str(tmp_path / "sample.bvh"), "-q"]) == 0
+    assert read_bvh(tmp_path / "sample.bvh").num_frames == frames - 4
+    assert main(["convert", "sample:walk", str(tmp_path / "raw.bvh"), "--keep-reference", "-q"]) == 0
+    assert read_bvh(tmp_path / "raw.bvh").num_frames == frames
+
+
 def test_convert_fps_units_and_target(tmp_path: Path) -> None:
     out = tmp_path / "w.npz"
     assert main(["convert", "sample:walk", str(out), "--fps", "30", "--units", "m", "-q"]) == 0
