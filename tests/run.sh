@@ -45,8 +45,15 @@ if command -v npm >/dev/null 2>&1 && ! grep -q "\"version\": \"$GLTF_VALIDATOR_V
     npm install --prefix "$SEGUE_GLTF_VALIDATOR_DIR" --no-audit --no-fund --silent \
         "gltf-validator@$GLTF_VALIDATOR_VERSION" || echo "tests/run.sh: gltf-validator not installed" >&2
 fi
-step "pip install -e '.[dev,web]'"
-"$PY" -m pip install --quiet --disable-pip-version-check -e '.[dev,web]'
+# pip takes 30-70 s even when nothing changed: skip it while this checkout is the editable install,
+# pyproject.toml and the Python are those of the last install, and every requirement is present
+if "$PY" -E tests/install_current.py; then
+    step "pip install skipped (segue[dev,web] is installed from this checkout; tests/install_current.py)"
+else
+    step "pip install -e '.[dev,web]'"
+    "$PY" -m pip install --quiet --disable-pip-version-check -e '.[dev,web]'
+    "$PY" -E tests/install_current.py --write
+fi
 
 step "ruff"
 "$PY" -m ruff check .
