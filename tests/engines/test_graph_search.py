@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import glob
 import itertools
-import threading
-import time
 from dataclasses import replace
 from pathlib import Path as FsPath
 from typing import Any
@@ -15,6 +13,7 @@ import numpy as np
 import pytest
 
 from engines.base import EngineError, Solution
+from engines.graph import search as search_module
 from engines.graph.assemble import assemble, body_frames, quality_inputs
 from engines.graph.model import EdgeTree, RootTracks
 from engines.graph.paths import (
@@ -338,7 +337,7 @@ def test_search_is_anytime_improving_and_meets_the_constraints(graph: Graph) -> 
     assert errors["body[1]"]["heading_deg"] < 0.1
     assert set(final.terms) == {"continuity", "length", "body", "joint", "label", "obstacle", "shared"}
     assert final.score == pytest.approx(sum(final.terms.values()))
-    assert out.times[0] < 2.0  # first solution early (generous for loaded CI machines)
+    # (how early the first solution comes is bench/graph.py's first_solution_ms, not a test)
 
 
 def clip_sequence(s: Solution) -> tuple[str, ...]:
@@ -374,24 +373,40 @@ def test_same_seed_same_solutions(graph: Graph) -> None:
     assert [(s.score, s.provenance) for s in other.solutions] != runs[0]
 
 
-def test_cancel_stops_quickly(graph: Graph) -> None:
-    flag = threading.Event()
+def test_cancel_stops_at_the_next_poll(graph: Graph) -> None:
+    """Cancelled as soon as its first solution is out, the search stops at its next poll: at most
+    the one emission under way follows, and no alternatives (an uncancelled run of this request
+    emits them). No clock: the cancel is a function of the search's own output."""
     out = Collect()
-    timer = threading.Timer(0.4, flag.set)
-    timer.start()
-    t0 = time.perf_counter()
-    searcher(graph, 2).run(request(), 30.0, out, flag.is_set)
-    stopped = time.perf_counter()
-    timer.cancel()
-    assert out.solutions
-    assert stopped - t0 < 0.4 + 0.15  # ~50 ms of polling latency, plus one pending emission
-    assert all(s.metrics["alternative"] == 0 for s in out.solutions)  # no alternatives after a cancel
+    searcher(graph, 2).run(request(alternatives=2), 600.0, out, lambda: len(out.solutions) >= 1)
+    assert 1 <= len(out.solutions) <= 2
+    assert all(s.metrics["alternative"] == 0 for s in out.solutions)
 
 
-def test_budget_is_respected(graph: Graph) -> None:
-    t0 = time.perf_counter()
-    searcher(graph, 2).run(request(alternatives=2), 0.6, Collect(), lambda: False)
-    assert time.perf_counter() - t0 < 0.6 + 0.2
+class _TickingClock:
+    """A stand-in for the search module's ``time``: every reading is 10 ms after the last one, so
+    a budget is spent after a fixed number of readings, whatever the machine's speed or load."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+        self.readings = 0
+
+    def perf_counter(self) -> float:
+        self.readings += 1
+        self.now += 0.01
+        return self.now
+
+
+def test_budget_is_respected(graph: Graph, monkeypatch: pytest.MonkeyPatch) -> None:
+    full = Collect()
+    searcher(graph, 2).run(request(alternatives=2), 1e9, full, lambda: False)
+    clock = _TickingClock()
+    monkeypatch.setattr(search_module, "time", clock)
+    cut = Collect()
+    searcher(graph, 2).run(request(alternatives=2), 0.6, cut, lambda: False)
+    # same seed, same start, until the budget (60 readings of the clock) ran out: less came out
+    assert clock.readings > 60 and 0 < len(cut.solutions) < len(full.solutions)
+    assert cut.solutions[0].score == full.solutions[0].score
 
 
 def test_hard_pose_constraints_hold(graph: Graph) -> None:
