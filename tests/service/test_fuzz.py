@@ -13,9 +13,12 @@ import time
 from pathlib import Path
 
 import httpx
+import pytest
 
 from motion.samples import sample_path
 from tests.live_server import live_server
+
+pytestmark = pytest.mark.slow  # a real server and schemathesis (about 10 CPU-seconds): CI and SEGUE_SLOW=1
 
 SCHEMATHESIS = shutil.which("schemathesis", path=str(Path(sys.executable).parent)) or shutil.which(
     "schemathesis"
