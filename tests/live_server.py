@@ -34,6 +34,9 @@ def live_server(data: Path, plugins: str | None = None, workers: int = 2) -> Ite
     env = os.environ | {
         "SEGUE_DATA_DIR": str(data),
         "SEGUE_WORKERS": str(workers),
+        # a job's hard time limit is its budget_s plus this grace: here a guard against a hang, not a
+        # bar a busy machine could trip (an engine process loading librosa at load 15 took > 30 s)
+        "SEGUE_JOB_GRACE_S": "600",
         "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
     }
     for var in ("SEGUE_API_TOKENS", "SEGUE_REDIS_URL", "SEGUE_ENGINE_PLUGINS"):

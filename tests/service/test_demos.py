@@ -28,7 +28,7 @@ def demo_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
         cwd=root,
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=900,  # a hang guard: every engine's demo, maybe compiling numba's kernels, on a busy machine
         env={"PATH": "/usr/bin:/bin", "PYTHONPATH": str(Path(__file__).resolve().parents[2])},
     )
     assert r.returncode == 0, r.stderr[-3000:]
