@@ -9,6 +9,10 @@ COPY service service
 COPY workers workers
 COPY web web
 RUN pip install --no-cache-dir .
+# the control engine's compiled kernels, compiled once into the image (numba keys them by the
+# installed sources): no container pays the ~15 CPU-s compile on its first job
+ENV NUMBA_CACHE_DIR=/opt/segue/numba
+RUN segue warm && chmod -R a+rX /opt/segue/numba
 ENV SEGUE_DATA_DIR=/data
 EXPOSE 8000
 CMD ["segue", "serve", "--host", "0.0.0.0", "--port", "8000"]

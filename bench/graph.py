@@ -4,12 +4,14 @@ Builds a graph database from dataset-2 walks, turns and runs at 30 fps, then sea
 ``--frames``-frame motion from ([0, 0], 0 deg) to a body constraint ``--goal x z heading`` for
 ``--budget`` seconds, and prints one JSON object:
 
-``{"frames_db", "clips", "leaf_edges", "root_edges", "build_s", "first_solution_ms",
+``{"frames_db", "clips", "leaf_edges", "root_edges", "build_s", "first_solution_ms", "stopped",
 "within_5pct_s", "score_at_1s", "final_score", "position_error_cm", "heading_error_deg",
 "length_frames", "foot_slip_m_s", "foot_slip_sources_m_s", "solutions", "search_s", "ok", "reasons"}``
 
-``within_5pct_s`` is the time of the first solution whose score is within 5% of the final best
-(the score at the end of the budget); ``score_at_1s`` the best score emitted within 1 s.
+The search does ``--rounds`` rounds (the request's default, 15, when not given; it stops earlier
+when it converges) under a ``--budget`` cap; ``stopped`` says which ended it (``work`` or
+``budget``). ``within_5pct_s`` is the time of the first solution whose score is within 5% of the
+final best; ``score_at_1s`` the best score emitted within 1 s.
 ``foot_slip_m_s`` is :func:`motion.metrics.foot_slip` of the output (contacts detected on it);
 ``foot_slip_sources_m_s`` the same metric on the database clips (frame-weighted mean), for scale;
 ``search_s`` when the last solution was emitted (the search stops once it converges); ``ok`` and
@@ -49,7 +51,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--per-kind", type=int, default=10, help="clips of each kind (walk, turns, run/2)")
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--goal", type=float, nargs=3, default=[6.0, 0.0, 90.0], metavar=("X", "Z", "HEADING"))
-    ap.add_argument("--budget", type=float, default=10.0)
+    ap.add_argument("--budget", type=float, default=60.0, help="time cap, seconds")
+    ap.add_argument("--rounds", type=int, default=None, help="search rounds (default: the request's)")
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args(argv)
     tune_process()
@@ -81,6 +84,7 @@ def main(argv: list[str] | None = None) -> int:
             "frames": args.frames,
             "seed": args.seed,
             "budget_s": args.budget,
+            **({} if args.rounds is None else {"rounds": args.rounds}),
             "constraints": [
                 {"type": "body", "frame": 0, "position": [0.0, 0.0], "heading_deg": 0.0},
                 {"type": "body", "frame": args.frames - 1, "position": [x, z], "heading_deg": h},
@@ -88,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
         }
     )
     rec = CollectingEmitter()
-    engine.search(request, args.budget, rec, lambda: False)
+    stopped = engine.search(request, args.budget, rec, lambda: False)
     events = [(t, float(sol.score), sol) for t, sol in zip(rec.times, rec.solutions, strict=True)]
     if not events:
         print(json.dumps({"error": "no solution"}))
@@ -109,6 +113,7 @@ def main(argv: list[str] | None = None) -> int:
         "root_edges": report.get("root_edges"),
         "build_s": round(build_s, 3),
         "first_solution_ms": round(events[0][0] * 1e3, 1),
+        "stopped": stopped.value,
         "within_5pct_s": round(within, 3),
         "score_at_1s": round(at_1s, 4),
         "final_score": round(best_score, 4),

@@ -6,6 +6,13 @@ library (:mod:`engines.library`) and stored as arrays; a loaded engine then answ
 score improves (anytime) and polling ``should_stop`` (cancel). Engines never import the service,
 the workers or Redis.
 
+Every search is bounded by *work* derived from the request (the graph's rounds, the annotation
+engine's passes, the control engine's stages, the rhythm engine's single pass), never by the
+clock, so a request and its seed give the same bytes on any machine and at any load. The time
+budget ``budget_s`` is only a safety cap: a :class:`Run` carries both bounds and the cancel flag,
+and ``search`` returns why it stopped (:class:`Stopped`), which the runtime puts in the ``done``
+event and the report.
+
 This module, :mod:`engines.registry` and the package itself are all the service may import of the
 engines (``tests/test_layering.py``): what a route needs of a database beyond running jobs goes
 through the small query API of :class:`Engine` -- :meth:`Engine.clip_labels` and
@@ -20,6 +27,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, ClassVar, Protocol
 
@@ -51,6 +59,110 @@ def open_database(path: str | Path) -> Iterator[DatabaseArrays]:
     """
     with np.load(Path(path), allow_pickle=False) as arrays:
         yield arrays
+
+
+class Stopped(StrEnum):
+    """Why a search ended (the ``stopped`` of the ``done`` event and of the report)."""
+
+    work = "work"
+    """It did the work the request asked for (or converged before): the answer depends only on
+    the request and its seed."""
+    budget = "budget"
+    """The time cap ``budget_s`` cut it short: the answer is the best found so far and may differ
+    from an unhurried run's (and from machine to machine)."""
+    cancelled = "cancelled"
+    """The job was cancelled (``should_stop``)."""
+
+    @property
+    def reason(self) -> str:
+        """One line for users saying what the stop means for the answer."""
+        return _STOP_REASONS[self]
+
+
+_STOP_REASONS = {
+    Stopped.work: "the search did all the work the request asked for: the same request and seed "
+    "give the same answer on any machine",
+    Stopped.budget: "the time cap (budget_s) cut the search short before the work the request asked "
+    "for was done: the answer is the best found so far and may differ from an unhurried run's; "
+    "raise budget_s or lower the work (rounds, passes) for a reproducible answer",
+    Stopped.cancelled: "the job was cancelled: the answer is the best found so far",
+}
+
+
+CLOCK: Callable[[], float] = time.perf_counter
+"""The clock :class:`Run` measures its time cap on (seconds; tests patch it)."""
+
+
+class Run:
+    """The bounds of one search: the cancel flag, the time cap and why the search stopped.
+
+    Engines bound their work by the request (rounds, passes, stages) and ask :meth:`over` between
+    units of work; the first time the cap or the cancel flag ends the search, :attr:`stopped`
+    records why (:class:`Stopped`), and :meth:`outcome` is what ``search`` returns
+    (``Stopped.work`` when nothing cut it short).
+
+    ``budget_s`` seconds are counted on :data:`CLOCK` (``time.perf_counter``; tests patch it to
+    simulate a slow machine) from when the run is made; ``should_stop`` is polled at most every
+    ``poll_s`` seconds (it may be a Redis round trip).
+
+    Example
+    -------
+    >>> run = Run(10.0, lambda: False)
+    >>> for _ in range(3):
+    ...     if run.over():
+    ...         break
+    >>> run.outcome()
+    <Stopped.work: 'work'>
+    """
+
+    __slots__ = ("_last_poll", "budget_s", "clock", "deadline", "poll_s", "should_stop", "stopped", "t0")
+
+    def __init__(self, budget_s: float, should_stop: ShouldStop, *, poll_s: float = 0.005) -> None:
+        self.clock: Callable[[], float] = CLOCK
+        self.budget_s = float(budget_s)
+        self.should_stop = should_stop
+        self.poll_s = poll_s
+        self.t0 = self.clock()
+        self.deadline = self.t0 + self.budget_s
+        self.stopped: Stopped | None = None
+        self._last_poll = -np.inf
+
+    def elapsed(self) -> float:
+        """Seconds since the run started (reports only: never a bound on work)."""
+        return self.clock() - self.t0
+
+    def out_of_time(self) -> bool:
+        """Whether the time cap is reached (recorded as the stop reason)."""
+        if self.stopped is not None:
+            return True
+        if self.clock() >= self.deadline:
+            self.stopped = Stopped.budget
+            return True
+        return False
+
+    def cancelled(self) -> bool:
+        """Whether the job is cancelled (polled now, recorded as the stop reason)."""
+        if self.stopped is Stopped.cancelled:
+            return True
+        if self.should_stop():
+            self.stopped = Stopped.cancelled
+            return True
+        return False
+
+    def over(self) -> bool:
+        """Whether the search must stop now: cancelled (polled every ``poll_s``) or out of time."""
+        if self.stopped is not None:
+            return True
+        now = self.clock()
+        if now - self._last_poll >= self.poll_s:
+            self._last_poll = now
+            if self.cancelled():
+                return True
+        return self.out_of_time()
+
+    def outcome(self) -> Stopped:
+        """Why the search ended: the recorded reason, else ``Stopped.work``."""
+        return self.stopped or Stopped.work
 
 
 class LiveControlSession(Protocol):
@@ -297,9 +409,10 @@ class Engine(ABC):
         return finish_solution(solution, inputs, self.quality_reference, positions)
 
     @abstractmethod
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
-        """Answer a request, calling ``emit.solution`` for every improvement, until done, out of
-        budget or ``should_stop()``."""
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+        """Answer a request, calling ``emit.solution`` for every improvement, until the work the
+        request asks for is done, the time cap ``budget_s`` is reached or ``should_stop()``;
+        returns why it stopped (a :class:`Run` keeps the bounds)."""
 
 
 FLOOR_PREFIX = "quality.floor."

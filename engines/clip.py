@@ -16,7 +16,7 @@ from motion import rotations as rot
 from motion.ground import body_root, heading
 from motion.mirror import mirror
 
-from .base import Emitter, Engine, EngineError, ShouldStop, Solution
+from .base import Emitter, Engine, EngineError, ShouldStop, Solution, Stopped
 
 
 class ClipEngine(Engine):
@@ -25,7 +25,7 @@ class ClipEngine(Engine):
     name = "clip"
     kind = "clips"
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
         try:
             source = self.library.clip(request.clip)
         except MotionError as exc:
@@ -52,3 +52,4 @@ class ClipEngine(Engine):
             motion = replace(motion, root_positions=root, rotations=q)
         provenance = [(request.clip, f) for f in range(request.start, end)]
         emit.solution(Solution(motion=motion, score=0.0, terms={"excerpt": 0.0}, provenance=provenance))
+        return Stopped.work

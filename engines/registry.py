@@ -7,6 +7,7 @@ refused with a clear message instead of being half-built.
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 
 from .base import Engine
 from .clip import ClipEngine
@@ -103,3 +104,15 @@ def kind_class(kind: str) -> type[Engine]:
             f"database kind {kind!r} is not available yet: its engine has not landed "
             f"(available kinds: {', '.join(sorted(KIND_ENGINES))})"
         ) from None
+
+
+def warm_compiled(say: Callable[[str], None] | None = None, force: bool = False) -> float:
+    """Compile (or load from numba's cache) the kernels of the engines that have them (the control
+    engine's, :mod:`engines.control.warm`) so that no request pays the compile; returns seconds.
+    ``say`` gets a line before and after; once done for this installation and cache it returns at
+    once unless ``force``."""
+    try:
+        from .control.warm import warm
+    except ModuleNotFoundError:  # an installation without the control engine
+        return 0.0
+    return warm(say, force)

@@ -33,7 +33,7 @@ from .kinematics import FRAME_BLOCK
 from .motion import Motion
 from .numparse import parse_decimals
 from .skeleton import VALID_CHANNELS, Skeleton
-from .units import METRES_PER_UNIT, UnitGuess, guess_units, standing_height
+from .units import METRES_PER_UNIT, UnitGuess, guess_units, standing_height, up_axis
 
 Array = npt.NDArray[np.float64]
 
@@ -184,11 +184,27 @@ def _unit_step(num_frames: int) -> int:
     return max(1, num_frames // 240)
 
 
-def detect_units(motion: Motion) -> UnitGuess:
-    """Standing height of a motion (its own unit) and the unit guess (see :mod:`motion.units`)."""
+def detect_units(motion: Motion, up: int | None = 1) -> UnitGuess:
+    """Standing height of a motion (its own unit) along the ``up`` axis (1: Y, as Segue reads a
+    BVH; 2: Z; None: detected, :func:`motion.units.up_axis`) and the unit guess (see
+    :mod:`motion.units`)."""
     step = _unit_step(motion.num_frames)
     sample = motion if step == 1 else _subsample(motion, step)
-    return _guess_of_sample(sample)
+    if up == 1:
+        return _guess_of_sample(sample)
+    points = _frame_points(sample)
+    return guess_units(standing_height(points, up_axis(points) if up is None else up))
+
+
+def detect_up_axis(motion: Motion) -> int:
+    """The vertical axis of a motion's file (1: Y, 2: Z; :func:`motion.units.up_axis`)."""
+    step = _unit_step(motion.num_frames)
+    return up_axis(_frame_points(motion if step == 1 else _subsample(motion, step)))
+
+
+def _frame_points(sample: Motion) -> npt.NDArray[np.float64]:
+    pos, grot = sample.fk()
+    return np.concatenate((pos, sample.end_site_positions(pos, grot)), axis=1)
 
 
 def _units_of_sample(sample: Motion) -> str:

@@ -14,19 +14,23 @@ without numpy's temporaries:
   the last bit for some inputs), so rotations agree to ~1e-16.
 
 Compiled with ``cache=True``: the first call in a fresh environment compiles (a few seconds),
-later processes load the machine code from ``__pycache__`` (numba's import and the load take a
-few hundred milliseconds once per process).
+later processes load the machine code from numba's cache (:mod:`motion.jitcache`; numba's import
+and the load take a few hundred milliseconds once per process).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from numba import njit
 
 from .errors import MotionError
+from .jitcache import configure
 from .motion import Motion
 from .resample import checked_frames
+
+configure()  # numba's cache outside the package, before numba is imported
+
+from numba import njit  # noqa: E402
 
 Array = npt.NDArray[np.float64]
 
@@ -88,9 +92,9 @@ def fast_fk(motion: Motion) -> tuple[Array, Array]:
         np.asarray(sk.parents, dtype=np.int64),
         np.asarray(sk.offsets, dtype=np.float64),
         slot,
-        motion.root_positions,
-        jt,
-        motion.rotations,
+        np.ascontiguousarray(motion.root_positions, dtype=np.float64),
+        np.ascontiguousarray(jt, dtype=np.float64),
+        np.ascontiguousarray(motion.rotations, dtype=np.float64),  # one specialisation (C order)
         pos,
         grot,
     )

@@ -15,7 +15,7 @@ from .export.arrays import write_json, write_npz
 from .export.events import contact_events_of, sorted_events
 from .export.targets import get_target, output_units, to_target
 from .motion import Motion
-from .samples import resolve_path
+from .samples import declared_units, resolve_path
 
 INPUT_SUFFIXES = (".bvh", ".bvh.gz")
 OUTPUT_SUFFIXES = (".bvh", ".bvh.gz", ".glb", ".json", ".npz")
@@ -31,10 +31,11 @@ def _suffix(path: Path, allowed: tuple[str, ...]) -> str:
 
 def load_motion(path: str | Path, *, units: str | None = None, limits: BvhLimits | None = None) -> Motion:
     """Read a motion file (BVH, optionally gzip-compressed; ``sample:NAME`` for a bundled sample);
-    see :func:`motion.bvh.read_bvh`."""
+    see :func:`motion.bvh.read_bvh`. ``units`` None: a bundled sample in the unit the catalogue
+    declares (:data:`motion.samples.SAMPLE_UNITS`), any other file in its guessed unit."""
     p = resolve_path(path)
     _suffix(p, INPUT_SUFFIXES)
-    return read_bvh(p, units=units, limits=limits)
+    return read_bvh(p, units=units if units is not None else declared_units(p), limits=limits)
 
 
 def save_motion(

@@ -37,6 +37,9 @@ _POW10 = 10.0 ** np.arange(9)
 @lru_cache(maxsize=1)
 def _kernel() -> Callable[..., int]:
     """The compiled scanner (numba is imported and the kernel loaded on first use)."""
+    from .jitcache import configure
+
+    configure()
     from numba import njit
 
     @njit(cache=True, nogil=True)

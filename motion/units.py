@@ -57,13 +57,29 @@ def vertical_extent(points: npt.NDArray[np.float64]) -> float:
     return float(y.max() - y.min()) if y.size else 0.0
 
 
-def standing_height(frame_points: npt.NDArray[np.float64]) -> float:
+UP_AXIS_RATIO = 1.2
+""":func:`up_axis` says Z when the points' median extent along Z is this many times that along Y."""
+
+
+def up_axis(frame_points: npt.NDArray[np.float64]) -> int:
+    """The vertical axis of a motion's points ``(F, P, 3)``: 1 (Y, the BVH custom and Segue's frame)
+    or 2 (Z, e.g. Unreal's convention), from the median over frames of each axis' extent: a body
+    is taller than it is wide or deep, so Z is up when its extent is ``UP_AXIS_RATIO`` times Y's
+    (a clip that never stands, e.g. crawling in a Y-up file, can fool it: declare it then)."""
+    fp = np.asarray(frame_points)
+    if fp.size == 0:
+        return 1
+    ext = np.median(fp.max(axis=-2) - fp.min(axis=-2), axis=0)  # (3,)
+    return 2 if ext[2] > UP_AXIS_RATIO * ext[1] else 1
+
+
+def standing_height(frame_points: npt.NDArray[np.float64], axis: int = 1) -> float:
     """Standing height in the points' unit: the median over frames of the vertical extent.
 
     Parameters
     ----------
     frame_points:
-        ``(F, P, 3)`` joint and End Site positions over a motion, Y up.
+        ``(F, P, 3)`` joint and End Site positions over a motion, ``axis`` up (1: Y, 2: Z).
 
     Rest poses are not used: many files (e.g. Bandai-Namco) define them lying down. The median
     is robust to a few crouching, jumping or arms-up frames; a clip that never stands upright
@@ -72,7 +88,7 @@ def standing_height(frame_points: npt.NDArray[np.float64]) -> float:
     fp = np.asarray(frame_points)
     if fp.size == 0:
         return 0.0
-    per_frame = fp[..., 1].max(axis=-1) - fp[..., 1].min(axis=-1)
+    per_frame = fp[..., axis].max(axis=-1) - fp[..., axis].min(axis=-1)
     return float(np.median(per_frame))
 
 

@@ -151,6 +151,11 @@ class EndConstraint(Strict):
     weight: float = Field(default=1.0, ge=0, le=1000)
 
 
+DEFAULT_PASSES = 80
+"""Coarse-to-fine passes of an annotation search by default (``bench/convergence.py``)."""
+MAX_PASSES = 10_000
+
+
 class AnnotationRequest(JobRequestBase):
     """A motion following a do / don't / don't-care label timeline.
 
@@ -175,6 +180,13 @@ class AnnotationRequest(JobRequestBase):
     )
     pool_size: int = Field(
         default=20, ge=1, le=100, description="best motions kept per level (end constraint)"
+    )
+    passes: int = Field(
+        default=DEFAULT_PASSES,
+        ge=1,
+        le=MAX_PASSES,
+        description="the search's work: coarse-to-fine DP passes, each from a fresh random active set "
+        "(the best is kept); with a seed the same passes give the same motion on any machine and load",
     )
     confidence: bool = Field(
         default=True,

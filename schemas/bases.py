@@ -25,7 +25,16 @@ class JobRequestBase(Strict):
     database: str | None = Field(
         default=None, description="database id (API); the CLI's --db directory supplies it otherwise"
     )
-    budget_s: float = Field(default=10.0, gt=0, le=3600, description="anytime search budget, seconds")
+    budget_s: float = Field(
+        default=10.0,
+        gt=0,
+        le=3600,
+        description="safety cap on the search's time, seconds: every search is bounded by work the "
+        "request sets (graph 'rounds', annotations 'passes', control stages, rhythm one pass), so a "
+        "request and seed give the same answer on any machine; when this cap cuts the work short, the "
+        '\'done\' event and the report say "stopped": "budget" (the answer may differ from an '
+        "unhurried run's)",
+    )
     seed: int = Field(default=0, ge=0, le=2**32 - 1)
     inputs: dict[str, str] = Field(
         default_factory=dict,

@@ -30,8 +30,11 @@ class JobEvent(BaseModel):
     "terms", "elapsed_ms", "result", "ok", "reasons"}`` (a new best: scores strictly decrease; lower
     is better; ``ok``/``reasons`` from the result's quality report); ``alternative`` the same for
     a result that is not a new best (e.g. the graph engine's other local minima);
-    ``done``/``cancelled`` ``{"result", "ok", "reasons"}`` (the best result, or null); ``failed``
-    ``{"error": {"code", "message"}}``.
+    ``done``/``cancelled`` ``{"result", "ok", "reasons", "stopped", "stopped_reason"}`` (the best
+    result, or null; ``stopped``: ``"work"`` when the search did the work the request asked for,
+    ``"budget"`` when the ``budget_s`` cap cut it short (the answer may differ from an unhurried
+    run's), ``"cancelled"``, or ``"time_limit"`` when the supervisor stopped a job that overran);
+    ``failed`` ``{"error": {"code", "message"}}``.
     """
 
     id: int = Field(ge=1)

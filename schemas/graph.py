@@ -152,6 +152,11 @@ class GraphWeights(Strict):
     shared: float = Field(default=1.0, ge=0, description="constraints between characters")
 
 
+DEFAULT_ROUNDS = 15
+"""Search rounds of a graph request by default (``bench/convergence.py``)."""
+MAX_ROUNDS = 100_000
+
+
 class GraphRequest(JobRequestBase):
     """A motion of a given length meeting constraints, found by randomized search of the graph."""
 
@@ -161,12 +166,12 @@ class GraphRequest(JobRequestBase):
     constraints: list[Constraint] = Field(default_factory=list, max_length=1000)
     alternatives: int = Field(default=1, ge=1, le=20, description="distinct local minima to return")
     rounds: int | None = Field(
-        default=None,
+        default=DEFAULT_ROUNDS,
         ge=0,
-        le=100_000,
-        description="stop after this many search rounds (the search also stops when it converges); "
-        "with a seed, a search that ends by rounds or convergence within its budget returns the same "
-        "motion on every machine and from every face (CLI, HTTP)",
+        le=MAX_ROUNDS,
+        description="the search's work: at most this many rounds (it also stops when it converges, "
+        "25 rounds without a better path; null: only then); with a seed the same request returns the "
+        "same motion on every machine and load, from every face (CLI, HTTP, workers)",
     )
     characters: list[GraphCharacter] | None = Field(
         default=None,

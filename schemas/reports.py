@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, Field
 
@@ -44,3 +44,11 @@ class Report(BaseModel):
     fps: float
     provenance: list[ProvenanceEntry]
     annotations: dict[str, Any] = Field(default_factory=dict)
+    stopped: Literal["work", "budget", "cancelled"] | None = Field(
+        default=None,
+        description="why the search ended, on the job's final result (null on intermediate results): "
+        "'work' (it did the work the request asked for: the same request and seed give the same "
+        "answer anywhere), 'budget' (the budget_s cap cut it short: the answer may differ from an "
+        "unhurried run's) or 'cancelled'",
+    )
+    stopped_reason: str | None = Field(default=None, description="what 'stopped' means for the answer")

@@ -151,4 +151,13 @@ class MovementGraph(Strict):
     groups: list[GraphGroup]
     transitions: list[GraphTransition]
     strongly_connected: bool = Field(description="every group can be reached from every other")
+    start_only_groups: list[int] = Field(
+        default_factory=list,
+        description="groups a dance is in only by starting there (or in their own strongly connected "
+        "part): no other group leads to them",
+    )
+    unreachable_groups: list[int] = Field(
+        default_factory=list,
+        description="groups no dance is ever in (not a start group, and no group leads to them)",
+    )
     derived_from: DerivedFrom | None = None

@@ -2,12 +2,14 @@
 
 Commands::
 
-    segue inspect FILE [--json] [--units U]       frames, fps, joints, height and units guess
+    segue inspect FILE [--json] [--units U] [--up A]  frames, fps, joints, height, units, up axis (BVH, GLB)
     segue beats FILE [--json] [--joints A,B] [--positions] [--tempo LO:HI]   motion beats (Kim et al. 2003)
     segue beats SONG.wav [--json] [--tempo-bpm X]      music beats of a recording (WAV, FLAC, Ogg, MP3)
     segue convert IN OUT [--fps N] [--target T]   BVH -> .bvh/.bvh.gz/.glb/.json/.npz
     segue retarget MOTION --to CHARACTER --out OUT [--map MAP.json] [--rest first|zero]
-                                                  the motion on another character (BVH or GLB/glTF skin)
+           [--target T] [--root-motion root|hips|none] [--animation-only] [--events contacts]
+                                                  the motion on another character (BVH or GLB/glTF skin;
+                                                  a GLB character's own file with the animation added)
     segue samples                                 list the bundled samples (clips and a MIDI song)
     segue demo [--out DIR]                        convert a bundled clip and dance it (rhythm)
     segue demo ENGINE [--out DIR]                 one engine end to end on bundled clips (service.demos)
@@ -15,7 +17,8 @@ Commands::
     segue synth REQUEST.json --db DIR --out OUT   run a job in-process (same JSON as POST /v1/jobs)
     segue graph DIR [--json]                      a rhythm database's movement transition graph
     segue graph-edit DIR EDITS.json --out DIR2    derive a database with an edited movement graph
-    segue serve [--host H] [--port P] [--redis URL]   the HTTP/WebSocket API (+ embedded workers)
+    segue serve [--host H] [--port P] [--redis URL] [--import DIR]   the HTTP/WebSocket API (+ embedded
+                                                  workers), serving database folders segue build wrote
     segue worker --redis URL                      a Redis job worker
 
 ``FILE``/``IN`` may be ``sample:NAME`` for a bundled sample (see ``segue samples``), as may clip and
@@ -62,24 +65,44 @@ def _limits(args: argparse.Namespace) -> BvhLimits:
     return BvhLimits(max_joints=args.max_joints, max_frames=args.max_frames)
 
 
-def inspect_summary(path: Path, motion: Motion, declared: str | None) -> dict[str, Any]:
-    """The facts ``segue inspect`` reports, JSON-ready."""
-    from motion.bvh import detect_units
+def inspect_summary(
+    path: Path,
+    motion: Motion,
+    declared: str | None,
+    up: str = "auto",
+    timing: tuple[int, float] | None = None,
+) -> dict[str, Any]:
+    """The facts ``segue inspect`` reports, JSON-ready. ``declared``: the unit the user gave (else
+    the sample catalogue's, :func:`motion.samples.declared_units`, else guessed); ``up``: ``y``,
+    ``z`` or ``auto`` (detected: :func:`motion.units.up_axis`); ``timing``: ``(frames, fps)`` of a
+    glTF file's animation (``motion`` is then its one-frame bind pose)."""
+    from motion.bvh import detect_units, detect_up_axis
+    from motion.samples import declared_units
+    from motion.units import METRES_PER_UNIT
 
-    guess = detect_units(motion)
-    mpu = motion.metres_per_unit
+    axis = {"y": 1, "z": 2}.get(up) or detect_up_axis(motion)
+    guess = detect_units(motion, axis)
+    frames, fps = timing if timing is not None else (motion.num_frames, motion.fps)
+    source = "declared" if declared else "sample" if declared_units(path) else "guess"
+    if path.name.lower().endswith((".glb", ".gltf")):
+        source = "gltf"  # metres, by glTF's rule
+    # a guessed unit comes from the height along the up axis (the reader guessed it along Y)
+    units = guess.units if source == "guess" else motion.units
+    mpu = METRES_PER_UNIT.get(units, motion.metres_per_unit)
     return {
         "file": str(path),
         "name": motion.name,
-        "frames": motion.num_frames,
-        "fps": motion.fps,
-        "duration_s": round(motion.duration_s, 6),
+        "frames": frames,
+        "fps": fps,
+        "duration_s": round((frames - 1) / fps if timing is not None and fps > 0 else motion.duration_s, 6),
         "joints": list(motion.skeleton.names),
         "parents": [int(p) for p in motion.skeleton.parents],
         "channels": motion.skeleton.num_channels,
         "end_sites": int(motion.skeleton.end_site_parents.size),
-        "units": motion.units,
-        "units_source": "declared" if declared else "guess",
+        "units": units,
+        "units_source": source,
+        "up": "yz"[axis - 1],
+        "up_source": "declared" if up != "auto" else "detected",
         "height": round(guess.height, 6),
         "height_m": round(guess.height * mpu, 4),
         "units_guess": {
@@ -90,12 +113,34 @@ def inspect_summary(path: Path, motion: Motion, declared: str | None) -> dict[st
     }
 
 
+UNITS_SOURCES = {
+    "declared": "declared",
+    "sample": "declared by the sample catalogue",
+    "gltf": "glTF files are in metres",
+}
+
+
 def cmd_inspect(args: argparse.Namespace) -> int:
+    from motion import MotionError
     from motion.io import load_motion
+    from motion.retarget.character import GLTF_SUFFIXES, gltf_character, gltf_timing
 
     path = _resolve(args.file)
-    motion = load_motion(path, units=args.units, limits=_limits(args))
-    info = inspect_summary(path, motion, args.units)
+    timing = None
+    if path.name.lower().endswith(GLTF_SUFFIXES):
+        if args.units not in (None, "m"):
+            raise MotionError(
+                f"{path}: a glTF file is in metres (glTF's rule); --units {args.units} does not apply"
+            )
+        try:
+            raw = path.read_bytes()
+        except OSError as exc:
+            raise MotionError(f"{path}: {exc.strerror or exc}") from None
+        motion = gltf_character(raw, name=path.name.rsplit(".", 1)[0])  # the skin's bind pose
+        timing = gltf_timing(raw)
+    else:
+        motion = load_motion(path, units=args.units, limits=_limits(args))
+    info = inspect_summary(path, motion, args.units, args.up, timing)
     if args.json:
         print(json.dumps(info))
         return 0
@@ -103,13 +148,20 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     shown = ", ".join(joints[:12]) + (f", ... (+{len(joints) - 12})" if len(joints) > 12 else "")
     guess = info["units_guess"]
     print(f"{path}")
-    print(f"  frames     {info['frames']} at {info['fps']:g} fps ({info['duration_s']:.2f} s)")
+    if timing is None and path.name.lower().endswith(GLTF_SUFFIXES):
+        print("  frames     none (no animation): the skin's bind pose")
+    else:
+        print(f"  frames     {info['frames']} at {info['fps']:g} fps ({info['duration_s']:.2f} s)")
     print(f"  joints     {len(joints)}: {shown}")
     print(f"  channels   {info['channels']}, end sites {info['end_sites']}")
-    print(f"  height     {info['height']:.4g} file units = {info['height_m']:.2f} m in {info['units']}")
+    where = " (the bind pose)" if timing is not None or info["units_source"] == "gltf" else ""
+    print(
+        f"  height     {info['height']:.4g} file units = {info['height_m']:.2f} m in {info['units']}{where}"
+    )
     note = "" if guess["plausible"] else " (implausible: declare --units)"
-    src = "declared" if args.units else f"guessed from height{note}"
+    src = UNITS_SOURCES.get(info["units_source"], f"guessed from height{note}")
     print(f"  units      {info['units']} ({src})")
+    print(f"  up axis    {info['up'].upper()} ({info['up_source']})")
     return 0
 
 
@@ -136,7 +188,8 @@ def _beats_audio(path: Path, args: argparse.Namespace) -> int:
     print(f"{path}")
     beats = info["beats_s"]
     print(f"  duration   {info['duration_s']:.2f} s")
-    print(f"  tempo      {info['tempo_bpm']:.1f} bpm")
+    sure = "" if info["tempo_confidence"] is None else f" (confidence {info['tempo_confidence']:.2f})"
+    print(f"  tempo      {info['tempo_bpm']:.1f} bpm{sure}")
     down = "none found" if info["downbeat_s"] is None else f"first at {info['downbeat_s']:.3f} s"
     print(f"  beats      {len(beats)}, downbeat {down}")
     shown = ", ".join(f"{t:.3f}" for t in beats[:16])
@@ -184,15 +237,30 @@ def cmd_beats(args: argparse.Namespace) -> int:
     return 0
 
 
+def _reference_note(dropped: int) -> list[str]:
+    """What to tell about the reference-pose frames dropped from a motion (:mod:`motion.refpose`)."""
+    if not dropped:
+        return []
+    s = "s" if dropped > 1 else ""
+    return [
+        f"dropped the first {dropped} frame{s} "
+        "(a reference pose and the blend out of it; --keep-reference keeps them)"
+    ]
+
+
 def cmd_convert(args: argparse.Namespace) -> int:
     from motion import MotionError
     from motion.export.events import parse_kinds
     from motion.ground import add_ground_root
     from motion.io import load_motion, save_motion
+    from motion.refpose import without_reference_lead
     from motion.resample import resample
 
     src = _resolve(args.input)
     motion = load_motion(src, units=args.in_units, limits=_limits(args))
+    dropped = 0
+    if not args.frames and not args.keep_reference:
+        motion, dropped = without_reference_lead(motion)
     if args.frames:
         start, _, stop = args.frames.partition(":")
         try:
@@ -210,7 +278,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     notes = save_motion(
         motion, args.output, target=args.target, units=args.units, in_place=args.in_place, events=events
     )
-    for note in notes:
+    for note in _reference_note(dropped) + notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
         print(
@@ -222,9 +290,14 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 def cmd_retarget(args: argparse.Namespace) -> int:
     from motion import MotionError
+    from motion.export.bind import bound_glb
+    from motion.export.events import contact_events, parse_kinds
+    from motion.export.glb import write_glb
     from motion.io import load_motion, save_motion
+    from motion.refpose import without_reference_lead
     from motion.retarget import correspond, retarget
-    from motion.retarget.character import load_character
+    from motion.retarget.character import GLTF_SUFFIXES, load_character
+    from motion.retarget.rootmotion import default_root_motion
     from motion.units import METRES_PER_UNIT
 
     name_map = None
@@ -237,22 +310,55 @@ def cmd_retarget(args: argparse.Namespace) -> int:
             raise MotionError(
                 f"{args.map}: the joint map must be a JSON object {{source joint: character joint}}"
             )
+    to = _resolve(args.to)
+    gltf_character = to.name.lower().endswith(GLTF_SUFFIXES)
+    glb_out = args.out.lower().endswith(".glb")
+    if args.animation_only and not (gltf_character and glb_out):
+        raise MotionError("--animation-only is for a glTF/GLB character written to a .glb")
+    kinds = parse_kinds(args.events) if args.events else ()
+    if set(kinds) - {"contacts"}:
+        raise MotionError("a retargeted motion has contact events only; beats and labels come with results")
     motion = load_motion(_resolve(args.motion), units=args.in_units, limits=_limits(args))
-    character = load_character(_resolve(args.to), rest=args.rest, limits=_limits(args))
+    dropped = 0
+    if not args.keep_reference:
+        motion, dropped = without_reference_lead(motion)
+    character = load_character(to, rest=args.rest, limits=_limits(args))
     t0 = time.perf_counter()
-    out = retarget(motion, character, name_map=name_map, plant=not args.no_plant)
-    # the character's own units, exactly (GLB is metres by glTF's rule)
-    keep = out.units in METRES_PER_UNIT and not args.out.lower().endswith(".glb")
-    notes = save_motion(out, args.out, units=out.units if keep else None)
-    for note in notes:
+    corr = correspond(motion.skeleton, character.skeleton, name_map)
+    mode = args.root_motion or default_root_motion(args.target, corr.target_roles["Hips"])
+    out = retarget(motion, character, name_map=name_map, plant=not args.no_plant, root_motion=mode)
+    notes: list[str] = []
+    if glb_out:
+        events = contact_events(out) if kinds else None
+        if gltf_character:  # the character's own file, with the animation added
+            data = bound_glb(
+                to.read_bytes(), out, animation_only=args.animation_only, events=events, base_dir=to.parent
+            )
+            try:
+                Path(args.out).write_bytes(data)
+            except OSError as exc:
+                raise MotionError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+        else:  # exactly the BVH character's hierarchy (no ground joint added)
+            write_glb(out, args.out, ground_root=False, events=events)
+    else:
+        # the character's own units, exactly
+        keep = out.units in METRES_PER_UNIT
+        notes = save_motion(out, args.out, units=out.units if keep else None, events=kinds)
+    for note in _reference_note(dropped) + notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
-        corr = correspond(motion.skeleton, character.skeleton, name_map)
+        root = (
+            character.skeleton.names[0]
+            if mode in ("root", "none")
+            else character.skeleton.names[corr.target_roles["Hips"]]
+        )
         print(
             f"wrote {args.out}: {out.num_frames} frames at {out.fps:g} fps on {character.name or args.to} "
             f"({out.num_joints} joints, {len(corr.pairs)} driven; "
             f"{corr.source_preset} -> {corr.target_preset}, "
-            f"units {out.units}; {time.perf_counter() - t0:.2f} s)"
+            f"units {out.units}; root motion {mode}"
+            + ("" if mode == "none" else f" on {root!r}")
+            + f"; {time.perf_counter() - t0:.2f} s)"
         )
     return 0
 
@@ -370,6 +476,8 @@ def cmd_graph(args: argparse.Namespace) -> int:
         f"{len(graph.transitions)} transitions, {graph.beats_per_movement} beats per movement"
         + ("" if graph.strongly_connected else " (NOT strongly connected)")
     )
+    if graph.start_only_groups or graph.unreachable_groups:
+        print(f"start-only groups {graph.start_only_groups}, unreachable groups {graph.unreachable_groups}")
     for g in graph.groups:
         r = g.representative
         mirror = " mirrored" if r.mirrored else ""
@@ -437,8 +545,31 @@ def cmd_serve(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
+    if args.imports:
+        import_databases(settings, [Path(d) for d in args.imports])
+    if not args.no_warm and not settings.redis_url:
+        start_warming()  # the embedded workers run jobs: compile their kernels off the request path
     uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level)
     return 0
+
+
+def import_databases(settings: Any, folders: list[Path]) -> None:
+    """``segue serve --import DIR``: put databases ``segue build`` wrote into the server's store, under
+    the id the API gives the same clips and spec, held by every principal (the tokenless user and
+    each ``SEGUE_API_TOKENS`` name). Raises ``workers.imports.ImportFailure`` naming a bad folder."""
+    from service.deps import LOCAL, token_table
+    from workers.imports import import_database_dir
+    from workers.store import Store
+
+    store = Store(settings.data_dir)
+    owners = [LOCAL, *(name for name, _ in token_table(settings))]
+    for folder in folders:
+        info, new = import_database_dir(store, folder, owners)
+        done = "imported" if new else "already held"
+        print(
+            f"segue: {done} {info.kind} database {info.id[:12]} ({len(info.clips)} clips) from {folder}",
+            file=sys.stderr,
+        )
 
 
 def is_loopback(host: str) -> bool:
@@ -457,16 +588,69 @@ def cmd_worker(args: argparse.Namespace) -> int:
     from workers.redis_worker import serve
     from workers.settings import get_settings, with_options
 
-    return serve(
-        with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name)
+    settings = with_options(get_settings(), redis_url=args.redis, data_dir=args.data, worker_name=args.name)
+    if not settings.redis_url:
+        print(
+            "segue: error: a worker needs a Redis URL: give --redis URL or set SEGUE_REDIS_URL",
+            file=sys.stderr,
+        )
+        return 2
+    return serve(settings, warm=not args.no_warm)
+
+
+def cmd_warm(args: argparse.Namespace) -> int:
+    from engines.registry import warm_compiled
+    from motion.jitcache import configure
+
+    print(f"numba cache: {configure()}")
+    warm_compiled(print, force=args.force)
+    return 0
+
+
+def start_warming() -> None:
+    """``segue warm`` in a background process (niced, output to this terminal): the compiled
+    kernels are ready before the first control job, without holding this process's GIL."""
+    import os
+    import subprocess
+
+    def lower_priority() -> None:
+        os.nice(5)
+
+    subprocess.Popen(
+        [sys.executable, "-m", "service.cli", "warm"],
+        stdout=sys.stderr,
+        stdin=subprocess.DEVNULL,
+        preexec_fn=lower_priority if hasattr(os, "nice") else None,
     )
+
+
+class _Version(argparse.Action):
+    """``--version``: the installed distribution's version, looked up only when asked."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: object) -> None:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            text = version("segue")
+        except PackageNotFoundError:
+            text = "unknown (not installed; run pip install -e .)"
+        print(f"segue {text}")
+        parser.exit()
 
 
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="segue", description="Segue: motion synthesis by example from motion capture."
     )
+    ap.add_argument("--version", action=_Version, help="print the installed version of Segue and exit")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, help: str, description: str | None = None) -> argparse.ArgumentParser:
+        """A subcommand whose ``--help`` opens with a description (its one-line ``help`` unless given)."""
+        return sub.add_parser(name, help=help, description=description or help[0].upper() + help[1:] + ".")
 
     def limits(p: argparse.ArgumentParser) -> None:
         p.add_argument(
@@ -477,14 +661,20 @@ def build_parser() -> argparse.ArgumentParser:
     from .demos import DEMOS
 
     units = sorted(UNITS)
-    p = sub.add_parser("inspect", help="frames, fps, joints, height and units guess of a BVH file")
-    p.add_argument("file", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
+    p = command("inspect", help="frames, fps, joints, height, units and up axis of a BVH or glTF/GLB file")
+    p.add_argument("file", help="BVH file (.bvh, .bvh.gz), glTF file (.glb, .gltf) or sample:NAME")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--units", choices=units, help="declare the file's length unit instead of guessing")
+    p.add_argument(
+        "--up",
+        choices=("auto", "y", "z"),
+        default="auto",
+        help="the file's vertical axis, for the height (default: detected; Segue's Unreal BVH is Z up)",
+    )
     limits(p)
     p.set_defaults(func=cmd_inspect)
 
-    p = sub.add_parser(
+    p = command(
         "beats",
         help="motion beats of a BVH file (Kim et al. 2003) or music beats of a recording (WAV FLAC Ogg MP3)",
     )
@@ -507,7 +697,7 @@ def build_parser() -> argparse.ArgumentParser:
     limits(p)
     p.set_defaults(func=cmd_beats)
 
-    p = sub.add_parser("convert", help="convert a BVH file by output extension: " + " ".join(OUTPUT_SUFFIXES))
+    p = command("convert", help="convert a BVH file by output extension: " + " ".join(OUTPUT_SUFFIXES))
     p.add_argument("input", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument("output", help="output file: " + ", ".join(OUTPUT_SUFFIXES))
     p.add_argument("--fps", type=float, help="resample to this frame rate (slerp rotations)")
@@ -531,11 +721,17 @@ def build_parser() -> argparse.ArgumentParser:
         help=".glb: the body stays over the origin; the root motion stays on the ground joint",
     )
     p.add_argument("--events", help="contacts: foot-contact events in .glb extras / .json events")
+    p.add_argument(
+        "--keep-reference",
+        action="store_true",
+        help="keep the reference-pose frames a clip starts with (CMU-Daz: a T-pose blending into "
+        "the capture; dropped by default, and never with --frames)",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
     p.set_defaults(func=cmd_convert)
 
-    p = sub.add_parser("retarget", help="put a motion on another character (BVH or GLB/glTF skin)")
+    p = command("retarget", help="put a motion on another character (BVH or GLB/glTF skin)")
     p.add_argument("motion", help="the motion: BVH file (.bvh, .bvh.gz) or sample:NAME")
     p.add_argument(
         "--to", required=True, help="the character: BVH (.bvh, .bvh.gz, sample:NAME) or .glb/.gltf skin"
@@ -552,14 +748,43 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--in-units", choices=units, help="declare the motion's length unit instead of guessing")
     p.add_argument("--no-plant", action="store_true", help="skip the leg IK that keeps planted feet planted")
+    p.add_argument(
+        "--target",
+        default="gltf",
+        choices=sorted((*TARGETS, "blender")),
+        help="the engine whose root-motion convention to follow: unreal, godot, blender, gltf on the "
+        "root bone at the floor; unity on the hips (the file keeps the character's axes and units)",
+    )
+    p.add_argument(
+        "--root-motion",
+        choices=("root", "hips", "none"),
+        help="where the root motion goes: the bone above the hips (root), the hips, or none (in place); "
+        "default: the --target's convention",
+    )
+    p.add_argument(
+        "--animation-only",
+        action="store_true",
+        help="glTF character to .glb: the skeleton and animation only (binds by bone names), no mesh",
+    )
+    p.add_argument("--events", help="contacts: foot-contact events in .glb extras / .json events")
+    p.add_argument(
+        "--keep-reference",
+        action="store_true",
+        help="keep the reference-pose frames the motion starts with (dropped by default)",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
     p.set_defaults(func=cmd_retarget)
 
-    p = sub.add_parser("samples", help="list the bundled sample clips")
+    p = command(
+        "samples",
+        help="list the bundled sample clips",
+        description="List the bundled samples (motion clips and a MIDI song) as sample:NAME and their paths; "
+        "every FILE argument, spec and request accepts sample:NAME.",
+    )
     p.set_defaults(func=cmd_samples)
 
-    p = sub.add_parser(
+    p = command(
         "demo",
         help="without ENGINE: convert a bundled salsa clip to GLB, JSON and NPZ and dance it to 120 BPM; "
         "with ENGINE: that engine end to end on bundled clips, into DIR/ENGINE/",
@@ -575,29 +800,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-synth", action="store_true", help="without ENGINE: only convert the clip (no dance)")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("build", help="build a database from a spec file (clip paths relative to it)")
+    p = command("build", help="build a database from a spec file (clip paths relative to it)")
     p.add_argument("spec", help='database spec JSON, e.g. {"kind": "clips", "clips": [{"bvh": "a.bvh"}]}')
     p.add_argument("--out", required=True, help="database directory to write")
     p.add_argument("--events", help="also write the job's events as JSON lines here")
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     p.set_defaults(func=cmd_build)
 
-    p = sub.add_parser("synth", help="run a synthesis request against a database directory")
+    p = command("synth", help="run a synthesis request against a database directory")
     p.add_argument("request", help='job request JSON, e.g. {"engine": "clip", "clip": "a"}')
     p.add_argument("--db", required=True, help="database directory from segue build")
     p.add_argument("--out", required=True, help="output motion: " + ", ".join(OUTPUT_SUFFIXES))
     p.add_argument("--report", help="write the report JSON here")
     p.add_argument("--events", help="write the events as JSON lines here")
-    p.add_argument("--budget", type=float, help="search budget in seconds (overrides the request's budget_s)")
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument(
+        "--budget",
+        type=float,
+        help="time cap of the search, seconds (overrides the request's budget_s; the request sets the work)",
+    )
+    p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     p.set_defaults(func=cmd_synth)
 
-    p = sub.add_parser("graph", help="a rhythm database's movement transition graph (groups, transitions)")
+    p = command("graph", help="a rhythm database's movement transition graph (groups, transitions)")
     p.add_argument("db", help="rhythm database directory from segue build (or segue graph-edit)")
     p.add_argument("--json", action="store_true", help="print the graph as JSON (GET /v1/databases/ID/graph)")
     p.set_defaults(func=cmd_graph)
 
-    p = sub.add_parser(
+    p = command(
         "graph-edit", help="derive a rhythm database whose movement graph is edited (connect, cut, weight)"
     )
     p.add_argument("db", help="rhythm database directory")
@@ -605,23 +834,60 @@ def build_parser() -> argparse.ArgumentParser:
         "edits", help='edits JSON: {"edits": [{"op": "cut", "source": 0, "target": 3}, ...]} or the list'
     )
     p.add_argument("--out", required=True, help="derived database directory to write")
-    p.add_argument("--quiet", "-q", action="store_true")
+    p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     p.set_defaults(func=cmd_graph_edit)
 
-    p = sub.add_parser("serve", help="run the HTTP/WebSocket API (embedded workers unless --redis)")
-    p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=8000)
+    p = command("serve", help="run the HTTP/WebSocket API (embedded workers unless --redis)")
+    p.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to listen on (default 127.0.0.1; another needs SEGUE_API_TOKENS)",
+    )
+    p.add_argument("--port", type=int, default=8000, help="TCP port to listen on (default 8000)")
     p.add_argument("--data", help="data directory (default $SEGUE_DATA_DIR or ./segue-data)")
     p.add_argument("--redis", help="Redis URL: queue jobs for `segue worker` processes instead")
     p.add_argument("--workers", type=int, help="embedded worker processes (default 2)")
-    p.add_argument("--log-level", default="info")
+    p.add_argument(
+        "--import",
+        dest="imports",
+        action="append",
+        metavar="DIR",
+        help="serve a database folder that `segue build` wrote (under the same id the API gives it); "
+        "repeat for more",
+    )
+    p.add_argument(
+        "--log-level",
+        default="info",
+        choices=("critical", "error", "warning", "info", "debug", "trace"),
+        help="server log level (default info)",
+    )
+    p.add_argument(
+        "--no-warm", action="store_true", help="do not compile the control kernels in the background at start"
+    )
     p.set_defaults(func=cmd_serve)
 
-    p = sub.add_parser("worker", help="a job worker consuming the Redis queue")
-    p.add_argument("--redis", required=True, help="Redis URL, e.g. redis://127.0.0.1:6379/0")
+    p = command(
+        "worker",
+        help="a job worker consuming the Redis queue",
+        description="A job worker consuming the Redis queue that `segue serve --redis` feeds.",
+    )
+    p.add_argument(
+        "--redis", help="Redis URL, e.g. redis://127.0.0.1:6379/0 (default $SEGUE_REDIS_URL; one is needed)"
+    )
     p.add_argument("--data", help="data directory shared with the API (default $SEGUE_DATA_DIR)")
     p.add_argument("--name", help="worker name (default host-pid)")
+    p.add_argument(
+        "--no-warm", action="store_true", help="do not compile the control kernels before the first job"
+    )
     p.set_defaults(func=cmd_worker)
+
+    p = command(
+        "warm",
+        help="compile the control engine's kernels into numba's cache (~15 s of CPU once per install; "
+        "serve and worker do it at start)",
+    )
+    p.add_argument("--force", action="store_true", help="run the kernels even if this cache was warmed")
+    p.set_defaults(func=cmd_warm)
     return ap
 
 
@@ -643,10 +909,29 @@ def _user_error(exc: Exception) -> str | None:
         ("engines.registry", "UnavailableError"),
         ("engines.base", "EngineError"),
         ("workers.inputs", "InputError"),
+        ("workers.imports", "ImportFailure"),
     ):
         if module in mods:
             known.append(getattr(mods[module], name))
     return str(exc) if isinstance(exc, tuple(known)) else None
+
+
+SIGPIPE_STATUS = 128 + 13
+"""The exit status of a Unix tool whose reader went away (``yes | head``: SIGPIPE)."""
+
+
+def _reader_gone() -> int:
+    """Stdout's reader closed the pipe (``segue graph DB | head -4``): end quietly, as Unix tools do.
+    Stdout is pointed at /dev/null so that the interpreter's final flush does not fail again (the
+    recipe of the Python docs, "Note on SIGPIPE")."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # stdout is not a file (an embedding program's stream)
+        pass
+    return SIGPIPE_STATUS
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -656,7 +941,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     tune_process()
     try:
-        return int(args.func(args))
+        status = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe shows here, not at exit
+        return status
+    except BrokenPipeError:
+        return _reader_gone()
     except Exception as exc:
         message = _user_error(exc)
         if message is None:

@@ -91,9 +91,6 @@ class SegueClient:
         self.close()
 
     def _request(self, method: str, path: str, **kwargs: Any) -> httpx.Response:
-        if method != "GET" and not {"json", "content", "files", "data"} & set(kwargs):
-            # bodyless writes (cancel, delete) declare JSON, as the server requires
-            kwargs["headers"] = {"Content-Type": "application/json", **kwargs.get("headers", {})}
         response = self.http.request(method, path, **kwargs)
         if response.status_code >= 400:
             raise _error_from(response.status_code, response.content)
@@ -198,6 +195,11 @@ class SegueClient:
     def cancel(self, job_id: str) -> JobInfo:
         """Ask a job to stop (it ends ``cancelled`` with its best result so far)."""
         return JobInfo.model_validate(self._request("POST", f"/v1/jobs/{job_id}/cancel").json())
+
+    def delete_job(self, job_id: str) -> None:
+        """Delete a finished job with its events and results (:class:`SegueError` 409
+        ``job_not_finished`` while it is queued or running: cancel it first)."""
+        self._request("DELETE", f"/v1/jobs/{job_id}")
 
     def events(self, job_id: str, after: int = 0, reconnects: int = 3) -> Iterator[JobEvent]:
         """A job's events over the WebSocket, until the terminal one (``done``/``failed``/``cancelled``).

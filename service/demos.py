@@ -133,7 +133,6 @@ DEMOS: dict[str, Demo] = {
                 "frames": 240,
                 "seed": 1,
                 "alternatives": 3,
-                "budget_s": 2,
                 "constraints": [
                     {"type": "body", "frame": 0, "position": [0, 0], "heading_deg": 0},
                     {"type": "body", "frame": 239, "position": [1.0, 8.0], "heading_deg": 10},
@@ -166,7 +165,6 @@ DEMOS: dict[str, Demo] = {
                 "engine": "annotations",
                 "frames": 240,
                 "seed": 3,
-                "budget_s": 1.5,
                 "timeline": [
                     {"label": "walk", "start": 0, "end": 150, "value": 1},
                     {"label": "run", "start": 150, "end": 240, "value": 1},
@@ -227,7 +225,11 @@ def run_demo(name: str, out_root: Path, say: Say = print) -> DemoResult:
     t0 = time.perf_counter()
     info = build_to_dir(folder / "db.json", folder / "db", EventWriter("build"))
     build_s = time.perf_counter() - t0
-    say(f"  built a {info.kind} database: {len(info.clips)} clips, {info.frames} frames, {build_s:.1f} s")
+    article = "an" if info.kind[:1] in "aeiou" else "a"
+    say(
+        f"  built {article} {info.kind} database: {len(info.clips)} clips, {info.frames} frames, "
+        f"{build_s:.1f} s"
+    )
     _write_json(folder / "job.json", {**demo.request, "database": info.id})
     t0 = time.perf_counter()
     writer = EventWriter("synth")

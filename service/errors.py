@@ -13,7 +13,8 @@ exception                                  status  code
 ``engines.registry.UnavailableError``      422     ``unavailable``
 ``workers.backend.BackendUnavailable``     503     ``backend_unavailable`` (+ ``Retry-After``)
 :class:`ApiError`                          its own (413 ``too_large``, 409 ``database_not_ready``...)
-``HTTPException`` (routing: 404, 405)      its own ``http_<status>``
+``HTTPException`` (routing: 404)           its own ``http_<status>``
+``HTTPException`` (routing: 405)           405     ``method_not_allowed`` (+ ``Allow``: every method)
 anything else                              500     ``internal`` (a bug; logged)
 =========================================  ======  =====================
 """
@@ -28,6 +29,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 from engines.registry import UnavailableError
 from motion import MotionError
@@ -134,9 +136,35 @@ async def _unavailable(request: Request, exc: Exception) -> JSONResponse:
     return error_response(422, "unavailable", str(exc))
 
 
+HTTP_METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE")
+"""The methods a 405's ``Allow`` header may name (``OPTIONS`` only with CORS, which answers itself)."""
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """Every method some route answers on this request's path: each method is tried against every
+    route (Starlette's own 405 names only the methods of the first route whose path matches, e.g.
+    ``GET`` for ``/v1/jobs/{id}``, which ``DELETE`` serves too)."""
+    routes = request.app.router.routes
+    return [
+        method
+        for method in HTTP_METHODS
+        if any(route.matches({**request.scope, "method": method})[0] == Match.FULL for route in routes)
+    ]
+
+
 async def _http_error(request: Request, exc: Exception) -> JSONResponse:
     exc = cast(StarletteHTTPException, exc)
     headers = dict(exc.headers) if exc.headers else None
+    if exc.status_code == 405:
+        allowed = allowed_methods(request) or sorted((headers or {}).get("Allow", "").split(", "))
+        headers = {**(headers or {}), "Allow": ", ".join(allowed)}
+        return error_response(
+            405,
+            "method_not_allowed",
+            f"{request.method} is not allowed on {request.url.path}; allowed: {', '.join(allowed)}",
+            {"allowed": allowed},
+            headers=headers,
+        )
     return error_response(exc.status_code, f"http_{exc.status_code}", str(exc.detail), headers=headers)
 
 

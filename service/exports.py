@@ -10,6 +10,7 @@ from typing import Any
 from motion import ExportError, Motion
 from motion.bvh import bvh_text
 from motion.export.arrays import motion_json, npz_bytes
+from motion.export.bind import bound_glb
 from motion.export.events import contact_events_of, sorted_events
 from motion.export.events import result_events as annotation_events
 from motion.export.glb import glb_bytes
@@ -71,11 +72,16 @@ def export_bytes(
     units: ExportUnits | None = None,
     in_place: bool = False,
     events: Sequence[dict[str, Any]] | None = None,
+    rig: bytes | None = None,
+    ground_root: bool = True,
 ) -> bytes:
     """The file content of ``motion`` in ``fmt`` (raises :class:`motion.ExportError`).
 
     Lengths in the target's units (metres; centimetres for ``unreal``) unless ``units`` overrides
     them; GLB is metres. ``in_place`` is for GLB; ``events`` go into GLB extras and JSON frames.
+    ``rig``: the glTF/GLB file of the character the motion was retargeted onto: a GLB is that file
+    with the animation added (:func:`motion.export.bind.bound_glb`). ``ground_root=False`` keeps
+    a GLB's skeleton exactly the motion's (a retargeted BVH character's hierarchy).
     """
     unit = None if units is None else units.value
     if in_place and fmt != ResultFormat.glb:
@@ -85,7 +91,9 @@ def export_bytes(
     if fmt == ResultFormat.glb:
         if unit not in (None, "m"):
             raise ExportError(f"GLB is in metres (glTF 2.0); units={unit} does not apply to it")
-        return glb_bytes(motion, in_place=in_place, events=events)
+        if rig is not None:
+            return bound_glb(rig, motion, events=events)
+        return glb_bytes(motion, ground_root=ground_root, in_place=in_place, events=events)
     if fmt == ResultFormat.npz:
         return npz_bytes(motion, target.value, unit)
     if fmt == ResultFormat.json:

@@ -121,30 +121,41 @@ def json_body_doc(schema_ref: str, description: str) -> dict[str, Any]:
     }
 
 
-async def require_json_intent(request: Request) -> None:
-    """Bodyless writes (``DELETE``, ``POST .../cancel``) must declare ``Content-Type:
-    application/json`` too (415 otherwise): a web page cannot send that cross-site without a CORS
-    preflight, so a forged form or a stray request cannot delete or cancel anything."""
+def carries_body(request: Request) -> bool:
+    """True when the request declares a body (a non-zero ``Content-Length`` or any
+    ``Transfer-Encoding``)."""
+    length = request.headers.get("content-length", "").strip()
+    return bool(request.headers.get("transfer-encoding")) or (length not in ("", "0"))
+
+
+async def refuse_foreign_body(request: Request) -> None:
+    """Bodyless writes (``DELETE``, ``POST .../cancel``): a plain ``curl -X DELETE`` is fine, but a
+    body, if one is sent, must be ``Content-Type: application/json`` (415 otherwise), as on every
+    JSON route. Forgery is covered elsewhere: a web page cannot send a cross-origin ``DELETE``
+    without a CORS preflight, which only ``SEGUE_CORS_ORIGINS`` pass, and every ``POST`` from a
+    browser carries an ``Origin`` that :class:`~service.guard.HostOriginGuard` checks."""
+    if not carries_body(request):
+        return
     content_type = request.headers.get("content-type", "")
     if not is_json_type(content_type):
         raise ApiError(
             415,
             "unsupported_media_type",
-            f"send this {request.method} with 'Content-Type: application/json' (the server refuses writes "
-            f"that a web page could forge), not {content_type or 'no content type'!r}",
+            f"this {request.method} takes no body, or a JSON one sent as 'Content-Type: application/json', "
+            f"not {content_type or 'no content type'!r}",
             {"content_type": content_type},
         )
 
 
-JsonIntent = Depends(require_json_intent)
-"""Add to a bodyless write route: ``dependencies=[JsonIntent]``."""
+BodylessWrite = Depends(refuse_foreign_body)
+"""Add to a bodyless write route: ``dependencies=[BodylessWrite]``."""
 
 
 def delete_route(*statuses: int) -> dict[str, Any]:
-    """The options of a ``DELETE`` route: 204, the JSON-intent guard, and its error responses
+    """The options of a ``DELETE`` route: 204, the foreign-body guard, and its error responses
     (401, 404, 415, 422 and ``statuses``): ``@router.delete("/{id}", **delete_route())``."""
     return {
         "status_code": 204,
-        "dependencies": [JsonIntent],
+        "dependencies": [BodylessWrite],
         "responses": responses(*sorted({401, 404, 415, 422, *statuses})),
     }

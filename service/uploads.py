@@ -55,7 +55,8 @@ async def read_upload(request: Request, limit: int, name: str | None) -> tuple[s
 
     A ``multipart/form-data`` body must carry the file in a field named ``file`` (its file name is
     the clip's name unless ``name`` is given); any other body is the file itself and ``name`` is
-    required. Raises :class:`~service.errors.ApiError` (413 over ``limit``, 422 otherwise).
+    required. Raises :class:`~service.errors.ApiError` (413 over ``limit``, 422 ``empty_upload`` for no
+    bytes, 422 otherwise).
     """
     content_type = request.headers.get("content-type", "")
     if content_type.startswith("multipart/form-data"):
@@ -75,14 +76,26 @@ async def read_upload(request: Request, limit: int, name: str | None) -> tuple[s
         await upload.close()
         if len(data) > limit:
             raise too_large(limit)
-        return clean_name(name or upload.filename or ""), data
+        return clean_name(name or upload.filename or ""), _not_empty(data, name or upload.filename)
     if not name:
         raise ApiError(
             422,
             "invalid_request",
             "name the clip: POST the file as multipart field 'file', or the raw bytes with ?name=FILE.bvh",
         )
-    return clean_name(name), await read_body(request, limit)
+    return clean_name(name), _not_empty(await read_body(request, limit), name)
+
+
+def _not_empty(data: bytes, name: str | None) -> bytes:
+    """``data``, or 422 ``empty_upload`` when there are no bytes (nothing to store or parse)."""
+    if not data:
+        raise ApiError(
+            422,
+            "empty_upload",
+            f"the upload {clean_name(name or '')!r} is empty (0 bytes); send the file's contents "
+            "(curl: --data-binary @FILE, or -F file=@FILE)",
+        )
+    return data
 
 
 def stored(info_of: Callable[[str], Info], data: bytes) -> Info | None:

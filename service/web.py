@@ -11,12 +11,14 @@ from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.responses import FileResponse
+from pydantic import BaseModel, Field, JsonValue
 from starlette.staticfiles import StaticFiles
 from starlette.types import Receive, Scope, Send
 
 import web
 from motion.samples import SAMPLES, is_clip_sample, sample_path
 
+from .demos import DEMOS
 from .errors import ApiError
 
 WEB_DIR = Path(web.__file__).resolve().parent
@@ -41,6 +43,16 @@ class WebFiles(StaticFiles):
         await super().__call__(scope, receive, send)
 
 
+class DemoOffer(BaseModel):
+    """One ``segue demo ENGINE`` database as the page offers it on a first visit."""
+
+    name: str
+    title: str
+    tool: str = Field(description="the browser tool that uses it (Path, Partner, ...)")
+    spec: dict[str, JsonValue] = Field(description="the database spec (bundled samples as sample:NAME)")
+    request: dict[str, JsonValue] = Field(description="the demo's job request")
+
+
 def sample_files() -> dict[str, str]:
     """The bundled sample clips: file name (``*.bvh.gz``) -> sample name (:data:`motion.samples.SAMPLES`;
     the MIDI song is not a clip, and requests name it ``sample:song``)."""
@@ -48,13 +60,22 @@ def sample_files() -> dict[str, str]:
 
 
 def mount_web(app: FastAPI) -> None:
-    """Add ``/samples`` (list and files) and serve ``web/`` at ``/`` for every path no route
+    """Add ``/samples`` (list and files), ``/demos`` and serve ``web/`` at ``/`` for every path no route
     matches (``/`` is ``index.html``)."""
 
     @app.get("/samples", include_in_schema=False)
     async def list_samples() -> dict[str, str]:
         """The bundled samples the page offers: file name -> sample name (not part of the API)."""
         return sample_files()
+
+    @app.get("/demos", include_in_schema=False)
+    async def list_demos() -> list[DemoOffer]:
+        """The databases ``segue demo ENGINE`` builds (on bundled samples), for the page's one-click
+        "try it" on a first visit: name, title, the browser tool, the spec and the demo's request."""
+        return [
+            DemoOffer(name=d.name, title=d.title, tool=d.tool, spec=d.spec, request=d.request)
+            for d in DEMOS.values()
+        ]
 
     @app.get("/samples/{name}", include_in_schema=False)
     async def get_sample(name: str) -> FileResponse:

@@ -44,6 +44,14 @@ if [ ! -x /usr/bin/chromium ]; then apt_install chromium || echo "tests/run.sh: 
 if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
     apt_install nodejs npm || echo "tests/run.sh: nodejs/npm not installed" >&2
 fi
+# Blender and Godot round trips (tests/motion/test_engine_roundtrip.py, slow): only with CI=true,
+# measured here at 67 s for blender + godot3, 23 s for python3-numpy (Debian's Blender imports glTF
+# with it) and 16 s for xvfb (Godot 3.2's editor needs a display to import): about 2 minutes.
+if [ "${CI:-}" = "true" ]; then
+    if ! command -v blender >/dev/null 2>&1 || ! command -v godot3 >/dev/null 2>&1 || ! command -v xvfb-run >/dev/null 2>&1; then
+        apt_install blender python3-numpy godot3 xvfb xauth || echo "tests/run.sh: blender/godot3 not installed" >&2
+    fi
+fi
 GLTF_VALIDATOR_VERSION=2.0.0-dev.3.10  # keep in step with tests/motion/test_gltf_validator.py
 export SEGUE_GLTF_VALIDATOR_DIR="${SEGUE_GLTF_VALIDATOR_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/segue/gltf-validator}"
 VALIDATOR_PKG="$SEGUE_GLTF_VALIDATOR_DIR/node_modules/gltf-validator/package.json"

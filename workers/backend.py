@@ -22,6 +22,10 @@ class BackendUnavailable(RuntimeError):
     API answers 503 and keeps no record of the job."""
 
 
+class JobNotFinished(RuntimeError):
+    """A job cannot be deleted while it is queued or running (cancel it first)."""
+
+
 class JobBackend(Protocol):
     """Where jobs run. All methods are called from the API's event loop."""
 
@@ -44,6 +48,15 @@ class JobBackend(Protocol):
 
     def events(self, job_id: str, after: int = 0) -> AsyncIterator[JobEvent]:
         """The job's events with id > ``after``, waiting for new ones, ending after the terminal one."""
+
+    async def backlog(self, job_id: str, after: int = 0) -> list[JobEvent]:
+        """The job's events with id > ``after`` recorded so far, loaded from wherever they are kept
+        (the store's archive, Redis) when this process has not got them yet; never waits for new
+        ones. How long the loading takes never changes the answer (``GET .../events``)."""
+
+    async def delete(self, job_id: str) -> None:
+        """Remove a *finished* job everywhere (store, event log, Redis keys); raises
+        :class:`JobNotFinished` while it is queued or running, ``NotFoundError`` when unknown."""
 
     async def health(self) -> dict[str, Any]:
         """Backend facts for /healthz and /metrics (workers alive, queue depth...)."""
@@ -103,6 +116,10 @@ class EventHub:
 
     def has(self, job_id: str) -> bool:
         return job_id in self._logs
+
+    def forget(self, job_id: str) -> None:
+        """Drop a (deleted) job's log; readers that hold it finish with what it has."""
+        self._logs.pop(job_id, None)
 
     async def append(self, event: JobEvent) -> bool:
         """Add an event (ignored when its id is not the next one: duplicates from a replay)."""

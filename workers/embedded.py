@@ -32,7 +32,7 @@ from typing import Any
 from schemas import DatabaseStatus, EventType, JobEvent, JobInfo, JobStatus
 from schemas.jobs import JobKind
 
-from .backend import BackendUnavailable, EventHub
+from .backend import BackendUnavailable, EventHub, JobNotFinished
 from .budget import shortfall
 from .execute import apply_event
 from .settings import Settings
@@ -307,10 +307,23 @@ class EmbeddedBackend:
                     break
         return await self.status(job_id)
 
+    async def delete(self, job_id: str) -> None:
+        info = await self.status(job_id)
+        if not info.status.finished or job_id in self._running:
+            raise JobNotFinished(f"job {job_id} is {info.status.value}")
+        self.hub.forget(job_id)
+        await asyncio.to_thread(self.store.delete_job, job_id)
+
+    async def backlog(self, job_id: str, after: int = 0) -> list[JobEvent]:
+        await self.status(job_id)  # NotFoundError for unknown jobs
+        await self._replay_from_disk(job_id)
+        return [e for e in self.hub.log(job_id).events if e.id > after]
+
     async def _replay_from_disk(self, job_id: str) -> None:
         """The events a previous server process archived (read in a worker thread; a concurrent
-        replay's duplicates are ignored by the hub)."""
-        if self.hub.has(job_id):
+        replay's duplicates are ignored by the hub). A log this process holds events in is whole:
+        its jobs record every event in the hub first."""
+        if self.hub.has(job_id) and self.hub.log(job_id).events:
             return
         for event in await asyncio.to_thread(self._archived, job_id):
             await self.hub.append(event)

@@ -17,7 +17,7 @@ from typing import Any
 from cachetools import LRUCache, cachedmethod
 from pydantic import ValidationError
 
-from engines.base import Engine, EngineError, Solution, foot_floor_arrays
+from engines.base import Engine, EngineError, Solution, Stopped, foot_floor_arrays
 from engines.library import ClipInput, MotionLibrary, build_library, library_to_arrays
 from engines.registry import UnavailableError, engine_class, kind_class
 from motion import Motion, MotionError
@@ -98,6 +98,7 @@ class SolutionRecorder:
         self.t0 = time.perf_counter()
         self.count = 0
         self.best: tuple[float, str] | None = None
+        self.best_saved: tuple[Motion, Report] | None = None
         self.verdicts: dict[str, tuple[bool | None, list[str]]] = {}
 
     def solution(self, solution: Solution) -> str:
@@ -127,6 +128,7 @@ class SolutionRecorder:
         improved = self.best is None or solution.score < self.best[0]
         if improved:
             self.best = (float(solution.score), rid)
+            self.best_saved = (motion, report)
         elapsed_ms = (time.perf_counter() - self.t0) * 1e3
         self.publish(
             EventType.solution if improved else EventType.alternative,
@@ -137,6 +139,8 @@ class SolutionRecorder:
                 "result": rid,
                 "ok": quality.ok,
                 "reasons": quality.reasons,
+                "frames": motion.num_frames,
+                "fps": motion.fps,
             },
         )
         return rid
@@ -149,6 +153,15 @@ class SolutionRecorder:
     @property
     def best_result(self) -> str | None:
         return None if self.best is None else self.best[1]
+
+    def conclude(self, stopped: Stopped) -> dict[str, Any]:
+        """Record why the search stopped in the best result's report (saved again) and return
+        the terminal event's ``{"stopped", "stopped_reason"}``."""
+        fields = {"stopped": stopped.value, "stopped_reason": stopped.reason}
+        if self.best_saved is not None and self.best is not None:
+            motion, report = self.best_saved
+            self.save(self.best[1], motion, report.model_copy(update=fields))
+        return fields
 
     def verdict(self, rid: str | None) -> dict[str, Any]:
         """``{"ok", "reasons"}`` of a result, for the terminal event."""
@@ -250,9 +263,9 @@ def _build(
                     "invalid_request", f"clip {source.display_name()!r} was not resolved to an upload"
                 )
             labels = [lb.model_dump() for lb in source.labels]
-            clips.append(
-                ClipInput(source.display_name(), store.clip_bytes(source.clip), source.units, labels)
-            )
+            # the spec's unit, else the clip's own (declared at upload, e.g. a bundled sample's, or guessed)
+            units = source.units if source.units is not None else store.clip_info(source.clip).units
+            clips.append(ClipInput(source.display_name(), store.clip_bytes(source.clip), units, labels))
         data, library = build_database_bytes(spec, clips, publish, should_stop)
         store.put_database_arrays(db_id, data)
         if save is not None:
@@ -292,16 +305,22 @@ def run_search(
     attempt: int = 1,
 ) -> None:
     """Run an engine's search and publish the terminal event (``done`` or ``cancelled`` with the
-    best result); raises :class:`JobFailure` when it found nothing."""
+    best result and why the search stopped: ``stopped`` ``work``, ``budget`` or ``cancelled`` and
+    a ``stopped_reason`` line, also written into the best result's report); raises
+    :class:`JobFailure` when it found nothing."""
     recorder = SolutionRecorder(job_id, engine.name, publish, save, attempt, engine.quality_reference)
-    engine.search(request, request.budget_s, recorder, should_stop)
-    best = recorder.best_result
+    stopped = engine.search(request, request.budget_s, recorder, should_stop) or Stopped.work
     if should_stop():
-        publish(EventType.cancelled, {"result": best, **recorder.verdict(best)})
-    elif best is None:
+        stopped = Stopped.cancelled
+    best = recorder.best_result
+    if best is None:
+        if stopped is Stopped.cancelled:
+            publish(EventType.cancelled, {"result": None, "stopped": stopped.value})
+            return
         raise JobFailure("no_solution", "the engine found no solution within the budget")
-    else:
-        publish(EventType.done, {"result": best, **recorder.verdict(best)})
+    fields = recorder.conclude(stopped)
+    event = EventType.cancelled if stopped is Stopped.cancelled else EventType.done
+    publish(event, {"result": best, **recorder.verdict(best), **fields})
 
 
 def _synth(

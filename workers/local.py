@@ -25,7 +25,7 @@ from engines.registry import engine_class
 from motion import Motion, MotionError
 from motion.export.events import result_events, sorted_events
 from motion.io import save_motion
-from motion.samples import resolve_path
+from motion.samples import declared_units, resolve_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobEvent, Report
 from schemas.bases import DatabaseSpecBase
 from schemas.databases import database_id, parse_database_spec
@@ -75,7 +75,12 @@ def load_spec_file(path: Path) -> tuple[DatabaseSpecBase, list[ClipInput], list[
             raise JobFailure("invalid_request", f"clip {source.bvh!r}: {exc.strerror or exc}") from None
         digests.append(hashlib.sha256(data).hexdigest())
         clips.append(
-            ClipInput(source.display_name(), data, source.units, [lb.model_dump() for lb in source.labels])
+            ClipInput(
+                source.display_name(),
+                data,
+                source.units if source.units is not None else declared_units(source.bvh),
+                [lb.model_dump() for lb in source.labels],
+            )
         )
     return spec, clips, digests
 

@@ -46,7 +46,7 @@ import redis.asyncio as aredis
 
 from schemas import EventType, JobEvent, JobInfo, JobStatus
 
-from .backend import BackendUnavailable, EventHub, JobLog
+from .backend import BackendUnavailable, EventHub, JobLog, JobNotFinished
 from .redis_events import (
     RETENTION_S,
     AsyncEventPublisher,
@@ -296,7 +296,45 @@ class RedisBackend:
             await publisher.publish(job_id, EventType.cancelled, {"result": info.result}, floor=floor)
         return await self.status(job_id)
 
+    async def delete(self, job_id: str) -> None:
+        client, _ = self._redis()
+        info = await self.status(job_id)
+        if not info.status.finished:
+            raise JobNotFinished(f"job {job_id} is {info.status.value}")
+        # the publisher of the terminal event writes the store's record and archive just after
+        # Redis says finished: delete once they are written, or they would bring the job back
+        for _ in range(100):
+            archived = await asyncio.to_thread(read_archive, self.store, job_id)
+            if archived and archived[-1].type.terminal:
+                break
+            await asyncio.sleep(0.05)
+        else:
+            stored = await asyncio.to_thread(self.store.job_info, job_id)
+            if not stored.status.finished:  # no archive: wait for the store's record at least
+                raise JobNotFinished(f"job {job_id} is finishing (its record is being written)")
+        reader = self._readers.pop(job_id, None)
+        if reader is not None:
+            reader.cancel()
+        keys = self.keys
+        try:
+            # the terminal marker stays (until it expires): a stale attempt still cannot publish
+            await client.delete(
+                keys.job(job_id), keys.events(job_id), keys.event_seq(job_id), keys.cancel(job_id)
+            )
+        except (redis.ConnectionError, redis.TimeoutError) as exc:
+            raise BackendUnavailable(f"Redis is unreachable: {exc}") from None
+        self._unfinished.discard(job_id)
+        self.hub.forget(job_id)
+        await asyncio.to_thread(self.store.delete_job, job_id)
+
     # -- events ------------------------------------------------------------------------------------
+    async def backlog(self, job_id: str, after: int = 0) -> list[JobEvent]:
+        await self.status(job_id)  # NotFoundError for unknown jobs
+        job_log = self.hub.log(job_id)
+        if not job_log.terminal:
+            await self._ensure_reader(job_id).wait()  # set once the reader caught up (XRANGE, archive)
+        return [e for e in job_log.events if e.id > after]
+
     async def events(self, job_id: str, after: int = 0) -> AsyncIterator[JobEvent]:
         await self.status(job_id)  # NotFoundError for unknown jobs
         job_log = self.hub.log(job_id)

@@ -53,6 +53,7 @@ from typing import Any, cast
 import redis
 from pydantic import ValidationError
 
+from engines.registry import warm_compiled
 from schemas import DatabaseStatus, EventType
 
 from .budget import shortfall
@@ -667,13 +668,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def serve(settings: Settings) -> int:
-    """Run a worker as a command: logging set up, exit status 0, 1 (a bad setting, Redis refused)
-    or 130 (interrupted)."""
+def serve(settings: Settings, warm: bool = True) -> int:
+    """Run a worker as a command: logging set up, the compiled kernels made ready before the first
+    job (``warm``: :func:`engines.registry.warm_compiled`, a fraction of a second once numba's cache
+    is warm), exit status 0, 1 (a bad setting, Redis refused) or 130 (interrupted)."""
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
     try:
+        if warm:
+            warm_compiled(log.info)
         run_worker(settings)
     except KeyboardInterrupt:
         return 130

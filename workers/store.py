@@ -336,6 +336,13 @@ class Store:
                 out.append(JobInfo.model_validate_json(p.read_bytes()))
         return sorted(out, key=lambda i: i.created_at)
 
+    def delete_job(self, job_id: str) -> None:
+        """Remove a job's record, request, events and results (NotFoundError when there is none)."""
+        d = self.job_dir(job_id)
+        if not (d / "info.json").exists():
+            raise NotFoundError(f"no job {job_id!r}")
+        shutil.rmtree(d, ignore_errors=True)
+
     def job_request(self, job_id: str) -> dict[str, Any]:
         p = self.job_dir(job_id) / "request.json"
         if not p.exists():

@@ -4,7 +4,7 @@ Database kind ``annotated`` (:class:`schemas.annotations.AnnotatedDatabaseSpec`)
 propagates the clips' labels by SVM and stores the continuity features and block clusterings
 (:mod:`engines.annotations.build`). Request ``engine: "annotations"``
 (:class:`schemas.annotations.AnnotationRequest`): ``search`` runs coarse-to-fine DP passes with new
-random active sets until the budget is spent, emitting every better motion
+random active sets (``passes`` of them: the search's work), emitting every better motion
 (:mod:`engines.annotations.search`).
 
 Example
@@ -18,7 +18,6 @@ Example
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -31,7 +30,7 @@ from schemas import LabelRange
 from schemas.annotations import AnnotatedDatabaseSpec, ClipLabels, LabelCorrection
 from schemas.bases import DatabaseSpecBase
 
-from ..base import Arrays, DatabaseArrays, Emitter, Engine, EngineError, ShouldStop, Solution
+from ..base import Arrays, DatabaseArrays, Emitter, Engine, EngineError, Run, ShouldStop, Solution, Stopped
 from ..library import MotionLibrary
 from .assemble import Frames, assemble, discontinuity, label_report, quality_inputs
 from .build import BLAS_THREADS, build_annotated
@@ -183,20 +182,23 @@ class AnnotationEngine(Engine):
         inputs = quality_inputs(self.db, self.frames, pb, cand.sigma, cuts)
         return self.finish(solution, with_loop_goal(inputs) if getattr(request, "loop", False) else inputs)
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+        """``request.passes`` coarse-to-fine passes (each from a fresh random active set drawn from
+        the request's seed), emitting every better motion; ``budget_s`` and ``should_stop()`` only
+        cut the passes short (the first pass always completes). BLAS runs single-threaded
+        (:data:`~engines.annotations.build.BLAS_THREADS`), so sums are reduced in one order."""
+        run = Run(budget_s, should_stop)
         with threadpool_limits(limits=BLAS_THREADS):
-            self._search(request, budget_s, emit, should_stop)
+            self._search(request, run, emit)
+        return run.outcome()
 
-    def _search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
-        t0 = time.perf_counter()
+    def _search(self, request: Any, run: Run, emit: Emitter) -> None:
         state = AnnotationSearch(self.db, request)
         best = float("inf")
-        passes = 0
-        while True:
+        for passes in range(1, int(request.passes) + 1):
             cand = state.one_pass()
-            passes += 1
             if cand.score < best - 1e-9:
                 best = cand.score
-                emit.solution(self.solution(cand, state.pb, request, passes, time.perf_counter() - t0))
-            if should_stop() or time.perf_counter() - t0 >= budget_s:
+                emit.solution(self.solution(cand, state.pb, request, passes, run.elapsed()))
+            if passes < request.passes and run.over():
                 break

@@ -32,9 +32,10 @@ from motion.goals import BodyGoal, FootplantGoal, Goal, HandholdGoal, LengthGoal
 from motion.ground import apply_floor_transform, body_root, ground_frames, static_reference_root
 from motion.quality import QualityInputs
 from motion.reach import reach, smooth_weights
+from motion.samples import declared_units, upload_units
 from motion.vectors import norms
 
-from ..base import Arrays, Emitter, Engine, EngineError, ShouldStop, Solution
+from ..base import Arrays, Emitter, Engine, EngineError, Run, ShouldStop, Solution, Stopped
 from ..library import MotionLibrary
 from .assemble import Assembled, assemble, body_rooted
 from .build import ControlDatabase, build_control_database
@@ -91,6 +92,19 @@ PATH_TOLERANCE_CM = 10.0
 a few centimetres either side of the path at every step."""
 
 
+SIZE_TOLERANCE = 0.10
+"""How far (relative) a control motion's size may be from the database's controls'
+(:meth:`ControlEngine._check_size`): people differ by less; a wrong unit by more (CMU "_scaled"
+files taken as metres: 22 %)."""
+
+
+def control_extent(cloud: Array) -> float:
+    """The size of a control cloud ``(F, P, 3)`` (metres): the median over frames of the vertical
+    extent of its points (with the default control joints, head to hips or hands)."""
+    y = np.asarray(cloud)[..., 1]
+    return float(np.median(y.max(axis=1) - y.min(axis=1))) if y.size else 0.0
+
+
 @dataclass(slots=True)
 class ControlInputCloud:
     """The control as a point cloud at its own rate: ``cloud (F, P, 3)`` metres, ``fps``; for a
@@ -142,6 +156,7 @@ class ControlEngine(Engine):
         self.local_of_[kept] = np.arange(kept.size)
         self._targets: dict[str, tuple[Motion, int]] = {}
         self._planted_slide: float | None = None
+        self._control_extent: float | None = None
         self.body_column_ = self._body_column()
         self.solver_instances_ = self.instances_for(0.0)
 
@@ -245,12 +260,22 @@ class ControlEngine(Engine):
             raise EngineError(str(exc.args[0])) from None
         # a motion database reads only its control joints (and their ancestors) of the control
         names = None if self.db.derived else list(self.db.meta["control_joints"])
+        # a bundled sample (named sample:NAME, or uploaded as its own file) in the unit the sample
+        # catalogue declares, any other file as declared or guessed
+        units = ctl.units if ctl.units is not None else declared_units(ctl.bvh) or upload_units(ctl.bvh, data)
         try:
-            motion = parse_bvh(data, units=ctl.units, source=ctl.bvh, name="control", joints=names)
+            motion = parse_bvh(data, units=units, source=ctl.bvh, name="control", joints=names)
             if names is not None and any(n not in motion.skeleton.names for n in names):
-                motion = parse_bvh(data, units=ctl.units, source=ctl.bvh, name="control")  # for the message
+                motion = parse_bvh(data, units=units, source=ctl.bvh, name="control")  # for the message
         except MotionError as exc:
             raise EngineError(f"control {ctl.bvh!r}: {exc}") from None
+        read_as = (
+            f"{motion.units!r} (as declared)"
+            if ctl.units is not None
+            else f"{motion.units!r} (the sample catalogue's unit)"
+            if units is not None
+            else f"{motion.units!r} (guessed from its height)"
+        )
         motion = motion.to_units("m") if motion.units != "unknown" else motion.with_units("m")
         if motion.num_frames < 2:
             raise EngineError("the control motion needs at least 2 frames")
@@ -259,7 +284,26 @@ class ControlEngine(Engine):
             cloud = derived_control(motion, sep, pos)
         else:
             cloud = joint_cloud(motion, list(self.db.meta["control_joints"]), f"control {ctl.bvh!r}", pos)
+            self._check_size(cloud, ctl.bvh, read_as)
         return ControlInputCloud(cloud, motion.fps, ctl.bvh)
+
+    def _check_size(self, cloud: Array, what: str, read_as: str) -> None:
+        """Refuse a control motion whose size (:func:`control_extent` of its ``(F, P, 3)`` cloud,
+        metres) differs from the database's controls' by more than ``SIZE_TOLERANCE``: the
+        interpretation compares positions in metres, so a control read in the wrong unit (a CMU
+        "_scaled" file taken as metres: 22 % small) would be matched to the wrong segments."""
+        if self._control_extent is None:
+            self._control_extent = control_extent(self.db.control)
+        ref, got = self._control_extent, control_extent(cloud)
+        if ref <= 0 or got <= 0 or abs(got / ref - 1.0) <= SIZE_TOLERANCE:
+            return
+        raise EngineError(
+            f"control {what!r}: its control joints span {got:.2f} m, the database's controls "
+            f"{ref:.2f} m ({100 * (got / ref - 1):+.0f} %; more than {100 * SIZE_TOLERANCE:.0f} % apart): "
+            f"it was read in {read_as}. Declare its unit in the request's control, e.g. "
+            '{"bvh": ..., "units": "cmu-scaled"} for a CMU "_scaled" file (1.28 m; the bundled '
+            'salsa samples are read so), or "cm", "m", "in"'
+        )
 
     def _constraints(self, request: Any, t_solve: int, rate: float) -> list[tuple[int, float]]:
         """``(kept instance index, time s)`` of the request's hard constraints."""
@@ -294,15 +338,22 @@ class ControlEngine(Engine):
 
     # ----------------------------------------------------------------------------------- search
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+        """The stages of :meth:`_search` (the search's work: fixed by the request, so the same
+        request gives the same bytes on any machine); ``budget_s`` and ``should_stop()`` only cut
+        the stages after the first short. BLAS runs single-threaded (one reduction order)."""
+        run = Run(budget_s, should_stop)
         # the solver's matrices are small: BLAS threads only contend (10-50x slower on a busy machine)
         with _thread_pools().limit(limits=1):
-            self._search(request, budget_s, emit, should_stop)
+            self._search(request, run, emit)
+        return run.outcome()
 
-    def _search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+    def _search(self, request: Any, run: Run, emit: Emitter) -> None:
         """The anytime schedule: interpret the control (:meth:`_interpret`), then solve the segment
         DP with a quick beam, a wider beam and (``exact``) the optimum, re-time every better solution
-        at the full rate and emit it when that improves the score too."""
+        at the full rate and emit it when that improves the score too. Every stage runs (the
+        work); the time cap and a cancel stop the stages after the first (the first always
+        answers)."""
         t_start = time.perf_counter()
         ctl = self.control_cloud(request)
         pb = self._interpret(request, ctl)
@@ -312,12 +363,12 @@ class ControlEngine(Engine):
         seg_unit = pb.d_unit
         best_score = np.inf
         for stage_i, stage in enumerate(stages):
-            if stage_i > 0 and (should_stop() or time.perf_counter() - t_start > budget_s):
+            if stage_i > 0 and run.over():
                 break
             t0 = time.perf_counter()
             try:
                 res = self._solve_stage(
-                    pb, stage, seg_unit, best_coarse, request, should_stop if stage_i else None
+                    pb, stage, seg_unit, best_coarse, request, run.over if stage_i else None
                 )
             except InterruptedError:
                 break

@@ -5,8 +5,9 @@ per boundary (select the predecessors and successors a beam or a bound keeps, al
 points, find each successor's best predecessor with an early exit), and in numpy their per-call
 overhead dominated (about 15 ms per anytime stage on the salsa database). Compiled with
 ``cache=True``: the first call in a fresh environment compiles (a few seconds, see
-``bench/control.py``'s ``first_call_s``), later processes load the machine code from
-``__pycache__``.
+``bench/control.py``'s ``first_call_s``), later processes load the machine code from numba's
+cache (:mod:`motion.jitcache`); ``segue warm`` (:mod:`engines.control.warm`) compiles them ahead of
+the first request.
 
 Exactness: every successor ``i`` scans its predecessors in increasing score ``q_j``; since
 continuity is never negative, once ``q_j`` reaches its best total so far (or what the upper bound
@@ -17,12 +18,22 @@ the candidates kept (all of them when neither beam nor caps are given).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from motion.jitcache import configure
+
+configure()  # numba's cache outside the package, before numba is imported
+
+from numba import njit  # noqa: E402
 
 INF = np.inf
 
 
-@njit(cache=True, nogil=True)
+@njit(
+    "void(float64[:, :, ::1], int64, float64, float64, float64, float64, float64, float64, "
+    "float64[:, :, ::1], int64)",
+    cache=True,
+    nogil=True,
+)  # one signature: no literal-argument copies
 def _place(
     pts: np.ndarray,
     p: int,
@@ -251,7 +262,49 @@ def _runs(dur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-@njit(cache=True, nogil=True)
+@njit("void(float64[::1], int64, int64[::1], int64[::1])", cache=True, nogil=True)
+def _argsort_stable(keys: np.ndarray, n: int, order: np.ndarray, tmp: np.ndarray) -> None:
+    """``order[:n]`` = the indices of ``keys[:n]`` (no NaN) in increasing key order, ties in index
+    order: the order ``np.argsort(keys[:n], kind="stable")`` gives, by a bottom-up merge sort
+    (``tmp``: scratch of at least ``n``). Written out because numba's own ``argsort`` was about a
+    fifth of the kernels' compile time (3 of ~15 CPU-s)."""
+    for i in range(n):
+        order[i] = i
+    src, dst = order, tmp
+    in_order = True
+    width = 1
+    while width < n:
+        for lo in range(0, n, 2 * width):
+            mid = min(lo + width, n)
+            hi = min(lo + 2 * width, n)
+            i, j, k = lo, mid, lo
+            while i < mid and j < hi:
+                if keys[src[j]] < keys[src[i]]:
+                    dst[k] = src[j]
+                    j += 1
+                else:
+                    dst[k] = src[i]
+                    i += 1
+                k += 1
+            while i < mid:
+                dst[k] = src[i]
+                i += 1
+                k += 1
+            while j < hi:
+                dst[k] = src[j]
+                j += 1
+                k += 1
+        src, dst = dst, src
+        in_order = not in_order
+        width *= 2
+    if not in_order:
+        for i in range(n):
+            order[i] = tmp[i]
+
+
+@njit(
+    "float64(float64[::1], int64, int64)", cache=True, nogil=True
+)  # one signature: no literal-argument copies
 def _select(work: np.ndarray, n: int, k: int) -> float:
     """The ``k``-th smallest (0-based) of ``work[:n]`` (no NaN), by quickselect in place."""
     lo, hi = 0, n - 1
@@ -280,7 +333,9 @@ SAMPLE = 64
 """Values sampled by :func:`_kth` to guess a threshold below which the wanted ones lie."""
 
 
-@njit(cache=True, nogil=True)
+@njit(
+    "float64(float64[::1], int64, int64, float64[::1])", cache=True, nogil=True
+)  # one signature: no literal-argument copies
 def _kth(values: np.ndarray, n: int, k: int, work: np.ndarray) -> float:
     """The ``k``-th smallest (0-based) of ``values[:n]`` (no NaN); ``work`` ``(>= n,)`` scratch.
 
@@ -380,6 +435,9 @@ def forward(
                 colmin[d] = DT[d, c]
     pairs = 0
     pred = np.empty(cells, dtype=np.int64)
+    order_buf = np.empty(cells, dtype=np.int64)
+    row0 = cells - cells  # 0 as a run-time int64: a literal 0 would compile another copy of _aligned
+    tmp_buf = np.empty(cells, dtype=np.int64)
     pq = np.empty(cells)
     succ = np.empty(cells, dtype=np.int64)
     skey = np.empty(cells)
@@ -419,7 +477,8 @@ def forward(
                     pq[m] = pq[j]
                     m += 1
             npred = m
-        order = np.argsort(pq[:npred], kind="mergesort")
+        _argsort_stable(pq, npred, order_buf, tmp_buf)
+        order = order_buf[:npred]
         ps = pred[order]
         qs = pq[order]
         qkept = qs[0]
@@ -492,7 +551,9 @@ def forward(
             e = t + dur[c]
             p = cell_inst[c]
             if rigid:
-                _aligned(c, e, heads, p, CT, ST, sum_a, n_pts, dur, context, cs, rot, trans, rigid, hbuf, 0)
+                _aligned(
+                    c, e, heads, p, CT, ST, sum_a, n_pts, dur, context, cs, rot, trans, rigid, hbuf, row0
+                )
             else:
                 lo = max(e - dur[c], 0)
                 wx = (cs[e + 2 * context, 0] - cs[lo, 0]) * inv_n[c]
@@ -586,7 +647,9 @@ PW_BLOCK = 128
 """NumPy's pairwise summation block (``PW_BLOCKSIZE`` of its ``pairwise_sum``)."""
 
 
-@njit(cache=True, nogil=True)
+@njit(
+    "float64(float64[::1], int64, int64, int64[:, ::1], float64[::1])", cache=True, nogil=True
+)  # one signature: no literal-argument copies
 def _pairwise(a: np.ndarray, lo: int, n: int, tasks: np.ndarray, vals: np.ndarray) -> float:
     """``a[lo:lo + n].sum()`` in NumPy's order (its ``pairwise_sum``: eight partial sums up to
     :data:`PW_BLOCK` values, else the sums of two halves, the first a multiple of 8 long), so a

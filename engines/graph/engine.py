@@ -11,7 +11,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..base import Arrays, Emitter, Engine, ShouldStop
+from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+from ..base import Arrays, Emitter, Engine, ShouldStop, Stopped
 from ..library import MotionLibrary
 from .build import build_graph
 from .model import EdgeTree, FootContacts, RootTracks
@@ -39,10 +41,22 @@ class GraphEngine(Engine):
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         return build_graph(spec, library, emit, should_stop)
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
-        # several characters with shared constraints are searched jointly (engines.graph.shared)
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+        # several characters with shared constraints are searched jointly (engines.graph.shared);
+        # one BLAS thread: matrix products reduce in one order whatever the machine's cores
         searcher = CoupledSearch if getattr(request, "characters", None) else GraphSearch
-        searcher(
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._run(searcher, request, budget_s, emit, should_stop)
+
+    def _run(
+        self,
+        searcher: type[GraphSearch] | type[CoupledSearch],
+        request: Any,
+        budget_s: float,
+        emit: Emitter,
+        should_stop: ShouldStop,
+    ) -> Stopped:
+        return searcher(
             self.library,
             self.tree,
             self.tracks,

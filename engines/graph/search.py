@@ -56,21 +56,21 @@ The loop (paper Sec. 4.2, steps 1-6):
    when the budget is spent.
 
 Anytime: every round whose best path improved emits a solution (the first one right after the
-first seeds); ``should_stop`` and the budget are checked every few milliseconds. At the end, the
+first seeds); ``should_stop`` and the time cap are checked every few milliseconds. At the end, the
 ``request.alternatives`` best distinct local minima (different clip sequences; the population
 fills in when there are too few) are emitted after the best one, each with a higher score (the
 runtime publishes them as ``alternative`` events, so ``solution`` events stay strictly
-improving); the search stops early enough to leave time for them (estimated from the first
-emission). All randomness comes from one ``numpy.random.Generator`` seeded with the request's
-seed, and every bound on work counts candidates, not seconds: only the budget cut-off depends on
-time, so a search that converges (or reaches ``rounds``) within its budget returns the same
-motion for the same seed from the CLI, the HTTP API or any worker.
+improving). All randomness comes from one ``numpy.random.Generator`` seeded with the request's
+seed, and every bound on work counts rounds and candidates, not seconds: the search ends by
+convergence or after the request's ``rounds`` (:data:`schemas.graph.DEFAULT_ROUNDS` by default),
+so the same request and seed return the same motion from the CLI, the HTTP API or any worker, at
+any load. ``budget_s`` is only a safety cap: when it cuts the search short, ``run`` returns
+``Stopped.budget`` (the ``done`` event and the report say so).
 """
 
 from __future__ import annotations
 
 import itertools
-import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -81,7 +81,7 @@ from motion.floorfit import CorrectionLimits
 from motion.looping import close_loop, with_loop_goal
 from motion.plausibility import Reference
 
-from ..base import Emitter, EngineError, ShouldStop, Solution, finish_solution
+from ..base import Emitter, EngineError, Run, ShouldStop, Solution, Stopped, finish_solution
 from ..library import MotionLibrary
 from .assemble import assemble, quality_inputs
 from .model import EdgeTree, FloatArray, FootContacts, IntArray, RootTracks
@@ -124,31 +124,30 @@ POLISH_ROUNDS = 6
 
 
 class _Stop(Exception):
-    """Raised inside the loop when the budget is spent or the job is cancelled."""
-
-    def __init__(self, cancelled: bool) -> None:
-        super().__init__("stop")
-        self.cancelled = cancelled
+    """Raised inside the loop when the time cap is reached or the job is cancelled."""
 
 
 class _Clock:
-    def __init__(self, budget_s: float, should_stop: ShouldStop, t0: float) -> None:
-        self.t0 = t0
-        self.deadline = t0 + budget_s
-        self.should_stop = should_stop
-        self.last_poll = 0.0
+    """The search's :class:`~engines.base.Run` as the loop checks it: raises :class:`_Stop`."""
+
+    def __init__(self, run: Run) -> None:
+        self.run = run
 
     def elapsed(self) -> float:
-        return time.perf_counter() - self.t0
+        return self.run.elapsed()
 
     def check(self) -> None:
-        now = time.perf_counter()
-        if now >= self.deadline:
-            raise _Stop(False)
-        if now - self.last_poll >= 0.005:
-            self.last_poll = now
-            if self.should_stop():
-                raise _Stop(True)
+        if self.run.over():
+            raise _Stop()
+
+
+class _FirstClock(_Clock):
+    """The first seeds are drawn whatever the time cap (only a cancel stops them): a search cut
+    short by ``budget_s`` still answers."""
+
+    def check(self) -> None:
+        if self.run.cancelled():
+            raise _Stop()
 
 
 @dataclass(slots=True)
@@ -258,39 +257,38 @@ class GraphSearch:
         max_rounds: int | None = None,
         keepaways: tuple[KeepawayTarget, ...] = (),
         warm: Path | None = None,
-    ) -> None:
+        cap: Run | None = None,
+    ) -> Stopped:
         """Search until the search converges (:attr:`patience` rounds without a better path:
-        the paper's "until no better path can be generated"), ``max_rounds`` rounds (or the
-        request's ``rounds``), ``budget_s`` seconds or ``should_stop()``, emitting every new best
-        and then the alternatives (module docstring). Only the budget depends on time: a search
-        that converges or reaches its rounds within the budget gives the same result for the same
-        seed on any machine.
+        the paper's "until no better path can be generated") or after ``max_rounds`` rounds (the
+        request's ``rounds`` when given), emitting every new best and then the alternatives
+        (module docstring); returns why it stopped. ``budget_s`` seconds (or the shared ``cap``)
+        and ``should_stop()`` only cut it short: a search that ends by its rounds or convergence
+        gives the same result for the same seed on any machine.
 
-        ``keepaways`` (moving keep-out targets) and ``warm`` (a path that joins the first seeds,
-        so the search returns nothing worse) serve the coupled search of several characters
-        (:mod:`engines.graph.shared`); the best path emitted is left in :attr:`best_path_`."""
+        ``keepaways`` (moving keep-out targets), ``warm`` (a path that joins the first seeds, so
+        the search returns nothing worse) and ``cap`` (the whole request's time cap) serve the
+        coupled search of several characters (:mod:`engines.graph.shared`); the best path emitted
+        is left in :attr:`best_path_`."""
         if getattr(request, "rounds", None) is not None:
             max_rounds = int(request.rounds)
-        t0 = time.perf_counter()
+        run = cap if cap is not None else Run(budget_s, should_stop)
         problem = compile_problem(request, self.library, self.tracks, keepaways)
         self.best_path_: Path | None = None
         rng = np.random.default_rng(self.seed)
-        clock = _Clock(budget_s, should_stop, t0)
-        if should_stop():
-            return
+        clock = _Clock(run)
+        if run.cancelled():
+            return run.outcome()
         self._problem = problem
         self._useful = None
         self._seen = set()
         self._queue = []
         self._minima: dict[tuple[int, ...], tuple[float, Path]] = {}
-        self._emit_cost = 0.0
         best: tuple[float, Path] | None = None
         emitted_best: Path | None = None
         population: list[_Member] = []
-        cancelled = False
-        reserve = 0.0
         try:
-            seeds = self._seed_members(problem, rng, self.population, 0, clock)
+            seeds = self._seed_members(problem, rng, self.population, 0, _FirstClock(run))
             if warm is not None:
                 ws = score_batch(self.index_, problem, PathBatch.from_paths([warm]))
                 if np.isfinite(ws.total[0]):
@@ -302,8 +300,6 @@ class GraphSearch:
             population = seeds
             best = (seeds[0].score, seeds[0].path)
             emitted_best = self._emit(emit, request, best[1], rank=0, local=False)
-            reserve = min(self._emit_cost * (request.alternatives - 1) * 1.2, 0.2 * budget_s)
-            clock.deadline = t0 + budget_s - reserve
             if self.chain_edges and not problem.poses:
                 population = self._merge(population + self._chain_members(problem, rng, clock))
                 if population[0].score < best[0]:
@@ -326,23 +322,25 @@ class GraphSearch:
                 if best[1] != emitted_best:
                     emitted_best = self._emit(emit, request, best[1], rank=0, local=False)
                     last_gain = rnd
-        except _Stop as stop:
-            cancelled = stop.cancelled
+        except _Stop:
+            pass
         if best is None:
-            return
+            return run.outcome()
         for m in population:
             if m.score < best[0]:
                 best = (m.score, m.path)
         if best[1] != emitted_best:
             self._emit(emit, request, best[1], rank=0, local=False)
-        if cancelled or request.alternatives <= 1:
-            return
+        if run.stopped is Stopped.cancelled or request.alternatives <= 1:
+            return run.outcome()
+        # the alternatives are part of the answer: emitted whatever the clock says (a cancel stops them)
         for rank, (path, local) in enumerate(
             self._alternatives(problem, best[1], population, request.alternatives), 1
         ):
-            if should_stop():
-                return
+            if run.cancelled():
+                break
             self._emit(emit, request, path, rank=rank, local=local)
+        return run.outcome()
 
     def _merge(self, members: list[_Member]) -> list[_Member]:
         """Distinct paths, best first, at most ``population``."""
@@ -470,12 +468,11 @@ class GraphSearch:
         scores: FloatArray,
         clock: _Clock,
         rounds: int = POLISH_ROUNDS,
-        deadline: float = np.inf,
     ) -> tuple[PathBatch, FloatArray]:
         """A few steps of vectorised hill climbing on a whole batch at once: each path tries its
         start slid by :data:`POLISH_SHIFTS` frames and each edge replaced by either child in the
         edge tree, and takes its best improving neighbour. Returns the improved batch and scores
-        (start frames re-anchored as scored); stops early past ``deadline`` (``perf_counter``)."""
+        (start frames re-anchored as scored)."""
         t = self.tree
         b, m = batch.edges.shape
         batch = PathBatch(batch.start_clip, batch.start_frame.copy(), batch.edges.copy())
@@ -484,8 +481,6 @@ class GraphSearch:
         shifts = np.asarray(POLISH_SHIFTS, dtype=np.int64)
         for _ in range(rounds):
             clock.check()
-            if time.perf_counter() > deadline:
-                break
             # start slides
             rows = [np.repeat(active, shifts.size)]
             sf = [(batch.start_frame[active, None] + shifts[None, :]).reshape(-1)]
@@ -625,12 +620,10 @@ class GraphSearch:
 
     # -- emission ----------------------------------------------------------------------------
     def _emit(self, emit: Emitter, request: Any, path: Path, *, rank: int, local: bool) -> Path:
-        t = time.perf_counter()
         ev = evaluate(self.index_, self._problem, path)
         if rank == 0:
             self.best_path_ = ev.path
         emit.solution(self.solution(ev, request, rank=rank, local=local))
-        self._emit_cost = max(self._emit_cost, time.perf_counter() - t)
         return path
 
     def solution(self, ev: Evaluation, request: Any, *, rank: int = 0, local: bool = False) -> Solution:

@@ -25,9 +25,12 @@ pass (``coupling_rounds``) searches each character again, warm-started from its 
 the new targets). The pair's score is the sum of each character's own score (its request's
 constraints, :func:`engines.graph.score.evaluate`) and the shared constraints' costs measured on
 the assembled motions in the same units (:func:`shared_cost`); a new combination is emitted only
-when that score improves, and the passes stop when a pass does not improve it or the budget is
-spent (split over the remaining searches, those of pass 0, which make every character's first
-full motion, with twice the share).
+when that score improves, and the passes stop when a pass does not improve it. Every search is
+bounded by work, as a single character's is (its ``rounds`` or convergence, each with its own seed
+derived from the request's, character and pass): the passes never split a time budget, so the
+same request and seed give the same motions at any load. ``budget_s`` is one safety cap over the
+whole request (a :class:`~engines.base.Run` shared by every search): when it cuts a search short,
+the characters found so far are combined and the search returns ``Stopped.budget``.
 
 Why not one joint search over pairs of paths: the graph search scores batches of paths of one
 character against fixed targets (vectorised over thousands of candidates); a pair search would
@@ -53,7 +56,6 @@ smallest separation and where, :mod:`motion.goals`), all measured on that output
 from __future__ import annotations
 
 import contextlib
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -81,7 +83,16 @@ from motion.plausibility import Reference
 from motion.quality import QualityInputs
 from motion.reach import reach_at
 
-from ..base import CollectingEmitter, Emitter, EngineError, ShouldStop, Solution, finish_solution
+from ..base import (
+    CollectingEmitter,
+    Emitter,
+    EngineError,
+    Run,
+    ShouldStop,
+    Solution,
+    Stopped,
+    finish_solution,
+)
 from ..combine import combine_motions, combined_characters
 from ..library import MotionLibrary
 from .assemble import quality_inputs
@@ -304,10 +315,11 @@ class CoupledSearch:
         return np.stack((hips[:, 0], np.zeros(hips.shape[0]), hips[:, 2]), axis=-1)
 
     # -- the search ----------------------------------------------------------------------------
-    def run(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
-        """Search the characters jointly until the passes converge, the budget is spent or
-        ``should_stop()``, emitting every better combination (module docstring)."""
-        t0 = time.perf_counter()
+    def run(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+        """Search the characters jointly until the passes converge or ``coupling_rounds`` passes
+        are done, emitting every better combination (module docstring); ``budget_s`` and
+        ``should_stop()`` only cut it short. Returns why it stopped."""
+        run = Run(budget_s, should_stop)
         n = len(request.characters)
         base = [
             request.model_copy(
@@ -325,20 +337,14 @@ class CoupledSearch:
         shared = self.shared_goals(request, length)
         states: list[_State | None] = [None] * n
         passes = 1 + int(request.coupling_rounds)
-        # pass 0 makes every character's first full motion: its searches get twice the share
-        weight_left = float(passes * n + n)
         best_score = np.inf
         for p in range(passes):
             improved = False
             for i in range(n):
-                if should_stop():
-                    return
-                left = budget_s - (time.perf_counter() - t0)
-                if left <= 0.05 and all(s is not None for s in states):
-                    break
-                w = 2.0 if p == 0 else 1.0
-                share = max(left, 0.05) * w / max(weight_left, 1.0)
-                weight_left -= w
+                # past the time cap only a character without a motion yet is searched (its first
+                # seeds are drawn whatever the clock): a request cut short still answers
+                if run.cancelled() or (states[i] is not None and run.over()):
+                    continue
                 sub, keep = self._derived(request, i, shared, states, length)
                 search = GraphSearch(
                     self.library,
@@ -352,19 +358,25 @@ class CoupledSearch:
                 collect = CollectingEmitter()
                 old = states[i]
                 search.run(
-                    sub, share, collect, should_stop, keepaways=keep, warm=None if old is None else old.path
+                    sub,
+                    budget_s,
+                    collect,
+                    should_stop,
+                    keepaways=keep,
+                    warm=None if old is None else old.path,
+                    cap=run,
                 )
                 got = collect.latest
                 if got is None or search.best_path_ is None:
-                    if old is None:
-                        return  # cancelled before a first motion
                     continue
                 if old is not None and got.motion.num_frames < old.motion.num_frames:
-                    continue  # out of time with a shorter path: keep the full one
+                    continue  # cut short with a shorter path: keep the full one
                 m = got.motion
                 pos = np.asarray(m.global_positions() * m.metres_per_unit, dtype=np.float64)
                 own = evaluate(self.index_, owns[i], search.best_path_).score
                 states[i] = _State(search.best_path_, m, pos, own, got)
+            if run.stopped is Stopped.cancelled:
+                break
             self.passes_ = p + 1
             if all(s is not None for s in states):
                 ready = [s for s in states if s is not None]
@@ -373,10 +385,9 @@ class CoupledSearch:
                 if improved:
                     best_score = solution.score
                     emit.solution(solution)
-            if p > 0 and not improved:
+            if run.stopped is not None or (p > 0 and not improved):
                 break
-            if budget_s - (time.perf_counter() - t0) <= 0.05:
-                break
+        return run.outcome()
 
     def _solution(
         self,

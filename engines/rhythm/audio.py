@@ -9,6 +9,17 @@ librosa's audioread fallback for what it cannot read. Beat tracking uses librosa
    ``DANCE_TEMPO_BPM``, the middle of dance music's 90-140 BPM), smoothed over ``TEMPO_SMOOTH_S``,
    so a tempo that drifts is followed; with a ``tempo_bpm`` hint the prior is centred there and
    narrow instead;
+2b. the metrical level, from the onsets' periodicity (:func:`choose_level`; not with a hint): the
+   prior picks the tempogram's strongest peak near 115 BPM, which may be a grouping of the beat's
+   subdivisions that is no metrical level at all (a drum-and-bass break at 87.5 BPM has its
+   strongest periodicity at 117 BPM: three of its eighth notes). A beat level is periodic *and*
+   so is its half (the beat divides in two), so each candidate ``r`` times the prior's tempo
+   (``LEVEL_RATIOS``) is scored by the tempogram at the beat period plus at half of it, frame by
+   frame at the local tempo, averaged. A candidate that beats the prior's by ``LEVEL_MARGIN``
+   replaces it, at the octave (it, its half or its double) the prior likes best: the prior is only
+   the tie-breaker between octaves. The confidence is the chosen level's score over the sum of it
+   and the best rival level's (not its octave): 0.5 when another level is as periodic, 1 when
+   none is;
 3. Ellis' dynamic-programming beat tracker (:func:`librosa.beat.beat_track`) with that
    time-varying tempo (a single global tempo loses the beat when the tempo drifts: a 96 -> 116 BPM
    track drifts a quarter of a beat in 4 s);
@@ -57,6 +68,13 @@ DOWNBEAT_MARGIN = 1.5
 """The downbeat phase's low-frequency power must exceed every other phase's by this factor."""
 DOWNBEAT_MAX_HZ = 150.0
 """Upper frequency of the band (kick drum, bass) whose power marks the downbeat, Hz."""
+LEVEL_RATIOS = (1.0, 2.0 / 3.0, 3.0 / 4.0, 4.0 / 3.0, 3.0 / 2.0)
+"""Candidate beat levels, as multiples of the prior's tempo (octaves of these are the prior's choice)."""
+LEVEL_MARGIN = 1.2
+"""A candidate level replaces the prior's when its periodicity score is this many times as high
+(and at least ``LEVEL_MIN_GAIN`` higher)."""
+LEVEL_MIN_GAIN = 0.1
+"""Smallest score gain for a change of level (tempogram units: 1 = perfectly periodic)."""
 MAX_SECONDS = 3600.0
 """Longest recording accepted, seconds."""
 SILENCE_RMS = 1e-4
@@ -89,12 +107,15 @@ class AudioBeats:
     tempo_bpm: median tempo (60 / median inter-beat interval).
     downbeat: index into ``beats_s`` of the first downbeat (bar start), None when none is clear.
     duration_s: length of the recording, seconds.
+    tempo_confidence: in [0, 1], how clearly the onsets' periodicity picks this metrical level over
+        every other (:func:`choose_level`; 0.5: another level is as periodic); None with a tempo hint.
     """
 
     beats_s: Array
     tempo_bpm: float
     downbeat: int | None
     duration_s: float
+    tempo_confidence: float | None = None
 
 
 def decode(data: bytes) -> tuple[Array, float]:
@@ -177,6 +198,10 @@ def track_beats(y: Array, tempo_bpm: float | None = None, meter: int = 4) -> Aud
     )
     fps = SR / HOP
     local = ndi.median_filter(np.asarray(local, dtype=np.float64), size=max(1, int(TEMPO_SMOOTH_S * fps)))
+    confidence = None
+    if not tempo_bpm:
+        ratio, confidence = choose_level(oenv, local, prior)
+        local = local * ratio
     _, frames = librosa.beat.beat_track(
         onset_envelope=oenv, sr=SR, hop_length=HOP, bpm=local, units="frames", trim=True
     )
@@ -189,7 +214,57 @@ def track_beats(y: Array, tempo_bpm: float | None = None, meter: int = 4) -> Aud
         raise MusicError("audio: no detectable beat")
     tempo = 60.0 / float(np.median(np.diff(beats)))
     down = _downbeat(y, beats, meter)
-    return AudioBeats(beats, tempo, down, y.size / SR)
+    return AudioBeats(beats, tempo, down, y.size / SR, confidence)
+
+
+def level_scores(oenv: npt.NDArray[Any], local: Array, ratios: tuple[float, ...] = LEVEL_RATIOS) -> Array:
+    """``(R,)`` how periodic the onsets are at each candidate beat level ``ratios[i] * local``:
+    the autocorrelation tempogram of ``oenv (T,)`` (onset envelope, ``HOP`` frames; each frame's
+    column normalized to 1 at lag 0) at the beat period plus at half of it, read at every frame
+    at its local tempo ``local (T,)`` (BPM) and averaged over the frames. 2 = perfectly periodic
+    at both; about 0 or below = no periodicity there."""
+    import librosa
+
+    tg = np.asarray(librosa.feature.tempogram(onset_envelope=oenv, sr=SR, hop_length=HOP), dtype=np.float64)
+    lags, frames = tg.shape
+    cols = np.arange(frames)
+    out = np.empty(len(ratios))
+    for i, r in enumerate(ratios):
+        total = np.zeros(frames)
+        for lag in (60.0 * SR / HOP / (local[:frames] * r), 30.0 * SR / HOP / (local[:frames] * r)):
+            lo = np.clip(np.floor(lag).astype(np.intp), 0, lags - 2)
+            w = np.clip(lag - lo, 0.0, 1.0)
+            total += (1.0 - w) * tg[lo, cols] + w * tg[lo + 1, cols]
+        out[i] = float(total.mean())
+    return out
+
+
+def choose_level(oenv: npt.NDArray[Any], local: Array, prior: Any) -> tuple[float, float]:
+    """The factor to apply to the prior's per-frame tempo ``local (T,)`` (BPM) to get the beat
+    level, and the confidence in that level (module doc, step 2b). ``prior``: the tempo prior
+    (a frozen scipy distribution over BPM) that chooses between octaves."""
+    scores = level_scores(oenv, local)
+    best = int(np.argmax(scores))
+    gain = scores[best] - scores[0]
+    if best == 0 or scores[best] < LEVEL_MARGIN * max(scores[0], 0.0) or gain < LEVEL_MIN_GAIN:
+        best = 0
+    base = LEVEL_RATIOS[best]
+    ratio = 1.0  # the prior's own pick is its favourite octave already
+    if best != 0:  # else the octave of the chosen level the prior likes best (at the median tempo)
+        centre = float(np.median(local)) * base
+        octaves = [o for o in (0.5, 1.0, 2.0) if 30.0 <= centre * o <= 320.0] or [1.0]
+        ratio = base * max(octaves, key=lambda o: float(prior.pdf(centre * o)))
+    # rivals: the other levels that are not this one's octave (2/3 and 4/3 are each other's octave)
+    chosen = max(scores[best], 0.0)
+    rivals = [
+        max(float(scores[i]), 0.0)
+        for i, r in enumerate(LEVEL_RATIOS)
+        if not np.isclose(np.log2(r / base) % 1.0, 0.0, atol=1e-6)
+        and not np.isclose(np.log2(r / base) % 1.0, 1.0, atol=1e-6)
+    ]
+    rival = max(rivals) if rivals else 0.0
+    confidence = chosen / (chosen + rival) if chosen + rival > 0 else 0.0
+    return ratio, round(float(confidence), 4)
 
 
 def _fill_gaps(frames: Array, window: int = 8) -> Array:
@@ -253,4 +328,4 @@ def audio_beats(data: bytes, tempo_bpm: float | None = None, meter: int = 4) -> 
     """Decode a recording's bytes and track its beats (:func:`decode`, :func:`track_beats`)."""
     y, duration = decode(data)
     found = track_beats(y, tempo_bpm, meter)
-    return AudioBeats(found.beats_s, found.tempo_bpm, found.downbeat, duration)
+    return AudioBeats(found.beats_s, found.tempo_bpm, found.downbeat, duration, found.tempo_confidence)

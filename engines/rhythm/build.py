@@ -37,6 +37,7 @@ from .beatkeys import beat_keys, movement_speed
 from .blend import fit_blender
 from .graph import k_medoids, medoids, subtractive_clustering, transition_graph
 from .movements import Example, Movements, extract_movements, movement_differences, transition_differences
+from .reach import describe as describe_graph
 from .synth import Tables
 
 Array = npt.NDArray[np.float64]
@@ -213,6 +214,7 @@ def build_rhythm(spec: Any, library: MotionLibrary, emit: Emitter, should_stop: 
         threshold=spec.edge_threshold,
         smoothing=spec.count_smoothing,
     )
+    emit.progress(0.9, describe_graph(graph.p, graph.start))
     q = _align_signs(mv.rot, labels, centre)
     keys, clarity = _beat_keys(mv, examples[0].motion)
     meta = {

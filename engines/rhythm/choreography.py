@@ -11,11 +11,15 @@ likelihoods of transitions, and avoid dead ends. Here:
 * :func:`apply_edits` applies them in order to the transition matrix ``P (K, K)`` (the learned
   ``rhythm.p``: rows sum to 1, zero = no edge) and checks the rules on the result:
 
-  - **no dead end**: every group keeps an outgoing transition. Synthesis draws each next group from
-    the row of the current one; an empty row has nothing to draw from.
-  - **no unreachable group**: the graph stays strongly connected (every group reachable from every
-    other). Every group may start a dance (``pi > 0``), but once a dance enters a closed part of the
-    graph it never leaves, and the groups outside it become unreachable for the rest of the dance.
+  The rules judge what the edits *change*, so a graph that is not strongly connected as learned
+  (:mod:`engines.rhythm.reach`: a start-only group) can be edited too:
+
+  - **no new dead end**: every group that had an outgoing transition keeps one. Synthesis draws
+    each next group from the row of the current one; an empty row has nothing to draw from.
+  - **no group made unreachable**: every group stays reachable from every group it was reachable
+    from before the edits (in any number of transitions). Once a dance leaves a part of the graph
+    it cannot get back to, the groups there are lost for the rest of the dance, so an edit may not
+    create such a part; a part the examples left that way (a start-only group) may stay so.
   - weights positive and finite (the schema refuses others).
 
   Each violation raises :class:`GraphEditError` naming the offending edit.
@@ -51,9 +55,11 @@ from schemas.rhythm_graph import (
 )
 
 from ..base import EngineError
+from .reach import lost_reach, start_only_groups, unreachable_groups
 from .synth import draw_probabilities
 
 Array = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
 Arrays = dict[str, npt.NDArray[Any]]
 
 
@@ -186,14 +192,18 @@ def apply_edits(p: Array, edits: list[ResolvedEdit]) -> Array:
             emptied.pop(a, None)
         if not np.isfinite(lik[a]).all() or lik[a].max() > 1e300:
             raise GraphEditError(f"{_describe(e, i)}: the weights overflow", i, {"problem": "overflow"})
-    _check_rules(lik, edits, emptied)
+    _check_rules(np.asarray(p), lik, edits, emptied)
     rows = sorted({e.source for e in edits})  # rows no edit touched stay exactly as they were
     lik[rows] = lik[rows] / lik[rows].sum(axis=1, keepdims=True)
     return lik
 
 
-def _check_rules(lik: Array, edits: list[ResolvedEdit], emptied: dict[int, int]) -> None:
-    dead = np.flatnonzero(~(lik > 0).any(axis=1))
+def _check_rules(before: Array, lik: Array, edits: list[ResolvedEdit], emptied: dict[int, int]) -> None:
+    """The rules of the module docstring, judged on what ``edits`` changed from ``before (K, K)`` to
+    ``lik (K, K)``: a group that had a transition out keeps one, and every group stays reachable
+    from every group it was reachable from (:mod:`engines.rhythm.reach`)."""
+    was, now = before > 0, lik > 0
+    dead = np.flatnonzero(was.any(axis=1) & ~now.any(axis=1))
     if dead.size:
         g = int(dead[0])
         i = emptied.get(g)
@@ -204,34 +214,33 @@ def _check_rules(lik: Array, edits: list[ResolvedEdit], emptied: dict[int, int])
             i,
             {"problem": "dead_end", "groups": [int(x) for x in dead]},
         )
-    n, comp = connected_components(lik > 0, directed=True, connection="strong")
-    if n == 1:
+    lost = lost_reach(was, now)
+    if not lost.any():
         return
-    edges = lik > 0
-    # a closed part: a component no edge leaves (a dance that enters it never gets out)
-    for c in range(n):
-        inside = comp == c
-        if edges[np.ix_(inside, ~inside)].any():
+    targets = [int(x) for x in np.flatnonzero(lost.any(axis=0))]
+    sources = [int(x) for x in np.flatnonzero(lost.any(axis=1))]
+    i = _culprit(was, now, lost, edits)
+    lead = f"{_describe(edits[i], i)} makes" if i is not None else "the edits make"
+    raise GraphEditError(
+        f"{lead} groups {_short(targets)} unreachable from groups {_short(sources)}: a dance in "
+        f"those never reaches groups {_short(targets)} again, as it could before (edits must keep "
+        "every group as reachable as it was; connect the groups another way, or cut less)",
+        i,
+        {"problem": "unreachable", "unreachable_groups": targets, "from_groups": sources},
+    )
+
+
+def _culprit(was: BoolArray, now: BoolArray, lost: BoolArray, edits: list[ResolvedEdit]) -> int | None:
+    """The last cut whose transition, given back alone, gives back some of the ``lost`` reach."""
+    for i in range(len(edits) - 1, -1, -1):
+        e = edits[i]
+        if e.op != "cut" or now[e.source, e.target]:
             continue
-        trapped = [int(x) for x in np.flatnonzero(inside)]
-        outside = [int(x) for x in np.flatnonzero(~inside)]
-        culprits = [
-            i
-            for i, e in enumerate(edits)
-            if e.op == "cut" and inside[e.source] and not inside[e.target] and not edges[e.source, e.target]
-        ]
-        i = culprits[-1] if culprits else None
-        lead = (
-            f"{_describe(edits[i], i)} closes off groups {trapped}"
-            if i is not None
-            else f"groups {trapped} have no transition to the other groups"
-        )
-        raise GraphEditError(
-            f"{lead}: a dance that enters them never reaches groups {_short(outside)} again "
-            "(the graph must stay strongly connected; connect one of them to another group)",
-            i,
-            {"problem": "unreachable", "closed_groups": trapped, "unreachable_groups": outside},
-        )
+        back = now.copy()
+        back[e.source, e.target] = True
+        if (lost & ~lost_reach(was, back)).any():
+            return i
+    return None
 
 
 def _short(groups: list[int], most: int = 12) -> str:
@@ -350,5 +359,7 @@ def movement_graph(
         groups=groups,
         transitions=transitions,
         strongly_connected=n_comp == 1,
+        start_only_groups=start_only_groups(p > 0, start),
+        unreachable_groups=unreachable_groups(p > 0, start),
         derived_from=derived_from,
     )

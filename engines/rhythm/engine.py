@@ -31,7 +31,7 @@ from motion.metrics import beat_align_scores
 from motion.plausibility import SPEED_P99_MARGIN, SPEED_WINDOW_S
 from motion.quality import QualityInputs
 
-from ..base import Arrays, Emitter, Engine, EngineError, LiveSession, ShouldStop, Solution
+from ..base import Arrays, Emitter, Engine, EngineError, LiveSession, ShouldStop, Solution, Stopped
 from ..combine import combine_motions, combined_characters
 from ..library import MotionLibrary
 from .build import build_rhythm, tables_from_arrays
@@ -341,7 +341,11 @@ class RhythmEngine(Engine):
 
         return LiveDancer(self, seed=seed, fps=fps, accent=accent)
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+        """One pass over the music (the search's work: one walk of the movement graph drawn from
+        the request's seed, so the same request gives the same bytes on any machine). The pass is
+        short and always completes: ``budget_s`` never cuts it (``Stopped.work``); a cancel before
+        the foot cleanup ends it without an answer (``Stopped.cancelled``)."""
         beats = music_beats(request, self.tables.beats_per_movement)
         emit.progress(0.1, f"{beats.size} music beats")
         leaders, partners, r = self.synthesize(request, beats)
@@ -349,7 +353,7 @@ class RhythmEngine(Engine):
             leaders = [_clean(m, self.foot_floor(m.skeleton)) for m in leaders]
             partners = [_clean(m, self.foot_floor(m.skeleton)) for m in partners]
             if should_stop():
-                return
+                return Stopped.cancelled
         hold = request.hand_hold
         if hold is not None and hold.reach and partners:
             from .hold import hold_hands
@@ -422,6 +426,7 @@ class RhythmEngine(Engine):
             },
         )
         emit.solution(self.finish(solution, inputs))
+        return Stopped.work
 
 
 def _clean(m: Motion, floor: dict[int, tuple[float, float]]) -> Motion:

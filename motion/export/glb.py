@@ -41,17 +41,26 @@ Ground root
 Several characters
     A combined motion (a crowd or a couple: a static ``world`` root and ``cN_``-prefixed
     characters, :func:`motion.export.characters.split_characters`) is written as one skin per
-    character: its own ``cN_ground`` root, joints, bind matrices and mesh node, all in one
-    animation. Characters with the same bind pose share one bone mesh and one bind-matrix
+    character: its own ``cN_ground`` root, joints, bind matrices and mesh node, the rig under its
+    own plain (non-joint) node named ``cN`` (so that importers make one armature or Skeleton per
+    character: Blender and Godot merge rigs that share a parent), and its own animation named
+    ``<motion>_cN``. Characters with the same bind pose share one bone mesh and one bind-matrix
     accessor, so the file grows by the animation of each character only (``bench/glb_size.py``).
 Animation
-    One animation named after the motion (``"motion"`` when unnamed). Key times ``frame / fps``
+    One animation named after the motion (``"motion"`` when unnamed; one per character, above).
+    Key times ``frame / fps``
     seconds in one shared input accessor; LINEAR samplers. Every joint gets a rotation channel
     (local quaternions, signs made continuous over time so that interpolation takes the short
     arc); the root and every joint of ``skeleton.translated_joints`` get a translation channel
     (metres). A channel whose float32 values never change (fingers held still) has one key at
-    0 s, which glTF holds for the whole animation. ``events`` (foot contacts, beats, labels:
-    :mod:`motion.export.events`) go in the animation's ``extras`` as ``{"events": [...]}``.
+    0 s, which glTF holds for the whole animation.
+Events
+    ``events`` (foot contacts, beats, labels: :mod:`motion.export.events`) go, as
+    ``{"events": [...]}``, in the animation's ``extras`` (a character's animation gets its own
+    contacts and the shared beats and labels), in the scene's ``extras`` (all of them) and in each
+    character's top node's ``extras`` (its skin root, or its ``cN`` node): Blender keeps scene and
+    node extras as custom properties, and Godot's importer drops extras, so a Godot script reads
+    them from the file (docs/game-engines.md).
 Skin
     ``joints`` = the ``J`` joint nodes (skin joint index = joint index), ``skeleton`` = node 0, and
     ``inverseBindMatrices`` (``MAT4``, column-major) = the inverse of each joint's global rest
@@ -146,8 +155,8 @@ def glb_bytes(
         path and heading) but is not the parent of the hips, whose animation is relative to it
         (needs ``ground_root``).
     events:
-        JSON objects (:mod:`motion.export.events`) written to the animation's ``extras`` as
-        ``{"events": [...]}``.
+        JSON objects (:mod:`motion.export.events`) written to the animations', the scene's and
+        the characters' top nodes' ``extras`` as ``{"events": [...]}`` (module docstring).
 
     Returns
     -------
@@ -175,8 +184,7 @@ def glb_bytes(
     times = _Times(b, prepared[0][0])
     nodes: list[dict[str, Any]] = []
     skins: list[dict[str, Any]] = []
-    channels: list[dict[str, Any]] = []
-    samplers: list[dict[str, Any]] = []
+    animations: list[dict[str, Any]] = []
     scene_roots: list[int] = []
     meshes: list[dict[str, Any]] = []
     mesh_nodes: list[dict[str, Any]] = []
@@ -186,7 +194,16 @@ def glb_bytes(
         rest = _rest_pose(m, lead)
         nodes += _joint_nodes(m, rest, base, pre)
         scene_roots.append(base)
+        channels: list[dict[str, Any]] = []
+        samplers: list[dict[str, Any]] = []
         _animation(b, m, times, base, channels, samplers)
+        animations.append(
+            {
+                "name": _label(motion) if split is None else _label(m),
+                "channels": channels,
+                "samplers": samplers,
+            }
+        )
         found = next((s for s in shared if _same_rest(s[0], s[1], rest, m.skeleton.parents)), None)
         if found is None:
             ibm = _ibm(b, rest)
@@ -221,18 +238,28 @@ def glb_bytes(
                 {"name": pre + m.skeleton.names[0] + "_mesh", "mesh": mesh_index, "skin": len(skins)}
             )
         skins.append(skin)
+    if split is not None:  # each character's rig under its own plain node: one armature each
+        for k, (_, pre) in enumerate(prepared):
+            nodes.append({"name": pre.rstrip("_") or f"character{k}", "children": [scene_roots[k]]})
+            scene_roots[k] = len(nodes) - 1
     scene_roots += range(len(nodes), len(nodes) + len(mesh_nodes))
     nodes += mesh_nodes
-    animation: dict[str, Any] = {"name": _label(motion), "channels": channels, "samplers": samplers}
+    scene: dict[str, Any] = {"name": _label(motion), "nodes": scene_roots}
     if events is not None:
-        animation["extras"] = {"events": list(events)}
+        evs = list(events)
+        scene["extras"] = {"events": evs}
+        for k, (anim, (_, pre)) in enumerate(zip(animations, prepared, strict=True)):
+            who = pre.rstrip("_")
+            mine = [e for e in evs if "character" not in e or e["character"] == who] if split else evs
+            anim["extras"] = {"events": mine}
+            nodes[scene_roots[k]].setdefault("extras", {})["events"] = mine
     gltf: dict[str, Any] = {
         "asset": {"version": "2.0", "generator": "segue"},
         "scene": 0,
-        "scenes": [{"name": _label(motion), "nodes": scene_roots}],
+        "scenes": [scene],
         "nodes": nodes,
         "skins": skins,
-        "animations": [animation],
+        "animations": animations,
     }
     if meshes:
         gltf["meshes"] = meshes

@@ -10,6 +10,8 @@ skeleton (names, offsets, End Sites, channel layout and units exactly as given) 
 * :mod:`~motion.retarget.transfer`: world-space bone directions carried through the two rest
   poses, and the root path scaled by leg length;
 * :mod:`~motion.retarget.legik`: planted feet kept planted and above the floor by two-bone leg IK;
+* :mod:`~motion.retarget.rootmotion`: the root motion where the target engine wants it (the
+  character's root bone at the floor, its hips, or none);
 * :mod:`~motion.retarget.character`: reading a character (BVH or glTF/GLB skin) and its rest pose.
 """
 
@@ -21,11 +23,20 @@ import numpy as np
 
 from ..errors import MotionError
 from ..motion import Motion
-from .legik import plant_feet
+from .legik import plant_feet, settle
 from .names import PRESETS, ROLES, Correspondence, correspond, detect_roles
+from .rootmotion import ROOT_MOTION_MODES, apply_root_motion
 from .transfer import Pose, hips_path, place_hips, transfer_rotations
 
-__all__ = ["PRESETS", "ROLES", "Correspondence", "correspond", "detect_roles", "retarget"]
+__all__ = [
+    "PRESETS",
+    "ROLES",
+    "ROOT_MOTION_MODES",
+    "Correspondence",
+    "correspond",
+    "detect_roles",
+    "retarget",
+]
 
 
 def _check_finite(motion: Motion, what: str) -> None:
@@ -45,6 +56,7 @@ def retarget(
     *,
     name_map: Mapping[str, str] | None = None,
     plant: bool = True,
+    root_motion: str | None = None,
 ) -> Motion:
     """``motion`` played by ``character``.
 
@@ -59,6 +71,10 @@ def retarget(
         ``{source joint or role: character joint}``, added to the automatic correspondence.
     plant:
         Keep planted feet planted and above the floor (leg IK); off, the transfer alone.
+    root_motion:
+        Where the root motion goes (:mod:`motion.retarget.rootmotion`): ``"root"`` (the joint
+        above the hips, on the floor, turning with the body), ``"hips"`` or ``"none"``; ``None``
+        leaves it on the character's root joint, moving with the hips.
 
     Returns
     -------
@@ -69,8 +85,11 @@ def retarget(
     Raises
     ------
     MotionError
-        When a required joint (hips, legs, feet) has no counterpart, or an input is not finite.
+        When a required joint (hips, legs, feet) has no counterpart, an input is not finite, or
+        ``root_motion="root"`` is asked of a skeleton starting at its hips.
     """
+    if root_motion is not None and root_motion not in ROOT_MOTION_MODES:
+        raise MotionError(f"root motion {root_motion!r}: use one of {', '.join(ROOT_MOTION_MODES)}")
     _check_finite(motion, "motion")
     _check_finite(character, "character")
     corr = correspond(motion.skeleton, character.skeleton, name_map)
@@ -90,7 +109,9 @@ def retarget(
     path, _ = hips_path(motion, character, corr, src_pose, out)
     out = place_hips(out, corr.target_roles["Hips"], path)
     if plant and n > 1:
-        out = plant_feet(out, corr.target_roles)
+        out = plant_feet(settle(out, corr.target_roles, rest), corr.target_roles, rest)
     if not np.all(np.isfinite(out.rotations)) or not np.all(np.isfinite(out.root_positions)):
         raise MotionError("retargeting produced non-finite values (degenerate bones in a skeleton?)")
+    if root_motion is not None:
+        out = apply_root_motion(out, rest, corr.target_roles, root_motion)
     return out

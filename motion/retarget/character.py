@@ -157,3 +157,20 @@ def gltf_character(raw: bytes, name: str = "character") -> Motion:
         raise MotionError("the skin's bind pose is not finite")
     skeleton = Skeleton(tuple(names), par, offsets, default_channels(len(names)))
     return Motion(skeleton, offsets[:1].copy(), local[None], 30.0, units="m", name=name)
+
+
+def gltf_timing(raw: bytes) -> tuple[int, float] | None:
+    """``(frames, fps)`` of a glTF/GLB document's first animation (its first sampler's keyframe
+    times: the accessor's count, min and max, which glTF requires), None when it has none."""
+    doc = _gltf_json(raw)
+    try:
+        anims = doc.get("animations") or []
+        if not anims or not anims[0].get("samplers"):
+            return None
+        acc = doc["accessors"][int(anims[0]["samplers"][0]["input"])]
+        count = int(acc["count"])
+        span = float(acc["max"][0]) - float(acc["min"][0])
+    except (IndexError, KeyError, TypeError, ValueError) as exc:
+        raise MotionError(f"malformed glTF animation: {exc}") from None
+    fps = (count - 1) / span if count > 1 and span > 0 else 0.0
+    return count, float(round(fps)) if abs(fps - round(fps)) < 1e-4 * fps else fps

@@ -5,10 +5,16 @@ A character with other proportions than the source slides its feet where the sou
 dip a toe under its floor. The contacts are detected on the transferred motion by
 :func:`motion.contacts.detect_contacts` (the detector the quality report uses), on the
 character's ankle and toe joints; :func:`motion.footskate.solve_foot_skate` then pins every contact
-run and lifts any ankle or toe below its floor height: the lower of the two ankles' (toes')
-usual lowest height in the transferred motion (5th percentile over frames, the level the contact
-detector measures from). The character's rest pose is not used for it: a rest pose taken from a
-clip may stand on one foot, or on its heels.
+run and lifts any ankle or toe below its floor height.
+
+Before that, :func:`settle` moves the whole body up or down (no limb turns) so that the flat
+planted feet (ankle and toe both in contact) sit at the character's own rest ankle height: with
+the feet turned flat by :func:`motion.retarget.transfer.planted_feet`, sole and toe are then on
+the floor. The floor of each ankle (toe) is the lower of the two rest-pose ankles (toes), where a
+flat foot has them; a rest pose taken from a clip may stand on one foot (hence the lower of the
+two), and a rest pose that does not stand (lying down) is not used: then the floor is the lower of
+the two ankles' (toes') usual lowest height in the transferred motion (5th percentile over frames,
+the level the contact detector measures from).
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ import numpy.typing as npt
 from ..contacts import detect_contacts
 from ..footskate import solve_foot_skate
 from ..motion import Motion
+from .transfer import place_hips
 
 FOOT_ROLES = ("LeftFoot", "LeftToes", "RightFoot", "RightToes")
 FLOOR_PERCENTILE = 5.0
@@ -41,7 +48,49 @@ def floor_heights(roles: dict[str, int], positions: npt.NDArray[np.float64]) -> 
     return np.array(out)
 
 
-def plant_feet(motion: Motion, roles: dict[str, int]) -> Motion:
+def rest_ankle_height(rest: Motion, roles: dict[str, int]) -> float | None:
+    """The height of the lower ankle in the character's rest pose (frame 0 of ``rest``), where a
+    planted ankle sits with the character's own sole and toe on the floor; ``None`` when that
+    pose does not stand (hips less than half a leg above the lower ankle: a pose lying down)."""
+    p = rest.global_positions()[0]
+    ankle = min(float(p[roles[r], 1]) for r in ("LeftFoot", "RightFoot"))
+    hip, knee, foot = (p[roles[f"Left{x}"]] for x in ("UpperLeg", "LowerLeg", "Foot"))
+    leg = float(np.linalg.norm(knee - hip) + np.linalg.norm(foot - knee))
+    return None if p[roles["Hips"], 1] - ankle < 0.5 * leg else ankle
+
+
+def rest_floor(rest: Motion, roles: dict[str, int]) -> npt.NDArray[np.float64] | None:
+    """``(K,)`` for :func:`foot_joints`, the lower of the left and right rest-pose heights of each
+    (ankles, toes): where they are with the foot flat on the floor; ``None`` when the rest pose
+    does not stand (:func:`rest_ankle_height`)."""
+    if rest_ankle_height(rest, roles) is None:
+        return None
+    return floor_heights(roles, rest.global_positions())
+
+
+def settle(motion: Motion, roles: dict[str, int], rest: Motion) -> Motion:
+    """``motion`` moved up or down so that its flat planted feet sit, over the clip, at the rest
+    pose's ankle height (:func:`rest_ankle_height`): the median ankle height over the frames where
+    an ankle and its toe (when the skeleton has toes) are both planted. A vertical shift of the
+    whole body: no limb turns. Unchanged when the rest pose does not stand or no foot is planted."""
+    target = rest_ankle_height(rest, roles)
+    if target is None:
+        return motion
+    pos = np.ascontiguousarray(motion.global_positions())
+    heights = []
+    for side in ("Left", "Right"):
+        joints = np.array([roles[side + p] for p in ("Foot", "Toes") if side + p in roles], dtype=np.intp)
+        _, flags = detect_contacts(motion, joints, positions=pos)
+        heights.append(pos[flags.all(axis=1), joints[0], 1])
+    flat = np.concatenate(heights)
+    if flat.size == 0:
+        return motion
+    shift = float(np.median(flat)) - target
+    hips = roles["Hips"]
+    return place_hips(motion, hips, pos[:, hips] - np.array([0.0, shift, 0.0]))
+
+
+def plant_feet(motion: Motion, roles: dict[str, int], rest: Motion | None = None) -> Motion:
     """``motion`` with planted feet pinned and no ankle or toe under its floor.
 
     Parameters
@@ -50,10 +99,16 @@ def plant_feet(motion: Motion, roles: dict[str, int]) -> Motion:
         The transferred motion of the character (its units, Y up).
     roles:
         Role -> joint index of the character (:class:`motion.retarget.names.Correspondence`).
+    rest:
+        The character in its rest pose: when that pose stands, the floor of each ankle and toe
+        is its flat-foot rest height (:func:`rest_floor`) instead of its usual lowest level.
     """
     joints = foot_joints(roles)
     pos = np.ascontiguousarray(motion.global_positions())
     floor = floor_heights(roles, pos)
+    flat = None if rest is None else rest_floor(rest, roles)
+    if flat is not None:
+        floor = flat
     joints, flags = detect_contacts(motion, joints, positions=pos)
     result = solve_foot_skate(motion, (joints, flags), blend_s=0.1, floor=floor)
     return result.motion

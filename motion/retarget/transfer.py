@@ -36,6 +36,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import rotations as rot
+from ..contacts import detect_contacts
 from ..errors import MotionError
 from ..motion import Motion
 from .names import Correspondence
@@ -239,6 +240,8 @@ def transfer_rotations(
             align[j] = a
             delta = rot.multiply(gs[:, s], rot.inverse(rot.multiply(a, gs0[s])))
             desired[j] = rot.multiply(delta, gt0[j])
+    for j, planted in planted_feet(source, character, corr, sp, t0).items():
+        desired[j] = planted
     rest_local = character.rotations[0]
     glob = np.empty((n, nj, 4))
     local = np.empty((n, nj, 4))
@@ -251,6 +254,57 @@ def transfer_rotations(
             local[:, j] = rest_local[j]
             glob[:, j] = local[:, j] if p < 0 else rot.multiply(glob[:, p], local[:, j])
     return np.asarray(rot.standardize(rot.normalize(local)))
+
+
+def floor_heading(positions: Array, left: int, right: int) -> Array:
+    """``(F,)`` the body's heading (radians about +Y, 0 = +Z, unwrapped) from the floor direction
+    of ``left - right`` joint positions ``(F, J, 3)`` crossed with up (forward = left x up)."""
+    across = positions[:, left] - positions[:, right]
+    forward = np.cross(across, np.array([0.0, 1.0, 0.0]))
+    return np.asarray(np.unwrap(np.arctan2(forward[:, 0], forward[:, 2])))
+
+
+MIN_PLANTED_FRAMES = 3
+
+
+def planted_feet(
+    source: Motion, character: Motion, corr: Correspondence, sp: Pose, t0: Pose
+) -> dict[int, Array]:
+    """World rotations ``(F, 4)`` of the character's feet (ankle joints), set so that a foot the
+    source plants is the character's own planted foot: its rest-pose foot (sole and toe on its
+    floor), turned by the body's heading.
+
+    The source's planted foot is its usual orientation on its contact frames
+    (:func:`motion.contacts.detect_contacts`), relative to the body's heading (the thighs'
+    :func:`floor_heading`); off the floor the character's foot turns as the source's turns from
+    that orientation. A skeleton's own joints, not the line from its ankle to its toe tip, decide
+    what "flat" is, so a source whose foot axis is 15-20 degrees off the character's (CMU's
+    ankle-to-toe-tip line against a game rig's ankle-to-ball bone) does not lift the toes. Feet
+    the source never plants (fewer than 3 contact frames) are left out (they stay aimed).
+    """
+    sr, tr = corr.source_roles, corr.target_roles
+    if not all(r in sr for r in ("LeftUpperLeg", "RightUpperLeg")):
+        return {}
+    heading = floor_heading(sp.positions, sr["LeftUpperLeg"], sr["RightUpperLeg"])
+    rest_heading = float(floor_heading(t0.positions, tr["LeftUpperLeg"], tr["RightUpperLeg"])[0])
+    out: dict[int, Array] = {}
+    for role in ("LeftFoot", "RightFoot"):
+        if role not in sr or role not in tr:
+            continue
+        s, j = sr[role], tr[role]
+        try:
+            _, flags = detect_contacts(source, np.array([s]), positions=sp.positions)
+        except MotionError:
+            continue
+        frames = np.flatnonzero(flags[:, 0])
+        if frames.size < MIN_PLANTED_FRAMES:
+            continue
+        local = rot.multiply(rot.from_yaw(-heading[frames]), sp.rotations[frames, s])
+        local = np.where(np.sum(local * local[:1], axis=-1, keepdims=True) < 0, -local, local)
+        flat = rot.normalize(local.mean(axis=0))  # the source's planted foot, heading 0
+        rest = rot.multiply(rot.from_yaw(-rest_heading), t0.rotations[0, j])  # the character's
+        out[j] = rot.multiply(sp.rotations[:, s], rot.multiply(rot.inverse(flat), rest))
+    return out
 
 
 def floor_height(positions: Array, feet: list[int]) -> float:

@@ -43,6 +43,12 @@ SAMPLES: dict[str, str] = {
 """Sample name -> file in this folder. Every ``.bvh.gz`` but ``start-walk-stop`` shares the 43-joint
 CMU skeleton (hip, abdomen, chest, ...), so any of them can share one database."""
 
+SAMPLE_UNITS: dict[str, str] = {name: "cmu-scaled" for name in SAMPLES if name.startswith("salsa-")}
+"""The length unit the catalogue declares for a sample clip (the others are guessed from their
+height, correctly: ``cm`` and ``cmu``). The salsa samples are CMU "_scaled" files whose unit is
+1.28 m (:data:`motion.units.METRES_PER_UNIT`, ``cmu-scaled``): too close to the metre to guess, so
+read as guessed they would be 1.15 m dancers instead of 1.46 m. A unit given explicitly wins."""
+
 
 def sample_path(name: str) -> Path:
     """Path of a bundled sample by name (see :data:`SAMPLES`)."""
@@ -82,3 +88,31 @@ def resolve_path(ref: str | Path, base: Path | None = None) -> Path:
     if base is not None and not path.is_absolute():
         return base / path
     return path
+
+
+def sample_of_path(path: str | Path) -> str | None:
+    """The sample a path is the bundled file of (``sample:NAME`` or this folder's file), else None."""
+    name = sample_name(path) if isinstance(path, str) else None
+    if name is not None:
+        return name
+    p = Path(path)
+    if p.parent.resolve() != _DIR:
+        return None
+    return next((n for n, f in SAMPLES.items() if f == p.name), None)
+
+
+def declared_units(path: str | Path) -> str | None:
+    """The unit the catalogue declares (:data:`SAMPLE_UNITS`) for the clip ``path`` names
+    (``sample:NAME`` or a bundled sample's file), None for any other file (read as guessed)."""
+    name = sample_of_path(path)
+    return SAMPLE_UNITS.get(name) if name is not None else None
+
+
+def upload_units(file_name: str, data: bytes) -> str | None:
+    """The declared unit of an upload that *is* a bundled sample: named as its file (the browser
+    uploads ``60_01_salsa_leader.bvh.gz`` from ``GET /samples``) and byte for byte the same;
+    None for any other upload."""
+    name = next((n for n, f in SAMPLES.items() if f == Path(file_name).name), None)
+    if name is None or name not in SAMPLE_UNITS:
+        return None
+    return SAMPLE_UNITS[name] if sample_path(name).read_bytes() == data else None

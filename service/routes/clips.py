@@ -9,6 +9,7 @@ import anyio
 from fastapi import APIRouter, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
+from motion.samples import upload_units
 from motion.units import METRES_PER_UNIT
 from schemas import ClipInfo
 
@@ -56,7 +57,9 @@ async def upload_clip(
 ) -> ClipInfo:
     """Upload a BVH clip; it is parsed and checked against the frame and joint limits.
 
-    Stored once per content hash: 201 for a new clip, 200 when you uploaded the same bytes before
+    A bundled sample's own file (as ``GET /samples`` serves it) is read in the unit the sample
+    catalogue declares unless ``units`` says otherwise. Stored once per content hash: 201 for a
+    new clip, 200 when you uploaded the same bytes before
     (409 ``units_conflict`` when that upload declared or was guessed other ``units``).
     """
     file_name, data = await read_upload(request, settings.max_upload_bytes, name)
@@ -68,7 +71,7 @@ async def upload_clip(
             file_name,
             data,
             settings.bvh_limits,
-            units.value if units is not None else None,
+            units.value if units is not None else upload_units(file_name, data),
             limiter=limiter,
         )
     elif units is not None and units.value != existing.units:

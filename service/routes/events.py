@@ -43,34 +43,30 @@ After = Annotated[int, Query(ge=0, description="resume: only events with a large
 
 
 async def collect_events(backend: JobBackend, job_id: str, after: int, wait: float) -> list[JobEvent]:
-    """The events after ``after``: those there now, and with ``wait`` > 0 every event until the
-    job's terminal one or until ``wait`` seconds have passed, whichever comes first (a long poll:
-    a client that asks again with the last id misses nothing and is not answered empty at once
-    while the job runs)."""
+    """The events after ``after``: those recorded now (however long loading them from the store or
+    Redis takes), and with ``wait`` > 0 every event until the job's terminal one or until ``wait``
+    seconds have passed, whichever comes first (a long poll: a client that asks again with the
+    last id misses nothing and is not answered empty at once while the job runs)."""
+    out = await backend.backlog(job_id, after)
+    if wait <= 0 or (out and out[-1].type.terminal):
+        return out
     loop = asyncio.get_running_loop()
     deadline = loop.time() + wait
-    events = backend.events(job_id, after)
-    out: list[JobEvent] = []
+    events = backend.events(job_id, out[-1].id if out else after)
     try:
-        while True:
-            left = deadline - loop.time()
-            # past the deadline: only what is already there (a short grace per event)
-            timeout = left if left > 0 else (0.05 if not out else 0.02)
+        while (left := deadline - loop.time()) > 0:
             try:
-                event = await asyncio.wait_for(anext(events), timeout)
+                event = await asyncio.wait_for(anext(events), left)
             except (StopAsyncIteration, TimeoutError):
                 break
             out.append(event)
-            if event.type.terminal or (left <= 0 and loop.time() > deadline + DRAIN_S):
-                break
+            if event.type.terminal:
+                return out
     finally:
         with contextlib.suppress(RuntimeError):
             await events.aclose()  # type: ignore[attr-defined]
-    return out
-
-
-DRAIN_S = 0.5
-"""Past the wait, events still arriving back to back are taken for at most this long."""
+    # the wait is over: what has arrived since, without waiting
+    return out + await backend.backlog(job_id, out[-1].id if out else after)
 
 
 @router.get("/{job_id}/events", response_model=list[JobEvent], responses=responses(401, 404, 422))

@@ -4,7 +4,8 @@ and the choreographer's edits of it (Kim, Park & Shin 2003, Sec. 4.3).
 ``GET .../graph`` describes the graph synthesis walks (groups with a representative clip span and
 a thumbnail pose, transitions with their probability and kinematic and behavioural likelihoods).
 ``POST .../graph-edits`` connects, cuts and weights transitions (groups by id or by a clip span),
-checks the edited graph (no dead end, strongly connected) and stores the result as a derived,
+checks what the edits change (no new dead end, no group made unreachable that was reachable)
+and stores the result as a derived,
 content-addressed database (:mod:`workers.graph_edits`): 201 when created, 200 when the same edits
 of the same parent exist already. It is quick (the parent's arrays with one matrix replaced), so it
 runs in a worker thread of the API, not as a job.
@@ -82,8 +83,9 @@ async def edit_graph(
 ) -> DatabaseInfo:
     """Derive a database whose movement graph has these edits (in order): ``connect``, ``cut`` or
     ``weight`` a transition between two groups, each named by id or by a clip span
-    (``{"clip", "frames"|"seconds"}``). The edited graph must keep a transition out of every group
-    and stay strongly connected; a 422 names the offending edit otherwise. The parent is untouched;
+    (``{"clip", "frames"|"seconds"}``). The edits must keep a transition out of every group and
+    every group as reachable as it was (from every group that reached it); a 422 names the
+    offending edit and the groups otherwise. The parent is untouched;
     the derived database records it and the edits (``derived_from``) and is used like any other."""
     info = await run_in_threadpool(database_for, store, principal, db_id)
     _ready_rhythm(info)

@@ -10,18 +10,18 @@ from fastapi import APIRouter, Depends, Query, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from engines.registry import engine_kind
-from motion import ExportError, MotionError
+from motion import ExportError, Motion, MotionError
 from motion.export.events import parse_kinds
 from motion.resample import resample
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
 from schemas.bases import JobRequestBase
 from schemas.jobs import JobKind, JobStatus
-from workers.backend import JobBackend
+from workers.backend import JobBackend, JobNotFinished
 from workers.budget import check_work, database_facts, estimate_work
 from workers.inputs import InputError, attach_from_store, resolve_inputs
 from workers.store import Store
 
-from ..characters import RestPose, load_character
+from ..characters import RestPose, RootMotion, load_character
 from ..deps import (
     BackendDep,
     JobQuotaDep,
@@ -35,7 +35,7 @@ from ..deps import (
 from ..errors import ApiError, conflict, responses
 from ..exports import MEDIA_TYPES, ExportTarget, ExportUnits, ResultFormat, export_bytes, result_events
 from ..jobs_common import submit_job
-from ..jsonbody import JsonIntent, json_body, json_body_doc
+from ..jsonbody import BodylessWrite, delete_route, json_body, json_body_doc
 from ..owners import database_for, job_for, visible
 from ..settings import Settings
 
@@ -114,13 +114,17 @@ async def _check_joints(store: Store, job_request: JobRequestBase) -> None:
         return
     npz = str(store.db_dir(str(job_request.database)) / "data.npz")
     names = (await run_in_threadpool(database_facts, npz)).joint_names
-    missing = [f"{where}: {joint!r}" for where, joint in named() if names and joint not in names]
+    missing = [(where, joint) for where, joint in named() if names and joint not in names]
     if missing:
+        shown = ", ".join(names[:16]) + (f", ... (+{len(names) - 16})" if len(names) > 16 else "")
+        problems = [
+            f"{where}: the database's skeleton has no joint named {joint!r}" for where, joint in missing
+        ]
         raise ApiError(
             422,
             "unknown_joint",
-            f"the database's skeleton has no joint named {'; '.join(missing)}",
-            {"unknown": missing, "joints": list(names)},
+            f"{'; '.join(problems)} (joints: {shown})",
+            {"unknown": [f"{where}: {joint!r}" for where, joint in missing], "joints": list(names)},
         )
 
 
@@ -174,13 +178,33 @@ async def get_job(job_id: str, backend: BackendDep, principal: PrincipalDep) -> 
     "/{job_id}/cancel",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=JobInfo,
-    dependencies=[JsonIntent],
+    dependencies=[BodylessWrite],
     responses=responses(401, 404, 415, 422, 503),
 )
 async def cancel(job_id: str, backend: BackendDep, principal: PrincipalDep) -> JobInfo:
-    """Ask a job to stop; it ends with a ``cancelled`` event carrying its best result so far."""
+    """Ask a job to stop; it ends with a ``cancelled`` event carrying its best result so far (no
+    body needed: ``curl -X POST .../cancel``)."""
     await owned_job(backend, principal, job_id)
     return await backend.cancel(job_id)
+
+
+@router.delete("/{job_id}", **delete_route(409, 503))
+async def delete_job(job_id: str, backend: BackendDep, principal: PrincipalDep) -> Response:
+    """Delete a finished job (``done``, ``failed`` or ``cancelled``): its record, events, results and
+    reports. A job still queued or running is 409 ``job_not_finished``: cancel it first (``POST
+    /v1/jobs/{id}/cancel``) and delete it once its terminal event has come. Databases the job built
+    stay."""
+    info = await owned_job(backend, principal, job_id)
+    try:
+        await backend.delete(job_id)
+    except JobNotFinished:
+        raise conflict(
+            "job_not_finished",
+            f"job {job_id} is {info.status.value}; cancel it first (POST /v1/jobs/{job_id}/cancel), then "
+            "delete it once it has ended",
+            {"job": job_id, "status": info.status.value},
+        ) from None
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 async def _result_id(backend: JobBackend, principal: Principal, job_id: str, result: str | None) -> str:
@@ -227,7 +251,10 @@ async def download_result(
     format: Annotated[ResultFormat, Query(description="bvh, glb, json frames or npz")] = ResultFormat.bvh,
     result: ResultQuery = None,
     target: Annotated[
-        ExportTarget, Query(description="axis/unit convention (not for glb)")
+        ExportTarget,
+        Query(
+            description="axis/unit convention (not for glb); with character, also its root-motion convention"
+        ),
     ] = ExportTarget.gltf,
     fps: Annotated[
         float | None,
@@ -253,6 +280,12 @@ async def download_result(
     in_place: Annotated[
         bool, Query(description="glb: body over the origin, root motion on the ground joint")
     ] = False,
+    root_motion: Annotated[
+        RootMotion | None,
+        Query(
+            description="with character: root motion on the root bone, the hips or none (default: target's)"
+        ),
+    ] = None,
     events: Annotated[
         str | None,
         Query(max_length=40, description="glb/json: contacts,beats,labels or all (glTF extras / events)"),
@@ -263,12 +296,22 @@ async def download_result(
     ``retarget_failed`` when the character's joints do not correspond."""
     rid = await _result_id(backend, principal, job_id, result)
     motion = await run_in_threadpool(store.result_motion, job_id, rid)
+    rig: bytes | None = None
     if character is not None:
-        from motion.retarget import retarget  # imported on first use: most downloads do not retarget
+        from motion.retarget import correspond, retarget  # imported on first use: most downloads do not
+        from motion.retarget.rootmotion import default_root_motion
 
         char = await run_in_threadpool(load_character, store, principal, character, rest, settings.bvh_limits)
+        rig = char.gltf
+        mode = "none" if in_place else None if root_motion is None else root_motion.value
+        in_place = False  # a character's root motion is placed by the retargeting
+
+        def retargeted() -> Motion:
+            hips = correspond(motion.skeleton, char.motion.skeleton).target_roles["Hips"]
+            return retarget(motion, char.motion, root_motion=mode or default_root_motion(target.value, hips))
+
         try:
-            motion = await run_in_threadpool(retarget, motion, char)
+            motion = await run_in_threadpool(retargeted)
         except MotionError as exc:
             raise ApiError(
                 422, "retarget_failed", f"cannot retarget result {rid} onto {character}: {exc}"
@@ -307,7 +350,16 @@ async def download_result(
             annotations = (await run_in_threadpool(store.result_report, job_id, rid)).annotations
             evs = await run_in_threadpool(result_events, motion, annotations, kinds, result_fps)
         data = await run_in_threadpool(
-            lambda: export_bytes(motion, format, target, units=units, in_place=in_place, events=evs)
+            lambda: export_bytes(
+                motion,
+                format,
+                target,
+                units=units,
+                in_place=in_place,
+                events=evs,
+                rig=rig,
+                ground_root=character is None,
+            )
         )
     except (ExportError, MotionError) as exc:
         raise ApiError(422, "export_failed", f"cannot export result {rid} as {format.value}: {exc}") from None

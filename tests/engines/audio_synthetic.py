@@ -82,3 +82,29 @@ def f_measure(found: Array, true: Array, tol_s: float = 0.07) -> float:
             hits += 1
     p, r = hits / found.size, hits / true.size
     return 2 * p * r / (p + r) if hits else 0.0
+
+
+BREAK_ONSETS: tuple[tuple[float, float], ...] = (
+    (0.058, 1.3), (0.325, 1.97), (0.488, 1.55), (0.65, 2.93), (0.789, 2.7), (1.022, 2.18),
+    (1.149, 5.16), (1.44, 0.48), (1.509, 3.16), (1.649, 6.46), (1.834, 5.52), (2.171, 9.52),
+    (2.368, 3.02), (2.531, 2.66), (2.705, 2.25),
+)  # fmt: skip
+"""(time s, strength) of the onsets of a 2.8 s drum-and-bass break at 87.5 BPM (the peaks of
+:func:`engines.rhythm.audio.track_beats`' onset envelope on madmom's ``tests/data/audio/sample.wav``,
+whose hand-annotated beats are :data:`BREAK_BEATS`): its strongest periodicity is 117 BPM, three
+of its eighth notes (the sample itself is not bundled: see tests/engines/test_rhythm_audio_real.py)."""
+BREAK_BEATS = np.array([0.0913, 0.7997, 1.4806, 2.1478])
+"""The break's beats (s): 87.5 BPM."""
+
+
+def break_track(seed: int = 0) -> Array:
+    """Mono samples ``(S,)`` at ``SR`` Hz: a drum hit at each of :data:`BREAK_ONSETS` (gain = its
+    strength), 2.8 s, with noise 40 dB below the peak."""
+    rng = np.random.default_rng(seed)
+    y = np.zeros(int(2.8 * SR))
+    for at_s, gain in BREAK_ONSETS:
+        i = int(at_s * SR)
+        x = _drum(4000, rng, 60.0, 0.08, 0.5)[: y.size - i]
+        y[i : i + x.size] += gain * x
+    y += rng.standard_normal(y.size) * 0.01 * np.abs(y).max()
+    return np.asarray(y / np.abs(y).max() * 0.9)

@@ -265,3 +265,27 @@ def test_a_body_placement_costs_the_cells_that_cover_its_time(three_couples: Con
     point = hips[lo] + (src - lo) * (hips[lo + 1] - hips[lo])
     placed = pb.interp.place(point[None, None, :], np.array([c]), np.array([e]))[0, 0]
     assert extra[c, e] == pytest.approx(2.0 * ((placed[0] - 0.5) ** 2 + (placed[2] + 0.2) ** 2))
+
+
+def test_a_leader_read_in_another_unit_than_the_database_is_refused_naming_the_unit(
+    three_couples: ControlEngine,
+) -> None:
+    """The database holds the bundled couples read as guessed (metres: 1.15 m dancers); the same
+    kind of leader named ``sample:salsa-leader-12`` is read in the unit the sample catalogue
+    declares (``cmu-scaled``: 1.46 m), 28 % larger: refused with a message saying how to declare
+    its unit, and accepted once it is declared as the database's."""
+    data = sample_path("salsa-leader-12").read_bytes()
+
+    def run(control: dict[str, object]) -> Any:
+        req = parse_job_request({"engine": "control", "control": control, "budget_s": 5})
+        req.attach_inputs({"sample:salsa-leader-12": data})
+        out = Collect()
+        three_couples.search(req, 5.0, out, lambda: False)
+        return out.solutions[-1]
+
+    with pytest.raises(
+        EngineError, match=r"\+2[78] %.*read in 'cmu-scaled' \(the sample catalogue's unit\).*\"units\""
+    ) as info:
+        run({"bvh": "sample:salsa-leader-12"})
+    assert "1.28 m" in str(info.value)
+    assert run({"bvh": "sample:salsa-leader-12", "units": "m"}).motion.num_frames > 100

@@ -183,3 +183,17 @@ def test_interpretation_matches_window_by_window_alignment(context: int) -> None
             assert interp.D[c, e] == pytest.approx(res[0] / (p * RATE), abs=1e-9)
             al = interp.alignment(np.array([c]), np.array([e]))
             assert al[0, 0] == pytest.approx(cos[0], abs=1e-9) and al[1, 0] == pytest.approx(sin[0], abs=1e-9)
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 7, 64, 301])
+def test_stable_argsort_matches_numpy(n: int) -> None:
+    from engines.control.kernels import _argsort_stable
+
+    rng = np.random.default_rng(n)
+    keys = np.concatenate((np.round(rng.normal(size=n), 1), [np.inf] * 3))  # many ties, and inf
+    order, tmp = np.full(n + 3, -1, dtype=np.int64), np.empty(n + 3, dtype=np.int64)
+    _argsort_stable(keys, n, order, tmp)
+    np.testing.assert_array_equal(order[:n], np.argsort(keys[:n], kind="stable"))
+    keys[: n // 2] = np.inf
+    _argsort_stable(keys, n + 3, order, tmp)
+    np.testing.assert_array_equal(order, np.argsort(keys, kind="stable"))

@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from engines.base import EngineError, Solution
-from engines.graph import search as search_module
+from engines import base as engines_base
+from engines.base import EngineError, Solution, Stopped
 from engines.graph.assemble import assemble, body_frames, quality_inputs
 from engines.graph.model import EdgeTree, RootTracks
 from engines.graph.paths import (
@@ -378,33 +378,22 @@ def test_cancel_stops_at_the_next_poll(graph: Graph) -> None:
     the one emission under way follows, and no alternatives (an uncancelled run of this request
     emits them). No clock: the cancel is a function of the search's own output."""
     out = Collect()
-    searcher(graph, 2).run(request(alternatives=2), 600.0, out, lambda: len(out.solutions) >= 1)
+    stopped = searcher(graph, 2).run(request(alternatives=2), 600.0, out, lambda: len(out.solutions) >= 1)
+    assert stopped == Stopped.cancelled
     assert 1 <= len(out.solutions) <= 2
     assert all(s.metrics["alternative"] == 0 for s in out.solutions)
 
 
-class _TickingClock:
-    """A stand-in for the search module's ``time``: every reading is 10 ms after the last one, so
-    a budget is spent after a fixed number of readings, whatever the machine's speed or load."""
-
-    def __init__(self) -> None:
-        self.now = 0.0
-        self.readings = 0
-
-    def perf_counter(self) -> float:
-        self.readings += 1
-        self.now += 0.01
-        return self.now
-
-
 def test_budget_is_respected(graph: Graph, monkeypatch: pytest.MonkeyPatch) -> None:
-    clock = _TickingClock()
-    monkeypatch.setattr(search_module, "time", clock)
+    """The time cap cuts the search short, on a clock that advances 10 ms at every reading: the
+    cap is spent after a fixed number of readings, whatever the machine's speed or load."""
+    ticks = itertools.count(1)
+    monkeypatch.setattr(engines_base, "CLOCK", lambda: next(ticks) * 0.01)
     gs, out = searcher(graph, 2), Collect()
-    gs.run(request(alternatives=2), 0.6, out, lambda: False, max_rounds=4)
-    # 60 readings of the clock spend the budget: the search stops before the 4 rounds it would run
-    # unhurried (it converges after about 35), with a best solution and its alternatives
-    assert clock.readings > 60 and getattr(gs, "rounds_", 0) < 4
+    stopped = gs.run(request(alternatives=2), 0.6, out, lambda: False, max_rounds=4)
+    # stopped before the 4 rounds it would run unhurried (it converges after about 35), with a
+    # best solution and its alternatives
+    assert stopped == Stopped.budget and next(ticks) > 60 and getattr(gs, "rounds_", 0) < 4
     assert out.solutions and out.solutions[0].metrics["alternative"] == 0
 
 

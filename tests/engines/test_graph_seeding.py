@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
+from engines.base import Run
 from engines.graph.paths import PathBatch, batch_pieces, batch_valid
 from engines.graph.score import score_batch
 from engines.graph.search import _Clock
@@ -46,7 +45,7 @@ def test_polish_only_improves_and_keeps_full_length_paths(graph: Graph) -> None:
     full = np.isfinite(s.total) & (s.pieces.total >= T)
     batch = batch.take(np.flatnonzero(full))
     before = s.total[full]
-    clock = _Clock(60.0, lambda: False, time.perf_counter())
+    clock = _Clock(Run(60.0, lambda: False))
     out, after = gs._polish(gs._problem, batch, before, clock)
     assert np.all(after <= before + 1e-12)
     assert np.any(after < before - 1e-6)

@@ -14,7 +14,7 @@ from engines.rhythm.engine import _on_the_bar, music_beats
 from engines.rhythm.music import MusicError
 from schemas.rhythm import RhythmRequest
 
-from .audio_synthetic import drifting_beats, drum_track, encode, f_measure
+from .audio_synthetic import BREAK_BEATS, break_track, drifting_beats, drum_track, encode, f_measure
 
 
 def _wav(samples: np.ndarray, rate: int = SR) -> bytes:
@@ -62,6 +62,25 @@ def test_tempo_hint_chooses_the_octave() -> None:
     y = drum_track(beats, 10.0, seed=3)
     assert audio_beats(_wav(y), tempo_bpm=65.0).tempo_bpm == pytest.approx(65.0, rel=0.05)
     assert audio_beats(_wav(y), tempo_bpm=130.0).tempo_bpm == pytest.approx(130.0, rel=0.05)
+
+
+def test_the_metrical_level_comes_from_the_onsets_not_the_prior() -> None:
+    """A drum-and-bass break at 87.5 BPM whose strongest periodicity is 117 BPM (three eighth notes,
+    near the 115 BPM prior): the beat level divides in two, 117 BPM does not, so the beats are found
+    at 87.5 BPM (the prior alone gave 120 BPM, F 0.25)."""
+    found = audio_beats(encode(break_track()))
+    assert f_measure(found.beats_s, BREAK_BEATS) >= 0.75
+    assert 80 <= found.tempo_bpm <= 95
+    assert found.tempo_confidence is not None and 0.5 < found.tempo_confidence <= 1.0
+
+
+def test_a_clear_beat_keeps_the_prior_level_with_high_confidence(
+    drifting: tuple[np.ndarray, np.ndarray],
+) -> None:
+    beats, y = drifting
+    found = audio_beats(encode(y, "WAV"))
+    assert found.tempo_confidence is not None and found.tempo_confidence > 0.6
+    assert audio_beats(encode(y, "WAV"), tempo_bpm=105.0).tempo_confidence is None  # a hint decides
 
 
 @pytest.mark.parametrize(

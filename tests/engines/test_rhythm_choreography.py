@@ -3,10 +3,13 @@ the graph as described, groups named by clip spans, the rules, and synthesis obe
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import breadth_first_order
 
 from engines.base import EngineError
 from engines.library import library_from_arrays
@@ -18,11 +21,14 @@ from engines.rhythm.choreography import (
     movement_graph,
     resolve_edits,
 )
+from engines.rhythm.reach import describe as describe_graph
+from engines.rhythm.reach import start_only_groups, unreachable_groups
 from engines.rhythm.synth import draw_probabilities
 from schemas.rhythm_graph import ClipSpan, GraphEdits, ResolvedEdit
 from tests.engines.rhythm_salsa import SAMPLES, group_walks, salsa_arrays, transition_counts
 
 SEEDS = range(40)
+SALSA_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "cmu-salsa"
 
 
 @pytest.fixture(scope="module")
@@ -280,14 +286,157 @@ def test_derived_arrays_keep_everything_but_the_graph(arrays: dict[str, Any]) ->
     assert added == []  # connecting back a learned transition is not an addition
 
 
-def test_a_learned_graph_that_is_not_strongly_connected_must_be_fixed_by_the_edits() -> None:
+def reach_of(p: np.ndarray) -> np.ndarray:
+    """``(K, K)`` j reachable from i (in zero or more transitions), by breadth-first search: a
+    reference independent of :mod:`engines.rhythm.reach`."""
+    k = p.shape[0]
+    out = np.zeros((k, k), dtype=bool)
+    for i in range(k):
+        out[i, breadth_first_order(csr_matrix(p > 0), i, directed=True, return_predecessors=False)] = True
+    return out
+
+
+# groups 0, 1, 2 lead to each other; 3 only starts dances (nothing leads to it); 4 is no start group
+# and only 3 leads to it
+NOT_STRONG = np.array(
+    [
+        [0.4, 0.3, 0.3, 0.0, 0.0],
+        [0.5, 0.0, 0.5, 0.0, 0.0],
+        [0.2, 0.8, 0.0, 0.0, 0.0],
+        [0.6, 0.0, 0.0, 0.0, 0.4],
+        [0.0, 0.0, 1.0, 0.0, 0.0],
+    ]
+)
+
+
+def test_edits_on_a_graph_not_strongly_connected_are_judged_by_what_they_change() -> None:
+    p = NOT_STRONG
+    start = np.array([0.3, 0.3, 0.2, 0.2, 0.0])
+    assert start_only_groups(p > 0, start) == [3] and unreachable_groups(p > 0, start) == []
+    assert start_only_groups(p > 0, np.array([0.5, 0.5, 0, 0, 0])) == []
+    assert unreachable_groups(p > 0, np.array([0.5, 0.5, 0, 0, 0])) == [3, 4]
+    assert "start-only groups [3]" in describe_graph(p, start)
+    # cuts and weights that keep every group as reachable as before are accepted
+    for ok in (
+        [ResolvedEdit(op="cut", source=0, target=0)],
+        [ResolvedEdit(op="cut", source=0, target=1)],  # 0 -> 2 -> 1 is left
+        [ResolvedEdit(op="cut", source=3, target=0)],  # 3 -> 4 -> 2 -> 0 is left
+        [ResolvedEdit(op="weight", source=1, target=2, weight=3.0)],
+    ):
+        out = apply_edits(p, ok)
+        np.testing.assert_array_equal(reach_of(out), reach_of(p))
+        np.testing.assert_allclose(out.sum(axis=1), 1.0)
+        e = ok[0]
+        assert (out[e.source, e.target] == 0) == (e.op == "cut")
+    # a dead end is refused by name
+    with pytest.raises(GraphEditError, match="cuts the last transition out of group 4: a dead end") as info:
+        apply_edits(p, [ResolvedEdit(op="cut", source=4, target=2)])
+    assert info.value.details["problem"] == "dead_end" and info.value.details["groups"] == [4]
+    # a cut that loses a way between groups is refused, naming the groups and the edit
+    with pytest.raises(GraphEditError, match=r"edit 1 \(cut 2 -> 1\) makes groups \[1\] unreachable") as info:
+        apply_edits(
+            p, [ResolvedEdit(op="cut", source=0, target=1), ResolvedEdit(op="cut", source=2, target=1)]
+        )
+    assert info.value.details["unreachable_groups"] == [1] and info.value.details["from_groups"] == [
+        0,
+        2,
+        3,
+        4,
+    ]
+    with pytest.raises(GraphEditError, match=r"makes groups \[4\] unreachable from groups \[3\]"):
+        apply_edits(p, [ResolvedEdit(op="cut", source=3, target=4)])
+    # a connection lets a cut through that alone would lose a way
+    out = apply_edits(
+        p, [ResolvedEdit(op="connect", source=0, target=4), ResolvedEdit(op="cut", source=3, target=4)]
+    )
+    assert out[3, 4] == 0 and out[0, 4] > 0 and reach_of(out)[0, 4]
+
+
+def test_a_closed_part_may_stay_but_no_new_one_is_made() -> None:
     # groups 0 and 1 lead to each other and to 2; 2 only to itself: a dance that reaches 2 stays there
     p = np.array([[0.5, 0.3, 0.2], [0.6, 0.0, 0.4], [0.0, 0.0, 1.0]])
-    with pytest.raises(GraphEditError, match=r"groups \[2\] have no transition to the other groups") as info:
-        apply_edits(p, [ResolvedEdit(op="weight", source=0, target=1, weight=2.0)])
-    assert info.value.index is None and info.value.details["unreachable_groups"] == [0, 1]
+    out = apply_edits(p, [ResolvedEdit(op="weight", source=0, target=1, weight=2.0)])
+    np.testing.assert_allclose(out[0], np.array([0.5, 0.6, 0.2]) / 1.3)
+    with pytest.raises(GraphEditError, match="a dead end"):
+        apply_edits(p, [ResolvedEdit(op="cut", source=2, target=2)])
+    with pytest.raises(GraphEditError, match=r"makes groups \[2\] unreachable from groups \[0, 1\]"):
+        apply_edits(
+            p, [ResolvedEdit(op="cut", source=0, target=2), ResolvedEdit(op="cut", source=1, target=2)]
+        )
     fixed = apply_edits(p, [ResolvedEdit(op="connect", source=2, target=0)])
     np.testing.assert_allclose(fixed[2], [0.5, 0.0, 0.5])  # as likely as the row's average transition
+    assert reach_of(fixed).all()
+
+
+def keeps_reach(p: np.ndarray, a: int, b: int) -> bool:
+    """Cutting ``a -> b`` leaves every group reachable from every group it was reachable from."""
+    cut = p.copy()
+    cut[a, b] = 0.0
+    return bool(np.array_equal(reach_of(cut), reach_of(p)))
+
+
+OTHER_LEADERS = ("03", "09", "11", "13", "15")
+"""Five salsa leaders of ../shared/data no bundled database holds: with ``edge_threshold`` 0.08 and
+4 beats per movement their learned graph is not strongly connected (a start-only group)."""
+
+
+@pytest.fixture(scope="module")
+def other_leaders() -> dict[str, Any]:
+    from engines.library import ClipInput
+    from schemas.databases import parse_database_spec
+    from workers.execute import build_database_bytes
+    from workers.store import load_npz
+
+    files = [SALSA_DATA / f"60_{n}_scaled.bvh" for n in OTHER_LEADERS]
+    if not all(f.is_file() for f in files):
+        pytest.skip(f"shared data not found: {SALSA_DATA}")
+    spec = {
+        "kind": "rhythm",
+        "clips": [{"bvh": f.name, "name": f"L{n}"} for f, n in zip(files, OTHER_LEADERS, strict=True)],
+        "fps": 30,
+        "beats_per_movement": 4,
+        "edge_threshold": 0.08,
+    }
+    clips = [ClipInput(f"L{n}", f.read_bytes()) for f, n in zip(files, OTHER_LEADERS, strict=True)]
+    messages: list[str] = []
+    data, _ = build_database_bytes(
+        parse_database_spec(spec),
+        clips,
+        lambda _t, data: messages.append(str(data.get("message", ""))),
+        lambda: False,
+    )
+    return {"arrays": load_npz(data), "messages": messages}
+
+
+def test_real_graph_not_strongly_connected_takes_a_cut_that_keeps_reach(
+    other_leaders: dict[str, Any],
+) -> None:
+    arrays = other_leaders["arrays"]
+    p = np.asarray(arrays["rhythm.p"])
+    k = p.shape[0]
+    g = movement_graph(arrays, "others")
+    reach = reach_of(p)
+    assert not g.strongly_connected and not reach.all()
+    into = (p > 0) & ~np.eye(k, dtype=bool)
+    assert g.start_only_groups and all(not into[:, x].any() for x in g.start_only_groups)
+    said = [m for m in other_leaders["messages"] if m.startswith("movement graph:")]
+    assert said and f"start-only groups {g.start_only_groups}" in said[0] and "no dead end" in said[0]
+    # the most taken transition whose cut keeps every group as reachable as before
+    walks = group_walks(arrays, range(12))
+    counts = transition_counts(walks, k)
+    keeps = [
+        (int(a), int(b)) for a, b in zip(*np.nonzero(p > 0), strict=True) if a != b and keeps_reach(p, a, b)
+    ]
+    a, b = max(keeps, key=lambda t: counts[t])
+    assert counts[a, b] > 0
+    derived = edited_arrays(arrays, [ResolvedEdit(op="cut", source=a, target=b)])
+    assert movement_graph(derived, "cut").start_only_groups == g.start_only_groups
+    after = transition_counts(group_walks(derived, range(12)), k)
+    assert after[a, b] == 0 and after.sum() == counts.sum()
+    # a dead end is still refused, naming the group
+    out_a = [ResolvedEdit(op="cut", source=a, target=int(x)) for x in np.flatnonzero(p[a] > 0)]
+    with pytest.raises(GraphEditError, match=f"cuts the last transition out of group {a}: a dead end"):
+        apply_edits(p, out_a)
 
 
 def test_reported_probabilities_are_what_dances_take(

@@ -157,16 +157,17 @@ def trs_matrix(t: Array, q: Array, s: Array) -> Array:
 
 
 def node_globals(glb: Glb, frame: int | None) -> Array:
-    """``(N, 4, 4)`` global matrices of every node at a key frame (``None``: rest pose)."""
+    """``(N, 4, 4)`` global matrices of every node at a key frame (``None``: rest pose), every
+    animation applied (a crowd has one per character, on disjoint nodes)."""
     gltf = glb.gltf
     nodes = gltf["nodes"]
     animated: dict[tuple[int, str], Array] = {}
-    if frame is not None:
-        (anim,) = gltf["animations"]
+    for anim in gltf["animations"] if frame is not None else []:
         for ch in anim["channels"]:
             sampler = anim["samplers"][ch["sampler"]]
             assert sampler["interpolation"] == "LINEAR"
             values = glb.accessor(sampler["output"])  # one key: the value of every frame
+            assert (ch["target"]["node"], ch["target"]["path"]) not in animated
             animated[ch["target"]["node"], ch["target"]["path"]] = values[min(frame, len(values) - 1)]
     local = np.empty((len(nodes), 4, 4))
     for i, node in enumerate(nodes):

@@ -20,12 +20,17 @@ import numpy as np
 import pytest
 
 import motion
+from motion.export.bind import bound_glb
 from motion.export.characters import combine_characters
 from motion.export.events import contact_events
+from motion.export.glb import write_glb
 from motion.io import save_motion
 from motion.resample import resample
+from motion.retarget import retarget
+from motion.retarget.character import gltf_character
 from motion.samples import sample_path
 
+from .retarget.gltf_rig import unreal_character_glb
 from .synthetic import walking_biped
 from .test_glb_game import lying_down
 
@@ -74,6 +79,15 @@ def _write(kind: str, path: Path) -> None:
         save_motion(lying_down(walking_biped(frames=30)), path)
     elif kind == "single-frame":
         save_motion(_walk().slice(0, 1), path)
+    elif kind.startswith("bound"):
+        hero = unreal_character_glb()
+        mode = "hips" if kind == "bound-hips" else "root"
+        moved = retarget(_walk(), gltf_character(hero), root_motion=mode)
+        evs = contact_events(moved)
+        path.write_bytes(bound_glb(hero, moved, animation_only=kind == "bound-animation-only", events=evs))
+    elif kind == "bvh-character":
+        character = motion.read_bvh(sample_path("walk-10-04")).slice(0, 1)
+        write_glb(retarget(_walk(), character, root_motion="hips"), path, ground_root=False)
     else:  # pragma: no cover - the list below names every kind
         raise AssertionError(kind)
 
@@ -92,6 +106,10 @@ KINDS = [
     "target-godot",
     "target-unity",
     "target-unreal",
+    "bound",
+    "bound-hips",
+    "bound-animation-only",
+    "bvh-character",
 ]
 
 

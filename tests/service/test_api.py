@@ -89,7 +89,7 @@ def test_malformed_bvh_is_400_naming_file_and_line(client: TestClient) -> None:
     [
         ({"content": b"not a bvh"}, "invalid_request", 422),  # raw body without ?name=
         ({"files": {"other": ("a.bvh", b"x")}}, "invalid_request", 422),  # no 'file' field
-        ({"content": b"", "params": {"name": "empty.bvh"}}, "invalid_bvh", 400),
+        ({"content": b"", "params": {"name": "empty.bvh"}}, "empty_upload", 422),
         ({"content": b"\x1f\x8b\x08garbage", "params": {"name": "z.bvh.gz"}}, "invalid_bvh", 400),
     ],
 )

@@ -20,7 +20,9 @@ def test_inspect_json_on_sample(capsys: pytest.CaptureFixture[str]) -> None:
     info = json.loads(capsys.readouterr().out)
     assert info["frames"] == 2242 and len(info["joints"]) == 43 and info["fps"] == 120.0
     assert info["units_guess"]["plausible"]
-    assert 1.0 < info["height_m"] < 1.3
+    # the sample catalogue declares the salsa samples' unit (cmu-scaled, 1.28 m): 1.46 m, not 1.15 m
+    assert info["units"] == "cmu-scaled" and info["units_source"] == "sample"
+    assert 1.4 < info["height_m"] < 1.5
 
 
 def test_inspect_text_and_declared_units(capsys: pytest.CaptureFixture[str]) -> None:
@@ -39,7 +41,9 @@ def test_convert_all_formats(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     again = read_bvh(tmp_path / "w.bvh")
     assert again.units == "m"
     np.testing.assert_allclose(again.global_positions(), ref / 100, atol=1e-5)  # 6 decimals of a metre
-    assert main(["convert", str(src), str(tmp_path / "c.bvh"), "--units", "cm", "-q"]) == 0
+    assert (
+        main(["convert", str(src), str(tmp_path / "c.bvh"), "--units", "cm", "--keep-reference", "-q"]) == 0
+    )
     np.testing.assert_allclose(read_bvh(tmp_path / "c.bvh").slice(1, 61).global_positions(), ref, atol=1e-4)
 
 
@@ -47,7 +51,8 @@ def test_convert_fps_units_and_target(tmp_path: Path) -> None:
     out = tmp_path / "w.npz"
     assert main(["convert", "sample:walk", str(out), "--fps", "30", "--units", "m", "-q"]) == 0
     z = np.load(out, allow_pickle=False)
-    assert float(z["fps"]) == 30.0 and z["positions"].shape[0] == 80 and str(z["units"]) == "m"
+    # 317 frames at 120 fps less the 4 of its reference-pose lead: 313 -> 79 at 30 fps
+    assert float(z["fps"]) == 30.0 and z["positions"].shape[0] == 79 and str(z["units"]) == "m"
     assert main(["convert", "sample:walk", str(tmp_path / "u.json"), "--target", "unreal", "-q"]) == 0
     doc = json.loads((tmp_path / "u.json").read_text())
     assert doc["convention"]["up"] == "+Z"

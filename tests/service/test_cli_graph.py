@@ -154,3 +154,31 @@ def test_spans_use_the_clip_names_of_the_spec(tmp_path: Path, capsys: pytest.Cap
         "no clip 'salsa-leader-02' among the database's examples (first dance, salsa-leader-04)"
         in capsys.readouterr().err
     )
+
+
+def test_graph_into_a_closed_pipe_ends_quietly(db_dir: Path) -> None:
+    """``segue graph DB | head -4`` (docs/rhythm.md): no ``Broken pipe`` error once head has gone."""
+    from tests.service.test_cli_help import _into_closed_pipe
+
+    r = _into_closed_pipe("graph", str(db_dir / "db"))
+    assert r.stderr == "" and r.returncode == 141
+
+
+def test_serve_import_takes_a_derived_folder_too(db_dir: Path, tmp_path: Path) -> None:
+    """``segue serve --import``: a folder ``segue graph-edit`` wrote is imported under its derived id
+    (checked against its parent's spec and clips and its edits), like the folder it came from."""
+    from workers.graph_edits import graph_of_dir
+    from workers.imports import import_database_dir
+    from workers.store import Store
+
+    t = graph_of_dir(db_dir / "db").transitions[0]
+    edits = [{"op": "weight", "source": t.source, "target": t.target, "weight": 2.0}]
+    (db_dir / "import-edits.json").write_text(json.dumps(edits), encoding="utf-8")
+    args = ["graph-edit", str(db_dir / "db"), str(db_dir / "import-edits.json"), "--out", str(tmp_path / "d")]
+    assert main([*args, "-q"]) == 0
+    store = Store(tmp_path / "data")
+    parent, _ = import_database_dir(store, db_dir / "db", ["local"])
+    derived, new = import_database_dir(store, tmp_path / "d", ["local"])
+    assert new and derived.id == json.loads((tmp_path / "d" / "info.json").read_text())["id"]
+    assert derived.derived_from is not None and derived.derived_from.parent == parent.id
+    assert store.database_spec(derived.id) == store.database_spec(parent.id)

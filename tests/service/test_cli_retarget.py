@@ -32,7 +32,7 @@ def test_retarget_to_a_bvh_character(
     src = load_motion("sample:walk-05-01")
     assert got.skeleton.names == char.skeleton.names and got.skeleton.channels == char.skeleton.channels
     np.testing.assert_allclose(got.skeleton.offsets, char.skeleton.offsets, atol=1e-6)
-    assert got.num_frames == src.num_frames and got.fps == src.fps
+    assert got.num_frames == src.num_frames - 1 and got.fps == src.fps  # its reference-pose frame dropped
 
 
 def test_retarget_to_glb_output_and_glb_character(tmp_path: Path, unreal_bvh: Path) -> None:
@@ -100,3 +100,55 @@ def test_errors_name_the_problem(
     code = main(["retarget", "sample:walk", "--to", str(char), "--out", str(tmp_path / "o.bvh"), *extra])
     assert code == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_bvh_character_keeps_exactly_its_hierarchy_in_glb(tmp_path: Path, unreal_bvh: Path) -> None:
+    from tests.motion.retarget.gltf_rig import read_glb
+
+    out = tmp_path / "o.glb"
+    assert main(["retarget", "sample:walk-05-01", "--to", str(unreal_bvh), "--out", str(out), "-q"]) == 0
+    doc, _ = read_glb(out.read_bytes())
+    names = [doc["nodes"][j]["name"] for j in doc["skins"][0]["joints"]]
+    assert names == list(read_bvh(unreal_bvh).skeleton.names)  # no ground joint added
+
+
+def test_animation_only_needs_a_gltf_character(
+    tmp_path: Path, unreal_bvh: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = ["retarget", "sample:walk", "--to", str(unreal_bvh), "--out", str(tmp_path / "o.glb")]
+    assert main([*args, "--animation-only"]) == 2
+    assert "--animation-only is for a glTF/GLB character" in capsys.readouterr().err
+
+
+def test_root_motion_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.motion.retarget.gltf_rig import read_glb, unreal_character_glb
+
+    hero = tmp_path / "hero.glb"
+    hero.write_bytes(unreal_character_glb())
+    out = tmp_path / "o.glb"
+    for flags, carrier in ((["--target", "unreal"], "root"), (["--target", "unity"], "pelvis")):
+        assert main(["retarget", "sample:walk", "--to", str(hero), "--out", str(out), *flags]) == 0
+        assert f"on {carrier!r}" in capsys.readouterr().out
+        doc, _ = read_glb(out.read_bytes())
+        moved = {
+            doc["nodes"][c["target"]["node"]]["name"]
+            for c in doc["animations"][0]["channels"]
+            if c["target"]["path"] == "translation"
+        }
+        assert moved == ({"root", "pelvis"} if carrier == "root" else {"pelvis"})
+    assert (
+        main(
+            [
+                "retarget",
+                "sample:walk",
+                "--to",
+                "sample:walk-10-04",
+                "--out",
+                str(out),
+                "--root-motion",
+                "root",
+            ]
+        )
+        == 2
+    )
+    assert "starts at its hips" in capsys.readouterr().err

@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from motion import parse_bvh
@@ -43,10 +44,17 @@ def test_each_demo_writes_an_ok_result_its_files_and_how_to_repeat_it(demo_root:
     out = (demo_root / "stdout.txt").read_text()
     block = out[out.index(f"segue demo {name}:") :]
     assert "quality: ok" in block.split("segue demo ", 2)[1]
+    kind = demo.spec["kind"]
+    assert f"built {'an' if kind == 'annotated' else 'a'} {kind} database:" in block
     report = json.loads((folder / "report.json").read_text())
     assert report["ok"] is True and report["reasons"] == [] and report["engine"] == demo.engine
     bvh = parse_bvh((folder / f"{demo.output}.bvh").read_bytes(), source=demo.output)
     assert bvh.num_frames == report["frames"] == len(report["provenance"])
+    if "sample:salsa" in (folder / "db.json").read_text():
+        # the salsa samples in the unit the sample catalogue declares (cmu-scaled): 1.46 m dancers
+        pos = bvh.global_positions()[::5]
+        height_m = float(np.median(pos[..., 1].max(axis=1) - pos[..., 1].min(axis=1))) * bvh.metres_per_unit
+        assert 1.4 <= height_m <= 1.6, height_m
     assert (folder / f"{demo.output}.glb").read_bytes()[:4] == b"glTF"
     for extra in demo.extra:
         assert (folder / extra).read_bytes()[:4] == b"glTF"
@@ -98,6 +106,7 @@ def test_plain_demo_is_the_readme_job(tmp_path: Path, capsys: pytest.CaptureFixt
     assert spec["clips"] == [{"bvh": "sample:salsa-leader"}]
     out = capsys.readouterr().out
     assert "segue demo {control,walk,graph,annotations,rhythm}" in out
+    assert "height 1.46 m (cmu-scaled)" in out
 
 
 def test_unknown_demo_is_an_argument_error(capsys: pytest.CaptureFixture[str]) -> None:

@@ -119,7 +119,7 @@ def test_database_summary_for_clients_that_did_not_build_it(client: TestClient) 
     assert roles == {"salsa-follower-02": "target", "salsa-leader-02": "control"}
     assert summary["skeleton"]["hips"] == "hip" and summary["skeleton"]["static_root"] is False
     assert summary["skeleton"]["joints"][0] == "hip" and summary["skeleton"]["parents"][0] == -1
-    assert {c["source_units"] for c in summary["clips"]} == {"m"}
+    assert {c["source_units"] for c in summary["clips"]} == {"cmu-scaled"}  # the sample catalogue's unit
     walks = _ready(client, {"kind": "control", "pairs": [{"target": "sample:walk-10-04"}]})
     assert walks["summary"]["control"] == "path"
     listed = {d["id"]: d for d in client.get("/v1/databases").json()}

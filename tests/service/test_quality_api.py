@@ -75,9 +75,11 @@ def test_graph_events_and_report_over_http(client: TestClient, graph_db: str, tm
     assert body["satisfied"] == (body["position_cm"] <= 5.0 and body["heading_deg"] <= 5.0)
     assert {"root_speed", "turn_rate", "foot_slide", "joint_step", "jerk"} <= report["plausibility"].keys()
     assert report["metrics"]["root_speed_max_m_s"] == report["plausibility"]["root_speed"]["value"]
-    # the same seed through the command line's runtime gives the same motion
+    # the same seed through the command line's runtime gives the same motion and the same report
+    # (the search is bounded by work, not time: issue 29), all but the job id
     cli = cli_result(tmp_path, REQUEST)
-    assert cli["provenance"] == report["provenance"] and cli["score"] == pytest.approx(report["score"])
+    assert report["stopped"] == "work" and done["data"]["stopped"] == "work"
+    assert {k: v for k, v in cli.items() if k != "job"} == {k: v for k, v in report.items() if k != "job"}
 
 
 def cli_result(where: Path, request: dict[str, Any]) -> dict[str, Any]:

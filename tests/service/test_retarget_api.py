@@ -57,6 +57,30 @@ def test_result_on_an_uploaded_glb_character(client: TestClient, walk_job: str) 
     assert "pelvis" in parse_bvh(r.content).skeleton.names
 
 
+def test_a_glb_download_is_the_characters_own_file(client: TestClient, walk_job: str) -> None:
+    from tests.motion.retarget.gltf_rig import read_glb, unreal_character_glb
+
+    hero = unreal_character_glb()
+    f = client.post("/v1/files", files={"file": ("hero.glb", hero)}).json()
+    for params, carrier in (
+        ({"target": "unreal"}, {"root", "pelvis"}),
+        ({"root_motion": "hips"}, {"pelvis"}),
+    ):
+        r = client.get(
+            f"/v1/jobs/{walk_job}/result", params={"format": "glb", "character": f["id"], **params}
+        )
+        assert r.status_code == 200, r.text
+        doc, _ = read_glb(r.content)
+        before, _ = read_glb(hero)
+        assert doc["nodes"] == before["nodes"] and doc["meshes"] == before["meshes"]
+        moved = {
+            doc["nodes"][c["target"]["node"]]["name"]
+            for c in doc["animations"][0]["channels"]
+            if c["target"]["path"] == "translation"
+        }
+        assert moved == carrier
+
+
 def test_character_errors(client: TestClient, walk_job: str) -> None:
     err = error_of(client.get(f"/v1/jobs/{walk_job}/result", params={"character": "nope"}), 404, "not_found")
     assert "no character 'nope'" in err["message"]

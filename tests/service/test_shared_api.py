@@ -89,3 +89,7 @@ def test_bad_shared_constraints_are_422(
     assert words in body["message"] or words in str(body.get("details")), body
     if code == "unknown_joint":
         assert body["code"] == code and "rHand" in body["details"]["joints"]
+        # where it was asked for first, then the joint, then the joints there are
+        assert body["message"].startswith(
+            "shared[0].a: the database's skeleton has no joint named 'rPaw' (joints: "
+        ), body["message"]

@@ -79,3 +79,17 @@ def test_client_errors_and_unknown_job_close(server: str, segue: SegueClient) ->
     with pytest.raises(SegueError) as exc:
         segue.submit({"engine": "clip", "clip": "x"})
     assert exc.value.status == 422 and exc.value.code == "invalid_request"
+
+
+def test_client_cancels_and_deletes_with_plain_requests(segue: SegueClient, database: str) -> None:
+    """``SegueClient`` sends cancel and delete as ``curl -X`` does: no body, no content type."""
+    job = segue.submit({"engine": "scripted", "database": database, "steps": 500, "step_s": 0.05})
+    with pytest.raises(SegueError) as exc:
+        segue.delete_job(job.id)
+    assert exc.value.status == 409 and exc.value.code == "job_not_finished"
+    segue.cancel(job.id)
+    assert list(segue.events(job.id))[-1].type == "cancelled"
+    segue.delete_job(job.id)
+    with pytest.raises(SegueError) as exc:
+        segue.job(job.id)
+    assert exc.value.status == 404

@@ -109,3 +109,22 @@ def test_web_files_are_package_data() -> None:
     line = next(line for line in text.splitlines() if line.startswith('"web" = '))
     for pattern in ("*.html", "*.css", "js/*.js", "vendor/three/**/*"):
         assert f'"{pattern}"' in line
+
+
+def test_the_pages_unit_table_is_the_services() -> None:
+    """web/js/bvh.js draws clips in the unit the service reports (ClipInfo.units): it knows every
+    unit of motion.units (cmu-scaled too: the bundled salsa samples declare it) and guesses among
+    the same ones."""
+    from motion.units import GUESSED_UNITS, METRES_PER_UNIT
+
+    js = (WEB_DIR / "js" / "bvh.js").read_text()
+    table = re.search(r"METRES_PER_UNIT = \{(.*?)\};", js)
+    guessed = re.search(r"GUESSED_UNITS = \[(.*?)\];", js)
+    assert table is not None and guessed is not None
+    entries = dict(re.findall(r"'?([\w-]+)'?: ([\d./ ]+)", table.group(1)))
+    assert set(entries) == set(METRES_PER_UNIT)
+    for unit, expr in entries.items():
+        a, _, b = expr.partition("/")
+        value = float(a) / float(b) if b else float(a)
+        assert value == pytest.approx(METRES_PER_UNIT[unit]), unit
+    assert re.findall(r"'([\w-]+)'", guessed.group(1)) == list(GUESSED_UNITS)

@@ -13,7 +13,7 @@ from typing import Any, Literal
 
 from pydantic import Field
 
-from engines.base import Emitter, Engine, EngineError, ShouldStop, Solution
+from engines.base import Emitter, Engine, EngineError, ShouldStop, Solution, Stopped
 from engines.registry import register
 from schemas.jobs import JobRequestBase, register_request_model
 
@@ -40,7 +40,7 @@ class ScriptedEngine(Engine):
     name = "scripted"
     kind = "clips"
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
+    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
         clip = self.library.motions[0]
         name = self.library.names[0]
         t0 = time.monotonic()
@@ -50,8 +50,10 @@ class ScriptedEngine(Engine):
             sum(range(10_000))  # an engine busy in Python: ignores cancels and holds the GIL
         t0 = time.monotonic()
         for i in range(request.steps):
-            if should_stop() or time.monotonic() - t0 > budget_s:
-                return
+            if should_stop():
+                return Stopped.cancelled
+            if time.monotonic() - t0 > budget_s:
+                return Stopped.budget
             if request.fail_at == i:
                 raise EngineError(f"scripted failure at step {i}")
             time.sleep(request.step_s)
@@ -64,6 +66,7 @@ class ScriptedEngine(Engine):
                     provenance=[(name, f) for f in range(n)],
                 )
             )
+        return Stopped.work
 
 
 register_request_model("scripted", ScriptedRequest)

@@ -17,7 +17,8 @@ def test_recording_beats_of_a_file(tmp_path: Path) -> None:
     path = tmp_path / "song.flac"
     path.write_bytes(encode(drum_track(beats, 10.0, seed=4), "FLAC"))
     info = recording_beats(path)
-    assert set(info) == {"file", "duration_s", "tempo_bpm", "beats_s", "downbeat_s"}
+    assert set(info) == {"file", "duration_s", "tempo_bpm", "tempo_confidence", "beats_s", "downbeat_s"}
+    assert 0.5 < info["tempo_confidence"] <= 1.0
     assert f_measure(np.array(info["beats_s"]), beats[beats > 1.0]) >= 0.85
     assert 100 <= info["tempo_bpm"] <= 110
 

@@ -345,3 +345,42 @@ def test_reclaim_hung_worker_and_own_leftovers(redis_url: str, rclient: redis.Re
         events = stream_events(rclient, job_id)
         assert events[-1].type == EventType.done
         assert [e.data for e in events if e.type == EventType.started] == [{"worker": "t1", "attempt": 2}]
+
+
+def test_delete_a_finished_job_refuse_a_running_one(
+    redis_url: str, rclient: redis.Redis, store: Store
+) -> None:
+    """``DELETE /v1/jobs/{id}`` on the Redis backend: a finished job goes from Redis and the store;
+    a running one is refused (cancel it first)."""
+    from workers.backend import JobNotFinished
+
+    db = add_database(store)
+
+    async def scenario() -> tuple[str, str]:
+        backend = RedisBackend(store, redis_url)
+        await backend.start()
+        try:
+            job, payload = synth(store, db, steps=2, step_s=0)
+            await backend.submit(job, "synth", payload)
+            assert (await collect(backend, job.id))[-1].type == "done"
+            long, long_payload = synth(store, db, steps=500, step_s=0.05)
+            await backend.submit(long, "synth", long_payload)
+            with pytest.raises(JobNotFinished):
+                await backend.delete(long.id)
+            await backend.delete(job.id)
+            with pytest.raises(NotFoundError):
+                await backend.status(job.id)
+            with pytest.raises(NotFoundError):
+                await backend.delete(job.id)
+            await backend.cancel(long.id)
+            assert (await collect(backend, long.id))[-1].type == "cancelled"
+            await backend.delete(long.id)
+            return job.id, long.id
+        finally:
+            await backend.close()
+
+    with worker_thread(redis_url, store, "t1"):
+        ids = run(scenario())
+    for job_id in ids:
+        assert not store.job_dir(job_id).exists()
+        assert not rclient.exists(KEYS.job(job_id), KEYS.events(job_id), KEYS.event_seq(job_id))

@@ -49,7 +49,9 @@ def deployment(redis_url: str, tmp_path: Path) -> Iterator[str]:
         ),
         *(
             subprocess.Popen(
-                [*segue, "worker", "--redis", redis_url, "--name", f"topology-{i}"], env=env, cwd=REPO
+                [*segue, "worker", "--redis", redis_url, "--name", f"topology-{i}", "--no-warm"],
+                env=env,
+                cwd=REPO,
             )
             for i in range(2)
         ),

@@ -85,6 +85,7 @@ export async function request(method, path, { json, body, query } = {}) {
 export const api = {
   health: async () => (await fetch('/healthz')).json(),
   samples: async () => (await request('GET', '/samples')).json(),
+  demos: async () => (await request('GET', '/demos')).json(),
   sampleBytes: async (file) => (await request('GET', `/samples/${encodeURIComponent(file)}`)).arrayBuffer(),
 
   uploadClip: async (name, bytes) => {

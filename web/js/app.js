@@ -54,10 +54,12 @@ const clipMotions = new Map(); // clip name -> parsed motion (metres)
 const summaryOf = (id) => (state.databases.find((d) => d.id === id) || {}).summary || null;
 
 // ---------------------------------------------------------------- errors
+const errorCodes = {}; // where -> the code of the error shown there
 export function showError(where, exc) {
   const el = $(`err-${where}`);
   const message = exc instanceof ApiError ? `${exc.message} [${exc.code}]` : String(exc.message || exc);
   if (el) el.textContent = message;
+  errorCodes[where] = exc.code || 'error';
   state.errors.push({ where, code: exc.code || 'error', message: exc.message || String(exc), status: exc.status || 0 });
   if (!(exc instanceof ApiError)) console.error(exc);
 }
@@ -65,7 +67,19 @@ export function showError(where, exc) {
 export function clearError(where) {
   const el = $(`err-${where}`);
   if (el) el.textContent = '';
+  delete errorCodes[where];
 }
+
+// A tool's "no database" / "database not ready" error is stale once its picker holds a ready
+// database (built since, or picked): it goes, instead of staying beside a tool that now works.
+const TOOL_SELECTS = { path: 'path-db', partner: 'partner-db', constraints: 'cons-db', timeline: 'tl-db', music: 'music-db' };
+const DATABASE_ERRORS = new Set(['no_database', 'database_not_ready']);
+function clearStaleDatabaseErrors() {
+  for (const [where, select] of Object.entries(TOOL_SELECTS)) {
+    if (DATABASE_ERRORS.has(errorCodes[where]) && $(select).value) clearError(where);
+  }
+}
+for (const select of Object.values(TOOL_SELECTS)) $(select).addEventListener('change', clearStaleDatabaseErrors);
 
 async function guarded(where, fn) {
   clearError(where);
@@ -199,6 +213,8 @@ async function refreshClips() {
     for (const c of state.clips) sel.add(new Option(clipName(c), clipName(c)));
     if (keep) sel.value = keep;
   }
+  tools.partner?.refreshLeaders();
+  if (state.ready) showWelcome();
 }
 
 // how a database is named in lists and pickers: its name, else its clips; its kind, and what drives
@@ -225,7 +241,11 @@ async function refreshDatabases() {
   if (seq !== dbListSeq) return; // a newer refresh is on its way
   const signature = JSON.stringify(databases.map((d) => [d.id, d.status, d.frames, Boolean(d.summary)]));
   state.databases = databases;
-  if (signature === dbListSignature) return; // nothing changed: leave the lists (and open menus) alone
+  showWelcome();
+  if (signature === dbListSignature) {
+    clearStaleDatabaseErrors();
+    return; // nothing changed: leave the lists (and open menus) alone
+  }
   dbListSignature = signature;
   const list = $('db-list');
   list.textContent = '';
@@ -249,6 +269,49 @@ async function refreshDatabases() {
     if (keep && ready.some((d) => d.id === keep)) sel.value = keep;
   }
   timeline.refreshTracks();
+  tools.partner?.refreshLeaders();
+  clearStaleDatabaseErrors();
+}
+
+// ---------------------------------------------------------------- first visit: "try it"
+// An empty page (no clip, no database) offers the databases `segue demo ENGINE` builds, from
+// bundled samples: one click builds one and opens the tool that uses it.
+const welcome = { demos: [], shown: false, built: [] };
+state.welcome = welcome;
+function showWelcome() {
+  welcome.shown = !state.databases.length && !state.clips.length && welcome.demos.length > 0;
+  $('welcome').hidden = !welcome.shown;
+}
+async function loadDemos() {
+  welcome.demos = await api.demos();
+  const box = $('welcome-demos');
+  box.textContent = '';
+  for (const demo of welcome.demos) {
+    const b = document.createElement('button');
+    b.dataset.demo = demo.name;
+    b.innerHTML = '<span></span><small></small>';
+    b.firstChild.textContent = `${demo.tool}: ${demo.name}`;
+    b.lastChild.textContent = demo.title;
+    b.onclick = () => guarded('build', () => tryDemo(demo));
+    box.appendChild(b);
+  }
+  showWelcome();
+}
+async function tryDemo(demo) {
+  for (const b of $('welcome-demos').querySelectorAll('button')) b.disabled = true;
+  try {
+    const info = await buildDatabase({ ...demo.spec, name: `${demo.name} demo` });
+    const tool = demo.tool.toLowerCase();
+    welcome.built.push({ demo: demo.name, database: info.id, tool });
+    selectTool(tool);
+    const select = $(TOOL_SELECTS[tool]);
+    if ([...select.options].some((o) => o.value === info.id)) {
+      select.value = info.id;
+      select.dispatchEvent(new Event('change'));
+    }
+  } finally {
+    for (const b of $('welcome-demos').querySelectorAll('button')) b.disabled = false;
+  }
 }
 
 const SPEC_TEMPLATES = {
@@ -413,6 +476,7 @@ export async function runJob(tool, request) {
   const info = await api.submit(request);
   state.job = { id: info.id, tool, status: info.status, submitted_ms: performance.now() - t0, events: [], reconnects: 0 };
   $('cancel-job').disabled = false;
+  showJobState(state.job);
   let best = Infinity;
   const run = { tool, t0, jobId: info.id, db: request.database };
   run.handle = followJob(info.id, (ev) => {
@@ -422,10 +486,11 @@ export async function runJob(tool, request) {
       $('sol-info').textContent = `${Math.round(ev.data.fraction * 100)}% ${ev.data.message || ''}`;
     } else if (ev.type === 'started') {
       state.job.status = 'running';
+      showJobState(state.job);
     } else if (ev.type === 'solution' || ev.type === 'alternative') {
       // solutions are new bests (drawn as they come); alternatives are other candidates to pick
       const sol = { job: info.id, result: ev.data.result, score: ev.data.score, elapsed_ms: ev.data.elapsed_ms, terms: ev.data.terms, at_ms: performance.now() - t0,
-        ok: ev.data.ok, reasons: ev.data.reasons || [], alternative: ev.type === 'alternative' };
+        ok: ev.data.ok, reasons: ev.data.reasons || [], alternative: ev.type === 'alternative', frames: ev.data.frames, fps: ev.data.fps };
       state.solutions.push(sol);
       const mark = sol.ok === false ? ' · not ok' : '';
       const opt = new Option(`${sol.result} · ${sol.alternative ? 'alternative · ' : ''}score ${sol.score.toFixed(3)}${mark}`, sol.result);
@@ -437,6 +502,10 @@ export async function runJob(tool, request) {
       }
     } else if (['done', 'failed', 'cancelled'].includes(ev.type)) {
       state.job.status = ev.type;
+      const error = ev.data.error || {};
+      state.job.end = { type: ev.type, result: ev.data.result || null, stopped: ev.data.stopped || null, short: ev.data.short || null,
+        message: ev.type === 'failed' ? `${error.message || 'the job failed'} [${error.code || 'failed'}]` : ev.data.message || '' };
+      showJobState(state.job);
       $('cancel-job').disabled = true;
       if (ev.type === 'failed') showError(tool, new ApiError(422, ev.data.error.code, ev.data.error.message));
       if (!state.solutions.length && ev.type !== 'failed') $('sol-info').textContent = `${ev.type} without a result`;
@@ -463,7 +532,11 @@ async function drawSolution(run, sol) {
   const root = placeJoint(motion, summary && summary.skeleton.hips);
   viewer.set('result', motion, undefined, { root }); // framed: each better solution may go elsewhere
   const drawn = performance.now() - run.t0;
-  state.current = { tool: run.tool, job: sol.job, result: sol.result, score: sol.score, frames: motion.frames, fps: motion.fps, joints: motion.joints.length, drawn_ms: drawn, root: rootPath(motion, root),
+  // the result as computed (its report's frames and rate, which its reasons count in), and the
+  // preview drawn here (at most VIEW_FPS)
+  const sourceFrames = sol.frames ?? motion.frames;
+  const sourceFps = sol.fps ?? motion.fps;
+  state.current = { tool: run.tool, job: sol.job, result: sol.result, score: sol.score, frames: motion.frames, fps: motion.fps, source_frames: sourceFrames, source_fps: sourceFps, joints: motion.joints.length, drawn_ms: drawn, root: rootPath(motion, root),
     rootJoint: motion.joints[root],
     // where the time went: the event's arrival, the download, parsing, drawing (ms)
     event_ms: sol.at_ms, download_ms: tParse - tFetch, parse_ms: tDraw - tParse, draw_ms: performance.now() - tDraw };
@@ -472,11 +545,32 @@ async function drawSolution(run, sol) {
     const { event_ms, download_ms, parse_ms, draw_ms } = state.current;
     state.firstDraw[run.tool] = { drawn_ms: drawn, event_ms, download_ms, parse_ms, draw_ms, result: sol.result };
   }
-  $('sol-info').textContent = `${sol.result} · score ${sol.score.toFixed(3)} · found at ${(sol.elapsed_ms / 1000).toFixed(2)} s · ${motion.frames} frames`;
+  $('sol-info').textContent = `${sol.result} · score ${sol.score.toFixed(3)} · found at ${(sol.elapsed_ms / 1000).toFixed(2)} s · ${framesText(sourceFrames, sourceFps, motion)}`;
   showQuality(sol);
   for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = false;
   if (first) { viewer.seek(0); viewer.play(); }
   tools[run.tool]?.onResult?.(motion, root);
+}
+
+// Where the job stands, in words beside Cancel: queued, running, then how it ended (done,
+// cancelled or failed, with the supervisor's `stopped` reason and a shortfall when the event has them)
+function showJobState(job) {
+  const el = $('job-state');
+  if (!job) { el.hidden = true; el.textContent = ''; return; }
+  const end = job.end;
+  let text = { queued: 'queued…', running: 'running…' }[job.status] || job.status;
+  if (end) {
+    const best = end.result ? ` · best ${end.result}` : '';
+    const stopped = end.stopped ? ` · stopped: ${end.stopped}` : '';
+    const short = end.short ? ` · short: ${end.short.frames} of ${end.short.requested_frames} frames` : '';
+    text = end.type === 'failed' ? `failed: ${end.message}` : `${end.type}${best}${stopped}${short}`;
+  }
+  el.hidden = false;
+  el.className = `job-state ${job.status}`;
+  el.textContent = text;
+  el.title = end && end.message ? end.message : '';
+  job.label = text;
+  job.labels = [...(job.labels || []), text]; // every state shown, for tests
 }
 
 // The result's quality report in one badge: "ok", or "not ok" with the first reason (all on hover).
@@ -488,6 +582,15 @@ function showQuality(sol) {
   el.textContent = sol.ok ? 'ok' : `not ok: ${sol.reasons[0] || ''}${sol.reasons.length > 1 ? ` (+${sol.reasons.length - 1})` : ''}`;
   el.title = sol.ok ? 'every constraint met; as plausible as the database\'s examples' : sol.reasons.join('\n');
   state.quality = { result: sol.result, ok: sol.ok, reasons: sol.reasons };
+}
+
+// a frame rate as people write it (a BVH's frame time rounds 30 fps to 30.0003)
+const rate = (fps) => (Math.abs(fps - Math.round(fps)) < 0.01 ? String(Math.round(fps)) : fps.toFixed(2));
+// "260 frames at 60 fps (drawn at 30 fps)": the result's own frames (the ones its report's reasons
+// name), and the preview's rate when the page draws fewer
+export function framesText(frames, fps, preview) {
+  const drawn = preview && Math.abs(preview.fps - fps) > 0.01 ? ` (drawn at ${rate(preview.fps)} fps)` : '';
+  return `${frames} frames at ${rate(fps)} fps${drawn}`;
 }
 
 // the floor path [[x, z], ...] of a motion's place joint (the hips; see viewer.placeJoint)
@@ -556,6 +659,7 @@ function clearResults() {
   $('alternatives').textContent = '';
   for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = true;
   $('cancel-job').disabled = true;
+  showJobState(null);
   $('sol-info').textContent = 'no result yet';
   for (const t of Object.values(tools)) t.clearResult?.();
 }
@@ -566,6 +670,7 @@ export function selectTool(name) {
   for (const b of document.querySelectorAll('#tabs button')) b.classList.toggle('active', b.dataset.tool === name);
   for (const t of document.querySelectorAll('.tool')) t.classList.toggle('active', t.id === `tool-${name}`);
   tools[name]?.redraw?.();
+  tools[name]?.onShow?.();
 }
 
 function numberOf(id, where, lo, hi) {
@@ -738,13 +843,79 @@ tools.path = (() => {
 // -- Partner: a leader clip -> the follower (control engine with the leader as the control motion)
 tools.partner = (() => {
   // the follower's start and end spots (request `bodies`), clicked on a floor pad beside the
-  // leader's path: the first click is the start, the second the end (later clicks move the end)
+  // leader's path: the first click is the start, the second the end (later clicks move the end);
+  // after a result, its start and end are offered (hollow rings) and a click moves the nearer one
   const pad = new FloorPad($('partner-pad'), 3);
   const canvas = $('partner-pad');
   let leaderPath = [];
   let result = [];
-  state.partner = { spots: [], bodies: null };
+  let shownLeader = null; // the picker value whose path is drawn
+  let leaderLoading = false;
+  state.partner = { spots: [], bodies: null, offered: null, leaders: [] };
+  // test hook: where a floor point [x, z] is on the pad, as fractions of its width and height
+  state.partner.padFraction = (p) => { const [x, y] = pad.toPixels(p); return [x / canvas.width, y / canvas.height]; };
   const info = (name) => state.clips.find((c) => clipName(c) === name);
+  const sampleFile = (name) => Object.keys(state.samples).find((f) => state.samples[f] === name);
+  // the words of a clip's name that say what it is (not its numbers): "60_12_salsa_leader_30fps"
+  // -> salsa, leader
+  const words = (name) => new Set(String(name).toLowerCase().replace(/\.gz$/, '').replace(/\.bvh$/, '')
+    .split(/[^a-z0-9]+/).filter((w) => w && !/^\d/.test(w)));
+  // The leaders that fit the chosen database: its skeleton (uploaded clips; a bundled sample is
+  // checked once drawn), named like its control clips (the words all their names share), not one
+  // of its followers; those it was not built from first ("held out"), then its own leaders.
+  const fittingLeaders = () => {
+    const summary = summaryOf($('partner-db').value);
+    if (!summary) return [];
+    const inDb = new Set(summary.clips.map((c) => c.name));
+    const targets = new Set(summary.clips.filter((c) => c.role === 'target').map((c) => c.name));
+    const controls = summary.clips.filter((c) => c.role === 'control').map((c) => words(c.name));
+    const common = controls.length ? [...controls[0]].filter((w) => controls.every((ws) => ws.has(w))) : [];
+    const named = (aliases) => aliases.some((a) => { const ws = words(a); return common.every((w) => ws.has(w)); });
+    const joints = summary.skeleton.joints.join('\n');
+    const out = [];
+    const uploadedSamples = new Set();
+    for (const c of state.clips) {
+      const aliases = [clipName(c), state.samples[c.name]].filter(Boolean);
+      if (state.samples[c.name]) uploadedSamples.add(state.samples[c.name]);
+      if (c.joints.join('\n') !== joints || aliases.some((a) => targets.has(a)) || !named(aliases)) continue;
+      out.push({ value: clipName(c), label: clipName(c), heldOut: !aliases.some((a) => inDb.has(a)) });
+    }
+    for (const name of Object.values(state.samples)) {
+      if (uploadedSamples.has(name) || targets.has(name) || !named([name])) continue;
+      out.push({ value: `sample:${name}`, label: `${name} (bundled sample)`, heldOut: !inDb.has(name) });
+    }
+    return [...out.filter((l) => l.heldOut), ...out.filter((l) => !l.heldOut)];
+  };
+  const refreshLeaders = () => {
+    const sel = $('partner-clip');
+    const keep = sel.value;
+    const leaders = fittingLeaders();
+    state.partner.leaders = leaders;
+    sel.textContent = '';
+    if (!leaders.length) {
+      const db = $('partner-db').value;
+      sel.add(new Option(db ? '(no clip fits this database: upload a leader with its skeleton)' : '(choose a partner database)', ''));
+    }
+    for (const l of leaders) sel.add(new Option(l.heldOut ? l.label : `${l.label} (in the database)`, l.value));
+    // keep the user's pick when it still fits; else the first held-out leader
+    if (keep && leaders.some((l) => l.value === keep)) sel.value = keep;
+    else if (keep.startsWith('sample:') && leaders.some((l) => l.value === clipName({ name: sampleFile(keep.slice(7)) || '' }))) {
+      sel.value = clipName({ name: sampleFile(keep.slice(7)) });
+    }
+    if (state.tool === 'partner' && !leaderLoading && sel.value !== shownLeader) guarded('partner', showLeader);
+  };
+  // a bundled sample picked as the leader is uploaded (as the library's Upload does): the request
+  // names it, the page draws it in the units the API found for it
+  const ensureLeader = async (value) => {
+    if (!value.startsWith('sample:')) return value;
+    const file = sampleFile(value.slice(7));
+    if (!file) throw new ApiError(0, 'no_clip', `no bundled sample ${value}`);
+    const uploaded = await api.uploadClip(file, await api.sampleBytes(file));
+    await refreshClips();
+    const name = clipName(uploaded);
+    $('partner-clip').value = name;
+    return name;
+  };
   // the leader in metres: parsed in this page when it was uploaded here, else its bytes from the
   // API (GET /v1/clips/{id}/bvh: clips uploaded by any client); null when it is not a clip
   const leaderMotion = async (name) => {
@@ -757,6 +928,13 @@ tools.partner = (() => {
     }
     return motion || null;
   };
+  const ring = (ctx, p, color) => {
+    const [x, y] = pad.toPixels(p);
+    ctx.strokeStyle = color;
+    ctx.lineWidth = 2;
+    ctx.beginPath(); ctx.arc(x, y, 7, 0, 2 * Math.PI); ctx.stroke();
+  };
+  const at = (p) => `[${p[0].toFixed(2)}, ${p[1].toFixed(2)}]`;
   const redraw = () => {
     const ctx = pad.clear();
     if (leaderPath.length) {
@@ -764,14 +942,31 @@ tools.partner = (() => {
       pad.dot(ctx, leaderPath[0], '#4aa3ff', 4);
     }
     if (result.length) pad.polyline(ctx, result, '#f0a030', 2);
-    state.partner.spots.forEach((p, i) => pad.dot(ctx, p, i ? '#e06060' : '#7ccf7c', 6));
-    const [a, b] = state.partner.spots;
-    const at = (p) => `[${p[0].toFixed(2)}, ${p[1].toFixed(2)}]`;
-    $('partner-spots-info').textContent = a ? `start ${at(a)}${b ? ` · end ${at(b)}` : ''} m` : 'no spots';
+    const { spots, offered } = state.partner;
+    if (!spots.length && offered) offered.forEach((p, i) => ring(ctx, p, i ? '#e06060' : '#7ccf7c'));
+    spots.forEach((p, i) => pad.dot(ctx, p, i ? '#e06060' : '#7ccf7c', 6));
+    const [a, b] = spots;
+    let text = 'no spots';
+    if (a) text = `start ${at(a)}${b ? ` · end ${at(b)}` : ''} m`;
+    else if (offered) text = `follower starts ${at(offered[0])} · ends ${at(offered[1])} m (click near one to move it)`;
+    $('partner-spots-info').textContent = text;
   };
   const showLeader = async () => {
-    const name = $('partner-clip').value;
+    const value = $('partner-clip').value;
+    shownLeader = value;
+    leaderLoading = true;
+    let name = '';
+    try {
+      name = value ? await ensureLeader(value) : '';
+    } finally {
+      leaderLoading = false;
+    }
+    shownLeader = $('partner-clip').value;
     const motion = name ? await leaderMotion(name) : null;
+    const summary = summaryOf($('partner-db').value);
+    if (motion && summary && motion.joints.join('\n') !== summary.skeleton.joints.join('\n')) {
+      throw new ApiError(0, 'wrong_skeleton', `the leader ${name} has another skeleton than the database's (${motion.joints.length} joints, not ${summary.skeleton.joints.length})`);
+    }
     leaderPath = motion ? rootPath(motion) : [];
     if (leaderPath.length) {
       const mean = (k) => leaderPath.reduce((acc, p) => acc + p[k], 0) / leaderPath.length;
@@ -780,10 +975,16 @@ tools.partner = (() => {
     redraw();
   };
   $('partner-clip').addEventListener('change', () => guarded('partner', showLeader));
+  $('partner-db').addEventListener('change', () => { state.partner.offered = null; refreshLeaders(); });
   canvas.addEventListener('click', (ev) => {
-    const spots = state.partner.spots;
+    const { spots, offered } = state.partner;
     const p = pad.toFloor(ev.clientX, ev.clientY);
-    if (spots.length < 2) spots.push(p);
+    if (!spots.length && offered) {
+      // start from the offered spots: the click moves the nearer one
+      spots.push([...offered[0]], [...offered[1]]);
+      const d = (q) => Math.hypot(q[0] - p[0], q[1] - p[1]);
+      spots[d(offered[0]) <= d(offered[1]) ? 0 : 1] = p;
+    } else if (spots.length < 2) spots.push(p);
     else spots[1] = p;
     redraw();
   });
@@ -791,8 +992,9 @@ tools.partner = (() => {
   $('partner-go').onclick = () =>
     guarded('partner', async () => {
       const db = dbOf('partner-db');
-      const leader = $('partner-clip').value;
-      if (!leader) throw new ApiError(0, 'no_clip', 'upload a leader clip first');
+      const picked = $('partner-clip').value;
+      if (!picked) throw new ApiError(0, 'no_clip', 'upload a leader clip that fits this database first');
+      const leader = await ensureLeader(picked);
       viewer.clear();
       const c = info(leader);
       const request = { engine: 'control', database: db, budget_s: numberOf('partner-budget', 'budget', 0.1, 600), control: { bvh: c ? c.name : leader } };
@@ -806,6 +1008,7 @@ tools.partner = (() => {
         if (spots[1]) request.bodies.push({ time_s: Math.floor(length * 1000) / 1000, position: place(spots[1]) });
       }
       state.partner.bodies = request.bodies || null;
+      state.partner.leader = leader;
       const job = runJob('partner', request);
       const motion = await leaderMotion(leader);
       if (motion) {
@@ -816,7 +1019,17 @@ tools.partner = (() => {
       await job;
     });
   redraw();
-  return { redraw, onResult: (motion, root) => { result = rootPath(motion, root); redraw(); }, clearResult: () => { result = []; redraw(); } };
+  return {
+    redraw,
+    refreshLeaders,
+    onShow: () => { if (!leaderLoading && $('partner-clip').value !== shownLeader) guarded('partner', showLeader); },
+    onResult: (motion, root) => {
+      result = rootPath(motion, root);
+      state.partner.offered = result.length ? [result[0], result[result.length - 1]] : null;
+      redraw();
+    },
+    clearResult: () => { result = []; state.partner.offered = null; redraw(); },
+  };
 })();
 
 // -- Constraints: body arrows (position + heading) and a length -> graph search with alternatives
@@ -1067,7 +1280,7 @@ timeline = tools.timeline = (() => {
 })();
 
 // -- Music: BPM or MIDI, steer with the mouse -> rhythmic synthesis; beat flashes
-music = setupMusic({ state, $, api, runJob, guarded, dbOf, numberOf, viewer, ApiError, FloorPad, headingDeg, showError });
+music = setupMusic({ state, $, api, runJob, guarded, dbOf, numberOf, viewer, ApiError, FloorPad, headingDeg, showError, framesText });
 tools.music = music;
 // -- the rhythm database's movement graph (choreographic edits -> a derived database): graph.js
 setupGraph({ state, $, guarded, clearError, refreshDatabases });
@@ -1086,6 +1299,7 @@ async function boot() {
   await guarded('upload', loadSamples);
   await guarded('upload', refreshClips);
   await guarded('build', refreshDatabases);
+  await guarded('build', loadDemos);
   state.ready = true;
 }
 boot();

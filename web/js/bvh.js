@@ -3,7 +3,9 @@
 import { BVHLoader } from 'three/addons/loaders/BVHLoader.js';
 
 // metres per file unit, as motion/units.py (the service reports a clip's guessed unit in ClipInfo.units)
-export const METRES_PER_UNIT = { m: 1, cm: 0.01, mm: 0.001, in: 0.0254, ft: 0.3048, cmu: 0.0254 / 0.45 };
+export const METRES_PER_UNIT = { m: 1, cm: 0.01, mm: 0.001, in: 0.0254, ft: 0.3048, cmu: 0.0254 / 0.45, 'cmu-scaled': 1.28 };
+// the units a guess chooses among (motion/units.py GUESSED_UNITS: cmu-scaled must be declared)
+const GUESSED_UNITS = ['m', 'cm', 'mm', 'in', 'ft', 'cmu'];
 
 async function gunzip(bytes) {
   const stream = new Blob([bytes]).stream().pipeThrough(new DecompressionStream('gzip'));
@@ -62,7 +64,7 @@ export async function parseBvh(bytes, name, units) {
       hi = Math.max(hi, positions[j * 3 + 1]);
     }
     const h = hi - lo || 1;
-    scale = Object.values(METRES_PER_UNIT).reduce((best, s) => (Math.abs(Math.log((h * s) / 1.7)) < Math.abs(Math.log((h * best) / 1.7)) ? s : best), 1);
+    scale = GUESSED_UNITS.map((u) => METRES_PER_UNIT[u]).reduce((best, s) => (Math.abs(Math.log((h * s) / 1.7)) < Math.abs(Math.log((h * best) / 1.7)) ? s : best), 1);
   }
   for (let i = 0; i < positions.length; i++) positions[i] *= scale;
   return { name, fps, joints, parents, frames: F, positions };
