@@ -50,7 +50,8 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, float | None]]:
 
 
 def within_bars(tools: dict[str, dict[str, float | None]]) -> bool:
-    return all(
+    """Every figure recorded is within its bar (False when nothing was recorded)."""
+    return bool(tools) and all(
         (value := figures.get(name)) is None or value <= bar
         for figures in tools.values()
         for name, bar in BARS.items()
