@@ -408,7 +408,7 @@ def test_hard_pose_constraints_hold(graph: Graph) -> None:
         ],
     )
     out = Collect()
-    searcher(graph, 4).run(req, 1.0, out, lambda: False)
+    searcher(graph, 4).run(req, 60.0, out, lambda: False)
     assert out.solutions
     for s in out.solutions:
         assert s.provenance[80] == ("left", 40)
@@ -426,7 +426,7 @@ def test_impossible_pose_constraints_are_reported(graph: Graph) -> None:
         ],
     )
     with pytest.raises(EngineError, match="pose constraints"):
-        searcher(graph, 4).run(req, 1.0, Collect(), lambda: False)
+        searcher(graph, 4).run(req, 60.0, Collect(), lambda: False)
 
 
 def test_labels_and_obstacles_steer_the_search(graph: Graph) -> None:
@@ -439,7 +439,7 @@ def test_labels_and_obstacles_steer_the_search(graph: Graph) -> None:
         ],
     )
     out = Collect()
-    searcher(graph, 6).run(req, 1.0, out, lambda: False)
+    searcher(graph, 6).run(req, 60.0, out, lambda: False)
     best = min(out.solutions, key=lambda s: s.score)
     errors = best.constraint_errors
     assert errors["obstacle[0]"]["frames"] == 0
