@@ -14,6 +14,10 @@ Sets:
 * ``mix``: dataset-2 walk and turns, plus every fourth clip of its actions (raise-up-*, wave-*)
   (~21k frames).
 * ``all``: every clip of dataset-1 and dataset-2 (639 clips, ~86k frames; one skeleton).
+* ``hierarchy``: no data; the edge hierarchy alone (``engines.graph.hierarchy.build_hierarchy``) over
+  200,000 random leaf edges among 60 clips of 2,000 frames, printing ``{"set", "leaf_edges",
+  "tree_nodes", "hierarchy_s", "peak_rss_mb", "load_avg"}`` (the scale
+  tests/engines/test_graph_build.py checks for correctness, without a clock).
 
 ``build_s`` is the build alone (features, scan, pruning, hierarchy, tracks), not the BVH loading
 (``load_s``); ``peak_rss_mb`` is the process's peak (loading included). ``load_avg`` is the 1-minute
@@ -99,13 +103,41 @@ def run_one(name: str, tau: float) -> dict[str, Any]:
     }
 
 
+def run_hierarchy(k: int = 200_000) -> dict[str, Any]:
+    import numpy as np
+
+    from engines.graph.hierarchy import LeafEdges, build_hierarchy
+
+    load_avg = os.getloadavg()[0]
+    rng = np.random.default_rng(2)
+    raw = np.stack(
+        (rng.integers(0, 60, k), rng.integers(0, 2000, k), rng.integers(0, 60, k), rng.integers(0, 2000, k))
+    )
+    key = np.unique(raw.T, axis=0)
+    leaves = LeafEdges(key[:, 0], key[:, 1], key[:, 2], key[:, 3], rng.random(len(key)))
+    t0 = time.perf_counter()
+    tree = build_hierarchy(leaves)
+    hierarchy_s = time.perf_counter() - t0
+    return {
+        "set": "hierarchy",
+        "leaf_edges": int(leaves.size),
+        "tree_nodes": int(tree.size),
+        "hierarchy_s": round(hierarchy_s, 2),
+        "peak_rss_mb": round(rss_mb(), 1),
+        "load_avg": round(load_avg, 2),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sets", default="loco,mix,all", help="comma-separated: loco, mix, all")
+    ap.add_argument("--sets", default="loco,mix,all", help="comma-separated: loco, mix, all, hierarchy")
     ap.add_argument("--tau", type=float, default=1.0)
     ap.add_argument("--one", help=argparse.SUPPRESS)  # run one set in this process
     args = ap.parse_args(argv)
-    if not DATA.exists():
+    if args.one == "hierarchy":
+        print(json.dumps(run_hierarchy()))
+        return 0
+    if not DATA.exists() and args.sets != "hierarchy":
         print(json.dumps({"skipped": f"no data at {DATA}"}))
         return 0
     if args.one:

@@ -29,10 +29,14 @@ def free_port() -> int:
 def live_server(data: Path, plugins: str | None = None, workers: int = 2) -> Iterator[str]:
     """Start ``uvicorn --factory service.app:create_app`` with a fresh data directory ``data`` (no
     tokens, no Redis; ``plugins`` = ``SEGUE_ENGINE_PLUGINS``), yield its base URL once ``/healthz``
-    answers, stop it with SIGINT afterwards. Fails the test if it exits or does not answer in 30 s."""
+    answers, stop it with SIGINT afterwards. Fails the test if it exits or does not answer in 120 s
+    (a guard against a hang: a loaded machine may take a while to import and start it)."""
     env = os.environ | {
         "SEGUE_DATA_DIR": str(data),
         "SEGUE_WORKERS": str(workers),
+        # a job's hard time limit is its budget_s plus this grace: here a guard against a hang, not a
+        # bar a busy machine could trip (an engine process loading librosa at load 15 took > 30 s)
+        "SEGUE_JOB_GRACE_S": "600",
         "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
     }
     for var in ("SEGUE_API_TOKENS", "SEGUE_REDIS_URL", "SEGUE_ENGINE_PLUGINS"):
@@ -48,7 +52,7 @@ def live_server(data: Path, plugins: str | None = None, workers: int = 2) -> Ite
             cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT,
         )  # fmt: skip
         url = f"http://127.0.0.1:{port}"
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + 120
         while True:
             if proc.poll() is not None:
                 pytest.fail(f"uvicorn exited with {proc.returncode}: {log_path.read_text()[-2000:]}")
@@ -59,7 +63,7 @@ def live_server(data: Path, plugins: str | None = None, workers: int = 2) -> Ite
                 pass
             if time.monotonic() > deadline:
                 proc.kill()
-                pytest.fail("uvicorn did not answer /healthz within 30 s")
+                pytest.fail("uvicorn did not answer /healthz within 120 s")
             time.sleep(0.05)
         try:
             yield url

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import glob
 import json
-import time
 import tracemalloc
 from pathlib import Path
 from types import SimpleNamespace
@@ -340,6 +339,8 @@ def test_hierarchy_invariants_on_random_edges_and_elongated_groups() -> None:
 
 
 def test_hierarchy_scales_to_many_edges() -> None:
+    """200,000 leaf edges make a tree of fewer than twice as many nodes (how long it takes is
+    ``python bench/graph_build.py --sets hierarchy``, not a test)."""
     rng = np.random.default_rng(2)
     k = 200_000
     raw = np.stack(
@@ -347,9 +348,7 @@ def test_hierarchy_scales_to_many_edges() -> None:
     )
     key = np.unique(raw.T, axis=0)
     leaves = LeafEdges(key[:, 0], key[:, 1], key[:, 2], key[:, 3], rng.random(len(key)))
-    t0 = time.perf_counter()
     tree = build_hierarchy(leaves)
-    assert time.perf_counter() - t0 < 20.0
     assert tree.size < 2 * leaves.size
 
 
@@ -435,14 +434,11 @@ def test_bandai_locomotion_build() -> None:
     assert len(files) == 20
     lib = build_library([ClipInput(Path(f).stem, Path(f).read_bytes()) for f in files], fps=30.0)
     tracemalloc.start()
-    t0 = time.perf_counter()
-    arrays = build_graph(spec(), lib, Collect(), lambda: False)
-    seconds = time.perf_counter() - t0
+    arrays = build_graph(spec(), lib, Collect(), lambda: False)  # its time: bench/graph_build.py
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     report = json.loads(str(arrays["graph.report"]))
     assert "joint_Root" not in report["joint_weights"] and report["joint_weights"]["Foot_L"] == 4.0
-    assert seconds < 60.0, report
     assert peak < 600e6, f"peak {peak / 1e6:.0f} MB for {lib.total_frames} frames"
     tree = EdgeTree.from_arrays(arrays)
     kind = np.array([n.split("_")[1] for n in lib.names])

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import glob
 import itertools
-import threading
-import time
 from dataclasses import replace
 from pathlib import Path as FsPath
 from typing import Any
@@ -14,7 +12,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from engines.base import EngineError, Solution
+from engines import base as engines_base
+from engines.base import EngineError, Solution, Stopped
 from engines.graph.assemble import assemble, body_frames, quality_inputs
 from engines.graph.model import EdgeTree, RootTracks
 from engines.graph.paths import (
@@ -338,7 +337,7 @@ def test_search_is_anytime_improving_and_meets_the_constraints(graph: Graph) -> 
     assert errors["body[1]"]["heading_deg"] < 0.1
     assert set(final.terms) == {"continuity", "length", "body", "joint", "label", "obstacle", "shared"}
     assert final.score == pytest.approx(sum(final.terms.values()))
-    assert out.times[0] < 2.0  # first solution early (generous for loaded CI machines)
+    # (how early the first solution comes is bench/graph.py's first_solution_ms, not a test)
 
 
 def clip_sequence(s: Solution) -> tuple[str, ...]:
@@ -374,24 +373,28 @@ def test_same_seed_same_solutions(graph: Graph) -> None:
     assert [(s.score, s.provenance) for s in other.solutions] != runs[0]
 
 
-def test_cancel_stops_quickly(graph: Graph) -> None:
-    flag = threading.Event()
+def test_cancel_stops_at_the_next_poll(graph: Graph) -> None:
+    """Cancelled as soon as its first solution is out, the search stops at its next poll: at most
+    the one emission under way follows, and no alternatives (an uncancelled run of this request
+    emits them). No clock: the cancel is a function of the search's own output."""
     out = Collect()
-    timer = threading.Timer(0.4, flag.set)
-    timer.start()
-    t0 = time.perf_counter()
-    searcher(graph, 2).run(request(), 30.0, out, flag.is_set)
-    stopped = time.perf_counter()
-    timer.cancel()
-    assert out.solutions
-    assert stopped - t0 < 0.4 + 0.15  # ~50 ms of polling latency, plus one pending emission
-    assert all(s.metrics["alternative"] == 0 for s in out.solutions)  # no alternatives after a cancel
+    stopped = searcher(graph, 2).run(request(alternatives=2), 600.0, out, lambda: len(out.solutions) >= 1)
+    assert stopped == Stopped.cancelled
+    assert 1 <= len(out.solutions) <= 2
+    assert all(s.metrics["alternative"] == 0 for s in out.solutions)
 
 
-def test_budget_is_respected(graph: Graph) -> None:
-    t0 = time.perf_counter()
-    searcher(graph, 2).run(request(alternatives=2), 0.6, Collect(), lambda: False)
-    assert time.perf_counter() - t0 < 0.6 + 0.2
+def test_budget_is_respected(graph: Graph, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The time cap cuts the search short, on a clock that advances 10 ms at every reading: the
+    cap is spent after a fixed number of readings, whatever the machine's speed or load."""
+    ticks = itertools.count(1)
+    monkeypatch.setattr(engines_base, "CLOCK", lambda: next(ticks) * 0.01)
+    gs, out = searcher(graph, 2), Collect()
+    stopped = gs.run(request(alternatives=2), 0.6, out, lambda: False, max_rounds=4)
+    # stopped before the 4 rounds it would run unhurried (it converges after about 35), with a
+    # best solution and its alternatives
+    assert stopped == Stopped.budget and next(ticks) > 60 and getattr(gs, "rounds_", 0) < 4
+    assert out.solutions and out.solutions[0].metrics["alternative"] == 0
 
 
 def test_hard_pose_constraints_hold(graph: Graph) -> None:
@@ -405,7 +408,7 @@ def test_hard_pose_constraints_hold(graph: Graph) -> None:
         ],
     )
     out = Collect()
-    searcher(graph, 4).run(req, 1.0, out, lambda: False)
+    searcher(graph, 4).run(req, 60.0, out, lambda: False)
     assert out.solutions
     for s in out.solutions:
         assert s.provenance[80] == ("left", 40)
@@ -423,7 +426,7 @@ def test_impossible_pose_constraints_are_reported(graph: Graph) -> None:
         ],
     )
     with pytest.raises(EngineError, match="pose constraints"):
-        searcher(graph, 4).run(req, 1.0, Collect(), lambda: False)
+        searcher(graph, 4).run(req, 60.0, Collect(), lambda: False)
 
 
 def test_labels_and_obstacles_steer_the_search(graph: Graph) -> None:
@@ -436,7 +439,7 @@ def test_labels_and_obstacles_steer_the_search(graph: Graph) -> None:
         ],
     )
     out = Collect()
-    searcher(graph, 6).run(req, 1.0, out, lambda: False)
+    searcher(graph, 6).run(req, 60.0, out, lambda: False)
     best = min(out.solutions, key=lambda s: s.score)
     errors = best.constraint_errors
     assert errors["obstacle[0]"]["frames"] == 0

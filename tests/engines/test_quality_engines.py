@@ -57,7 +57,7 @@ def graph_search() -> Any:
 
 def test_graph_unreachable_goal_is_reported_unmet_without_a_drag(graph_search: Any) -> None:
     out = Collect()
-    graph_search(3).run(graph_request((0.0, 100.0, 0.0)), 1.0, out, lambda: False)
+    graph_search(3).run(graph_request((0.0, 100.0, 0.0)), 60.0, out, lambda: False)
     sol = best(out)
     q = sol.quality
     assert q is not None and not q.ok

@@ -21,10 +21,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from motion import BvhError, BvhLimits, Motion, parse_bvh
+from tests.thoroughness import examples
 
 from .bvh_helpers import POSITION_XYZ, JointSpec, bvh_text_from_spec, random_channel_rows, rot_channels
 
-FUZZ = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(max_examples=examples(300), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
 def _bases() -> list[bytes]:

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from motion.errors import MotionError
 from motion.floorfit import CorrectionLimits, FloorGoal, faded_shifts, floor_correction, water_fill
+from tests.thoroughness import examples
 
 FPS = 30.0
 
@@ -24,7 +25,7 @@ def corrected(xz: np.ndarray, theta: np.ndarray, shift: np.ndarray) -> np.ndarra
     return np.stack((c * xz[:, 0] + s * xz[:, 1], -s * xz[:, 0] + c * xz[:, 1]), axis=-1) + shift
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(
     st.lists(st.floats(0, 5, allow_nan=False), min_size=1, max_size=30),
     st.floats(0, 200, allow_nan=False),

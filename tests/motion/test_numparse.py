@@ -16,6 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from motion.numparse import parse_decimals
+from tests.thoroughness import examples
 
 
 def parse(
@@ -116,14 +117,14 @@ odd_tokens = st.one_of(
 # --------------------------------------------------------------------------------------------
 
 
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=examples(400), deadline=None)
 @given(joined(st.lists(plain_tokens(), min_size=1, max_size=60)))
 def test_plain_decimals_are_bit_identical_to_float(case: tuple[bytes, list[bytes]]) -> None:
     data, tokens = case
     check_plain(data, tokens)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(
     k=st.integers(0, 8),
     xs=st.lists(finite, min_size=1, max_size=40),
@@ -194,7 +195,7 @@ def test_a_bad_token_in_any_piece_gives_none(where: str) -> None:
     assert parse(text[:cut] + b" 1e-5" + text[cut:]) is None
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(
     prefix=st.binary(max_size=20).filter(lambda b: not b.endswith(b".")),
     case=joined(st.lists(plain_tokens(), min_size=1, max_size=10)),
@@ -266,7 +267,7 @@ def test_tokens_outside_the_grammar_give_none(bad: bytes, position: str) -> None
     assert parse(context) is None, f"{context!r} should be rejected"
 
 
-@settings(max_examples=500, deadline=None)
+@settings(max_examples=examples(500), deadline=None)
 @given(joined(st.lists(st.one_of(plain_tokens(), odd_tokens), min_size=1, max_size=20)))
 def test_grammar_decides_between_values_and_none(case: tuple[bytes, list[bytes]]) -> None:
     data, tokens = case

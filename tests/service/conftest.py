@@ -36,6 +36,7 @@ def api_settings(tmp_path_factory: pytest.TempPathFactory) -> Settings:
         workers=1,
         engine_plugins=PLUGINS,
         allowed_hosts=("localhost", "testserver"),  # TestClient WebSockets use ws://testserver
+        job_grace_s=600.0,  # the hard time limit past budget_s: a hang guard, not a speed bar
     )
 
 

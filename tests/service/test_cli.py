@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from motion import parse_bvh, read_bvh
+from motion import read_bvh
 from motion.samples import SAMPLES, sample_path
 from service.cli import main
 
@@ -111,20 +111,13 @@ def test_malformed_bvh_names_line(tmp_path: Path, capsys: pytest.CaptureFixture[
 
 
 def test_samples_and_demo(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """(The whole ``segue demo`` is tests/service/test_demos.py's.)"""
     assert main(["samples"]) == 0
     listed = capsys.readouterr().out
     assert all(f"sample:{name}" in listed for name in SAMPLES)
-    assert main(["demo", "--out", str(tmp_path)]) == 0
-    assert {"salsa-leader.glb", "salsa-leader.json", "salsa-leader.npz"} <= {
-        p.name for p in tmp_path.iterdir()
-    }
-    dance = parse_bvh((tmp_path / "salsa-dance.bvh").read_bytes(), source="salsa-dance.bvh")
-    assert abs(dance.num_frames / dance.fps - 12.0) < 0.05  # 12 s of music
-    report = json.loads((tmp_path / "salsa-dance-report.json").read_text())
-    assert len(report["annotations"]["music_beats_s"]) == 25 and len(report["provenance"]) == dance.num_frames
-    assert (tmp_path / "salsa-dance.glb").read_bytes()[:4] == b"glTF"
     quick = tmp_path / "quick"
     assert main(["demo", "--out", str(quick), "--no-synth"]) == 0
+    assert {"salsa-leader.glb", "salsa-leader.json", "salsa-leader.npz"} <= {p.name for p in quick.iterdir()}
     assert not (quick / "salsa-dance.bvh").exists()
 
 

@@ -57,10 +57,11 @@ def test_events_wait_returns_at_the_end_with_every_event(client: TestClient, wal
 def test_events_wait_waits_for_the_timeout_when_nothing_is_new(
     client: TestClient, walk_db: dict[str, Any]
 ) -> None:
-    job = submit(client, {"engine": "scripted", "database": walk_db["id"], "steps": 2, "step_s": 1.5})
+    job = submit(client, {"engine": "scripted", "database": walk_db["id"], "steps": 2, "step_s": 5})
     with client.websocket_connect(f"/v1/jobs/{job['id']}/events") as ws:
         assert [ws.receive_json()["type"] for _ in range(2)] == ["queued", "started"]
-    # the engine now sleeps 1.5 s before its first solution
+    # the engine now sleeps 5 s before its first solution (however loaded the machine, longer than
+    # the 0.4 s wait: the wait cannot end with an event, only at its timeout)
     t0 = time.monotonic()
     got = client.get(f"/v1/jobs/{job['id']}/events", params={"after": 2, "wait": 0.4}).json()
     assert got == [] and time.monotonic() - t0 >= 0.4

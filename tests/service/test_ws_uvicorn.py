@@ -1,11 +1,10 @@
 """The API under a real uvicorn on 127.0.0.1: upload -> build -> submit -> stream, drop and resume
-the WebSocket, download the GLB, and the submit -> first worker event latency on a warm database."""
+the WebSocket, download the GLB. (The submit -> first worker event latency is a figure of
+``bench/service.py``, ``first_event_p50_ms``, not a test.)"""
 
 from __future__ import annotations
 
 import json
-import statistics
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -51,7 +50,7 @@ def test_stream_drop_resume_and_download(
     first: list[dict[str, Any]] = []
     with connect(_ws_url(server, job.id)) as ws:
         while len(first) < 4:
-            first.append(json.loads(ws.recv(timeout=10)))
+            first.append(json.loads(ws.recv(timeout=120)))
     # the socket is gone mid-stream; resume after the last event seen
     rest: list[dict[str, Any]] = []
     with connect(_ws_url(server, job.id, after=first[-1]["id"])) as ws:
@@ -75,7 +74,7 @@ def test_client_errors_and_unknown_job_close(server: str, segue: SegueClient) ->
     assert exc.value.status == 404
     with connect(_ws_url(server, "0" * 32)) as ws:
         with pytest.raises(Exception):  # noqa: B017, PT011 - the close frame ends recv
-            ws.recv(timeout=5)
+            ws.recv(timeout=120)
         assert ws.close_code == 4404
     with pytest.raises(SegueError) as exc:
         segue.submit({"engine": "clip", "clip": "x"})
@@ -94,28 +93,3 @@ def test_client_cancels_and_deletes_with_plain_requests(segue: SegueClient, data
     with pytest.raises(SegueError) as exc:
         segue.job(job.id)
     assert exc.value.status == 404
-
-
-@pytest.mark.slow  # a latency figure (bench/service.py measures it): CI only, not every local run
-def test_submit_to_first_worker_event_latency(server: str, segue: SegueClient, database: str) -> None:
-    """p50 of submit -> ``started`` received over the WebSocket, over 20 warm ``clip`` jobs, <= 100 ms."""
-    request = {"engine": "clip", "database": database, "clip": WALK_CLIP, "start": 0, "end": 30}
-    for _ in range(3):  # warm the workers' engine caches
-        job = segue.submit(request)
-        list(segue.events(job.id))
-    first, done = [], []
-    for _ in range(20):
-        t0 = time.perf_counter()
-        job = segue.submit(request)
-        with connect(_ws_url(server, job.id)) as ws:
-            for message in ws:
-                event = json.loads(message)
-                if event["type"] == "started":
-                    first.append(time.perf_counter() - t0)
-                if event["type"] in ("done", "failed", "cancelled"):
-                    assert event["type"] == "done"
-                    done.append(time.perf_counter() - t0)
-    p50_first, p50_done = statistics.median(first) * 1e3, statistics.median(done) * 1e3
-    worst = max(first) * 1e3
-    print(f"\nsubmit -> started p50 {p50_first:.1f} ms (max {worst:.1f}); -> done p50 {p50_done:.1f} ms")
-    assert p50_first <= 100, first

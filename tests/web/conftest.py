@@ -83,7 +83,7 @@ def page(browser: Any, server: str) -> Iterator[Any]:
     pg.on("pageerror", lambda exc: errors.append(f"pageerror: {exc}"))
     pg.on("console", lambda msg: errors.append(f"console: {msg.text}") if msg.type == "error" else None)
     pg.goto(server + "/")
-    pg.wait_for_function("window.__segue && window.__segue.ready", timeout=15_000)
+    pg.wait_for_function("window.__segue && window.__segue.ready", timeout=120_000)  # a hang guard
     pg.errors = errors
     try:
         yield pg

@@ -18,7 +18,16 @@ from service.demos import DEMOS
 from tests.live_server import live_server
 
 from .conftest import screenshot
-from .test_browser import BEST_DRAWN, LEADER12, needs_engine, reload_databases, select_database, state, wait
+from .test_browser import (
+    BEST_DRAWN,
+    GUARD_MS,
+    LEADER12,
+    needs_engine,
+    reload_databases,
+    select_database,
+    state,
+    wait,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -39,7 +48,7 @@ def test_partner_offers_the_leaders_that_fit_and_the_followers_spots(page: Any, 
     page.click("#tabs button[data-tool='partner']")
     select_database(page, "partner-db", db)
     page.dispatch_event("#partner-db", "change")
-    wait(page, "s.partner.leaders.length > 0", 30_000)
+    wait(page, "s.partner.leaders.length > 0")
     leaders = state(page, ".partner.leaders")
     values = [leader["value"] for leader in leaders]
     assert not any("walk" in v or "follower" in v for v in values), values
@@ -47,10 +56,10 @@ def test_partner_offers_the_leaders_that_fit_and_the_followers_spots(page: Any, 
     assert all(not leader["heldOut"] for leader in leaders[1:]), leaders  # the database's own leaders
     assert page.input_value("#partner-clip") in HELD_OUT
     # the default leader is drawn (a bundled sample is uploaded to be drawn and sent)
-    wait(page, "document.querySelector('#partner-clip').value === '60_12_salsa_leader_30fps'", 30_000)
+    wait(page, "document.querySelector('#partner-clip').value === '60_12_salsa_leader_30fps'")
     page.fill("#partner-budget", "5")
     page.click("#partner-go")
-    wait(page, f"['done', 'cancelled'].includes(s.job.status) && {BEST_DRAWN}", 60_000)
+    wait(page, f"['done', 'cancelled'].includes(s.job.status) && {BEST_DRAWN}")
     s = state(page)
     assert s["partner"]["leader"] == LEADER12
     end = s["job"]["end"]
@@ -60,7 +69,7 @@ def test_partner_offers_the_leaders_that_fit_and_the_followers_spots(page: Any, 
     assert "job-state done" in page.get_attribute("#job-state", "class") or end["type"] == "cancelled"
     assert s["quality"]["ok"], s["quality"]["reasons"]  # the held-out leader, not a walk
     # the result's start and end are offered on the pad; a click near the end moves it
-    wait(page, "s.partner.offered", 10_000)
+    wait(page, "s.partner.offered")
     start, finish = state(page, ".partner.offered")
     root = s["current"]["root"]
     assert start == pytest.approx(root[0]) and finish == pytest.approx(root[-1])
@@ -92,9 +101,9 @@ def test_music_says_how_its_job_ended_in_the_reports_frames(page: Any, segue: Se
     page.fill("#music-bpm", "150")
     page.fill("#music-seconds", "2")
     page.click("#music-go")
-    wait(page, "s.current && s.current.tool === 'music' && !s.current.live", 60_000)
-    wait(page, f"['done', 'cancelled'].includes(s.job.status) && {BEST_DRAWN}", 60_000)
-    wait(page, "!s.music.info.includes('synthesizing') && !s.music.info.includes('searching')", 30_000)
+    wait(page, "s.current && s.current.tool === 'music' && !s.current.live")
+    wait(page, f"['done', 'cancelled'].includes(s.job.status) && {BEST_DRAWN}")
+    wait(page, "!s.music.info.includes('synthesizing') && !s.music.info.includes('searching')")
     s = state(page)
     current = s["current"]
     report = segue.report(s["job"]["id"], current["result"])
@@ -114,17 +123,17 @@ def test_a_database_error_goes_once_the_database_is_there(page: Any, segue: Segu
     page.click("#tabs button[data-tool='constraints']")
     page.evaluate("document.getElementById('cons-db').value = ''")  # as on a first visit: none
     page.click("#cons-go")
-    wait(page, "s.errors.length && s.errors[s.errors.length - 1].code === 'no_database'", 10_000)
+    wait(page, "s.errors.length && s.errors[s.errors.length - 1].code === 'no_database'")
     assert "choose a ready graph database" in page.text_content("#err-constraints")
     # a new database (a unique spec: a new content id), built through the API as the CLI user does
     spec = {"kind": "graph", "fps": 30, "clips": [{"bvh": "sample:walk-05-01"}], "name": uuid.uuid4().hex[:8]}
     spec["tau"] = 1.0 + int(uuid.uuid4().hex[:6], 16) * 1e-9
     segue.build_database(spec)
-    page.wait_for_function("document.querySelector('#err-constraints').textContent === ''", timeout=30_000)
+    page.wait_for_function("document.querySelector('#err-constraints').textContent === ''", timeout=GUARD_MS)
     # picking a database clears it too
     page.evaluate("document.getElementById('cons-db').value = ''")
     page.click("#cons-go")
-    page.wait_for_selector("#err-constraints:not(:empty)", timeout=10_000)
+    page.wait_for_selector("#err-constraints:not(:empty)", timeout=GUARD_MS)
     first = page.eval_on_selector_all("#cons-db option", "os => os.map(o => o.value)")[0]
     page.select_option("#cons-db", first)
     assert page.text_content("#err-constraints") == ""
@@ -141,13 +150,13 @@ def test_a_first_visit_offers_one_click_sample_databases(browser: Any, tmp_path:
         page.on("pageerror", lambda exc: errors.append(str(exc)))
         try:
             page.goto(url + "/")
-            page.wait_for_function("window.__segue && window.__segue.ready", timeout=30_000)
+            page.wait_for_function("window.__segue && window.__segue.ready", timeout=GUARD_MS)
             assert page.is_visible("#welcome")
             names = page.eval_on_selector_all("#welcome-demos button", "bs => bs.map(b => b.dataset.demo)")
             assert sorted(names) == sorted(DEMOS)
             screenshot(page, "welcome")
             page.click("#welcome-demos button[data-demo='walk']")
-            wait(page, "s.welcome.built.length === 1", 120_000)
+            wait(page, "s.welcome.built.length === 1")
             built = state(page, ".welcome.built")[0]
             assert built["tool"] == "path" and state(page, ".tool") == "path"
             assert page.input_value("#path-db") == built["database"]

@@ -13,7 +13,7 @@ from service.client import SegueClient
 from tests.engines.rhythm_salsa import SPEC
 
 from .conftest import screenshot
-from .test_browser import needs_engine, reload_databases, select_database, state, wait
+from .test_browser import GUARD_MS, needs_engine, reload_databases, select_database, state, wait
 
 pytestmark = pytest.mark.slow  # tests/run.sh runs these with CI=true or SEGUE_SLOW=1
 
@@ -35,7 +35,7 @@ def test_graph_view_cut_connect_derive(page: Any, segue: SegueClient) -> None:
     page.click("#tabs button[data-tool='music']")
     select_database(page, "music-db", db)
     page.click("#graph-view summary")  # opening the view loads the selected database's graph
-    wait(page, f"s.graph.database === '{db}'", 10_000)
+    wait(page, f"s.graph.database === '{db}'")
     server = segue.graph(db)
     assert page.locator("#graph-svg g.node").count() == len(server.groups)
     assert page.locator("#graph-svg path.edge").count() == len(server.transitions)
@@ -76,7 +76,7 @@ def test_graph_view_cut_connect_derive(page: Any, segue: SegueClient) -> None:
     page.locator("#graph-svg").scroll_into_view_if_needed()
     screenshot(page, "graph")
     page.click("#graph-submit")
-    wait(page, "s.graph.derived && s.graph.database === s.graph.derived", 15_000)
+    wait(page, "s.graph.derived && s.graph.database === s.graph.derived")
     derived = state(page, ".graph.derived")
     assert page.locator("#music-db").input_value() == derived  # the Music tool dances it now
     info = segue.database(derived)
@@ -98,7 +98,7 @@ def test_graph_view_cut_connect_derive(page: Any, segue: SegueClient) -> None:
         page.dispatch_event(f"#graph-svg path.edge[data-source='{c}'][data-target='{target}']", "click")
     before = len(state(page, ".errors"))
     page.click("#graph-submit")
-    page.wait_for_function(f"window.__segue.errors.length > {before}", timeout=10_000)
+    page.wait_for_function(f"window.__segue.errors.length > {before}", timeout=GUARD_MS)
     err = state(page, ".errors")[-1]
     assert err["where"] == "graph" and err["status"] == 422
     assert "dead end" in page.locator("#err-graph").inner_text()

@@ -38,6 +38,9 @@ from workers.store import Store, now
 REPO = Path(__file__).resolve().parents[2]
 PLUGINS = "tests.workers.scripted_engine"
 T = TypeVar("T")
+GUARD_S = 120.0
+"""How long a test waits for something that should happen before it calls it a hang: generous, so
+that a loaded machine is never mistaken for a broken one (tests assert results, not speed)."""
 
 
 def run(coro: Coroutine[Any, Any, T]) -> T:
@@ -86,7 +89,7 @@ def redis_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         )
         url = f"redis://127.0.0.1:{port}/0"
         client = redis.Redis.from_url(url)
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + GUARD_S
         while proc.poll() is None and time.monotonic() < deadline:
             try:
                 client.ping()
@@ -103,7 +106,7 @@ def redis_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         finally:
             proc.terminate()
             try:
-                proc.wait(timeout=5)
+                proc.wait(timeout=GUARD_S)
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
@@ -193,7 +196,7 @@ def worker_thread(redis_url: str, store: Store, name: str, **fields: Any) -> Ite
         yield stop
     finally:
         stop.set()
-        thread.join(timeout=15)
+        thread.join(timeout=GUARD_S)
         if thread.is_alive():
             raise RuntimeError(f"worker thread {name} did not stop")
 
@@ -230,22 +233,25 @@ def spawn_worker(redis_url: str, store: Store, name: str, *extra: str) -> subpro
 
 @contextlib.contextmanager
 def worker_processes(
-    redis_url: str, store: Store, names: list[str]
+    redis_url: str, store: Store, names: list[str], *extra: str
 ) -> Iterator[dict[str, subprocess.Popen[bytes]]]:
-    procs = {name: spawn_worker(redis_url, store, name) for name in names}
+    """``spawn_worker`` for each name (``extra``: more worker options, e.g. ``--ttl 600``); killed
+    (SIGKILL) on exit if still running."""
+    procs = {name: spawn_worker(redis_url, store, name, *extra) for name in names}
     try:
         yield procs
     finally:
         for proc in procs.values():
             if proc.poll() is None:
                 proc.send_signal(signal.SIGKILL)
-            proc.wait(timeout=10)
+            proc.wait(timeout=GUARD_S)
 
 
 def wait_for(
-    condition: Callable[[], Any], timeout: float = 20.0, interval: float = 0.02, what: str = ""
+    condition: Callable[[], Any], timeout: float = GUARD_S, interval: float = 0.02, what: str = ""
 ) -> Any:
-    """Poll until ``condition()`` is truthy; returns its value (fails the test on timeout)."""
+    """Poll until ``condition()`` is truthy; returns its value (fails the test on timeout: a guard
+    against a hang, never a speed bar)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         value = condition()

@@ -4,7 +4,6 @@ that would starve a heartbeat thread, and the supervisor's cancel, time and memo
 from __future__ import annotations
 
 import asyncio
-import time
 from pathlib import Path
 from typing import Any
 
@@ -20,10 +19,10 @@ from workers.redis_backend import RedisBackend
 from workers.store import Store
 from workers.supervisor import ChildConfig, EngineProcess, Task, engine_plugins
 
-from .conftest import _free_port, add_database, run, synth, wait_for, worker_thread
+from .conftest import GUARD_S, _free_port, add_database, run, synth, wait_for, worker_thread
 
 
-async def _collect(backend: Any, job_id: str, timeout: float = 30.0) -> list[JobEvent]:
+async def _collect(backend: Any, job_id: str, timeout: float = GUARD_S) -> list[JobEvent]:
     async def go() -> list[JobEvent]:
         return [e async for e in backend.events(job_id)]
 
@@ -86,7 +85,7 @@ def test_a_busy_engine_cannot_starve_the_heartbeat(
         try:
             info, payload = synth(store, db, steps=2, step_s=0.0, spin_s=2.5)
             await backend.submit(info, "synth", payload)
-            backend_events.extend(await _collect(backend, info.id, 60))
+            backend_events.extend(await _collect(backend, info.id))
         finally:
             await backend.close()
 
@@ -109,7 +108,7 @@ def _supervised(store: Store, **kwargs: Any) -> tuple[EngineProcess, list[tuple[
         **kwargs,
     )
     process.start()
-    assert process.ready.wait(60)
+    assert process.ready.wait(GUARD_S)
     return process, seen
 
 
@@ -118,17 +117,17 @@ def test_the_supervisor_kills_a_job_that_does_not_stop(store: Store, limit: str)
     db = add_database(store)
     process, seen = _supervised(store, cancel_grace_s=0.5)
     try:
-        payload = {"request": {"engine": "scripted", "database": db, "steps": 1, "spin_s": 30.0}}
+        # the engine would spin (ignoring the cancel) for 60 s, then end "done": only a kill by the
+        # supervisor ends it with the outcome below, whatever the machine's load
+        payload = {"request": {"engine": "scripted", "database": db, "steps": 1, "spin_s": 60.0}}
         task = Task("j1", "synth", payload, time_limit_s=1.0 if limit == "time" else None)
-        t0 = time.monotonic()
         assert process.run(task)
-        wait_for(lambda: any(t == "started" for t, _ in seen), 30)
+        wait_for(lambda: any(t == "started" for t, _ in seen))
         if limit == "cancel":
             process.cancel("j1")
-        wait_for(lambda: any(t == "end" for t, _ in seen), 30)
-        assert time.monotonic() - t0 < 10  # not the 30 s the engine wanted
-        assert ("end", "cancel_timeout" if limit == "cancel" else "time_limit") in seen
-        wait_for(lambda: process.idle, 30, what="a fresh engine process")  # replaced at once
+        wait_for(lambda: any(t == "end" for t, _ in seen))
+        assert [d for t, d in seen if t == "end"] == ["cancel_timeout" if limit == "cancel" else "time_limit"]
+        wait_for(lambda: process.idle, what="a fresh engine process")  # replaced at once
         assert process.restarts == 1
     finally:
         process.close()
@@ -140,7 +139,7 @@ def test_the_supervisor_stops_a_job_over_its_memory(store: Store) -> None:
     try:
         payload = {"request": {"engine": "scripted", "database": db, "steps": 50, "step_s": 0.1}}
         assert process.run(Task("j1", "synth", payload))
-        wait_for(lambda: any(t == "end" for t, _ in seen), 30)
+        wait_for(lambda: any(t == "end" for t, _ in seen))
         assert ("end", "memory_limit") in seen
     finally:
         process.close()

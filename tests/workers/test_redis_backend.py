@@ -16,13 +16,13 @@ from workers.redis_events import EventPublisher, read_archive
 from workers.redis_keys import RedisKeys
 from workers.store import NotFoundError, Store
 
-from .conftest import add_database, new_job, run, synth, wait_for, worker_thread
+from .conftest import GUARD_S, add_database, new_job, run, synth, wait_for, worker_thread
 
 KEYS = RedisKeys()
 
 
 async def collect(
-    backend: RedisBackend, job_id: str, after: int = 0, timeout: float = 20.0
+    backend: RedisBackend, job_id: str, after: int = 0, timeout: float = GUARD_S
 ) -> list[JobEvent]:
     async def go() -> list[JobEvent]:
         return [e async for e in backend.events(job_id, after)]
@@ -30,7 +30,7 @@ async def collect(
     return await asyncio.wait_for(go(), timeout)
 
 
-async def wait_archived(store: Store, job_id: str, count: int, timeout: float = 10.0) -> None:
+async def wait_archived(store: Store, job_id: str, count: int, timeout: float = GUARD_S) -> None:
     """Until the store's event archive of a job holds ``count`` events."""
     deadline = time.monotonic() + timeout
     while len(read_archive(store, job_id)) < count:
@@ -167,7 +167,7 @@ def test_resume_after_replays_exactly_the_missed_events(
         fourth.quiet_check_s = 0.2
         await fourth.start()
         try:
-            assert await collect(fourth, job.id, after=1, timeout=10.0) == full[1:3]
+            assert await collect(fourth, job.id, after=1) == full[1:3]
         finally:
             await fourth.close()
 
@@ -223,7 +223,7 @@ def test_cancel_queued_job_ends_at_once_and_is_skipped(
     events = run(scenario())
     assert [(e.id, e.type) for e in events] == [(1, "queued"), (2, "cancelled")]
     with worker_thread(redis_url, store, "t1"):
-        wait_for(lambda: rclient.xlen(KEYS.jobs) == 0, 10, what="the worker to drop the cancelled job")
+        wait_for(lambda: rclient.xlen(KEYS.jobs) == 0, what="the worker to drop the cancelled job")
     assert [e.type for e in stream_events(rclient, events[0].job)] == ["queued", "cancelled"]
 
 
@@ -275,7 +275,6 @@ def test_failed_job_and_dead_letter_after_max_deliveries(
     with worker_thread(redis_url, store, "t1", max_deliveries=2):
         wait_for(
             lambda: rclient.xlen(KEYS.jobs) == 0 and not rclient.xpending(KEYS.jobs, KEYS.group)["pending"],
-            10,
             what="the queue to drain",
         )
     dead = [fields for _, fields in rclient.xrange(KEYS.dead)]
@@ -341,9 +340,7 @@ def test_reclaim_hung_worker_and_own_leftovers(redis_url: str, rclient: redis.Re
         if consumer == "zombie":
             rclient.xclaim(KEYS.jobs, KEYS.group, "zombie", 0, [entry_id], idle=60_000, justid=True)
     with worker_thread(redis_url, store, "t1"):
-        wait_for(
-            lambda: all(rclient.exists(KEYS.terminal(j)) for j in (hung, leftover)), 10, what="both jobs"
-        )
+        wait_for(lambda: all(rclient.exists(KEYS.terminal(j)) for j in (hung, leftover)), what="both jobs")
     for job_id in (hung, leftover):
         events = stream_events(rclient, job_id)
         assert events[-1].type == EventType.done

@@ -19,7 +19,7 @@ from workers.redis_cache import DatabaseCache
 from workers.redis_keys import RedisKeys
 from workers.store import NotFoundError, Store, load_npz
 
-from .conftest import add_database, new_job, run, worker_thread
+from .conftest import GUARD_S, add_database, new_job, run, worker_thread
 
 KEYS = RedisKeys()
 
@@ -94,7 +94,7 @@ def test_database_cache_survives_flushall(redis_url: str, rclient: redis.Redis, 
         try:
             job = new_job(store, kind, payload)
             await backend.submit(job, kind, payload)
-            return await asyncio.wait_for(_all(backend, job.id), 20)
+            return await asyncio.wait_for(_all(backend, job.id), GUARD_S)
         finally:
             await backend.close()
 

@@ -18,6 +18,8 @@ from motion import parse_bvh
 from motion.samples import sample_path
 from service.client import SegueClient
 
+from .conftest import GUARD_S
+
 pytestmark = pytest.mark.slow  # real processes: tests/run.sh runs it with CI=true or SEGUE_SLOW=1
 
 REPO = Path(__file__).resolve().parents[2]
@@ -56,7 +58,7 @@ def deployment(redis_url: str, tmp_path: Path) -> Iterator[str]:
     ]
     base = f"http://127.0.0.1:{port}"
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + GUARD_S
         while True:
             try:
                 if httpx.get(f"{base}/healthz", timeout=1).status_code == 200:
@@ -64,7 +66,7 @@ def deployment(redis_url: str, tmp_path: Path) -> Iterator[str]:
             except httpx.HTTPError:
                 pass
             if time.monotonic() > deadline:
-                pytest.fail("segue serve --redis did not answer /healthz within 60 s")
+                pytest.fail(f"segue serve --redis did not answer /healthz within {GUARD_S} s")
             time.sleep(0.2)
         yield base
     finally:

@@ -812,8 +812,9 @@ tools.path = (() => {
     state.path.points = resample(until);
     state.path.held_ms = until - raw[0][0]; // how long the button was held, as the page timed it
     if (live) {
-      if (live.fps()) live.push(resample(until, live.fps()));
-      live.stop();
+      // the whole path, at the session's fps once known (a busy server may open the session only
+      // after the button is released: the path drawn meanwhile is sent then, not lost)
+      live.stop((fps) => resample(until, fps));
     }
     redraw();
   };

@@ -15,8 +15,9 @@ import { forwardKinematics } from './bvh.js';
 const SEND_MS = 100; // a path message every 0.1 s (3 frames at 30 fps)
 
 // Opens a session and returns a controller: push(points) queues the path sampled so far (at
-// `fps()` frames per second, [x, z] metres), stop() ends the control; `done` settles when the
-// session closes. onFrames(positions, frames, fps, names, parents) draws the walker so far;
+// `fps()` frames per second, [x, z] metres), stop(pathAt) ends the control after queueing
+// pathAt(fps), the whole path at the session's fps (called once the session has told its fps, so
+// a path drawn before the session opened is sent, not lost); `done` settles when the session closes. onFrames(positions, frames, fps, names, parents) draws the walker so far;
 // `info` collects what the tests and the status line read.
 export function startLiveWalk({ database, latencyS, onFrames, onStatus, ApiError }) {
   const info = { mode: 'live', latency_s: latencyS, sent: 0, frames: 0, framesBeforeStop: 0, maxAhead: -Infinity, stopped: false, end: null, skeleton: null, errors: [] };
@@ -25,6 +26,7 @@ export function startLiveWalk({ database, latencyS, onFrames, onStatus, ApiError
   let pending = [];
   let chunks = [];
   let stopAsked = false;
+  let finalPath = null;
   let timer = null;
   const send = (msg) => { if (ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(msg)); };
   const flush = () => {
@@ -36,8 +38,13 @@ export function startLiveWalk({ database, latencyS, onFrames, onStatus, ApiError
       info.sent += batch.length;
     }
   };
+  const push = (points) => {
+    const have = info.sent + pending.length;
+    if (points.length > have) pending.push(...points.slice(have));
+  };
   const finish = () => {
     if (!skeleton || info.stopped) return;
+    if (finalPath) push(finalPath(skeleton.fps));
     flush();
     send({ type: 'stop' });
     info.stopped = true;
@@ -85,12 +92,10 @@ export function startLiveWalk({ database, latencyS, onFrames, onStatus, ApiError
     done,
     fps: () => (skeleton ? skeleton.fps : null),
     // the points sampled so far; only those not yet queued or sent are new
-    push(points) {
-      const have = info.sent + pending.length;
-      if (points.length > have) pending.push(...points.slice(have));
-    },
-    stop() {
+    push,
+    stop(pathAt = null) {
       stopAsked = true;
+      finalPath = pathAt;
       if (skeleton) finish();
     },
     close() { clearInterval(timer); if (ws.readyState <= WebSocket.OPEN) ws.close(); },
