@@ -630,7 +630,7 @@ def start_warming() -> None:
 
     subprocess.Popen(
         [sys.executable, "-m", "service.cli", "warm"],
-        stdout=sys.stderr,
+        stdout=2,  # this process's standard error, whatever object sys.stderr is now
         stdin=subprocess.DEVNULL,
         preexec_fn=lower_priority if hasattr(os, "nice") else None,
     )

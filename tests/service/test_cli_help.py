@@ -91,7 +91,7 @@ def test_worker_takes_the_redis_url_from_the_environment(monkeypatch: pytest.Mon
     import workers.redis_worker as redis_worker
 
     seen: list[Settings] = []
-    monkeypatch.setattr(redis_worker, "serve", lambda settings: seen.append(settings) or 0)
+    monkeypatch.setattr(redis_worker, "serve", lambda settings, **kw: seen.append(settings) or 0)
     monkeypatch.setenv("SEGUE_REDIS_URL", "redis://127.0.0.1:6390/3")
     get_settings.cache_clear()
     try:

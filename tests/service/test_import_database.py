@@ -58,7 +58,9 @@ def test_serve_import_imports_before_serving(
     served: list[Any] = []
     monkeypatch.setattr(uvicorn, "run", lambda app, **kw: served.append(kw))
     data = tmp_path / "data"
-    assert cli.main(["serve", "--data", str(data), "--import", str(built), "--port", "8123"]) == 0
+    assert (
+        cli.main(["serve", "--data", str(data), "--import", str(built), "--port", "8123", "--no-warm"]) == 0
+    )
     assert served and served[0]["port"] == 8123
     folder_id = json.loads((built / "info.json").read_text())["id"]
     assert f"imported clips database {folder_id[:12]} (1 clips) from {built}" in capsys.readouterr().err
