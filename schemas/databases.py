@@ -42,6 +42,14 @@ class GraphDatabaseSpec(DatabaseSpecBase):
     min_jump_frames: int = Field(
         default=10, ge=1, le=10000, description="ignore cuts within a clip closer than this to playing on"
     )
+    candidates: Literal["auto", "indexed", "all_pairs"] = Field(
+        default="auto",
+        description=(
+            "how the build finds transitions: 'all_pairs' compares every pair of frames (exact, time "
+            "N^2), 'indexed' descends from a nearest-neighbour index's seeds (near-linear, keeps the "
+            "best cuts of each frame), 'auto' = all_pairs up to 20,000 frames, else indexed"
+        ),
+    )
 
 
 # Kind-specific specs defined in their engine's schema module (they import DatabaseSpecBase from here).

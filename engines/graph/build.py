@@ -47,6 +47,7 @@ from schemas.databases import GraphDatabaseSpec
 
 from ..base import Arrays, Emitter, EngineError, ShouldStop
 from ..library import MotionLibrary
+from .candidates import IndexStats, indexed_minima
 from .features import TransitionFeatures, exact_costs, reduce_features, transition_features
 from .hierarchy import LeafEdges, build_hierarchy
 from .tracks import foot_contacts, root_tracks
@@ -60,6 +61,9 @@ TILE = 2048
 PCA_MIN_DIMS = 48
 """Scan on a PCA reduction of the features when they have more dimensions than this."""
 PCA_VARIANCE = 0.999
+ALL_PAIRS_MAX_FRAMES = 20000
+"""Largest library (frames) whose candidate transitions come from the all-pairs scan under
+``candidates="auto"``; larger ones use the nearest-neighbour index (``engines.graph.candidates``)."""
 
 # the 8 neighbours, most selective first: the cost's valleys run along the diagonal (frames that
 # match keep matching as both clips play on), so neighbours along it reject the most candidates.
@@ -249,34 +253,58 @@ def _cpu_count() -> int:
         return os.cpu_count() or 1
 
 
+def use_index(method: str, frames: int) -> bool:
+    """Whether the build finds its candidate transitions with the nearest-neighbour index
+    (:mod:`engines.graph.candidates`) rather than the all-pairs scan: ``"indexed"``, ``"all_pairs"``,
+    or ``"auto"`` (the index above :data:`ALL_PAIRS_MAX_FRAMES` frames)."""
+    if method not in ("auto", "indexed", "all_pairs"):
+        raise EngineError(f"candidates must be 'auto', 'indexed' or 'all_pairs', got {method!r}")
+    return method == "indexed" or (method == "auto" and frames > ALL_PAIRS_MAX_FRAMES)
+
+
 def candidate_edges(
     features: TransitionFeatures,
     tau: float,
     min_jump_frames: int,
     *,
+    method: str = "all_pairs",
     tile: int = TILE,
     pca_min_dims: int = PCA_MIN_DIMS,
     workers: int | None = None,
     progress: Progress = _no_progress,
     should_stop: ShouldStop = _never,
-) -> tuple[LeafEdges, ScanStats]:
+) -> tuple[LeafEdges, ScanStats | IndexStats]:
     """The edges of G: local minima of the transition cost below ``tau`` (module docstring, step 2),
-    both directions of every minimum, sorted by (from clip, to clip, from frame, to frame). Costs
-    are recomputed from differences of the full feature rows (:func:`~.features.exact_costs`)."""
+    both directions of every minimum, sorted by (from clip, to clip, from frame, to frame), found by
+    the all-pairs scan or the index (:func:`use_index` of ``method``). Costs are recomputed from
+    differences of the full feature rows (:func:`~.features.exact_costs`)."""
     rows = features.rows
     screen = rows
     if rows.shape[1] > pca_min_dims:
         screen, _ = reduce_features(rows, PCA_VARIANCE)
-    x, y, v, stats = local_minima(
-        screen,
-        features.offsets,
-        tau,
-        min_jump_frames,
-        tile=tile,
-        workers=workers,
-        progress=progress,
-        should_stop=should_stop,
-    )
+    stats: ScanStats | IndexStats
+    if use_index(method, int(rows.shape[0])):
+        x, y, v, stats = indexed_minima(
+            screen,
+            features.offsets,
+            tau,
+            min_jump_frames,
+            workers=max(1, workers or _cpu_count()),
+            progress=progress,
+            should_stop=should_stop,
+        )
+    else:
+        x, y, v, stats = local_minima(
+            screen,
+            features.offsets,
+            tau,
+            min_jump_frames,
+            tile=tile,
+            workers=workers,
+            progress=progress,
+            should_stop=should_stop,
+        )
+    del screen
     v = exact_costs(rows, x, y)  # from differences of the full rows: no cancellation, no PCA error
     ok = v < tau
     x, y, v = x[ok], y[ok], v[ok]
@@ -391,6 +419,7 @@ def build_graph(
         features,
         spec.tau,
         spec.min_jump_frames,
+        method=spec.candidates,
         tile=tile,
         workers=workers,
         progress=lambda f, m: progress(0.05 + 0.85 * f, m),
@@ -428,7 +457,12 @@ def build_graph(
         "joint_weights": dict(zip(features.joints, features.joint_weights.tolist(), strict=True)),
         "feature_dims": int(features.rows.shape[1]),
         "scan_dims": stats.dims,
-        "below_tau": stats.below_tau,
+        "candidates": "indexed" if isinstance(stats, IndexStats) else "all_pairs",
+        **(
+            {"index_cells": stats.cells, "index_probed": stats.probed, "seeds": stats.seeds}
+            if isinstance(stats, IndexStats)
+            else {"below_tau": stats.below_tau}
+        ),
         "max_steps": features.max_steps,
         "features_s": round(t_features, 3),
         "scan_s": round(t_scan, 3),

@@ -36,7 +36,13 @@ GAIT = 30  # frames per gait cycle of walking_biped at 30 fps
 
 
 def spec(**kw: Any) -> Any:
-    base = {"tau": 1.0, "joint_weights": {}, "velocity_weight": 1.0, "min_jump_frames": 10}
+    base = {
+        "tau": 1.0,
+        "joint_weights": {},
+        "velocity_weight": 1.0,
+        "min_jump_frames": 10,
+        "candidates": "auto",
+    }
     base.update(kw)
     return SimpleNamespace(**base)
 
