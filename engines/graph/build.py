@@ -37,6 +37,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -50,6 +51,7 @@ from ..library import MotionLibrary
 from .candidates import IndexStats, indexed_minima
 from .features import TransitionFeatures, exact_costs, reduce_features, transition_features
 from .hierarchy import LeafEdges, build_hierarchy
+from .model import RootTracks
 from .tracks import foot_contacts, root_tracks
 
 IntArray = npt.NDArray[np.int64]
@@ -61,6 +63,9 @@ TILE = 2048
 PCA_MIN_DIMS = 48
 """Scan on a PCA reduction of the features when they have more dimensions than this."""
 PCA_VARIANCE = 0.999
+LOCOMOTION_SPEED = 0.5
+"""Body speed over the floor (m/s) above which a frame counts as locomotion when the build chooses
+the component to keep (:func:`largest_component`)."""
 ALL_PAIRS_MAX_FRAMES = 20000
 """Largest library (frames) whose candidate transitions come from the all-pairs scan under
 ``candidates="auto"``; larger ones use the nearest-neighbour index (``engines.graph.candidates``)."""
@@ -324,12 +329,16 @@ def candidate_edges(
 
 
 def largest_component(
-    leaves: LeafEdges, frames: IntArray, names: tuple[str, ...]
-) -> tuple[npt.NDArray[np.bool_], list[dict[str, str]]]:
-    """Strongly connected components of the clip graph; keeps the largest (by frames, then clips)
-    among those with an edge inside (a lone clip without a transition to itself is no cycle).
+    leaves: LeafEdges, frames: IntArray, names: tuple[str, ...], moving: IntArray | None = None
+) -> tuple[npt.NDArray[np.bool_], list[dict[str, Any]]]:
+    """Strongly connected components of the clip graph; keeps, among those with an edge inside (a
+    lone clip without a transition to itself is no cycle), the one with the most locomotion
+    (``moving (C,)``: each clip's frames whose body travels faster than
+    :data:`LOCOMOTION_SPEED`; a component without locomotion cannot reach a goal), then the most
+    frames, then the most clips. Without ``moving``, the largest by frames.
 
-    Returns a mask of the edges between kept clips and, for every other clip, ``{"clip", "reason"}``.
+    Returns a mask of the edges between kept clips and, for every other clip, ``{"clip", "frames",
+    "reason"}``.
     """
     c = int(frames.size)
     adj = csr_matrix(
@@ -342,7 +351,8 @@ def largest_component(
     internal = label[leaves.from_clip] == label[leaves.to_clip]
     cyclic = np.bincount(label[leaves.from_clip[internal]], minlength=n_comp) > 0
     # a component without an edge inside (a lone clip, no self-transition) cannot be played on
-    best = int(np.lexsort((size_clips, size_frames, cyclic))[-1])
+    size_moving = np.bincount(label, (frames * 0 if moving is None else moving).astype(np.float64), n_comp)
+    best = int(np.lexsort((size_clips, size_frames, size_moving, cyclic))[-1])
     inside = label == best
     keep = inside[leaves.from_clip] & inside[leaves.to_clip]
     other = leaves.from_clip != leaves.to_clip
@@ -353,7 +363,7 @@ def largest_component(
     out_of[leaves.from_clip[inside[leaves.to_clip]]] = True
     touched[leaves.from_clip[other]] = True
     touched[leaves.to_clip[other]] = True
-    dropped: list[dict[str, str]] = []
+    dropped: list[dict[str, Any]] = []
     for k in np.flatnonzero(~inside):
         group = int(size_clips[label[k]])
         if not touched[k]:
@@ -366,8 +376,18 @@ def largest_component(
             why = "no transition to or from the main component"
         if group > 1:
             why += f" (nor for the {group - 1} other clip(s) of its strongly connected group)"
-        dropped.append({"clip": names[k], "reason": why})
+        dropped.append({"clip": names[k], "frames": int(frames[k]), "reason": why})
     return keep, dropped
+
+
+def moving_frames(tracks: RootTracks, fps: float) -> IntArray:
+    """``(C,)`` frames of each clip whose body travels over the floor faster than
+    :data:`LOCOMOTION_SPEED` (speed from the root track's consecutive frames)."""
+    step = np.linalg.norm(np.diff(tracks.root_xz, axis=0), axis=1) * fps
+    fast = np.concatenate((step > LOCOMOTION_SPEED, [False]))
+    fast[tracks.offsets[1:-1] - 1] = False  # no step across clips
+    clip = np.repeat(np.arange(tracks.offsets.size - 1), np.diff(tracks.offsets))
+    return np.bincount(clip, fast, tracks.offsets.size - 1).astype(np.int64)
 
 
 def dead_end_edges(leaves: LeafEdges, frames: IntArray) -> int:
@@ -431,13 +451,17 @@ def build_graph(
             f"no transitions below tau={spec.tau:g} between any frames of the {frames.size} clips; "
             "raise tau (e.g. to 2-4) or add clips of similar motion"
         )
-    keep, dropped = largest_component(leaves, frames, library.names)
+    moving = moving_frames(tracks, library.fps)
+    keep, dropped = largest_component(leaves, frames, library.names, moving)
     kept = leaves.take(keep)
     if kept.size == 0:
         raise EngineError(
             f"the {leaves.size} transitions below tau={spec.tau:g} form no cycle between clips: "
             "every path reaches a clip's end; raise tau or add clips that lead back to each other"
         )
+    position = {name: i for i, name in enumerate(library.names)}
+    dropped_index = np.array([position[d["clip"]] for d in dropped], dtype=np.int64)
+    dropped_frames = int(frames[dropped_index].sum())
     progress(0.92, f"graph: hierarchy of {kept.size} edges")
     tree = build_hierarchy(kept)
     if should_stop():
@@ -454,6 +478,12 @@ def build_graph(
         "candidate_edges": leaves.size,
         "dead_end_edges": dead_end_edges(kept, frames),
         "dropped_clips": dropped,
+        "kept": {
+            "clips": int(frames.size) - len(dropped),
+            "frames": int(frames.sum()) - dropped_frames,
+            "moving_frames": int(moving.sum()) - int(moving[dropped_index].sum()),
+        },
+        "dropped_frames": dropped_frames,
         "joint_weights": dict(zip(features.joints, features.joint_weights.tolist(), strict=True)),
         "feature_dims": int(features.rows.shape[1]),
         "scan_dims": stats.dims,
