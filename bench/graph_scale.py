@@ -143,10 +143,12 @@ def run_one(frames: int, with_recall: bool, budget: float, goal_m: float, candid
     library, made_of = library_of(frames)
     spec = parse_database_spec({"kind": "graph", "clips": [{"bvh": "x.bvh"}], "candidates": candidates})
     rss_library = rss_mb()
-    # what workers.execute.build_database_bytes does, from the library
+    # what workers.execute.build_database_bytes does, from the library (in its order)
     c0, t0 = time.process_time(), time.perf_counter()
+    extra = GraphEngine.build(spec, library, CollectingEmitter(), lambda: False)
     arrays = library_to_arrays(library)
-    arrays.update(GraphEngine.build(spec, library, CollectingEmitter(), lambda: False))
+    arrays.update(extra)
+    del extra
     arrays.update(GraphEngine.quality_reference_of(library, arrays).to_arrays())
     arrays.update(foot_floor_arrays(library, GraphEngine.example_clips(library, arrays)))
     data = npz_bytes(arrays)

@@ -115,6 +115,7 @@ def indexed_minima(
     *,
     neighbours: int = NEIGHBOURS,
     stride: int = STRIDE,
+    queries: IntArray | None = None,
     workers: int = 1,
     progress: Progress = _no_progress,
     should_stop: ShouldStop = _never,
@@ -122,7 +123,9 @@ def indexed_minima(
     """Local minima below ``tau`` of ``M[x, y] = ||rows[x] - rows[y]||^2``, ``x < y``, reached by
     descent from the index's seeds (module docstring).
 
-    ``rows (N, D)`` float32; ``offsets (C + 1,)`` each clip's first row. Entries of one clip with
+    ``rows (N, D)`` float32; ``offsets (C + 1,)`` each clip's first row. The index holds every
+    ``stride``-th row; ``queries`` (sorted row indices) ask it for seeds, by default the held rows.
+    Entries of one clip with
     ``|y - x| < min_jump_frames`` are never kept (they still count as neighbours). ``workers``
     threads search the index and descend. Returns ``(x, y, cost, stats)``: row indices sorted by
     ``(x, y)`` and float32-accurate costs. Raises :class:`InterruptedError` when ``should_stop()``
@@ -172,7 +175,8 @@ def indexed_minima(
     values: list[Float32Array] = []
     oks: list[npt.NDArray[np.bool_]] = []
     n_seeds = 0
-    queries = held  # the querying frames: the held ones
+    if queries is None:
+        queries = held
     starts = list(range(0, queries.size, CHUNK))
     with ThreadPoolExecutor(max_workers=threads) as pool:
         for i, q0 in enumerate(starts):

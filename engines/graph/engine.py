@@ -11,9 +11,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..base import Arrays, Emitter, Engine, ShouldStop
+from ..base import Arrays, BuildWork, Emitter, Engine, ShouldStop
 from ..library import MotionLibrary
-from .build import build_graph
+from .build import build_graph, build_work
 from .model import EdgeTree, FootContacts, RootTracks
 from .paths import GraphIndex
 from .search import GraphSearch
@@ -38,6 +38,10 @@ class GraphEngine(Engine):
     @classmethod
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         return build_graph(spec, library, emit, should_stop)
+
+    @classmethod
+    def build_work(cls, spec: Any, frames: int) -> BuildWork:
+        return build_work(frames, spec.candidates)
 
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> None:
         # several characters with shared constraints are searched jointly (engines.graph.shared)

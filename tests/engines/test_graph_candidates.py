@@ -9,9 +9,18 @@ import numpy as np
 import pytest
 
 from engines.base import EngineError
-from engines.graph.build import build_graph, local_minima, use_index
+from engines.graph.build import (
+    bridge_edges,
+    build_graph,
+    candidate_edges,
+    local_minima,
+    merge_edges,
+    screen_rows,
+    use_index,
+)
 from engines.graph.candidates import indexed_minima
 from engines.graph.features import transition_features
+from engines.graph.hierarchy import LeafEdges
 from engines.graph.model import EdgeTree
 from engines.library import MotionLibrary
 from tests.engines.emitters import Collect
@@ -97,3 +106,33 @@ def test_indexed_build_keeps_edges_of_the_all_pairs_build(walks: MotionLibrary) 
     assert any("transition candidates" in m for _, m in emit.progress_events)
     tf = transition_features(walks)
     assert report["frames"] == tf.rows.shape[0]
+
+
+def test_bridge_edges_are_all_pairs_edges_of_the_clips_asked(walks: MotionLibrary) -> None:
+    tf = transition_features(walks)
+    screen = screen_rows(tf)
+    exact, _ = candidate_edges(tf, 1.0, 10, method="all_pairs", screen=screen)
+    extra = bridge_edges(tf, screen, np.array([1]), 1.0, 10)
+
+    def keys(e: LeafEdges) -> set[tuple[int, int, int, int]]:
+        cols = (e.from_clip, e.from_frame, e.to_clip, e.to_frame)
+        return set(zip(*(c.tolist() for c in cols), strict=True))
+
+    got = keys(extra)
+    assert got and got <= keys(exact)
+    assert all(1 in (a, c) for a, _, c, _ in got)  # every edge touches the clip asked
+    assert {(a, c) for a, _, c, _ in got} >= {(0, 1), (1, 0)}
+    assert bridge_edges(tf, screen, np.zeros(0, dtype=np.int64), 1.0, 10).size == 0
+
+
+def test_merge_edges_is_a_sorted_union() -> None:
+    a = LeafEdges(
+        np.array([0, 1]), np.array([5, 7]), np.array([1, 0]), np.array([9, 2]), np.array([0.1, 0.2])
+    )
+    b = LeafEdges(
+        np.array([0, 0]), np.array([5, 3]), np.array([1, 1]), np.array([9, 4]), np.array([0.1, 0.3])
+    )
+    m = merge_edges(a, b)
+    cols = (m.from_clip, m.from_frame, m.to_clip, m.to_frame)
+    assert list(zip(*(c.tolist() for c in cols), strict=True)) == [(0, 3, 1, 4), (0, 5, 1, 9), (1, 7, 0, 2)]
+    assert m.cost.tolist() == [0.3, 0.1, 0.2]
