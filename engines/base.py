@@ -223,6 +223,12 @@ class Engine(ABC):
         return {}
 
     @classmethod
+    def library_for(cls, spec: Any, library: MotionLibrary) -> MotionLibrary:
+        """The library a database of ``spec`` is built from and stores, given its clips as read
+        (default: as read; graph databases add mirror images with ``mirror``)."""
+        return library
+
+    @classmethod
     def build_work(cls, spec: Any, frames: int) -> BuildWork | None:
         """Estimated CPU time and peak memory of building a database of ``frames`` frames (at its
         rate) with ``spec``; ``None`` when the engine gives no estimate (then the service's frame

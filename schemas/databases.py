@@ -42,6 +42,10 @@ class GraphDatabaseSpec(DatabaseSpecBase):
     min_jump_frames: int = Field(
         default=10, ge=1, le=10000, description="ignore cuts within a clip closer than this to playing on"
     )
+    mirror: bool = Field(
+        default=False,
+        description="add the mirror image of every clip (left and right exchanged), named '<clip> (mirror)'",
+    )
     candidates: Literal["auto", "indexed", "all_pairs"] = Field(
         default="auto",
         description=(

@@ -68,7 +68,8 @@ def summarize(spec: dict[str, Any], npz: bytes, source_units: dict[str, str]) ->
         roles[couple["leader"]] = "leader"
         roles[couple["follower"]] = "follower"
     clips = []
-    for entry, name, count in zip(spec["clips"], names, counts, strict=True):
+    entries = list(spec["clips"]) + [{}] * (len(names) - len(spec["clips"]))  # mirror images follow
+    for entry, name, count in zip(entries, names, counts, strict=True):
         units = entry.get("units") or source_units.get(entry.get("clip") or "")
         labels = [LabelRange.model_validate(lb) for lb in entry.get("labels") or []]
         clips.append(

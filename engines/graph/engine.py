@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..base import Arrays, BuildWork, Emitter, Engine, ShouldStop
-from ..library import MotionLibrary
+from ..library import MotionLibrary, with_mirrors
 from .build import build_graph, build_work
 from .model import EdgeTree, FootContacts, RootTracks
 from .paths import GraphIndex
@@ -38,6 +38,10 @@ class GraphEngine(Engine):
     @classmethod
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         return build_graph(spec, library, emit, should_stop)
+
+    @classmethod
+    def library_for(cls, spec: Any, library: MotionLibrary) -> MotionLibrary:
+        return with_mirrors(library) if getattr(spec, "mirror", False) else library
 
     @classmethod
     def build_work(cls, spec: Any, frames: int) -> BuildWork:
