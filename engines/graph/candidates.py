@@ -62,11 +62,6 @@ TRAIN_PER_CELL = 64
 MAX_STEPS = 256
 """Moves of one descent at most (a seed that has not settled by then is dropped)."""
 SEED = 1234
-TRAIN_ROWS = 65536
-"""Rows the index's k-means trains on at most (the training costs rows x cells)."""
-FLAT_CELLS = 512
-"""Up to this many cells, a query compares itself with every cell's centroid; above, an HNSW graph
-of the centroids finds the nearest cells."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,37 +88,19 @@ def _no_progress(fraction: float, message: str) -> None:
 
 
 def _index(rows: Float32Array, threads: int) -> tuple[Any, int, int]:
-    """A trained and filled ``faiss.IndexIVFFlat`` over ``rows``; returns it, ``nlist``, ``nprobe``.
-
-    The cells are a seeded k-means of at most :data:`TRAIN_ROWS` evenly strided rows; above
-    :data:`FLAT_CELLS` cells their centroids are found by an HNSW graph (built on one thread, so the
-    same every time) rather than compared one by one, which keeps a query's cost from growing with
-    the library."""
+    """A trained and filled ``faiss.IndexIVFFlat`` over ``rows``; returns it, ``nlist``, ``nprobe``."""
     import faiss  # a heavy import: only for builds
 
     faiss.omp_set_num_threads(threads)
     n, d = rows.shape
     nlist = max(1, min(n // CELL_FRAMES, 65536))
-    step = max(1, n // min(nlist * TRAIN_PER_CELL, TRAIN_ROWS))
-    sample = np.ascontiguousarray(rows[::step])
-    if nlist <= FLAT_CELLS:
-        quantizer: Any = faiss.IndexFlatL2(d)
-    else:
-        kmeans = faiss.Kmeans(d, nlist, niter=10, seed=SEED, max_points_per_centroid=TRAIN_PER_CELL * 4)
-        kmeans.train(sample)
-        quantizer = faiss.IndexHNSWFlat(d, 32)
-        quantizer.hnsw.efSearch = 4 * NPROBE
-        faiss.omp_set_num_threads(1)  # the graph's links depend on the order of insertion
-        quantizer.add(kmeans.centroids)
-        faiss.omp_set_num_threads(threads)
+    quantizer = faiss.IndexFlatL2(d)
     index = faiss.IndexIVFFlat(quantizer, d, nlist, faiss.METRIC_L2)
-    if nlist <= FLAT_CELLS:
-        index.cp.seed = SEED
-        index.cp.niter = 10
-        index.cp.max_points_per_centroid = TRAIN_PER_CELL * 4
-        index.train(sample)
-    else:
-        index.is_trained = True
+    index.cp.seed = SEED
+    index.cp.niter = 10
+    index.cp.max_points_per_centroid = TRAIN_PER_CELL * 4
+    step = max(1, n // (nlist * TRAIN_PER_CELL))
+    index.train(np.ascontiguousarray(rows[::step]))
     index.add(rows)
     nprobe = min(NPROBE, nlist)
     index.nprobe = nprobe

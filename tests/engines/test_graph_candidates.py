@@ -136,19 +136,3 @@ def test_merge_edges_is_a_sorted_union() -> None:
     cols = (m.from_clip, m.from_frame, m.to_clip, m.to_frame)
     assert list(zip(*(c.tolist() for c in cols), strict=True)) == [(0, 3, 1, 4), (0, 5, 1, 9), (1, 7, 0, 2)]
     assert m.cost.tolist() == [0.3, 0.1, 0.2]
-
-
-def test_hnsw_cells_give_a_reproducible_subset(monkeypatch: pytest.MonkeyPatch) -> None:
-    import engines.graph.candidates as candidates
-
-    rows, offsets = smooth_rows(6, [600, 500, 700], dims=8)
-    tau = float(np.quantile(dense_costs(rows), 0.05))
-    ax, ay, _, _ = local_minima(rows, offsets, tau, 10)
-    monkeypatch.setattr(candidates, "CELL_FRAMES", 16)
-    monkeypatch.setattr(candidates, "FLAT_CELLS", 8)  # 56 cells: found through the HNSW graph
-    runs = [indexed_minima(rows, offsets, tau, 10, neighbours=8, workers=w) for w in (2, 1)]
-    assert runs[0][3].cells > 8
-    got = set(zip(runs[0][0].tolist(), runs[0][1].tolist(), strict=True))
-    assert got and got <= set(zip(ax.tolist(), ay.tolist(), strict=True))
-    for a, b in zip(runs[0][:3], runs[1][:3], strict=True):
-        np.testing.assert_array_equal(a, b)
