@@ -54,6 +54,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--budget", type=float, default=60.0, help="time cap, seconds")
     ap.add_argument("--rounds", type=int, default=None, help="search rounds (default: the request's)")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument(
+        "--candidates", default="auto", choices=("auto", "indexed", "all_pairs"), help="the spec's candidates"
+    )
     args = ap.parse_args(argv)
     tune_process()
     if not DATA.exists():
@@ -67,7 +70,9 @@ def main(argv: list[str] | None = None) -> int:
         ("run", args.per_kind // 2),
     ):
         files += sorted(glob.glob(str(DATA / f"dataset-2_{kind}_normal_*.bvh")))[:k]
-    spec = parse_database_spec({"kind": "graph", "clips": [{"bvh": f} for f in files]})
+    spec = parse_database_spec(
+        {"kind": "graph", "clips": [{"bvh": f} for f in files], "candidates": args.candidates}
+    )
     t0 = time.perf_counter()
     library = build_library([ClipInput(Path(f).stem, Path(f).read_bytes()) for f in files], spec.fps)
     arrays = build_graph(spec, library, CollectingEmitter(), lambda: False)
@@ -107,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     yaw = np.degrees(heading(motion, pos))
     end = np.asarray(pos[-1, body_root(motion.skeleton), [0, 2]])
     out = {
+        "candidates": report.get("candidates"),
         "frames_db": library.total_frames,
         "clips": len(library.names),
         "leaf_edges": report.get("leaf_edges"),

@@ -79,7 +79,9 @@ def run_one(name: str, tau: float) -> dict[str, Any]:
     lib = build_library([ClipInput(Path(f).stem, Path(f).read_bytes()) for f in files], fps=30.0)
     load_s = time.perf_counter() - t0
     before = rss_mb()
-    spec = SimpleNamespace(tau=tau, joint_weights={}, velocity_weight=1.0, min_jump_frames=10)
+    spec = SimpleNamespace(
+        tau=tau, joint_weights={}, velocity_weight=1.0, min_jump_frames=10, candidates="auto"
+    )
     t0 = time.perf_counter()
     arrays = build_graph(spec, lib, CollectingEmitter(), lambda: False)
     build_s = time.perf_counter() - t0

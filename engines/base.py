@@ -49,6 +49,15 @@ DatabaseArrays = Mapping[str, npt.NDArray[Any]]
 Array = npt.NDArray[np.float64]
 
 
+@dataclass(frozen=True, slots=True)
+class BuildWork:
+    """What a database build is expected to take: CPU seconds (all threads) and peak resident
+    memory (MiB) of the build job."""
+
+    cpu_s: float
+    memory_mb: float
+
+
 @contextmanager
 def open_database(path: str | Path) -> Iterator[DatabaseArrays]:
     """The arrays of a database file (``data.npz``), each read from the file only when indexed.
@@ -324,6 +333,19 @@ class Engine(ABC):
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         """Kind-specific database arrays computed from the library (default: none)."""
         return {}
+
+    @classmethod
+    def library_for(cls, spec: Any, library: MotionLibrary) -> MotionLibrary:
+        """The library a database of ``spec`` is built from and stores, given its clips as read
+        (default: as read; graph databases add mirror images with ``mirror``)."""
+        return library
+
+    @classmethod
+    def build_work(cls, spec: Any, frames: int) -> BuildWork | None:
+        """Estimated CPU time and peak memory of building a database of ``frames`` frames (at its
+        rate) with ``spec``; ``None`` when the engine gives no estimate (then the service's frame
+        limit applies)."""
+        return None
 
     @classmethod
     def example_clips(cls, library: MotionLibrary, arrays: Arrays) -> list[int]:

@@ -100,6 +100,25 @@ def build_library(
     return MotionLibrary(tuple(names), tuple(out), tuple(tuple(c.labels) for c in clips))
 
 
+MIRROR_SUFFIX = " (mirror)"
+"""Appended to a clip's name to name its mirror image (:func:`with_mirrors`)."""
+
+
+def with_mirrors(lib: MotionLibrary) -> MotionLibrary:
+    """The library followed by the mirror image of each of its clips (:func:`motion.mirror.mirror`:
+    reflected across the YZ plane, left and right exchanged), named ``<name> (mirror)``, with the
+    same labels. Raises :class:`MotionError` when the skeleton's left/right joints are not
+    symmetric or a mirror's name is taken."""
+    from motion.mirror import mirror
+
+    names = [n + MIRROR_SUFFIX for n in lib.names]
+    taken = sorted(set(names) & set(lib.names))
+    if taken:
+        raise MotionError(f"cannot name the mirror images: clip names {', '.join(taken)} are taken")
+    mirrored = tuple(replace(mirror(m), name=n) for m, n in zip(lib.motions, names, strict=True))
+    return MotionLibrary(lib.names + tuple(names), lib.motions + mirrored, lib.labels + lib.labels)
+
+
 def library_to_arrays(lib: MotionLibrary) -> Arrays:
     """Concatenated arrays of a library (frames of all clips end to end)."""
     counts = np.array([m.num_frames for m in lib.motions], dtype=np.int64)

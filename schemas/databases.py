@@ -42,6 +42,18 @@ class GraphDatabaseSpec(DatabaseSpecBase):
     min_jump_frames: int = Field(
         default=10, ge=1, le=10000, description="ignore cuts within a clip closer than this to playing on"
     )
+    mirror: bool = Field(
+        default=False,
+        description="add the mirror image of every clip (left and right exchanged), named '<clip> (mirror)'",
+    )
+    candidates: Literal["auto", "indexed", "all_pairs"] = Field(
+        default="auto",
+        description=(
+            "how the build finds transitions: 'all_pairs' compares every pair of frames (exact, time "
+            "N^2), 'indexed' descends from a nearest-neighbour index's seeds (near-linear, keeps the "
+            "best cuts of each frame), 'auto' = all_pairs up to 20,000 frames, else indexed"
+        ),
+    )
 
 
 # Kind-specific specs defined in their engine's schema module (they import DatabaseSpecBase from here).
@@ -111,6 +123,28 @@ class ClipSummary(Strict):
     )
 
 
+class DroppedClip(Strict):
+    """A clip a graph build left out of the motion graph, and why."""
+
+    clip: str
+    frames: int = Field(description="its frames at the database rate")
+    reason: str
+
+
+class GraphKept(Strict):
+    """What a graph build kept: the part of the graph a search can play (the strongly connected
+    component of clips chosen by the build: the one with the most locomotion, then frames) and the
+    clips outside it (their frames are never played)."""
+
+    candidates: str = Field(description="how transitions were found: 'all_pairs' or 'indexed'")
+    leaf_edges: int = Field(description="transitions of the kept graph")
+    kept_clips: int
+    kept_frames: int
+    moving_frames: int = Field(description="kept frames whose body travels faster than 0.5 m/s")
+    dropped_frames: int
+    dropped: list[DroppedClip] = Field(description="every clip outside the kept component, and why")
+
+
 class DatabaseSummary(Strict):
     """What a ready database holds, for clients that did not build it: its kind, clips, label
     vocabulary, skeleton and units."""
@@ -128,6 +162,9 @@ class DatabaseSummary(Strict):
     )
     couples: bool = Field(
         default=False, description="rhythm databases with partners (requests may ask couples)"
+    )
+    graph: GraphKept | None = Field(
+        default=None, description="graph databases: the clips and frames the build kept, and those left out"
     )
 
 

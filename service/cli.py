@@ -449,7 +449,34 @@ def cmd_build(args: argparse.Namespace) -> int:
             f"built {info.kind} database {info.id[:12]} in {args.out}: {len(info.clips)} clips, "
             f"{info.frames} frames at {info.fps:g} fps"
         )
+        for line in kept_lines(Path(args.out) / "data.npz"):
+            print(line)
     return 0
+
+
+def kept_lines(npz: Path, limit: int = 20) -> list[str]:
+    """What a graph build kept and left out (its report in the database's ``data.npz``), one line
+    per dropped clip up to ``limit``; no lines for other kinds of database."""
+    import numpy as np
+
+    from workers.summary import graph_kept
+
+    with np.load(npz, allow_pickle=False) as z:
+        if "graph.report" not in z.files:
+            return []
+        kept = graph_kept(z["graph.report"])
+    if kept is None:
+        return []
+    total = kept.kept_frames + kept.dropped_frames
+    lines = [
+        f"graph ({kept.candidates} transitions): kept {kept.kept_clips} clips, {kept.kept_frames} of {total} "
+        f"frames ({kept.moving_frames} in locomotion), {kept.leaf_edges} transitions; "
+        f"left out {len(kept.dropped)} clips, {kept.dropped_frames} frames" + (":" if kept.dropped else "")
+    ]
+    lines += [f"  {d.clip} ({d.frames} frames): {d.reason}" for d in kept.dropped[:limit]]
+    if len(kept.dropped) > limit:
+        lines.append(f"  ... and {len(kept.dropped) - limit} more (GET /v1/databases/{{id}}: summary.graph)")
+    return lines
 
 
 def cmd_synth(args: argparse.Namespace) -> int:

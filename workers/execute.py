@@ -222,7 +222,7 @@ def build_database_bytes(
     Raises :class:`JobFailure` with code ``cancelled`` when stopped."""
     engine_cls = kind_class(spec.kind)
     publish(EventType.progress, {"fraction": 0.1, "message": f"reading {len(clips)} clips"})
-    library = build_library(clips, spec.fps)
+    library = engine_cls.library_for(spec, build_library(clips, spec.fps))
     if should_stop():
         raise JobFailure("cancelled", "build cancelled")
     publish(

@@ -86,7 +86,16 @@ class Settings(BaseSettings):
         "a worker's supervisor stops a job (0: no limit)",
     )
     max_database_frames: int = Field(
-        default=200_000, ge=1, description="frames of one database at its rate (all its clips), at submission"
+        default=200_000,
+        ge=1,
+        description="frames of one database at its rate (all its clips), at submission, for kinds whose "
+        "engine gives no build estimate (graph databases are bounded by max_build_cpu_s and "
+        "max_job_memory_mb instead)",
+    )
+    max_build_cpu_s: float = Field(
+        default=3600.0,
+        ge=0,
+        description="estimated CPU seconds of one database build, at submission (0: no limit)",
     )
     job_grace_s: float = Field(
         default=30.0,

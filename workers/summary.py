@@ -6,6 +6,7 @@ database)."""
 from __future__ import annotations
 
 import io
+import json
 import zipfile
 from typing import Any, Literal
 
@@ -14,7 +15,7 @@ import numpy as np
 from motion.ground import body_root
 from motion.serialize import skeleton_from_arrays
 from schemas.clips import LabelRange
-from schemas.databases import ClipSummary, DatabaseSummary, SkeletonSummary
+from schemas.databases import ClipSummary, DatabaseSummary, DroppedClip, GraphKept, SkeletonSummary
 
 from .store import NotFoundError, Store
 
@@ -25,6 +26,7 @@ STATIC_M = 1e-3
 """Joint 0 moving less than this on the floor (metres) over every clip is a static ground node."""
 
 _KEYS = ("names", "frame_counts", "fps", "root_positions")
+_REPORTS = ("graph.report",)
 
 
 def _library_arrays(npz: bytes) -> dict[str, Any]:
@@ -34,7 +36,8 @@ def _library_arrays(npz: bytes) -> dict[str, Any]:
     with zipfile.ZipFile(io.BytesIO(npz)) as zf:
         for member in zf.namelist():
             key = member.removesuffix(".npy")
-            if key.startswith("library.skeleton.") or key.removeprefix("library.") in _KEYS:
+            wanted = key.startswith("library.skeleton.") or key.removeprefix("library.") in _KEYS
+            if wanted or key in _REPORTS:
                 with zf.open(member) as fh:
                     out[key] = np.lib.format.read_array(fh, allow_pickle=False)
     return out
@@ -65,12 +68,14 @@ def summarize(spec: dict[str, Any], npz: bytes, source_units: dict[str, str]) ->
         roles[couple["leader"]] = "leader"
         roles[couple["follower"]] = "follower"
     clips = []
-    for entry, name, count in zip(spec["clips"], names, counts, strict=True):
+    entries = list(spec["clips"]) + [{}] * (len(names) - len(spec["clips"]))  # mirror images follow
+    for entry, name, count in zip(entries, names, counts, strict=True):
         units = entry.get("units") or source_units.get(entry.get("clip") or "")
         labels = [LabelRange.model_validate(lb) for lb in entry.get("labels") or []]
         clips.append(
             ClipSummary(name=name, frames=count, source_units=units, labels=labels, role=roles.get(name))
         )
+    graph = graph_kept(arrays["graph.report"]) if "graph.report" in arrays else None
     control: ControlKind | None = None
     if spec["kind"] == "control":
         control = "motion" if any(p.get("control") for p in spec.get("pairs") or []) else "path"
@@ -87,6 +92,25 @@ def summarize(spec: dict[str, Any], npz: bytes, source_units: dict[str, str]) ->
         ),
         control=control,
         couples=bool(spec.get("partners")),
+        graph=graph,
+    )
+
+
+def graph_kept(report_json: Any) -> GraphKept | None:
+    """The kept-component part of a graph build's report (``graph.report``, 0-d JSON text);
+    ``None`` for databases built before the report had it."""
+    report = json.loads(str(report_json))
+    kept = report.get("kept")
+    if kept is None:
+        return None
+    return GraphKept(
+        candidates=report.get("candidates", "all_pairs"),
+        leaf_edges=int(report["leaf_edges"]),
+        kept_clips=int(kept["clips"]),
+        kept_frames=int(kept["frames"]),
+        moving_frames=int(kept["moving_frames"]),
+        dropped_frames=int(report["dropped_frames"]),
+        dropped=[DroppedClip.model_validate(d) for d in report["dropped_clips"]],
     )
 
 

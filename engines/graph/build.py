@@ -37,6 +37,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -45,10 +46,12 @@ from scipy.sparse.csgraph import connected_components
 
 from schemas.databases import GraphDatabaseSpec
 
-from ..base import Arrays, Emitter, EngineError, ShouldStop
+from ..base import Arrays, BuildWork, Emitter, EngineError, ShouldStop
 from ..library import MotionLibrary
+from .candidates import IndexStats, indexed_minima
 from .features import TransitionFeatures, exact_costs, reduce_features, transition_features
 from .hierarchy import LeafEdges, build_hierarchy
+from .model import RootTracks
 from .tracks import foot_contacts, root_tracks
 
 IntArray = npt.NDArray[np.int64]
@@ -60,6 +63,12 @@ TILE = 2048
 PCA_MIN_DIMS = 48
 """Scan on a PCA reduction of the features when they have more dimensions than this."""
 PCA_VARIANCE = 0.999
+LOCOMOTION_SPEED = 0.5
+"""Body speed over the floor (m/s) above which a frame counts as locomotion when the build chooses
+the component to keep (:func:`largest_component`)."""
+ALL_PAIRS_MAX_FRAMES = 20000
+"""Largest library (frames) whose candidate transitions come from the all-pairs scan under
+``candidates="auto"``; larger ones use the nearest-neighbour index (``engines.graph.candidates``)."""
 
 # the 8 neighbours, most selective first: the cost's valleys run along the diagonal (frames that
 # match keep matching as both clips play on), so neighbours along it reject the most candidates.
@@ -249,34 +258,129 @@ def _cpu_count() -> int:
         return os.cpu_count() or 1
 
 
+# Build cost per frame, measured by bench/graph_scale.py (Bandai-Namco and copies, 100k-1M frames;
+# whole worker build: library arrays, graph, quality reference, npz), with a margin.
+_INDEXED_CPU_S = (10.0, 2.5e-4)  # seconds: a + b * N
+_INDEXED_MB = (400.0, 9.0e-3)  # MiB: a + b * N
+_ALL_PAIRS_CPU_S = (5.0, 4.0e-9)  # seconds: a + b * N^2
+_ALL_PAIRS_MB = (400.0, 1.4e-7)  # MiB: a + b * N^2 (the edges grow about as N^2)
+
+
+def build_work(frames: int, method: str = "auto") -> BuildWork:
+    """Estimated CPU seconds and peak memory (MiB) of a graph build of ``frames`` frames: linear in
+    ``frames`` with the index, quadratic with the all-pairs scan (coefficients measured by
+    ``bench/graph_scale.py``, with a margin)."""
+    n = float(frames)
+    if use_index(method, frames):
+        return BuildWork(_INDEXED_CPU_S[0] + _INDEXED_CPU_S[1] * n, _INDEXED_MB[0] + _INDEXED_MB[1] * n)
+    return BuildWork(
+        _ALL_PAIRS_CPU_S[0] + _ALL_PAIRS_CPU_S[1] * n * n, _ALL_PAIRS_MB[0] + _ALL_PAIRS_MB[1] * n * n
+    )
+
+
+def use_index(method: str, frames: int) -> bool:
+    """Whether the build finds its candidate transitions with the nearest-neighbour index
+    (:mod:`engines.graph.candidates`) rather than the all-pairs scan: ``"indexed"``, ``"all_pairs"``,
+    or ``"auto"`` (the index above :data:`ALL_PAIRS_MAX_FRAMES` frames)."""
+    if method not in ("auto", "indexed", "all_pairs"):
+        raise EngineError(f"candidates must be 'auto', 'indexed' or 'all_pairs', got {method!r}")
+    return method == "indexed" or (method == "auto" and frames > ALL_PAIRS_MAX_FRAMES)
+
+
+def screen_rows(features: TransitionFeatures, pca_min_dims: int = PCA_MIN_DIMS) -> npt.NDArray[np.float32]:
+    """The rows the candidate search compares: the features, or their PCA reduction (99.9% of the
+    variance; distances are lower bounds) when they have more than ``pca_min_dims`` dimensions."""
+    if features.rows.shape[1] > pca_min_dims:
+        return reduce_features(features.rows, PCA_VARIANCE)[0]
+    return features.rows
+
+
 def candidate_edges(
     features: TransitionFeatures,
     tau: float,
     min_jump_frames: int,
     *,
+    method: str = "all_pairs",
     tile: int = TILE,
     pca_min_dims: int = PCA_MIN_DIMS,
+    screen: npt.NDArray[np.float32] | None = None,
     workers: int | None = None,
     progress: Progress = _no_progress,
     should_stop: ShouldStop = _never,
-) -> tuple[LeafEdges, ScanStats]:
+) -> tuple[LeafEdges, ScanStats | IndexStats]:
     """The edges of G: local minima of the transition cost below ``tau`` (module docstring, step 2),
-    both directions of every minimum, sorted by (from clip, to clip, from frame, to frame). Costs
-    are recomputed from differences of the full feature rows (:func:`~.features.exact_costs`)."""
-    rows = features.rows
-    screen = rows
-    if rows.shape[1] > pca_min_dims:
-        screen, _ = reduce_features(rows, PCA_VARIANCE)
-    x, y, v, stats = local_minima(
+    both directions of every minimum, sorted by (from clip, to clip, from frame, to frame), found by
+    the all-pairs scan or the index (:func:`use_index` of ``method``) on ``screen`` (default
+    :func:`screen_rows`). Costs are recomputed from differences of the full feature rows
+    (:func:`~.features.exact_costs`)."""
+    if screen is None:
+        screen = screen_rows(features, pca_min_dims)
+    stats: ScanStats | IndexStats
+    if use_index(method, int(features.rows.shape[0])):
+        x, y, v, stats = indexed_minima(
+            screen,
+            features.offsets,
+            tau,
+            min_jump_frames,
+            workers=max(1, workers or _cpu_count()),
+            progress=progress,
+            should_stop=should_stop,
+        )
+    else:
+        x, y, v, stats = local_minima(
+            screen,
+            features.offsets,
+            tau,
+            min_jump_frames,
+            tile=tile,
+            workers=workers,
+            progress=progress,
+            should_stop=should_stop,
+        )
+    return edges_of_minima(features, x, y, tau), stats
+
+
+BRIDGE_NEIGHBOURS = 64
+"""Seeds per frame of the second, denser search from the clips the first left out."""
+
+
+def bridge_edges(
+    features: TransitionFeatures,
+    screen: npt.NDArray[np.float32],
+    clips: IntArray,
+    tau: float,
+    min_jump_frames: int,
+    *,
+    workers: int | None = None,
+    should_stop: ShouldStop = _never,
+) -> LeafEdges:
+    """Edges below ``tau`` touching ``clips`` (the clips outside the kept component) that the first
+    indexed search may have missed: every frame of those clips asks an index of every frame
+    (stride 1) for :data:`BRIDGE_NEIGHBOURS` seeds. The edges are the all-pairs scan's (local
+    minima below ``tau``), so they connect a clip back where the data allows it."""
+    inside = np.zeros(features.offsets.size - 1, dtype=bool)
+    inside[clips] = True
+    rows = np.flatnonzero(inside[features.clip_of_row]).astype(np.int64)
+    if rows.size == 0:
+        return LeafEdges.empty()
+    x, y, _, _ = indexed_minima(
         screen,
         features.offsets,
         tau,
         min_jump_frames,
-        tile=tile,
-        workers=workers,
-        progress=progress,
+        neighbours=BRIDGE_NEIGHBOURS,
+        stride=1,
+        queries=rows,
+        workers=max(1, workers or _cpu_count()),
         should_stop=should_stop,
     )
+    return edges_of_minima(features, x, y, tau)
+
+
+def edges_of_minima(features: TransitionFeatures, x: IntArray, y: IntArray, tau: float) -> LeafEdges:
+    """Both edges of every minimum ``(x, y)`` (rows, ``x < y``) whose exact cost is below ``tau``,
+    sorted by (from clip, to clip, from frame, to frame)."""
+    rows = features.rows
     v = exact_costs(rows, x, y)  # from differences of the full rows: no cancellation, no PCA error
     ok = v < tau
     x, y, v = x[ok], y[ok], v[ok]
@@ -292,16 +396,39 @@ def candidate_edges(
         np.concatenate((v[fwd], v[bwd])),
     )
     order = np.lexsort((leaves.to_frame, leaves.from_frame, leaves.to_clip, leaves.from_clip))
-    return leaves.take(order), stats
+    return leaves.take(order)
+
+
+def merge_edges(a: LeafEdges, b: LeafEdges) -> LeafEdges:
+    """The union of two sorted edge sets (an edge in both once), sorted as :func:`edges_of_minima`."""
+    both = LeafEdges(*(np.concatenate((getattr(a, k), getattr(b, k))) for k in _LEAF_FIELDS))
+    order = np.lexsort((both.to_frame, both.from_frame, both.to_clip, both.from_clip))
+    both = both.take(order)
+    same = np.ones(both.size, dtype=bool)
+    same[1:] = (
+        (np.diff(both.from_clip) == 0)
+        & (np.diff(both.to_clip) == 0)
+        & (np.diff(both.from_frame) == 0)
+        & (np.diff(both.to_frame) == 0)
+    )
+    same[0] = False
+    return both.take(~same)
+
+
+_LEAF_FIELDS = ("from_clip", "from_frame", "to_clip", "to_frame", "cost")
 
 
 def largest_component(
-    leaves: LeafEdges, frames: IntArray, names: tuple[str, ...]
-) -> tuple[npt.NDArray[np.bool_], list[dict[str, str]]]:
-    """Strongly connected components of the clip graph; keeps the largest (by frames, then clips)
-    among those with an edge inside (a lone clip without a transition to itself is no cycle).
+    leaves: LeafEdges, frames: IntArray, names: tuple[str, ...], moving: IntArray | None = None
+) -> tuple[npt.NDArray[np.bool_], list[dict[str, Any]]]:
+    """Strongly connected components of the clip graph; keeps, among those with an edge inside (a
+    lone clip without a transition to itself is no cycle), the one with the most locomotion
+    (``moving (C,)``: each clip's frames whose body travels faster than
+    :data:`LOCOMOTION_SPEED`; a component without locomotion cannot reach a goal), then the most
+    frames, then the most clips. Without ``moving``, the largest by frames.
 
-    Returns a mask of the edges between kept clips and, for every other clip, ``{"clip", "reason"}``.
+    Returns a mask of the edges between kept clips and, for every other clip, ``{"clip", "frames",
+    "reason"}``.
     """
     c = int(frames.size)
     adj = csr_matrix(
@@ -314,7 +441,8 @@ def largest_component(
     internal = label[leaves.from_clip] == label[leaves.to_clip]
     cyclic = np.bincount(label[leaves.from_clip[internal]], minlength=n_comp) > 0
     # a component without an edge inside (a lone clip, no self-transition) cannot be played on
-    best = int(np.lexsort((size_clips, size_frames, cyclic))[-1])
+    size_moving = np.bincount(label, (frames * 0 if moving is None else moving).astype(np.float64), n_comp)
+    best = int(np.lexsort((size_clips, size_frames, size_moving, cyclic))[-1])
     inside = label == best
     keep = inside[leaves.from_clip] & inside[leaves.to_clip]
     other = leaves.from_clip != leaves.to_clip
@@ -325,7 +453,7 @@ def largest_component(
     out_of[leaves.from_clip[inside[leaves.to_clip]]] = True
     touched[leaves.from_clip[other]] = True
     touched[leaves.to_clip[other]] = True
-    dropped: list[dict[str, str]] = []
+    dropped: list[dict[str, Any]] = []
     for k in np.flatnonzero(~inside):
         group = int(size_clips[label[k]])
         if not touched[k]:
@@ -338,8 +466,18 @@ def largest_component(
             why = "no transition to or from the main component"
         if group > 1:
             why += f" (nor for the {group - 1} other clip(s) of its strongly connected group)"
-        dropped.append({"clip": names[k], "reason": why})
+        dropped.append({"clip": names[k], "frames": int(frames[k]), "reason": why})
     return keep, dropped
+
+
+def moving_frames(tracks: RootTracks, fps: float) -> IntArray:
+    """``(C,)`` frames of each clip whose body travels over the floor faster than
+    :data:`LOCOMOTION_SPEED` (speed from the root track's consecutive frames)."""
+    step = np.linalg.norm(np.diff(tracks.root_xz, axis=0), axis=1) * fps
+    fast = np.concatenate((step > LOCOMOTION_SPEED, [False]))
+    fast[tracks.offsets[1:-1] - 1] = False  # no step across clips
+    clip = np.repeat(np.arange(tracks.offsets.size - 1), np.diff(tracks.offsets))
+    return np.bincount(clip, fast, tracks.offsets.size - 1).astype(np.int64)
 
 
 def dead_end_edges(leaves: LeafEdges, frames: IntArray) -> int:
@@ -387,13 +525,16 @@ def build_graph(
     if should_stop():
         raise InterruptedError("build cancelled")
 
+    screen = screen_rows(features)
     leaves, stats = candidate_edges(
         features,
         spec.tau,
         spec.min_jump_frames,
+        method=spec.candidates,
         tile=tile,
+        screen=screen,
         workers=workers,
-        progress=lambda f, m: progress(0.05 + 0.85 * f, m),
+        progress=lambda f, m: progress(0.05 + 0.8 * f, m),
         should_stop=should_stop,
     )
     t_scan = time.perf_counter() - t0 - t_features
@@ -402,13 +543,36 @@ def build_graph(
             f"no transitions below tau={spec.tau:g} between any frames of the {frames.size} clips; "
             "raise tau (e.g. to 2-4) or add clips of similar motion"
         )
-    keep, dropped = largest_component(leaves, frames, library.names)
+    moving = moving_frames(tracks, library.fps)
+    keep, dropped = largest_component(leaves, frames, library.names, moving)
+    bridged = 0
+    if isinstance(stats, IndexStats) and any(
+        d["reason"].startswith(("dead end", "unreachable")) for d in dropped
+    ):
+        # the index is approximate: look again, harder, for transitions of the clips left out
+        # (only clips with transitions one way: a clip without any, or a group apart, is the data)
+        position = {name: i for i, name in enumerate(library.names)}
+        one_way = [d["clip"] for d in dropped if d["reason"].startswith(("dead end", "unreachable"))]
+        out = np.array([position[c] for c in one_way], dtype=np.int64)
+        progress(0.86, f"graph: looking again for transitions of {out.size} clips left out")
+        extra = bridge_edges(
+            features, screen, out, spec.tau, spec.min_jump_frames, workers=workers, should_stop=should_stop
+        )
+        if extra.size:
+            leaves = merge_edges(leaves, extra)
+            keep, again = largest_component(leaves, frames, library.names, moving)
+            bridged = len(dropped) - len(again)
+            dropped = again
+    del screen
     kept = leaves.take(keep)
     if kept.size == 0:
         raise EngineError(
             f"the {leaves.size} transitions below tau={spec.tau:g} form no cycle between clips: "
             "every path reaches a clip's end; raise tau or add clips that lead back to each other"
         )
+    position = {name: i for i, name in enumerate(library.names)}
+    dropped_index = np.array([position[d["clip"]] for d in dropped], dtype=np.int64)
+    dropped_frames = int(frames[dropped_index].sum())
     progress(0.92, f"graph: hierarchy of {kept.size} edges")
     tree = build_hierarchy(kept)
     if should_stop():
@@ -425,10 +589,22 @@ def build_graph(
         "candidate_edges": leaves.size,
         "dead_end_edges": dead_end_edges(kept, frames),
         "dropped_clips": dropped,
+        "kept": {
+            "clips": int(frames.size) - len(dropped),
+            "frames": int(frames.sum()) - dropped_frames,
+            "moving_frames": int(moving.sum()) - int(moving[dropped_index].sum()),
+        },
+        "dropped_frames": dropped_frames,
+        "bridged_clips": bridged,
         "joint_weights": dict(zip(features.joints, features.joint_weights.tolist(), strict=True)),
         "feature_dims": int(features.rows.shape[1]),
         "scan_dims": stats.dims,
-        "below_tau": stats.below_tau,
+        "candidates": "indexed" if isinstance(stats, IndexStats) else "all_pairs",
+        **(
+            {"index_cells": stats.cells, "index_probed": stats.probed, "seeds": stats.seeds}
+            if isinstance(stats, IndexStats)
+            else {"below_tau": stats.below_tau}
+        ),
         "max_steps": features.max_steps,
         "features_s": round(t_features, 3),
         "scan_s": round(t_scan, 3),

@@ -9,13 +9,14 @@ request with several ``characters`` is searched jointly by ``shared.py``.
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
-from ..base import Arrays, Emitter, Engine, ShouldStop, Stopped
-from ..library import MotionLibrary
-from .build import build_graph
+from ..base import Arrays, BuildWork, Emitter, Engine, ShouldStop, Solution, Stopped
+from ..library import MotionLibrary, with_mirrors
+from .build import build_graph, build_work
 from .model import EdgeTree, FootContacts, RootTracks
 from .paths import GraphIndex
 from .search import GraphSearch
@@ -41,7 +42,18 @@ class GraphEngine(Engine):
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         return build_graph(spec, library, emit, should_stop)
 
+    @classmethod
+    def library_for(cls, spec: Any, library: MotionLibrary) -> MotionLibrary:
+        return with_mirrors(library) if getattr(spec, "mirror", False) else library
+
+    @classmethod
+    def build_work(cls, spec: Any, frames: int) -> BuildWork:
+        return build_work(frames, spec.candidates)
+
     def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+        note = left_out_note(self.arrays)
+        if note is not None:
+            emit = _NotingEmitter(emit, note)
         # several characters with shared constraints are searched jointly (engines.graph.shared);
         # one BLAS thread: matrix products reduce in one order whatever the machine's cores
         searcher = CoupledSearch if getattr(request, "characters", None) else GraphSearch
@@ -65,3 +77,37 @@ class GraphEngine(Engine):
             reference=self.quality_reference,
             foot_floor=self.foot_floor(self.library.motions[0].skeleton),
         ).run(request, budget_s, emit, should_stop)
+
+
+def left_out_note(arrays: Any) -> str | None:
+    """What a missed goal's report adds when the build left clips out of the graph (their frames
+    cannot be played); ``None`` when it kept every clip or the database predates the report."""
+    if "graph.report" not in arrays:
+        return None
+    report = json.loads(str(arrays["graph.report"]))
+    dropped = int(report.get("dropped_frames") or 0)
+    if not dropped or "kept" not in report:
+        return None
+    kept = report["kept"]
+    return (
+        f"the graph plays {kept['frames']} of {kept['frames'] + dropped} frames ({kept['moving_frames']} "
+        f"of locomotion): the build left out {len(report['dropped_clips'])} clips ({dropped} frames) "
+        "with no transition to or from the rest (see the database's summary.graph); a goal they "
+        "alone could reach is out of reach"
+    )
+
+
+class _NotingEmitter:
+    """Adds ``note`` to the quality reasons of every solution that misses a goal's position."""
+
+    def __init__(self, inner: Emitter, note: str) -> None:
+        self.inner, self.note = inner, note
+
+    def solution(self, solution: Solution) -> str:
+        q = solution.quality
+        if q is not None and any("from its goal" in r for r in q.reasons) and self.note not in q.reasons:
+            q.reasons.append(self.note)
+        return self.inner.solution(solution)
+
+    def progress(self, fraction: float, message: str = "") -> None:
+        self.inner.progress(fraction, message)

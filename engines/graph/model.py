@@ -57,7 +57,19 @@ class EdgeTree:
         return self.left < 0
 
     def to_arrays(self, prefix: str = "graph.edges.") -> dict[str, Any]:
-        return {f"{prefix}{k}": getattr(self, k) for k in _EDGE_FIELDS}
+        """Stored compactly: int32 indices (clips, frames and node ids stay below 2^31) and float32
+        costs (7 digits; costs are compared, never accumulated over many edges); 28 bytes an edge.
+        :meth:`from_arrays` widens them back to int64 / float64."""
+        out: dict[str, Any] = {}
+        for k in _EDGE_FIELDS:
+            a = getattr(self, k)
+            if k == "cost":
+                out[f"{prefix}{k}"] = np.asarray(a, dtype=np.float32)
+            else:
+                if a.size and (int(a.max()) >= 2**31 or int(a.min()) < -(2**31)):
+                    raise ValueError(f"edge field {k} does not fit int32")
+                out[f"{prefix}{k}"] = np.asarray(a, dtype=np.int32)
+        return out
 
     @classmethod
     def from_arrays(cls, arrays: Any, prefix: str = "graph.edges.") -> EdgeTree:

@@ -12,7 +12,7 @@ from fastapi import APIRouter, Depends, Request, Response, status
 from pydantic import TypeAdapter
 from starlette.concurrency import run_in_threadpool
 
-from engines.registry import require_kind
+from engines.registry import kind_class, require_kind
 from motion import MotionError
 from motion.resample import resampled_frames
 from schemas import ClipSource, DatabaseInfo, DatabaseSpec, DatabaseStatus
@@ -147,19 +147,53 @@ async def create_database(
     the existing one with the same content address (200)."""
     quota.check(principal.name)
     info = await create_from_spec(
-        spec, response, store, backend, metrics, principal, max_frames=settings.max_database_frames
+        spec,
+        response,
+        store,
+        backend,
+        metrics,
+        principal,
+        max_frames=settings.max_database_frames,
+        work_limits=(settings.max_build_cpu_s, float(settings.max_job_memory_mb)),
     )
     if info.build_job and response.status_code == status.HTTP_202_ACCEPTED:
         quota.add(principal.name, info.build_job)
     return await run_in_threadpool(with_summary, request.app.state, store, info)
 
 
-def check_database_size(store: Store, spec: DatabaseSpecBase, hashes: list[str], limit: int | None) -> None:
-    """413 ``over_budget`` when the database would hold more than ``limit`` frames at its rate."""
-    if limit is None:
-        return
+def check_database_size(
+    store: Store,
+    spec: DatabaseSpecBase,
+    hashes: list[str],
+    limit: int | None,
+    work_limits: tuple[float, float] | None = None,
+) -> None:
+    """413 ``over_budget`` when the database would be too big to build. Kinds whose engine estimates
+    its build (``Engine.build_work``: the graph) are bounded by ``work_limits`` (CPU seconds, MiB
+    of memory; 0 = no limit); others hold at most ``limit`` frames at their rate."""
     clips = [(info.frames, info.fps) for info in (store.clip_info(h) for h in hashes)]
     total = database_frames(clips, spec.fps)
+    work = kind_class(spec.kind).build_work(spec, total) if work_limits is not None else None
+    if work is not None and work_limits is not None:
+        max_cpu, max_mb = work_limits
+        if (max_cpu and work.cpu_s > max_cpu) or (max_mb and work.memory_mb > max_mb):
+            raise ApiError(
+                413,
+                "over_budget",
+                f"building the database ({total} frames at its rate) would take about {work.cpu_s:.0f} CPU "
+                f"seconds and {work.memory_mb:.0f} MiB, over the limits of {max_cpu:g} s "
+                f"(SEGUE_MAX_BUILD_CPU_S) and {max_mb:g} MiB (SEGUE_MAX_JOB_MEMORY_MB)",
+                {
+                    "frames": total,
+                    "cpu_s": round(work.cpu_s),
+                    "memory_mb": round(work.memory_mb),
+                    "max_build_cpu_s": max_cpu,
+                    "max_job_memory_mb": max_mb,
+                },
+            )
+        return
+    if limit is None:
+        return
     if total > limit:
         raise ApiError(
             413,
@@ -192,11 +226,12 @@ async def create_from_spec(
     principal: Principal,
     shared: frozenset[str] = frozenset(),
     max_frames: int | None = None,
+    work_limits: tuple[float, float] | None = None,
 ) -> DatabaseInfo:
     """The body of ``POST /v1/databases`` once the spec is valid (also used by corrections)."""
     require_kind(spec.kind)  # 422 unavailable for kinds whose engine has not landed
     resolved, hashes = await run_in_threadpool(resolve_clips, store, spec, principal, shared)
-    await run_in_threadpool(check_database_size, store, resolved, hashes, max_frames)
+    await run_in_threadpool(check_database_size, store, resolved, hashes, max_frames, work_limits)
     await run_in_threadpool(check_label_ranges, store, resolved, hashes)
     db_id = database_id(resolved, hashes)
     # No await between this check and the job being stored (in submit_job, before the backend is

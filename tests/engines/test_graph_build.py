@@ -15,7 +15,7 @@ import pytest
 from scipy import ndimage
 
 from engines.base import EngineError
-from engines.graph.build import build_graph, candidate_edges, largest_component, local_minima
+from engines.graph.build import build_graph, candidate_edges, largest_component, local_minima, moving_frames
 from engines.graph.features import (
     default_joint_weight,
     exact_costs,
@@ -35,7 +35,13 @@ GAIT = 30  # frames per gait cycle of walking_biped at 30 fps
 
 
 def spec(**kw: Any) -> Any:
-    base = {"tau": 1.0, "joint_weights": {}, "velocity_weight": 1.0, "min_jump_frames": 10}
+    base = {
+        "tau": 1.0,
+        "joint_weights": {},
+        "velocity_weight": 1.0,
+        "min_jump_frames": 10,
+        "candidates": "auto",
+    }
     base.update(kw)
     return SimpleNamespace(**base)
 
@@ -292,7 +298,8 @@ def check_tree(tree: EdgeTree, leaves: LeafEdges) -> np.ndarray:
     assert tree.roots.size <= e
     np.testing.assert_array_equal(tree.from_frame[inner], round_frames(sums[inner, 1] / sums[inner, 0]))
     np.testing.assert_array_equal(tree.to_frame[inner], round_frames(sums[inner, 2] / sums[inner, 0]))
-    np.testing.assert_allclose(tree.cost[inner], sums[inner, 3] / sums[inner, 0], rtol=1e-9)
+    # stored costs are float32 (EdgeTree.to_arrays)
+    np.testing.assert_allclose(tree.cost[inner], sums[inner, 3] / sums[inner, 0], rtol=1e-6)
     # a node's clips are its leaves' clips
     np.testing.assert_array_equal(tree.from_clip[root], leaves.from_clip)
     np.testing.assert_array_equal(tree.to_clip[root], leaves.to_clip)
@@ -450,3 +457,23 @@ def test_bandai_locomotion_build() -> None:
     tracks = RootTracks.from_arrays(arrays)
     assert np.ptp(tracks.root_xz[: tracks.offsets[1]], axis=0).max() > 1.0
     assert report["frames"] == lib.total_frames and report["leaf_edges"] > 0
+
+
+def test_largest_component_prefers_locomotion() -> None:
+    # 0 <-> 1 (gestures, 300 frames) and 2 <-> 3 (walks, 200 frames, 150 of them moving)
+    pairs = [(0, 1), (1, 0), (2, 3), (3, 2)]
+    f, t = np.array(pairs).T
+    z = np.zeros(len(pairs), dtype=np.int64)
+    leaves = LeafEdges(f, z + 5, t, z + 20, np.full(len(pairs), 0.5))
+    frames = np.array([150, 150, 100, 100], dtype=np.int64)
+    keep, dropped = largest_component(leaves, frames, tuple("abcd"))
+    assert keep.tolist() == [True, True, False, False]  # by frames
+    keep, dropped = largest_component(leaves, frames, tuple("abcd"), np.array([0, 0, 80, 70]))
+    assert keep.tolist() == [False, False, True, True]
+    assert [(d["clip"], d["frames"]) for d in dropped] == [("a", 150), ("b", 150)]
+
+
+def test_moving_frames_counts_frames_faster_than_the_locomotion_speed() -> None:
+    x = np.concatenate((np.arange(10) * 0.05, np.arange(5) * 0.01))  # 1.5 m/s, then 0.3 m/s at 30 fps
+    tracks = RootTracks(np.array([0, 10, 15]), np.stack((x, np.zeros(15)), axis=1), np.zeros(15))
+    assert moving_frames(tracks, 30.0).tolist() == [9, 0]

@@ -1,0 +1,269 @@
+"""Benchmark: graph databases from 10k to 1M frames (build, memory, disk, search), one JSON line per size.
+
+Needs ``../shared/data/bandai-namco``. The library of a size is made of every clip of both sets
+(639 clips, 85,981 frames at 30 fps, one skeleton) and, past that, copies: variant ``v`` of the
+sequence ``mirrored``, ``x0.9``, ``mirrored x0.9``, ``x1.1``, ``mirrored x1.1``, ``x0.8``, ... (left/right
+mirror image by ``motion.mirror``; time-scaled = played at that speed, resampled to 30 fps), clip by
+clip until the size is reached. Sizes below the data take an evenly spread subset of the clips
+(every k-th clip). Each size runs in a fresh process (so ``peak_rss_mb`` is its own) and does what a
+worker does (``workers.execute.build_database_bytes``: library arrays, the graph build, quality
+reference and foot floor, then the npz), writes the npz to a temporary directory (``disk_mb``), loads
+it back into an engine and searches:
+
+* ``first_solution_s``: a 300-frame request from the origin to a body goal 12 m away (heading 90);
+* ``round_s``: that search's wall time over its rounds (``GraphSearch.rounds_``), budget 20 s;
+* ``goal_error_cm`` and ``ok``: its best result's distance to the goal and quality verdict.
+
+``build_cpu_s`` is the process CPU time (all threads) of the build, ``build_s`` its wall time. With
+``--recall`` (sizes up to 40k), the all-pairs build runs too and ``edge_recall`` is the fraction of its
+leaf edges the indexed build keeps, ``best_edge_recall`` the fraction of frames whose cheapest
+all-pairs edge it keeps. ``load_avg`` is the 1-minute load average at the start (other work on a
+shared machine slows the figures down).
+
+Run the big sizes with ``nice -n 10``: ``nice -n 10 python bench/graph_scale.py --sizes 100000,1000000``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+DATA = ROOT.parent / "shared" / "data" / "bandai-namco"
+SPEEDS = (1.0, 0.9, 1.1, 0.8, 1.2, 0.85, 1.15, 0.95, 1.05, 0.75, 1.25, 0.7, 1.3)
+
+
+def variants() -> list[tuple[bool, float]]:
+    """(mirrored, speed) of the copies, in order: the data itself first."""
+    return [(m, s) for s in SPEEDS for m in (False, True)]
+
+
+def library_of(frames: int) -> tuple[Any, str]:
+    """A library of about ``frames`` frames (module docstring) and a description of it."""
+    from engines.library import ClipInput, MotionLibrary, build_library
+    from motion.mirror import mirror
+    from motion.resample import resample
+
+    files = sorted(glob.glob(str(DATA / "dataset-1" / "*.bvh"))) + sorted(
+        glob.glob(str(DATA / "dataset-2" / "*.bvh"))
+    )
+    base = build_library([ClipInput(Path(f).stem, Path(f).read_bytes()) for f in files], fps=30.0)
+    total = base.total_frames
+    if frames < total:
+        k = max(1, round(total / frames))  # an evenly spread subset: every k-th clip
+        pick = list(range(0, len(files), k))
+        names, motions, labels = [], [], []
+        for i in pick:
+            names.append(base.names[i])
+            motions.append(base.motions[i])
+            labels.append(base.labels[i])
+        return MotionLibrary(tuple(names), tuple(motions), tuple(labels)), f"every {k}th Bandai-Namco clip"
+    names, motions = list(base.names), list(base.motions)
+    count = total
+    used: list[str] = []
+    for mirrored, speed in variants()[1:]:
+        if count >= frames:
+            break
+        tag = ("mirrored " if mirrored else "") + (f"x{speed:g}" if speed != 1.0 else "")
+        used.append(tag.strip())
+        for name, m in zip(base.names, base.motions, strict=True):
+            if count >= frames:
+                break
+            c = mirror(m) if mirrored else m
+            if speed != 1.0:
+                c = resample(replace(c, fps=c.fps * speed), 30.0)
+            names.append(f"{name} ({tag.strip()})")
+            motions.append(replace(c, name=names[-1]))
+            count += c.num_frames
+    lib = MotionLibrary(tuple(names), tuple(motions), tuple(() for _ in names))
+    return lib, "Bandai-Namco (both sets) + copies: " + ", ".join(used)
+
+
+def rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def recall(library: Any, arrays: dict[str, Any]) -> dict[str, float]:
+    from engines.base import CollectingEmitter
+    from engines.graph.build import build_graph
+    from engines.graph.model import EdgeTree
+    from schemas.databases import parse_database_spec
+
+    spec = parse_database_spec({"kind": "graph", "clips": [{"bvh": "x.bvh"}], "candidates": "all_pairs"})
+    exact = build_graph(spec, library, CollectingEmitter(), lambda: False)
+
+    def leaves(a: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+        t = EdgeTree.from_arrays(a)
+        m = t.is_leaf
+        key = ((t.from_clip[m] * 100000 + t.from_frame[m]) * 10000 + t.to_clip[m]) * 100000 + t.to_frame[m]
+        return key, t.cost[m]
+
+    got, _ = leaves(arrays)
+    want, cost = leaves(exact)
+    hit = np.isin(want, got)
+    t = EdgeTree.from_arrays(exact)
+    m = t.is_leaf
+    frame = t.from_clip[m] * 100000 + t.from_frame[m]
+    order = np.lexsort((cost, frame))
+    first = np.concatenate(([True], np.diff(frame[order]) != 0))
+    return {
+        "exact_leaf_edges": int(want.size),
+        "edge_recall": round(float(hit.mean()), 4),
+        "best_edge_recall": round(float(hit[order][first].mean()), 4),
+    }
+
+
+def run_one(frames: int, with_recall: bool, budget: float, goal_m: float, candidates: str) -> dict[str, Any]:
+    from engines.base import CollectingEmitter, foot_floor_arrays
+    from engines.graph.engine import GraphEngine
+    from engines.graph.search import GraphSearch
+    from engines.library import library_from_arrays, library_to_arrays
+    from motion.allocator import tune_process
+    from motion.ground import body_root
+    from schemas.databases import parse_database_spec
+    from schemas.jobs import parse_job_request
+    from workers.store import load_npz, npz_bytes
+
+    tune_process()  # as every Segue process does
+    load_avg = os.getloadavg()[0]
+    library, made_of = library_of(frames)
+    spec = parse_database_spec({"kind": "graph", "clips": [{"bvh": "x.bvh"}], "candidates": candidates})
+    rss_library = rss_mb()
+    # what workers.execute.build_database_bytes does, from the library (in its order)
+    c0, t0 = time.process_time(), time.perf_counter()
+    extra = GraphEngine.build(spec, library, CollectingEmitter(), lambda: False)
+    arrays = library_to_arrays(library)
+    arrays.update(extra)
+    del extra
+    arrays.update(GraphEngine.quality_reference_of(library, arrays).to_arrays())
+    arrays.update(foot_floor_arrays(library, GraphEngine.example_clips(library, arrays)))
+    data = npz_bytes(arrays)
+    build_cpu, build_s = time.process_time() - c0, time.perf_counter() - t0
+    report = json.loads(str(arrays["graph.report"]))
+    out: dict[str, Any] = {
+        "frames": library.total_frames,
+        "clips": len(library.names),
+        "made_of": made_of,
+        "candidates": report["candidates"],
+        "build_cpu_s": round(build_cpu, 1),
+        "build_s": round(build_s, 1),
+        "scan_s": report["scan_s"],
+        "leaf_edges": report["leaf_edges"],
+        "tree_nodes": report["tree_nodes"],
+        "dropped_clips": len(report["dropped_clips"]),
+        "dropped_frames": report.get("dropped_frames"),
+    }
+    if with_recall:
+        out.update(recall(library, arrays))
+    del arrays, library
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "data.npz"
+        path.write_bytes(data)
+        disk = path.stat().st_size
+        del data
+        out["disk_mb"] = round(disk / 1e6, 1)
+        out["bytes_per_frame"] = round(disk / out["frames"])
+        out["peak_rss_build_mb"] = round(rss_mb(), 1)
+        t0 = time.perf_counter()
+        loaded = load_npz(path.read_bytes())
+        engine = GraphEngine(library_from_arrays(loaded), loaded)
+        out["load_s"] = round(time.perf_counter() - t0, 2)
+    n = 450
+    request = parse_job_request(
+        {
+            "engine": "graph",
+            "frames": n,
+            "seed": 1,
+            "budget_s": budget,
+            "constraints": [
+                {"type": "body", "frame": 0, "position": [0.0, 0.0], "heading_deg": 0.0},
+                {"type": "body", "frame": n - 1, "position": [goal_m, 0.0], "heading_deg": 90.0},
+            ],
+        }
+    )
+    searcher = GraphSearch(
+        engine.library,
+        engine.tree,
+        engine.tracks,
+        request.seed,
+        contacts=engine.contacts,
+        reference=engine.quality_reference,
+        foot_floor=engine.foot_floor(engine.library.motions[0].skeleton),
+    )
+    rec = CollectingEmitter()
+    t0 = time.perf_counter()
+    searcher.run(request, budget, rec, lambda: False)
+    wall = time.perf_counter() - t0
+    if rec.solutions:
+        best = min(rec.solutions, key=lambda s: float(s.score))
+        pos = best.motion.global_positions()
+        end = np.asarray(pos[-1, body_root(best.motion.skeleton), [0, 2]])
+        out["first_solution_s"] = round(rec.times[0], 3)
+        out["goal_error_cm"] = round(float(np.linalg.norm(end - [goal_m, 0.0])) * 100, 1)
+        out["ok"] = None if best.quality is None else best.quality.ok
+        out["reasons"] = [] if best.quality is None else best.quality.reasons
+    else:
+        out["first_solution_s"] = None
+    out["rounds"] = searcher.rounds_
+    out["round_s"] = round(wall / max(searcher.rounds_, 1), 3)
+    out["search_s"] = round(wall, 2)
+    out["peak_rss_mb"] = round(rss_mb(), 1)
+    out["rss_library_mb"] = round(rss_library, 1)
+    out["load_avg"] = round(load_avg, 2)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument(
+        "--sizes", default="10000,40000,100000,200000,400000,1000000", help="frames, comma-separated"
+    )
+    ap.add_argument("--candidates", default="indexed", choices=("auto", "indexed", "all_pairs"))
+    ap.add_argument("--recall", action="store_true", help="also the all-pairs build (sizes <= 40k)")
+    ap.add_argument("--budget", type=float, default=20.0, help="search budget (s)")
+    ap.add_argument("--goal", type=float, default=12.0, help="distance of the body goal (m)")
+    ap.add_argument("--one", type=int, help=argparse.SUPPRESS)  # one size in this process
+    args = ap.parse_args(argv)
+    if not DATA.exists():
+        print(json.dumps({"skipped": f"no data at {DATA}"}))
+        return 0
+    if args.one:
+        with_recall = args.recall and args.one <= 40000
+        print(json.dumps(run_one(args.one, with_recall, args.budget, args.goal, args.candidates)))
+        return 0
+    for size in args.sizes.split(","):
+        cmd = [
+            sys.executable,
+            __file__,
+            "--one",
+            size.strip(),
+            "--budget",
+            str(args.budget),
+            "--goal",
+            str(args.goal),
+            "--candidates",
+            args.candidates,
+        ]
+        if args.recall:
+            cmd.append("--recall")
+        out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+        print(out.strip().splitlines()[-1], flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
