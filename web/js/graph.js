@@ -3,7 +3,8 @@
 // transition (width = probability). Click an arrow to cut it (click again to keep it); click a
 // node to pick the source of a new transition, shift-click another to connect them (or use the
 // from/to pickers and Add; Weight multiplies an existing transition's likelihood). Submit posts the edits (POST /v1/databases/{id}/graph-edits): the server
-// checks the rules (no dead end, strongly connected) and answers the derived database, which the
+// checks the rules by what the edits change (no new dead end, no group made unreachable from a group
+// that reached it) and answers the derived database, which the
 // page then selects in the Music tool. Self-contained: app.js hands it a few helpers.
 
 import { request } from './api.js';
@@ -49,6 +50,7 @@ export function setupGraph(ctx) {
     from: null, // the node picked as the source of a new transition
     derived: null, // the database the last submit derived
     strongly_connected: null,
+    start_only: [], // groups a dance can start in but never come back to (as learned)
     parents: [],
   };
   state.graph = g;
@@ -124,7 +126,7 @@ export function setupGraph(ctx) {
     const edits = g.cuts.length + g.connects.length + g.weights.length;
     $('graph-submit').disabled = !edits;
     $('graph-info').textContent = g.database
-      ? `${g.groups.length} groups · ${g.transitions.length} transitions${g.strongly_connected ? '' : ' · NOT strongly connected'} · ${edits} pending edit${edits === 1 ? '' : 's'}`
+      ? `${g.groups.length} groups · ${g.transitions.length} transitions${g.strongly_connected ? '' : ' · NOT strongly connected'}${g.start_only.length ? ` (start-only groups ${g.start_only.join(', ')})` : ''} · ${edits} pending edit${edits === 1 ? '' : 's'}`
       : '';
   }
 
@@ -189,6 +191,7 @@ export function setupGraph(ctx) {
       groups: graph.groups,
       transitions: graph.transitions,
       strongly_connected: graph.strongly_connected,
+      start_only: graph.start_only_groups || [],
       derived_from: graph.derived_from,
       parents: graph.parents,
       cuts: [],
