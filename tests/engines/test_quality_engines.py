@@ -73,7 +73,7 @@ def test_graph_unreachable_goal_is_reported_unmet_without_a_drag(graph_search: A
 
 def test_graph_reachable_goal_is_met_and_ok(graph_search: Any) -> None:
     out = Collect()
-    graph_search(3).run(graph_request((2.0, 4.0, 60.0)), 1.5, out, lambda: False)
+    graph_search(3).run(graph_request((2.0, 4.0, 60.0)), 60.0, out, lambda: False)  # rounds bound it
     q = best(out).quality
     assert q is not None
     assert q.constraint_errors["body[1]"]["satisfied"], q.reasons
@@ -96,7 +96,7 @@ def test_annotations_unreachable_end_and_label_goals(annotations: AnnotationEngi
     out = Collect()
     annotations.search(
         AnnotationRequest(frames=96, seed=4, timeline=timeline, end={"position": [0.0, 60.0]}),
-        1.0,
+        60.0,  # a safety cap: the passes bound the work
         out,
         lambda: False,
     )
@@ -120,7 +120,7 @@ def test_control_walk_that_cannot_keep_up_with_its_path_is_not_ok() -> None:
         {"engine": "control", "control": {"trajectory": {"fps": 30, "points": path.tolist()}}, "budget_s": 3}
     )
     out = Collect()
-    engine.search(req, 3.0, out, lambda: False)
+    engine.search(req, 60.0, out, lambda: False)
     q = best(out).quality
     assert q is not None and not q.ok
     assert not q.constraint_errors["path"]["satisfied"] and q.constraint_errors["path"]["rms_cm"] > 10
@@ -129,7 +129,7 @@ def test_control_walk_that_cannot_keep_up_with_its_path_is_not_ok() -> None:
         {"engine": "control", "control": {"trajectory": {"fps": 30, "points": (path / 2.5).tolist()}}}
     )
     out = Collect()
-    engine.search(slow, 3.0, out, lambda: False)
+    engine.search(slow, 60.0, out, lambda: False)
     path_error = best(out).constraint_errors["path"]
     assert path_error["satisfied"] and path_error["rms_cm"] < 10
 
