@@ -130,7 +130,6 @@ def recall(library: Any, arrays: dict[str, Any]) -> dict[str, float]:
 def run_one(frames: int, with_recall: bool, budget: float, goal_m: float, candidates: str) -> dict[str, Any]:
     from engines.base import CollectingEmitter, foot_floor_arrays
     from engines.graph.engine import GraphEngine
-    from engines.graph.search import GraphSearch
     from engines.library import library_from_arrays, library_to_arrays
     from motion.allocator import tune_process
     from motion.ground import body_root
@@ -195,15 +194,7 @@ def run_one(frames: int, with_recall: bool, budget: float, goal_m: float, candid
             ],
         }
     )
-    searcher = GraphSearch(
-        engine.library,
-        engine.tree,
-        engine.tracks,
-        request.seed,
-        contacts=engine.contacts,
-        reference=engine.quality_reference,
-        foot_floor=engine.foot_floor(engine.library.motions[0].skeleton),
-    )
+    searcher = engine.searcher(request.seed)
     rec = CollectingEmitter()
     t0 = time.perf_counter()
     searcher.run(request, budget, rec, lambda: False)

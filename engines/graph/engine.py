@@ -68,15 +68,21 @@ class GraphEngine(Engine):
         emit: Emitter,
         should_stop: ShouldStop,
     ) -> Stopped:
-        return searcher(
+        return self.searcher(request.seed, searcher).run(request, budget_s, emit, should_stop)
+
+    def searcher(
+        self, seed: int, kind: type[GraphSearch] | type[CoupledSearch] = GraphSearch
+    ) -> GraphSearch | CoupledSearch:
+        """A search over this database's graph seeded with ``seed`` (benches read its ``rounds_``)."""
+        return kind(
             self.library,
             self.tree,
             self.tracks,
-            request.seed,
+            seed,
             contacts=self.contacts,
             reference=self.quality_reference,
             foot_floor=self.foot_floor(self.library.motions[0].skeleton),
-        ).run(request, budget_s, emit, should_stop)
+        )
 
 
 def left_out_note(arrays: Any) -> str | None:
