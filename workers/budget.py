@@ -13,6 +13,11 @@ joints: a rhythm crowd of 40 characters x 20 s peaks at 1.1 GB and takes 11 s on
 single 1000-s dance 1.8 GB and 18 s) and rounded up; :func:`expected_frames` is also what a
 worker compares the result with, so a result shorter than asked is flagged instead of silently
 ``done``.
+
+Input files count from their headers and capped counts (:mod:`workers.input_facts`): a MIDI song's
+length and beats (at most :data:`~workers.input_facts.MAX_MIDI_EVENTS` events read), a recording's
+length and decoded size (``soundfile.info``), a control BVH's frames (its header); so a request's
+size is known at submission whatever its files hold, in bounded time and memory.
 """
 
 from __future__ import annotations
@@ -53,35 +58,81 @@ class WorkEstimate:
     joint_frames: int | None
     memory_bytes: int | None
     seconds: float
+    problems: tuple[str, ...] = ()
+    """What the input files alone exceed (too many MIDI events, an implausible tempo...)."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
-def _music_seconds(request: Any) -> float | None:
-    music = request.music
+@dataclass(frozen=True, slots=True)
+class InputFacts:
+    """What a request's input files add to its budget (:mod:`workers.input_facts`): the music's
+    length in seconds (None: unknown), the bytes decoding it holds, and the problems found."""
+
+    music_s: float | None = None
+    decode_bytes: int = 0
+    problems: tuple[str, ...] = ()
+
+
+def input_facts(request: Any) -> InputFacts:
+    """The input facts of a rhythm request's music (header reads and capped counts only: bounded
+    time and memory whatever the file holds; other requests have none)."""
+    music = getattr(request, "music", None)
+    if music is None:
+        return InputFacts()
     if music.bpm is not None:
-        return float(music.duration_s)
+        return InputFacts(float(music.duration_s))
     length: float | None = None
+    decode, problems = 0, ()
     if music.beats_s is not None:
         length = float(music.beats_s[-1])
     elif music.midi is not None:
-        try:
-            from engines.rhythm.music import parse_midi
+        from .input_facts import midi_facts
 
-            tempo = parse_midi(request.input_bytes(music.midi))
-            length = float(tempo.tick_to_seconds([tempo.end_tick])[0])
-        except Exception:  # an unreadable file fails in the engine, with its own message
-            length = None
+        midi = midi_facts(_input(request, music.midi))
+        length, problems = midi.duration_s, midi.problems
+    elif music.audio is not None:
+        from .input_facts import audio_facts
+
+        audio = audio_facts(_input(request, music.audio))
+        if audio is not None:
+            length, decode = audio.duration_s, audio.decoded_bytes
     if music.duration_s is not None:
         length = float(music.duration_s) if length is None else min(length, float(music.duration_s))
-    return length
+    return InputFacts(length, decode, problems)
 
 
-def expected_frames(request: Any, db_fps: float, clip_frames: dict[str, int] | None = None) -> int | None:
+def _input(request: Any, ref: str) -> bytes:
+    try:
+        return bytes(request.input_bytes(ref))
+    except KeyError:  # not attached (a caller that estimates without the files)
+        return b""
+
+
+def _control_frames(request: Any, fps: float) -> int | None:
+    """Output frames of a control request driven by a BVH (its header's frames, at ``fps``)."""
+    from motion import BvhError
+    from motion.bvh_header import bvh_header
+
+    ref = getattr(request.control, "bvh", None)
+    data = _input(request, ref) if ref is not None else b""
+    if not data:
+        return None
+    try:
+        head = bvh_header(data)
+    except BvhError:  # unreadable: the engine names the fault when the job runs
+        return None
+    return round(head.duration_s * fps) + 1
+
+
+def expected_frames(
+    request: Any, db_fps: float, clip_frames: dict[str, int] | None = None, facts: InputFacts | None = None
+) -> int | None:
     """Output frames per character that ``request`` asks for at the output rate (None: unknown).
 
-    ``clip_frames``: frames of the database's clips at the database rate, by name (for ``clip``)."""
+    ``clip_frames``: frames of the database's clips at the database rate, by name (for ``clip``);
+    ``facts``: the request's :func:`input_facts` when the caller has them already."""
     engine = getattr(request, "engine", None)
     fps = float(getattr(request, "fps", None) or db_fps)
     if engine == "graph":
@@ -89,13 +140,13 @@ def expected_frames(request: Any, db_fps: float, clip_frames: dict[str, int] | N
     if engine == "annotations":
         return int(request.frames)
     if engine == "rhythm":
-        seconds = _music_seconds(request)
+        seconds = (facts or input_facts(request)).music_s
         return None if seconds is None else round(seconds * fps)
     if engine == "control":
         trajectory = request.control.trajectory
         if trajectory is not None:
             return round((len(trajectory.points) - 1) / float(trajectory.fps) * fps) + 1
-        return None  # a control clip: its length is checked by the upload limits
+        return _control_frames(request, fps)
     if engine == "clip":
         total = (clip_frames or {}).get(request.clip)
         end = request.end if request.end is not None else total
@@ -114,20 +165,23 @@ def estimate_work(
         2 if getattr(request, "couples", False) else 1
     )
     fps = float(getattr(request, "fps", None) or db_fps)
-    frames = expected_frames(request, db_fps, clip_frames)
+    facts = input_facts(request)
+    frames = expected_frames(request, db_fps, clip_frames, facts)
     budget = float(getattr(request, "budget_s", 0.0))
     if frames is None:
-        return WorkEstimate(None, characters, joints, fps, None, None, budget)
+        return WorkEstimate(None, characters, joints, fps, None, None, budget, facts.problems)
     joint_frames = characters * frames * max(joints, 1)
     per = BYTES_PER_JOINT_FRAME.get(engine, max(BYTES_PER_JOINT_FRAME.values()))
-    memory = BASE_MEMORY_BYTES + joint_frames * per
+    memory = BASE_MEMORY_BYTES + joint_frames * per + facts.decode_bytes
     seconds = budget + joint_frames * SECONDS_PER_JOINT_FRAME
-    return WorkEstimate(frames, characters, joints, fps, joint_frames, memory, round(seconds, 3))
+    return WorkEstimate(
+        frames, characters, joints, fps, joint_frames, memory, round(seconds, 3), facts.problems
+    )
 
 
 def check_work(work: WorkEstimate, limits: WorkLimits) -> list[str]:
     """Every limit ``work`` exceeds, as a sentence naming the number and the limit."""
-    problems = []
+    problems = list(work.problems)
     if limits.max_budget_s is not None and work.seconds > limits.max_budget_s:
         problems.append(
             f"the job would take about {work.seconds:.0f} s (budget_s plus assembly), over the "

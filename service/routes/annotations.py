@@ -26,7 +26,7 @@ from schemas.annotations import ClipLabels, LabelCorrection
 from schemas.bases import DatabaseSpecBase
 from workers.store import Store
 
-from ..deps import BackendDep, MetricsDep, PrincipalDep, SettingsDep, StoreDep
+from ..deps import BackendDep, JobQuotaDep, MetricsDep, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, conflict, responses
 from ..jsonbody import json_body, json_body_doc
 from ..owners import database_for
@@ -78,6 +78,7 @@ def _clip_labels(store: Store, info: DatabaseInfo, clip: str, start: int, end: i
         413,
         415,
         422,
+        429,
         503,
         extra={200: {"model": DatabaseInfo, "description": "the corrected database exists"}},
     ),
@@ -89,21 +90,27 @@ async def correct_labels(
     backend: BackendDep,
     metrics: MetricsDep,
     settings: SettingsDep,
+    quota: JobQuotaDep,
     principal: PrincipalDep,
     corrections: CorrectionsBody,
 ) -> DatabaseInfo:
     """Build the database with corrected labels (``set`` a label on a clip's frame range, or
-    ``accept`` the propagated labels of a range); clips are named as in the database."""
+    ``accept`` the propagated labels of a range); clips are named as in the database. The build
+    counts against your unfinished jobs (429 ``too_many_jobs`` over ``SEGUE_MAX_QUEUED_JOBS``)."""
     info = await run_in_threadpool(database_for, store, principal, db_id)
+    quota.check(principal.name)
     _annotated(info, ready=any(c.action == "accept" for c in corrections))
     try:
         corrected = await run_in_threadpool(_corrected_spec, store, info, corrections)
     except EngineError as exc:
         raise ApiError(422, "invalid_request", str(exc)) from None
     shared = frozenset(c.clip for c in corrected.clips if c.clip is not None)
-    return await create_from_spec(
+    built = await create_from_spec(
         corrected, response, store, backend, metrics, principal, shared, settings.max_database_frames
     )
+    if built.build_job and response.status_code == status.HTTP_202_ACCEPTED:
+        quota.add(principal.name, built.build_job)
+    return built
 
 
 @router.get("/{db_id}/labels", response_model=ClipLabels, responses=responses(401, 404, 409, 422))

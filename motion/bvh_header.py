@@ -1,0 +1,121 @@
+"""What a BVH file is, from its header and a streaming pass, in bounded memory.
+
+:func:`bvh_header` reads the HIERARCHY and the ``Frames:`` / ``Frame Time:`` lines of a BVH file
+(plain or gzip) without parsing its MOTION table: the joints, channels, frames and rate a budget
+needs (frames x joints) and the header errors :func:`motion.bvh.parse_bvh` would give, with the
+same messages (it uses the same hierarchy and motion-header parsers). A gzip file is inflated
+chunk by chunk and the inflated bytes are counted and dropped, so a gzip bomb costs CPU bounded by
+``limits.max_bytes`` and memory bounded by :data:`CHUNK_BYTES` + :data:`MAX_HEADER_BYTES`.
+
+This is the check an API process can afford on an upload; the full parse (every number of the
+table) runs in a worker.
+"""
+
+from __future__ import annotations
+
+import re
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+from .bvh import _FPS_SNAP, BvhLimits, _decode, _parse_hierarchy, _parse_motion_header
+from .errors import BvhError
+
+MAX_HEADER_BYTES = 4 << 20
+"""Most bytes of a BVH header (HIERARCHY + MOTION lines) read before giving up: 1,024 joints of a
+verbose exporter take ~0.3 MB."""
+CHUNK_BYTES = 1 << 20
+"""Inflated bytes held at once while a gzip file is measured."""
+
+_MOTION = re.compile(rb"(?m)^[ \t]*MOTION\b")
+
+
+@dataclass(frozen=True, slots=True)
+class BvhHeader:
+    """A BVH file's shape: ``joints`` (names, file order, End Sites excluded), ``channels`` per frame,
+    ``frames`` (as the ``Frames:`` line declares them; the full parse checks the table holds
+    them), ``fps`` (1 / Frame Time) and ``text_bytes`` (bytes after gunzip)."""
+
+    joints: tuple[str, ...]
+    channels: int
+    frames: int
+    fps: float
+    text_bytes: int
+
+    @property
+    def joint_frames(self) -> int:
+        """frames x joints: what a motion's arrays scale with."""
+        return self.frames * len(self.joints)
+
+    @property
+    def duration_s(self) -> float:
+        """Seconds from the first frame to the last (``(frames - 1) / fps``)."""
+        return (self.frames - 1) / self.fps
+
+
+def _inflated(data: bytes, limit: int, source: str) -> Iterator[bytes]:
+    """The inflated chunks of gzip ``data`` (all members), :class:`BvhError` past ``limit`` bytes
+    or for corrupt data (the messages of :func:`motion.bvh.parse_bvh`)."""
+    size, rest = 0, data
+    try:
+        while rest:
+            d = zlib.decompressobj(16 + zlib.MAX_WBITS)
+            pending = rest
+            while True:
+                chunk = d.decompress(pending, CHUNK_BYTES)
+                size += len(chunk)
+                if size > limit:
+                    raise BvhError(f"decompressed file is larger than the {limit}-byte limit", source=source)
+                if chunk:
+                    yield chunk
+                pending = d.unconsumed_tail
+                if not pending and (d.eof or not chunk):
+                    break
+            if not d.eof:
+                raise BvhError("gzip stream is truncated", source=source)
+            rest = d.unused_data
+            if rest and not rest.startswith(b"\x1f\x8b"):
+                if rest.strip(b"\x00"):
+                    raise BvhError("trailing garbage after the gzip data", source=source)
+                break
+    except zlib.error as exc:
+        raise BvhError(f"corrupt gzip data ({exc})", source=source) from None
+
+
+def bvh_header(data: bytes, limits: BvhLimits | None = None, source: str = "<bytes>") -> BvhHeader:
+    """The header facts of BVH ``data`` (plain or gzip), in bounded memory (module docstring).
+
+    Raises :class:`~motion.errors.BvhError` for what the header shows: a bad hierarchy, too many
+    joints, a missing or bad ``Frames:``/``Frame Time:``, more frames than ``limits.max_frames``,
+    more bytes (after gunzip) than ``limits.max_bytes``. The table itself is not read."""
+    lim = limits or BvhLimits()
+    if data.startswith(b"\x1f\x8b"):
+        head, total = bytearray(), 0
+        for chunk in _inflated(data, lim.max_bytes, source):
+            total += len(chunk)
+            if len(head) < MAX_HEADER_BYTES:
+                head += chunk[: MAX_HEADER_BYTES - len(head)]
+        text = bytes(head)
+    else:
+        total = len(data)
+        if total > lim.max_bytes:
+            raise BvhError(f"file is larger than the {lim.max_bytes}-byte limit", source=source)
+        text = data[:MAX_HEADER_BYTES]
+    offset = 3 if text.startswith(b"\xef\xbb\xbf") else 0
+    if offset:
+        text, total = text[offset:], total - offset
+    m = _MOTION.search(text)
+    if m is None:
+        if not text.strip():
+            raise BvhError("file is empty", source=source)
+        _parse_hierarchy(_decode(text, source), lim, source)  # a broken hierarchy is the better message
+        if total > len(text):
+            raise BvhError(f"no MOTION section in the first {MAX_HEADER_BYTES} bytes", source=source)
+        raise BvhError("no MOTION section", line=text.count(b"\n") + 1, source=source)
+    skeleton = _parse_hierarchy(_decode(text[: m.start()], source), lim, source)
+    motion_line = text.count(b"\n", 0, m.start()) + 1
+    frames, frame_time, _, _ = _parse_motion_header(text, m.end(), motion_line, lim, source)
+    fps = 1.0 / frame_time
+    if abs(fps - round(fps)) <= _FPS_SNAP * fps:  # as parse_bvh snaps it
+        fps = float(round(fps))
+    return BvhHeader(tuple(skeleton.names), skeleton.num_channels, frames, fps, total)
