@@ -74,6 +74,8 @@ def parse_job_request(data: Any) -> JobRequestBase:
 class JobKind(StrEnum):
     synth = "synth"
     build = "build"
+    task = "task"
+    """A small job the API runs for a request (parsing an upload, making an export): not listed."""
 
 
 class JobStatus(StrEnum):

@@ -1,102 +1,106 @@
-"""Result downloads: a stored result motion in BVH, GLB, JSON frames or NPZ."""
+"""Result downloads: a stored result motion in BVH, GLB, JSON frames or NPZ, streamed from the store.
+
+Each download (result, format and options: :class:`workers.result_export.ExportSpec`) is made once
+and kept in the store under its key. A small one (:func:`workers.result_export.inline_ok`, from the
+result's array headers) is made here, a bounded number at once; anything larger, and every
+retargeting onto a character, is a small job in a worker (:mod:`service.tasks`). Either way the
+answer is streamed from the store in chunks, so the API's memory does not grow with the export.
+"""
 
 from __future__ import annotations
 
-import json
-from collections.abc import Mapping, Sequence
-from enum import StrEnum
-from typing import Any
+from collections.abc import Iterator
+from typing import BinaryIO
 
-from motion import ExportError, Motion
-from motion.bvh import bvh_text
-from motion.export.arrays import motion_json, npz_bytes
-from motion.export.bind import bound_glb
-from motion.export.events import contact_events_of, sorted_events
-from motion.export.events import result_events as annotation_events
-from motion.export.glb import glb_bytes
-from motion.export.targets import to_target
+import anyio
+from starlette.concurrency import run_in_threadpool
+from starlette.responses import Response, StreamingResponse
 
+from workers.backend import JobBackend
+from workers.result_export import (
+    MEDIA_TYPES,
+    ExportFailure,
+    ExportSpec,
+    ExportTarget,
+    ExportUnits,
+    ResultFormat,
+    export_bytes,
+    inline_ok,
+    make_export,
+    result_events,
+)
+from workers.store import NotFoundError, Store
+from workers.tasks import task_payload
 
-class ResultFormat(StrEnum):
-    """Download formats of a result."""
+from .errors import ApiError
+from .metrics import Metrics
+from .tasks import TaskRunner
 
-    bvh = "bvh"
-    glb = "glb"
-    json = "json"
-    npz = "npz"
+__all__ = [
+    "MEDIA_TYPES",
+    "ExportTarget",
+    "ExportUnits",
+    "ResultFormat",
+    "export_bytes",
+    "result_download",
+    "result_events",
+]
 
-
-class ExportTarget(StrEnum):
-    """Axis/unit conventions (GLB is always glTF's own)."""
-
-    gltf = "gltf"
-    godot = "godot"
-    unity = "unity"
-    unreal = "unreal"
-
-
-MEDIA_TYPES: dict[ResultFormat, str] = {
-    ResultFormat.bvh: "text/plain; charset=utf-8",
-    ResultFormat.glb: "model/gltf-binary",
-    ResultFormat.json: "application/json",
-    ResultFormat.npz: "application/octet-stream",
-}
-
-
-def result_events(
-    motion: Motion, annotations: Mapping[str, Any], kinds: Sequence[str], result_fps: float
-) -> list[dict[str, Any]]:
-    """The events of a result: foot contacts measured on ``motion`` (the motion exported, after
-    any resampling) and the beats and labels of its report's ``annotations`` (label frame ranges
-    at the result's own ``result_fps``), sorted by time."""
-    evs = contact_events_of(motion) if "contacts" in kinds else []
-    evs += annotation_events(annotations, result_fps, motion.duration_s, kinds)
-    return sorted_events(evs)
+CHUNK_BYTES = 1 << 20
+"""Bytes read from the store per chunk of a streamed download."""
 
 
-class ExportUnits(StrEnum):
-    """Length units of an export (default: the target's; GLB is always metres)."""
-
-    m = "m"
-    cm = "cm"
-    mm = "mm"
-    inch = "in"
-    ft = "ft"
+def _chunks(fh: BinaryIO) -> Iterator[bytes]:
+    try:
+        while chunk := fh.read(CHUNK_BYTES):
+            yield chunk
+    finally:
+        fh.close()
 
 
-def export_bytes(
-    motion: Motion,
-    fmt: ResultFormat,
-    target: ExportTarget = ExportTarget.gltf,
-    *,
-    units: ExportUnits | None = None,
-    in_place: bool = False,
-    events: Sequence[dict[str, Any]] | None = None,
-    rig: bytes | None = None,
-    ground_root: bool = True,
-) -> bytes:
-    """The file content of ``motion`` in ``fmt`` (raises :class:`motion.ExportError`).
+def _failure(exc: ExportFailure) -> ApiError:
+    return ApiError(exc.status, exc.code, exc.message)
 
-    Lengths in the target's units (metres; centimetres for ``unreal``) unless ``units`` overrides
-    them; GLB is metres. ``in_place`` is for GLB; ``events`` go into GLB extras and JSON frames.
-    ``rig``: the glTF/GLB file of the character the motion was retargeted onto: a GLB is that file
-    with the animation added (:func:`motion.export.bind.bound_glb`). ``ground_root=False`` keeps
-    a GLB's skeleton exactly the motion's (a retargeted BVH character's hierarchy).
-    """
-    unit = None if units is None else units.value
-    if in_place and fmt != ResultFormat.glb:
-        raise ExportError("in_place is for format=glb (its ground joint keeps the root motion)")
-    if events is not None and fmt not in (ResultFormat.glb, ResultFormat.json):
-        raise ExportError("events go into format=glb (animation extras) and format=json only")
-    if fmt == ResultFormat.glb:
-        if unit not in (None, "m"):
-            raise ExportError(f"GLB is in metres (glTF 2.0); units={unit} does not apply to it")
-        if rig is not None:
-            return bound_glb(rig, motion, events=events)
-        return glb_bytes(motion, ground_root=ground_root, in_place=in_place, events=events)
-    if fmt == ResultFormat.npz:
-        return npz_bytes(motion, target.value, unit)
-    if fmt == ResultFormat.json:
-        doc = motion_json(motion, target.value, units=unit, events=events)
-        return json.dumps(doc, separators=(",", ":")).encode()
-    return bvh_text(to_target(motion, target.value, unit)).encode()
+
+async def result_download(
+    spec: ExportSpec,
+    store: Store,
+    backend: JobBackend,
+    metrics: Metrics,
+    runner: TaskRunner,
+    limiter: anyio.CapacityLimiter,
+) -> Response:
+    """The download ``spec`` asks for, streamed from the store (made first when it is not there)."""
+    key = spec.key()
+    try:
+        fh = await run_in_threadpool(store.open_export, spec.job, key)
+    except NotFoundError:
+        frames, joints, fps = await run_in_threadpool(store.result_shape, spec.job, spec.result)
+        if inline_ok(spec, frames, joints, fps):
+            try:
+                data = await anyio.to_thread.run_sync(make_export, store, spec, limiter=limiter)
+            except ExportFailure as exc:
+                raise _failure(exc) from None
+            await run_in_threadpool(store.put_export, spec.job, key, data)
+            return _response(spec, data)
+        payload = task_payload("export", spec=spec.to_dict())
+        await runner.run(f"export:{spec.job}:{key}", payload, store, backend, metrics)
+        fh = await run_in_threadpool(store.open_export, spec.job, key)
+    return StreamingResponse(_chunks(fh), media_type=MEDIA_TYPES[spec.format], headers=_headers(spec, fh))
+
+
+def _headers(spec: ExportSpec, fh: BinaryIO | None = None) -> dict[str, str]:
+    filename = f"segue-{spec.job}-{spec.result}.{spec.format.value}"
+    headers = {"Content-Disposition": f'attachment; filename="{filename}"'}
+    if fh is not None:
+        try:
+            import os
+
+            headers["Content-Length"] = str(os.fstat(fh.fileno()).st_size)
+        except (OSError, ValueError, AttributeError):
+            pass
+    return headers
+
+
+def _response(spec: ExportSpec, data: bytes) -> Response:
+    return Response(data, media_type=MEDIA_TYPES[spec.format], headers=_headers(spec))

@@ -14,6 +14,7 @@ from collections import defaultdict
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from schemas.jobs import JobKind
 from workers.store import NotFoundError, Store
 
 from .errors import ApiError
@@ -28,7 +29,7 @@ class JobQuota:
         self.store, self.limit = store, limit
         self._open: dict[str, set[str]] = defaultdict(set)
         for info in store.list_jobs():
-            if not info.status.finished:
+            if not info.status.finished and info.kind != JobKind.task:  # small jobs: the server's own
                 self._open[info.owner or ""].add(info.id)
 
     def _prune(self, owner: str) -> set[str]:

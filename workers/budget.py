@@ -84,7 +84,8 @@ def input_facts(request: Any) -> InputFacts:
     if music.bpm is not None:
         return InputFacts(float(music.duration_s))
     length: float | None = None
-    decode, problems = 0, ()
+    decode = 0
+    problems: tuple[str, ...] = ()
     if music.beats_s is not None:
         length = float(music.beats_s[-1])
     elif music.midi is not None:

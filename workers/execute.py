@@ -188,7 +188,8 @@ def execute_job(
     Parameters
     ----------
     kind:
-        ``"build"`` (payload ``{"database": id}``) or ``"synth"`` (payload ``{"request": {...}}``).
+        ``"build"`` (payload ``{"database": id}``), ``"synth"`` (payload ``{"request": {...}}``) or
+        ``"task"`` (a small job for an API request: :mod:`workers.tasks`).
     publish:
         Called with each event type and data, in order.
     should_stop:
@@ -203,6 +204,10 @@ def execute_job(
             _build(store, payload["database"], publish, should_stop, save_database_bytes)
         elif kind == "synth":
             _synth(store, job_id, payload["request"], publish, should_stop, cache, load, attempt)
+        elif kind == "task":  # a small job for an API request (workers.tasks)
+            from .tasks import run_task
+
+            run_task(store, payload["request"], publish)
         else:
             raise JobFailure("invalid_job", f"unknown job kind {kind!r}")
     except JobFailure as exc:

@@ -368,3 +368,55 @@ class Store:
         if not p.exists():
             raise NotFoundError(f"job {job_id!r} has no result {result_id!r}")
         return Report.model_validate_json(p.read_bytes())
+
+    # -- derived files: result exports and staged uploads (workers.tasks) -----------------------
+    def result_shape(self, job_id: str, result_id: str) -> tuple[int, int, float]:
+        """``(frames, joints, fps)`` of a stored result, from its arrays' headers only (no array
+        is read: what an API decides an export's size by)."""
+        import zipfile
+
+        p = self.job_dir(job_id) / "results" / f"{_safe_id(result_id)}.npz"
+        if not p.exists():
+            raise NotFoundError(f"job {job_id!r} has no result {result_id!r}")
+        try:
+            with zipfile.ZipFile(p) as zf:
+                with zf.open("rotations.npy") as fh:
+                    major, _ = np.lib.format.read_magic(fh)
+                    read_header = (
+                        np.lib.format.read_array_header_1_0
+                        if major == 1
+                        else np.lib.format.read_array_header_2_0
+                    )
+                    shape, _, _ = read_header(fh)
+                with zf.open("fps.npy") as fh:
+                    fps = float(np.lib.format.read_array(fh, allow_pickle=False))
+        except (KeyError, ValueError, OSError, zipfile.BadZipFile) as exc:
+            raise NotFoundError(f"result {result_id!r} is unreadable: {exc}") from None
+        return int(shape[0]), int(shape[1]), fps
+
+    def _export_path(self, job_id: str, key: str) -> Path:
+        return self.job_dir(job_id) / "exports" / _safe_id(key)
+
+    def put_export(self, job_id: str, key: str, data: bytes) -> None:
+        """Keep the bytes of a result's export under ``key`` (removed with the job)."""
+        _atomic_write(self._export_path(job_id, key), data)
+
+    def open_export(self, job_id: str, key: str) -> io.BufferedReader:
+        """A stored export, opened for reading in chunks (``NotFoundError`` when not made yet)."""
+        try:
+            return open(self._export_path(job_id, key), "rb")
+        except FileNotFoundError:
+            raise NotFoundError(f"job {job_id!r} has no export {key!r}") from None
+
+    def put_staged(self, key: str, data: bytes) -> None:
+        """Keep an upload's bytes until a worker has checked them (:meth:`delete_staged` after)."""
+        _atomic_write(self.root / "staged" / _safe_id(key), data)
+
+    def staged_bytes(self, key: str) -> bytes:
+        p = self.root / "staged" / _safe_id(key)
+        if not p.exists():
+            raise NotFoundError(f"no staged upload {key!r}")
+        return p.read_bytes()
+
+    def delete_staged(self, key: str) -> None:
+        (self.root / "staged" / _safe_id(key)).unlink(missing_ok=True)

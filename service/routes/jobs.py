@@ -5,23 +5,20 @@ from __future__ import annotations
 from typing import Annotated
 
 import anyio
-import numpy as np
 from fastapi import APIRouter, Depends, Query, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from engines.registry import engine_kind
-from motion import ExportError, Motion, MotionError
-from motion.export.events import parse_kinds
-from motion.resample import resample
 from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
 from schemas.bases import JobRequestBase
 from schemas.jobs import JobKind, JobStatus
 from workers.backend import JobBackend, JobNotFinished
 from workers.budget import check_work, database_facts, estimate_work
 from workers.inputs import InputError, attach_from_store, resolve_inputs
+from workers.result_export import ExportSpec
 from workers.store import Store
 
-from ..characters import RestPose, RootMotion, load_character
+from ..characters import RestPose, RootMotion, character_ref
 from ..deps import (
     BackendDep,
     JobQuotaDep,
@@ -33,11 +30,12 @@ from ..deps import (
     StoreDep,
 )
 from ..errors import ApiError, conflict, responses
-from ..exports import MEDIA_TYPES, ExportTarget, ExportUnits, ResultFormat, export_bytes, result_events
+from ..exports import MEDIA_TYPES, ExportTarget, ExportUnits, ResultFormat, result_download
 from ..jobs_common import submit_job
 from ..jsonbody import BodylessWrite, delete_route, json_body, json_body_doc
 from ..owners import database_for, job_for, visible
 from ..settings import Settings
+from ..tasks import TaskRunnerDep
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 
@@ -157,7 +155,11 @@ async def list_jobs(
     limit: Annotated[int, Query(ge=1, le=1000, description="at most this many, newest first")] = 100,
 ) -> list[JobInfo]:
     """Your jobs, newest first (status as last recorded in the store)."""
-    jobs = [j for j in await run_in_threadpool(store.list_jobs) if principal.may(j.owner)]
+    jobs = [
+        j
+        for j in await run_in_threadpool(store.list_jobs)
+        if principal.may(j.owner) and j.kind != JobKind.task  # small jobs are the server's own
+    ]
     if status_filter is not None:
         jobs = [j for j in jobs if j.status == status_filter]
     return jobs[::-1][:limit]
@@ -246,6 +248,9 @@ async def download_result(
     job_id: str,
     store: StoreDep,
     backend: BackendDep,
+    metrics: MetricsDep,
+    runner: TaskRunnerDep,
+    limiter: ParseLimiterDep,
     principal: PrincipalDep,
     settings: SettingsDep,
     format: Annotated[ResultFormat, Query(description="bvh, glb, json frames or npz")] = ResultFormat.bvh,
@@ -293,82 +298,31 @@ async def download_result(
 ) -> Response:
     """Download a result motion (default: the job's best result so far), optionally resampled or
     retargeted onto a character; 409 ``result_not_ready`` while the job has none yet, 422
-    ``retarget_failed`` when the character's joints do not correspond."""
+    ``retarget_failed`` when the character's joints do not correspond. Each download is made once
+    (large ones and retargetings by a worker) and streamed from the store."""
     rid = await _result_id(backend, principal, job_id, result)
-    motion = await run_in_threadpool(store.result_motion, job_id, rid)
-    rig: bytes | None = None
+    char = None
     if character is not None:
-        from motion.retarget import correspond, retarget  # imported on first use: most downloads do not
-        from motion.retarget.rootmotion import default_root_motion
-
-        char = await run_in_threadpool(load_character, store, principal, character, rest, settings.bvh_limits)
-        rig = char.gltf
-        mode = "none" if in_place else None if root_motion is None else root_motion.value
-        in_place = False  # a character's root motion is placed by the retargeting
-
-        def retargeted() -> Motion:
-            hips = correspond(motion.skeleton, char.motion.skeleton).target_roles["Hips"]
-            return retarget(motion, char.motion, root_motion=mode or default_root_motion(target.value, hips))
-
-        try:
-            motion = await run_in_threadpool(retargeted)
-        except MotionError as exc:
-            raise ApiError(
-                422, "retarget_failed", f"cannot retarget result {rid} onto {character}: {exc}"
-            ) from None
-        if (
-            units is None
-            and format is not ResultFormat.glb
-            and motion.units in {u.value for u in ExportUnits}
-        ):
-            units = ExportUnits(motion.units)  # the character's own units, exactly
-    finite = await run_in_threadpool(
-        lambda: bool(np.isfinite(motion.root_positions).all() and np.isfinite(motion.rotations).all())
+        char = await run_in_threadpool(character_ref, store, principal, character)
+    limits = settings.bvh_limits
+    spec = ExportSpec(
+        job=job_id,
+        result=rid,
+        format=format,
+        target=target,
+        fps=fps,
+        max_fps=max_fps,
+        character=char,
+        rest=rest,
+        units=units,
+        in_place=in_place,
+        root_motion=root_motion,
+        events=events,
+        max_frames=settings.max_output_frames,
+        max_joint_frames=settings.max_joint_frames,
+        bvh_limits=(limits.max_joints, limits.max_frames, limits.max_bytes),
     )
-    if not finite:
-        raise ApiError(
-            422, "export_failed", f"result {rid} holds numbers that are not finite; it cannot be exported"
-        )
-    result_fps = motion.fps
-    try:
-        if fps is None and max_fps is not None and motion.fps > max_fps:
-            fps = max_fps
-        if fps is not None and motion.num_frames * fps / motion.fps > 4 * max(
-            settings.max_output_frames, motion.num_frames
-        ):
-            raise ApiError(
-                413,
-                "too_large",
-                f"resampling result {rid} ({motion.num_frames} frames at {motion.fps:g} fps) to {fps:g} fps "
-                f"would give over {4 * max(settings.max_output_frames, motion.num_frames)} frames",
-            )
-        if fps is not None and abs(fps - motion.fps) > 1e-9:
-            motion = await run_in_threadpool(resample, motion, fps)
-        kinds = parse_kinds(events) if events else ()
-        evs = None
-        if kinds:
-            annotations = (await run_in_threadpool(store.result_report, job_id, rid)).annotations
-            evs = await run_in_threadpool(result_events, motion, annotations, kinds, result_fps)
-        data = await run_in_threadpool(
-            lambda: export_bytes(
-                motion,
-                format,
-                target,
-                units=units,
-                in_place=in_place,
-                events=evs,
-                rig=rig,
-                ground_root=character is None,
-            )
-        )
-    except (ExportError, MotionError) as exc:
-        raise ApiError(422, "export_failed", f"cannot export result {rid} as {format.value}: {exc}") from None
-    filename = f"segue-{job_id}-{rid}.{format.value}"
-    return Response(
-        data,
-        media_type=MEDIA_TYPES[format],
-        headers={"Content-Disposition": f'attachment; filename="{filename}"'},
-    )
+    return await result_download(spec, store, backend, metrics, runner, limiter)
 
 
 @router.get("/{job_id}/report", response_model=Report, responses=responses(401, 404, 409, 422))
