@@ -119,3 +119,39 @@ def bvh_header(data: bytes, limits: BvhLimits | None = None, source: str = "<byt
     if abs(fps - round(fps)) <= _FPS_SNAP * fps:  # as parse_bvh snaps it
         fps = float(round(fps))
     return BvhHeader(tuple(skeleton.names), skeleton.num_channels, frames, fps, total)
+
+
+def _head_text(data: bytes, limit: int, source: str) -> bytes:
+    """The first ``limit`` bytes of BVH text (inflating only what it takes)."""
+    if not data.startswith(b"\x1f\x8b"):
+        return data[:limit]
+    head = bytearray()
+    for chunk in _inflated(data, 1 << 62, source):
+        head += chunk[: limit - len(head)]
+        if len(head) >= limit:
+            break
+    return bytes(head)
+
+
+def bvh_first_frames(data: bytes, frames: int = 1, source: str = "<bytes>") -> bytes | None:
+    """BVH text of ``data`` (plain or gzip) cut after its first ``frames`` frames (its ``Frames:``
+    line saying so), read from the first :data:`MAX_HEADER_BYTES` only; None when they are not
+    there (a header or lines longer than that). Parsing it gives exactly the first frames of the
+    whole file: what a character's rest pose needs of a clip, without reading its other frames."""
+    from .bvh import _MOTION_HEADER
+
+    text = _head_text(data, MAX_HEADER_BYTES, source)
+    offset = 3 if text.startswith(b"\xef\xbb\xbf") else 0
+    m = _MOTION.search(text, offset)
+    if m is None:
+        return None
+    header = _MOTION_HEADER.match(text, m.end())
+    if header is None:
+        return None
+    end = header.end()
+    for _ in range(frames):
+        nl = text.find(b"\n", end)
+        if nl < 0:
+            return None
+        end = nl + 1
+    return text[offset : header.start(1)] + str(frames).encode() + text[header.end(1) : end]

@@ -1,7 +1,14 @@
-"""Reading uploads under a size limit: raw bodies and ``multipart/form-data`` with a ``file`` field.
+"""Reading uploads under a size limit: raw bodies and ``multipart/form-data`` with a ``file`` field;
+checking a BVH upload.
 
 The limit is enforced while reading (``Content-Length`` first, then the bytes actually received),
 so an oversized upload is refused with 413 before it is held in memory.
+
+A BVH upload's header is checked here (:func:`motion.bvh_header.bvh_header`: joints, frames,
+rate; a gzip file inflated in chunks and counted, never held), so what the header shows is
+refused at once in bounded memory. A clip whose table is small (:data:`INLINE_VALUES` numbers) is
+then parsed here; a larger one is parsed by a worker as a small job (:mod:`workers.tasks`), and
+the answer waits for it: a 1 MB gzip file can hold 250 MB of text and 1.9M frames.
 """
 
 from __future__ import annotations
@@ -11,13 +18,22 @@ from collections.abc import AsyncGenerator, Callable
 from pathlib import PurePosixPath
 from typing import Any, TypeVar
 
+import anyio
+from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
 from starlette.requests import Request
 
-from workers.store import NotFoundError
+from motion import BvhLimits
+from motion.bvh_header import bvh_header
+from schemas import ClipInfo
+from workers.backend import JobBackend
+from workers.store import NotFoundError, Store
+from workers.tasks import task_payload
 
 from .errors import ApiError, too_large
+from .metrics import Metrics
+from .tasks import TaskRunner
 
 Info = TypeVar("Info")
 
@@ -126,3 +142,38 @@ def upload_body(description: str) -> dict[str, Any]:
             },
         }
     }
+
+
+INLINE_VALUES = 2_000_000
+"""Most numbers (frames x channels) of a BVH table parsed in the API process (~16 MB of float64,
+a few tens of milliseconds); larger tables are parsed by a worker (0: every clip)."""
+
+
+async def parse_upload(
+    file_name: str,
+    data: bytes,
+    units: str | None,
+    limits: BvhLimits,
+    store: Store,
+    backend: JobBackend,
+    metrics: Metrics,
+    runner: TaskRunner,
+    limiter: anyio.CapacityLimiter,
+) -> ClipInfo:
+    """Check and store a new BVH upload (module docstring): 400 ``invalid_bvh`` naming the fault,
+    as :func:`motion.bvh.parse_bvh` words it."""
+    head = await anyio.to_thread.run_sync(bvh_header, data, limits, file_name, limiter=limiter)
+    if head.frames * head.channels <= INLINE_VALUES:
+        return await anyio.to_thread.run_sync(store.put_clip, file_name, data, limits, units, limiter=limiter)
+    digest = hashlib.sha256(data).hexdigest()
+    await run_in_threadpool(store.put_staged, digest, data)
+    payload = task_payload(
+        "clip",
+        staged=digest,
+        digest=digest,
+        name=file_name,
+        units=units,
+        limits=[limits.max_joints, limits.max_frames, limits.max_bytes],
+    )
+    done = await runner.run(f"clip:{digest}:{units}:{file_name}", payload, store, backend, metrics)
+    return ClipInfo.model_validate(done["clip"])

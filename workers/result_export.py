@@ -233,17 +233,29 @@ def export_bytes(
 def _character(
     store: Store, ref: CharacterRef, rest: RestPose, limits: BvhLimits
 ) -> tuple[Motion, bytes | None]:
-    """A character's rest pose (a one-frame motion) and, for a glTF/GLB file, the file itself."""
+    """A character's rest pose (a one-frame motion) and, for a glTF/GLB file, the file itself.
+
+    A BVH character's first frame is parsed from the file's head only
+    (:func:`motion.bvh_header.bvh_first_frames`): the same frame, without reading the others."""
+    from motion import BvhError
     from motion.bvh import parse_bvh
+    from motion.bvh_header import bvh_first_frames
     from motion.retarget.character import gltf_character
     from motion.retarget.transfer import zero_pose
 
     if ref.kind == "file":
         raw = store.file_bytes(ref.id)
         return gltf_character(raw, name=ref.name), raw
-    motion = parse_bvh(
-        store.clip_bytes(ref.id), units=ref.units, limits=limits, source=ref.name, name=ref.name
-    )
+    data = store.clip_bytes(ref.id)
+    motion: Motion | None = None
+    head = bvh_first_frames(data, 1, ref.name)
+    if head is not None:
+        try:
+            motion = parse_bvh(head, units=ref.units, limits=limits, source=ref.name, name=ref.name)
+        except BvhError:
+            motion = None  # e.g. blank lines before the first frame: read it all
+    if motion is None:
+        motion = parse_bvh(data, units=ref.units, limits=limits, source=ref.name, name=ref.name)
     return (zero_pose(motion) if rest == RestPose.zero else motion.slice(0, 1)), None
 
 

@@ -54,6 +54,8 @@ def _clip(store: Store, request: dict[str, Any]) -> dict[str, Any]:
         info = store.put_clip(str(request["name"]), data, limits, request.get("units"))
     except MotionError as exc:
         raise TaskFailure(400, "invalid_bvh", str(exc)) from None
+    finally:
+        store.delete_staged(key)
     return {"clip": info.model_dump(mode="json")}
 
 

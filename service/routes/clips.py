@@ -5,7 +5,6 @@ from __future__ import annotations
 from enum import StrEnum
 from typing import Annotated
 
-import anyio
 from fastapi import APIRouter, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
@@ -13,11 +12,12 @@ from motion.samples import upload_units
 from motion.units import METRES_PER_UNIT
 from schemas import ClipInfo
 
-from ..deps import ParseLimiterDep, PrincipalDep, SettingsDep, StoreDep
+from ..deps import BackendDep, MetricsDep, ParseLimiterDep, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, responses
 from ..jsonbody import delete_route
 from ..owners import clip_for, hold, only_visible, release
-from ..uploads import read_upload, stored, upload_body
+from ..tasks import TaskRunnerDep
+from ..uploads import parse_upload, read_upload, stored, upload_body
 
 router = APIRouter(prefix="/v1/clips", tags=["clips"])
 
@@ -47,6 +47,9 @@ async def upload_clip(
     request: Request,
     response: Response,
     store: StoreDep,
+    backend: BackendDep,
+    metrics: MetricsDep,
+    runner: TaskRunnerDep,
     settings: SettingsDep,
     limiter: ParseLimiterDep,
     principal: PrincipalDep,
@@ -55,7 +58,8 @@ async def upload_clip(
         UnitName | None, Query(description="declared length unit (default: guessed from the height)")
     ] = None,
 ) -> ClipInfo:
-    """Upload a BVH clip; it is parsed and checked against the frame and joint limits.
+    """Upload a BVH clip; it is parsed and checked against the frame and joint limits (its header
+    here, a large clip's frames by a worker: the answer waits for it).
 
     A bundled sample's own file (as ``GET /samples`` serves it) is read in the unit the sample
     catalogue declares unless ``units`` says otherwise. Stored once per content hash: 201 for a
@@ -65,14 +69,9 @@ async def upload_clip(
     file_name, data = await read_upload(request, settings.max_upload_bytes, name)
     existing = await run_in_threadpool(stored, store.clip_info, data)
     if existing is None:
-        # parsing is the expensive, memory-hungry part: a bounded number at once, off the event loop
-        existing = await anyio.to_thread.run_sync(
-            store.put_clip,
-            file_name,
-            data,
-            settings.bvh_limits,
-            units.value if units is not None else upload_units(file_name, data),
-            limiter=limiter,
+        unit = units.value if units is not None else upload_units(file_name, data)
+        existing = await parse_upload(
+            file_name, data, unit, settings.bvh_limits, store, backend, metrics, runner, limiter
         )
     elif units is not None and units.value != existing.units:
         raise ApiError(
