@@ -146,13 +146,13 @@ class Sampler(threading.Thread):
         self.proc, self.abort = proc, abort
         self.peak = 0
         self.aborted = False
-        self._stop = threading.Event()
+        self._halt = threading.Event()
 
     def reset(self) -> None:
         self.peak = rss_bytes(self.proc.pid)
 
     def run(self) -> None:
-        while not self._stop.wait(0.02):
+        while not self._halt.wait(0.02):
             rss = rss_bytes(self.proc.pid)
             self.peak = max(self.peak, rss)
             if rss > self.abort and not self.aborted:
@@ -160,7 +160,7 @@ class Sampler(threading.Thread):
                 self.proc.kill()
 
     def stop(self) -> None:
-        self._stop.set()
+        self._halt.set()
 
 
 class Prober(threading.Thread):
@@ -171,7 +171,7 @@ class Prober(threading.Thread):
         self.url, self.database = url, database
         self.latencies: list[float] = []
         self.errors: dict[str, int] = {}
-        self._stop = threading.Event()
+        self._halt = threading.Event()
 
     def run(self) -> None:
         body = {
@@ -181,7 +181,7 @@ class Prober(threading.Thread):
             "budget_s": 0.2,
         }
         with httpx.Client(base_url=self.url, headers=auth("bob"), timeout=300) as client:
-            while not self._stop.wait(0.5):
+            while not self._halt.wait(0.5):
                 t0 = time.perf_counter()
                 try:
                     r = client.post("/v1/jobs", json=body)
@@ -195,7 +195,7 @@ class Prober(threading.Thread):
                     self.errors[str(r.status_code)] = self.errors.get(str(r.status_code), 0) + 1
 
     def stop(self) -> None:
-        self._stop.set()
+        self._halt.set()
 
 
 def auth(who: str) -> dict[str, str]:
