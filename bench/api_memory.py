@@ -217,6 +217,7 @@ def main() -> None:
     parser.add_argument("--root", type=Path, default=ROOT, help="the checkout whose code runs")
     parser.add_argument("--rss-abort-mb", type=float, default=2500, help="stop the server past this RSS")
     parser.add_argument("--timeout", type=float, default=300, help="seconds per request")
+    parser.add_argument("--only", help="comma-separated steps to run (default: all, in order)")
     args = parser.parse_args()
     out: dict[str, Any] = {"root": str(args.root), "steps": {}}
     with tempfile.TemporaryDirectory(prefix="segue-apimem-") as tmp:
@@ -314,8 +315,12 @@ def run(
     cpu0 = cpu_seconds(proc.pid)
     overall_peak = 0
 
+    only = set(args.only.split(",")) if args.only else None
+
     def step(name: str, calls: list[Any]) -> None:
         nonlocal overall_peak
+        if only is not None and name not in only:
+            return
         if sampler.aborted or proc.poll() is not None:
             out["steps"][name] = {"skipped": "the server was stopped"}
             return

@@ -9,6 +9,8 @@ answer is streamed from the store in chunks, so the API's memory does not grow w
 
 from __future__ import annotations
 
+import contextlib
+import os
 from collections.abc import Iterator
 from typing import BinaryIO
 
@@ -93,12 +95,8 @@ def _headers(spec: ExportSpec, fh: BinaryIO | None = None) -> dict[str, str]:
     filename = f"segue-{spec.job}-{spec.result}.{spec.format.value}"
     headers = {"Content-Disposition": f'attachment; filename="{filename}"'}
     if fh is not None:
-        try:
-            import os
-
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # not a file: sent chunked
             headers["Content-Length"] = str(os.fstat(fh.fileno()).st_size)
-        except (OSError, ValueError, AttributeError):
-            pass
     return headers
 
 

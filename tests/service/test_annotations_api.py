@@ -85,3 +85,18 @@ def test_a_correction_builds_a_new_database_with_the_label(
     assert walk == [{"label": "walk", "start": 20, "end": 50, "value": -1}]
     again = client.post(f"/v1/databases/{db}/corrections", json=fixes)
     assert again.status_code == 200 and again.json()["id"] == new["id"]  # same content address
+
+
+def test_corrections_count_against_the_job_quota(
+    client: TestClient, annotated_db: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    quota = client.app.state.job_quota  # type: ignore[attr-defined]
+    monkeypatch.setattr(quota, "limit", 0)  # every principal is at its limit of unfinished jobs
+    fixes = [{"clip": "follower", "start": 3, "end": 9, "label": "turn", "value": 1}]
+    r = client.post(f"/v1/databases/{annotated_db['id']}/corrections", json=fixes)
+    assert r.status_code == 429 and r.json()["error"]["code"] == "too_many_jobs", r.text
+    monkeypatch.setattr(quota, "limit", 1_000)
+    built = client.post(f"/v1/databases/{annotated_db['id']}/corrections", json=fixes)
+    assert built.status_code == 202, built.text
+    assert built.json()["build_job"] in set().union(*quota._open.values())
+    _ready(client, built)
