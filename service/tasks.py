@@ -87,6 +87,11 @@ class TaskRunner:
             headers=headers,
         )
 
+    async def idle(self) -> None:
+        """Wait until every small job this runner started has ended and been removed."""
+        while self._drivers:
+            await asyncio.gather(*self._drivers, return_exceptions=True)
+
     async def _drive(
         self,
         key: str,
