@@ -108,7 +108,7 @@ async def correct_labels(
     built = await create_from_spec(
         corrected, response, store, backend, metrics, principal, shared, settings.max_database_frames
     )
-    if built.build_job and response.status_code == status.HTTP_202_ACCEPTED:
+    if built.build_job and response.status_code != status.HTTP_200_OK:  # a build was queued (202)
         quota.add(principal.name, built.build_job)
     return built
 

@@ -156,7 +156,7 @@ async def create_database(
         max_frames=settings.max_database_frames,
         work_limits=(settings.max_build_cpu_s, float(settings.max_job_memory_mb)),
     )
-    if info.build_job and response.status_code == status.HTTP_202_ACCEPTED:
+    if info.build_job and response.status_code != status.HTTP_200_OK:  # a build was queued (202)
         quota.add(principal.name, info.build_job)
     return await run_in_threadpool(with_summary, request.app.state, store, info)
 
