@@ -49,42 +49,31 @@ TOKENS = {"alice": "alice-token-0123456789", "bob": "bob-token-0123456789"}
 
 # -- inputs ---------------------------------------------------------------------------------------
 def hostile_bvh(frames: int = 1_900_000) -> bytes:
-    """A 21-joint humanoid whose every frame is zeros, gzip-compressed (~1 MB for 1.9M frames)."""
-    limbs = [
-        ["Spine", "Chest", "Neck", "Head"],
-        ["LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase"],
-        ["RightUpLeg", "RightLeg", "RightFoot", "RightToeBase"],
-        ["LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand"],
-        ["RightShoulder", "RightArm", "RightForeArm", "RightHand"],
-    ]
-    offsets = {"Spine": (0, 10, 0), "LeftUpLeg": (9, 0, 0), "RightUpLeg": (-9, 0, 0)}
-    offsets |= {"LeftShoulder": (5, 40, 0), "RightShoulder": (-5, 40, 0)}
-    step = {"Spine": (0, 12, 0), "Left": (0, -42, 0), "Right": (0, -42, 0)}
+    """A 21-joint humanoid (cm) standing still for ``frames`` frames, gzip-compressed: ~1 MB for
+    1.9M frames (~250 MB of text, under the default 256 MB inflate cap)."""
+    limbs = {  # first joint's offset from the hips, then each next joint's from its parent
+        ("Spine", "Chest", "Neck", "Head"): ((0, 10, 0), (0, 15, 0)),
+        ("LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase"): ((9, 0, 0), (0, -42, 0)),
+        ("RightUpLeg", "RightLeg", "RightFoot", "RightToeBase"): ((-9, 0, 0), (0, -42, 0)),
+        ("LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand"): ((5, 45, 0), (15, 0, 0)),
+        ("RightShoulder", "RightArm", "RightForeArm", "RightHand"): ((-5, 45, 0), (-15, 0, 0)),
+    }
     lines = ["HIERARCHY", "ROOT Hips", "{", "  OFFSET 0 0 0"]
     lines.append("  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation")
     channels = 6
-    for limb in limbs:
-        depth = 0
-        for i, joint in enumerate(limb):
-            off = offsets.get(joint) if i == 0 else step["Spine" if limb[0] == "Spine" else "Left"]
-            if i > 0 and "Shoulder" in limb[0]:
-                off = (15 if "Left" in joint else -15, 0, 0)
-            pad = "  " * (depth + 1)
+    for joints, (first, step) in limbs.items():
+        for depth, joint in enumerate(joints, start=1):
+            pad, off = "  " * depth, first if depth == 1 else step
             lines += [f"{pad}JOINT {joint}", f"{pad}{{", f"{pad}  OFFSET {off[0]} {off[1]} {off[2]}"]
             lines.append(f"{pad}  CHANNELS 3 Zrotation Xrotation Yrotation")
             channels += 3
-            depth += 1
-        pad = "  " * (depth + 1)
+        pad = "  " * (len(joints) + 1)
         lines += [f"{pad}End Site", f"{pad}{{", f"{pad}  OFFSET 0 5 0", f"{pad}}}"]
-        for d in range(depth, 0, -1):
-            lines.append("  " * d + "}")
+        lines += ["  " * depth + "}" for depth in range(len(joints), 0, -1)]
     lines += ["}", "MOTION", f"Frames: {frames}", "Frame Time: 0.0083333"]
     head = ("\n".join(lines) + "\n").encode()
     row = b"0 95 0 " + b"0 " * (channels - 4) + b"0\n"
-    gz = gzip.compress(head, 9)
-    block = row * 10_000
-    body = gzip.compress(block * (frames // 10_000), 9)
-    return gz + body
+    return gzip.compress(head, 9) + gzip.compress(row * frames, 9)
 
 
 def hostile_midi(events: int = 2_800_000) -> bytes:
