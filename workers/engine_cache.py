@@ -7,7 +7,7 @@ under ``max_bytes``, so what a process holds depends on the sizes of the databas
 how many jobs ran before: a job's memory limit is met or not whatever earlier jobs used. A database
 larger than the whole bound is loaded for its job and not kept.
 
-The weight of an engine is its database's array bytes (the manifest's total), not a measurement of
+The weight of an engine is its database's array bytes (``nbytes`` summed), not a measurement of
 the engine's objects: it is known before loading, the same in every process, and an upper bound on
 the mapped part (the part an engine derives, e.g. float64 copies of float32 arrays, is of the same
 order).
