@@ -27,10 +27,10 @@ import redis
 
 import tests.workers.scripted_engine  # noqa: F401  (registers the scripted engine in this process)
 from motion.samples import sample_path
-from tests.s3server import aws_environment, moto_server, new_bucket
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobInfo, JobStatus
 from schemas.databases import database_id, parse_database_spec
 from schemas.jobs import JobKind
+from tests.s3server import aws_environment, moto_server, new_bucket
 from workers.execute import EngineCache, execute_job
 from workers.redis_worker import run_worker
 from workers.settings import Settings

@@ -86,9 +86,8 @@ def test_unreachable_store_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> 
     monkeypatch.setenv("AWS_DEFAULT_REGION", "us-east-1")
     store = open_objects("s3://nowhere/p")
     assert isinstance(store, S3Objects)
-    from botocore.config import Config
-
     import boto3
+    from botocore.config import Config
 
     store._client = boto3.client("s3", config=Config(retries={"max_attempts": 1}, connect_timeout=1))
     with pytest.raises(StoreUnavailable, match="unreachable"):
