@@ -202,7 +202,8 @@ class Store:
             created_at=now(),
         )
         self.objects.put(f"clips/{digest}.bvh", data)
-        self.objects.put(key, info.model_dump_json().encode())
+        if not self.objects.put(key, info.model_dump_json().encode(), if_absent=True):
+            return ClipInfo.model_validate_json(self.objects.get(key))  # a concurrent upload won
         return info
 
     def clip_info(self, clip_id: str) -> ClipInfo:
@@ -411,7 +412,8 @@ class Store:
             id=digest, name=name, size_bytes=len(data), media_type=_media_type(data), created_at=now()
         )
         self.objects.put(f"files/{digest}.bin", data)
-        self.objects.put(key, info.model_dump_json().encode())
+        if not self.objects.put(key, info.model_dump_json().encode(), if_absent=True):
+            return FileInfo.model_validate_json(self.objects.get(key))  # a concurrent upload won
         return info
 
     def delete_file(self, file_id: str) -> None:

@@ -30,7 +30,6 @@ from motion.samples import sample_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobInfo, JobStatus
 from schemas.databases import database_id, parse_database_spec
 from schemas.jobs import JobKind
-from tests.s3server import aws_environment, moto_server, new_bucket
 from workers.execute import EngineCache, execute_job
 from workers.redis_worker import run_worker
 from workers.settings import Settings
@@ -137,20 +136,6 @@ def rclient(redis_url: str) -> Iterator[redis.Redis]:
 @pytest.fixture
 def store(tmp_path: Path) -> Store:
     return Store(tmp_path / "data")
-
-
-@pytest.fixture(scope="session")
-def s3_endpoint() -> Iterator[str]:
-    """A ``moto_server`` (a real S3-protocol server) for the session, with the standard AWS
-    variables pointing at it (so spawned workers find it as a deployment's would)."""
-    with moto_server() as endpoint, aws_environment(endpoint):
-        yield endpoint
-
-
-@pytest.fixture
-def s3_url(s3_endpoint: str) -> str:
-    """``s3://<a fresh bucket>/segue``: a test's own empty object store."""
-    return f"s3://{new_bucket(s3_endpoint)}/segue"
 
 
 @pytest.fixture
