@@ -147,6 +147,9 @@ class LazyArrays(Mapping[str, npt.NDArray[Any]]):
             self._loaded[name] = self._load(name)
         return self._loaded[name]
 
+    def __contains__(self, name: object) -> bool:
+        return name in self.manifest.files  # without reading the array
+
     def __iter__(self) -> Iterator[str]:
         return iter(self.manifest.files)
 
