@@ -33,6 +33,7 @@ The cost of boto3 is its size (botocore is about 30 MB unpacked), which is why i
 
 from __future__ import annotations
 
+import builtins
 import contextlib
 import os
 import re
@@ -87,6 +88,11 @@ class Objects(Protocol):
 
     def list(self, prefix: str) -> list[str]:
         """Keys directly or indirectly under ``prefix`` + ``/``, sorted."""
+        ...
+
+    def children(self, prefix: str) -> builtins.list[str]:
+        """Names directly under ``prefix`` + ``/`` (the next key part: objects and sub-prefixes),
+        sorted: one listing call however many objects lie deeper."""
         ...
 
     def exists(self, key: str) -> bool: ...
@@ -170,6 +176,12 @@ class LocalObjects:
             if p.is_file() and not p.name.startswith("."):
                 out.append(p.relative_to(self.root).as_posix())
         return sorted(out)
+
+    def children(self, prefix: str) -> builtins.list[str]:
+        base = self._path(prefix)
+        if not base.is_dir():
+            return []
+        return sorted(p.name for p in base.iterdir() if not p.name.startswith("."))
 
     def exists(self, key: str) -> bool:
         return self._path(key).is_file()
@@ -282,6 +294,19 @@ class S3Objects:
             extra = {"ContinuationToken": token} if token else {}
             page = self._call("list_objects_v2", prefix, Prefix=full, **extra)
             out.extend(str(item["Key"])[strip:] for item in page.get("Contents", []))
+            if not page.get("IsTruncated"):
+                return sorted(out)
+            token = page.get("NextContinuationToken")
+
+    def children(self, prefix: str) -> builtins.list[str]:
+        full = self._key(prefix) + "/"
+        out: set[str] = set()
+        token: str | None = None
+        while True:
+            extra = {"ContinuationToken": token} if token else {}
+            page = self._call("list_objects_v2", prefix, Prefix=full, Delimiter="/", **extra)
+            out.update(str(p["Prefix"])[len(full) :].rstrip("/") for p in page.get("CommonPrefixes", []))
+            out.update(str(item["Key"])[len(full) :] for item in page.get("Contents", []))
             if not page.get("IsTruncated"):
                 return sorted(out)
             token = page.get("NextContinuationToken")

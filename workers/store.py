@@ -215,8 +215,9 @@ class Store:
 
     def _infos_under(self, kind: str) -> list[bytes]:
         out = []
-        for key in self.objects.list(kind):
-            if key.endswith(".json"):
+        for name in self.objects.children(kind):
+            key = f"{kind}/{name}"
+            if name.endswith(".json"):
                 try:
                     out.append(self._immutable(key, key))
                 except NotFoundError:  # deleted since the listing
@@ -297,12 +298,11 @@ class Store:
 
     def list_databases(self) -> list[DatabaseInfo]:
         out = []
-        for key in self.objects.list("databases"):
-            if key.count("/") == 2 and key.endswith("/info.json"):
-                try:
-                    out.append(DatabaseInfo.model_validate_json(self.objects.get(key)))
-                except ObjectNotFound:
-                    continue
+        for db_id in self.objects.children("databases"):
+            try:
+                out.append(DatabaseInfo.model_validate_json(self.objects.get(f"databases/{db_id}/info.json")))
+            except (ObjectNotFound, ValueError):  # being written or deleted, or not an id
+                continue
         return sorted(out, key=lambda i: i.created_at)
 
     def put_database_arrays(self, db_id: str, arrays: Mapping[str, Any] | bytes) -> None:
@@ -481,12 +481,11 @@ class Store:
     def list_jobs(self) -> list[JobInfo]:
         """Every job, oldest first."""
         out = []
-        for key in self.objects.list("jobs"):
-            if key.count("/") == 2 and key.endswith("/info.json"):
-                try:
-                    out.append(JobInfo.model_validate_json(self.objects.get(key)))
-                except ObjectNotFound:
-                    continue
+        for job_id in self.objects.children("jobs"):
+            try:
+                out.append(JobInfo.model_validate_json(self.objects.get(f"jobs/{job_id}/info.json")))
+            except (ObjectNotFound, ValueError):  # being written or deleted, or not an id
+                continue
         return sorted(out, key=lambda i: i.created_at)
 
     def delete_job(self, job_id: str) -> None:

@@ -33,6 +33,11 @@ def test_put_get_list_delete(objects: Objects, tmp_path: Path) -> None:
     assert objects.get("jobs/j1/info.json") == b"replaced"
     assert objects.list("jobs") == ["jobs/j1/info.json", "jobs/j1/results/r1.npz", "jobs/j2/info.json"]
     assert objects.list("jobs/j1") == ["jobs/j1/info.json", "jobs/j1/results/r1.npz"]
+    assert objects.children("jobs") == ["j1", "j2"] and objects.children("jobs/j1") == [
+        "info.json",
+        "results",
+    ]
+    assert objects.children("nothing") == []
     assert objects.download("jobs/j1/results/r1.npz", tmp_path / "dl" / "r1.npz") == 1000
     assert (tmp_path / "dl" / "r1.npz").read_bytes() == b"\x00" * 1000
     objects.delete_prefix("jobs/j1")
