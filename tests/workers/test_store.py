@@ -121,3 +121,9 @@ def test_an_object_store_is_cached_on_disk_and_evicted_by_bytes(s3_url: str, tmp
     with pytest.raises(NotFoundError):
         worker.database_dir("d1")
     assert not (tmp_path / "api" / "cache").exists()
+
+
+def test_any_valid_id_is_a_plain_miss(any_store: Store) -> None:
+    for lookup in (any_store.job_info, any_store.database_info, any_store.clip_info, any_store.delete_job):
+        with pytest.raises(NotFoundError):
+            lookup("__main__")
