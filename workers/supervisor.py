@@ -3,7 +3,7 @@ starve, and budgets, cancels and memory enforced from outside the engine.
 
 An :class:`EngineProcess` is one long-lived child process (``spawn``) that runs one job at a time
 with :func:`workers.execute.execute_job` and sends its events back over a pipe; it keeps its
-:class:`~workers.execute.EngineCache` between jobs. The owner (the embedded backend in the API
+:class:`~workers.engine_cache.EngineCache` between jobs. The owner (the embedded backend in the API
 process, or a ``segue worker``) gives it a :class:`Task`; a watch thread of the owner relays the
 child's events (``on_event``) and calls ``on_end`` once per task with an :data:`Outcome`:
 
