@@ -8,7 +8,8 @@ COPY schemas schemas
 COPY service service
 COPY workers workers
 COPY web web
-RUN pip install --no-cache-dir .
+# the s3 extra: boto3, for SEGUE_STORE_URL=s3://... (MinIO in docker-compose.yml)
+RUN pip install --no-cache-dir ".[s3]"
 # the control engine's compiled kernels, compiled once into the image (numba keys them by the
 # installed sources): no container pays the ~15 CPU-s compile on its first job
 ENV NUMBA_CACHE_DIR=/opt/segue/numba

@@ -17,7 +17,8 @@ This module, :mod:`engines.registry` and the package itself are all the service 
 engines (``tests/test_layering.py``): what a route needs of a database beyond running jobs goes
 through the small query API of :class:`Engine` -- :meth:`Engine.clip_labels` and
 :meth:`Engine.corrected_spec` read a few arrays of a lazily opened database file
-(:func:`open_database`), and :meth:`Engine.live_session` starts a :class:`LiveSession`.
+(:func:`open_database`, :mod:`engines.container`), and :meth:`Engine.live_session` starts a
+:class:`LiveSession`.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from motion.quality import QualityInputs, QualityReport, assess
 from schemas.annotations import ClipLabels, LabelCorrection
 from schemas.bases import DatabaseSpecBase
 
+from . import container
 from .library import MotionLibrary, library_from_arrays
 
 Arrays = dict[str, npt.NDArray[Any]]
@@ -59,14 +61,26 @@ class BuildWork:
 
 
 @contextmanager
-def open_database(path: str | Path) -> Iterator[DatabaseArrays]:
-    """The arrays of a database file (``data.npz``), each read from the file only when indexed.
+def open_database(path: str | Path | DatabaseArrays) -> Iterator[DatabaseArrays]:
+    """The arrays of a built database, each read only when indexed.
 
-    An ``.npz`` is a zip of ``.npy`` members, so a query that needs a few small arrays (clip names,
-    frame counts, labels) reads those and leaves the motion and the engine's tables on disk.
-    Raises ``OSError`` when the file cannot be read.
+    ``path`` is a database directory (``arrays.json`` + one ``.npy`` per array,
+    :mod:`engines.container`: large arrays are memory-mapped), a legacy ``data.npz`` file (a zip of
+    ``.npy`` members: indexing reads that member) or a directory holding one, or a mapping of
+    arrays already opened (e.g. by the store, from an object store), passed through. A query that
+    needs a few small arrays (clip names, frame counts, labels) reads those and leaves the motion
+    and the engine's tables where they are. Raises ``OSError`` when nothing can be read.
     """
-    with np.load(Path(path), allow_pickle=False) as arrays:
+    if isinstance(path, Mapping):
+        yield path
+        return
+    p = Path(path)
+    if p.is_dir() and (p / container.MANIFEST).is_file():
+        yield container.open_arrays(p)
+        return
+    if p.is_dir():
+        p = p / "data.npz"
+    with np.load(p, allow_pickle=False) as arrays:
         yield arrays
 
 

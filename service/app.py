@@ -28,7 +28,7 @@ from schemas.jobs import JobRequest
 from schemas.rhythm_graph import GraphEdits
 from workers.backend import JobBackend
 from workers.embedded import EmbeddedBackend
-from workers.execute import EngineCache
+from workers.engine_cache import EngineCache
 from workers.store import Store
 
 from .errors import install_error_handlers
@@ -72,7 +72,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     """Start the store and the backend; stop the backend at shutdown."""
     settings: Settings = app.state.settings
     load_plugins(settings.engine_plugins)  # the engine processes get them from the settings too
-    store = Store(settings.data_dir)
+    store = Store.from_settings(settings)
     backend = make_backend(settings, store)
     observe_terminal_events(backend.hub, app.state.metrics, since=time.time())
     app.state.job_quota = JobQuota(store, settings.max_queued_jobs)
@@ -128,7 +128,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.metrics = Metrics()
     app.state.backend = None
     app.state.session_quota = SessionQuota(settings.max_sessions)
-    app.state.engines = EngineCache(capacity=4)  # live sessions' engines (the only ones loaded here)
+    # live sessions' engines (the only ones loaded here)
+    app.state.engines = EngineCache(settings.engine_cache_mb << 20)
     install_error_handlers(app)
     for module in (
         clips,

@@ -22,7 +22,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.requests import HTTPConnection
 
 from workers.backend import JobBackend
-from workers.execute import EngineCache
+from workers.engine_cache import EngineCache
 from workers.store import Store
 
 from .errors import ApiError, unauthorized

@@ -8,7 +8,6 @@ with ``Retry-After``: no job is left ``queued`` that nothing will run.
 
 from __future__ import annotations
 
-import shutil
 import uuid
 from typing import Any
 
@@ -66,7 +65,7 @@ async def submit_job(
     try:
         submitted = await backend.submit(info, kind.value, payload)
     except BackendUnavailable as exc:
-        shutil.rmtree(store.job_dir(info.id), ignore_errors=True)
+        store.discard_job(info.id)
         metrics.inc("segue_jobs_refused_total", reason="backend_unavailable")
         raise unavailable(exc) from None
     metrics.inc("segue_jobs_submitted_total", kind=kind.value)

@@ -222,13 +222,11 @@ class DatabaseFacts:
     joint_names: tuple[str, ...] = ()
 
 
-@cached(LRUCache(maxsize=256), lock=threading.Lock())
-def database_facts(npz_path: str) -> DatabaseFacts:
-    """Read the facts from a database's ``data.npz`` (only the small arrays are loaded; a built
-    database never changes, so the last 256 are kept)."""
-    import numpy as np
-
-    with np.load(npz_path, allow_pickle=False) as z:
+@cached(LRUCache(maxsize=256), key=lambda store, db_id: (store.url, db_id), lock=threading.Lock())
+def database_facts(store: Any, db_id: str) -> DatabaseFacts:
+    """Read the facts from a database of ``store`` (a :class:`~workers.store.Store`; only the small
+    arrays are read; a built database never changes, so the last 256 are kept)."""
+    with store.open_database(db_id) as z:
         names = [str(n) for n in z["library.names"]]
         counts = [int(c) for c in z["library.frame_counts"]]
         fps = float(z["library.fps"])
@@ -256,7 +254,7 @@ def shortfall(store: Any, job_id: str, payload: dict[str, Any], result: str | No
         request = parse_job_request(request_data)
         if request.database is None:
             return None
-        facts = database_facts(str(store.db_dir(request.database) / "data.npz"))
+        facts = database_facts(store, request.database)
         wanted = expected_frames(request, facts.fps, facts.clip_frames)
         got = store.result_report(job_id, result).frames
     except Exception:  # a flag is a courtesy: never fail a finished job over it

@@ -64,7 +64,8 @@ class EmbeddedBackend:
             build_timeout_s=settings.build_timeout_s,
             max_rss_bytes=settings.max_rss_bytes,
             plugins=settings.engine_plugins,
-            engine_cache=settings.engine_cache,
+            engine_cache_bytes=settings.engine_cache_mb << 20,
+            load_timeout_s=settings.load_timeout_s,
         )
 
     def __init__(
@@ -78,10 +79,12 @@ class EmbeddedBackend:
         build_timeout_s: float = 3600.0,
         max_rss_bytes: int | None = None,
         plugins: str | None = None,
-        engine_cache: int = 4,
+        engine_cache_bytes: int = 2048 << 20,
+        load_timeout_s: float | None = 300.0,
     ) -> None:
         self.store = store
-        self.plugins, self.engine_cache = plugins, engine_cache
+        self.plugins, self.engine_cache_bytes = plugins, engine_cache_bytes
+        self.load_timeout_s = load_timeout_s
         self.workers = max(1, workers)
         self.max_attempts = max_attempts
         self.cancel_grace_s, self.time_grace_s = cancel_grace_s, time_grace_s
@@ -98,9 +101,11 @@ class EmbeddedBackend:
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
         config = ChildConfig(
-            store_root=str(self.store.root),
+            store_root=self.store.url,
             plugins=engine_plugins(self.plugins),
-            engine_cache=self.engine_cache,
+            engine_cache_bytes=self.engine_cache_bytes,
+            cache_dir=str(self.store.root),
+            disk_cache_bytes=self.store.cache.max_bytes,
         )
         for i in range(self.workers):
             process = EngineProcess(
@@ -110,6 +115,7 @@ class EmbeddedBackend:
                 self._on_end,
                 cancel_grace_s=self.cancel_grace_s,
                 max_rss_bytes=self.max_rss_bytes,
+                load_timeout_s=self.load_timeout_s,
                 on_ready=self._on_ready,
                 spawner=self._on_loop,
             )
@@ -272,9 +278,7 @@ class EmbeddedBackend:
             return None  # exactly one terminal event, nothing after it
         event = self.hub.make_event(job_id, type_, data, when)
         await self.hub.append(event)
-        job_dir = self.store.job_dir(job_id)
-        with open(job_dir / "events.jsonl", "a", encoding="utf-8") as fh:
-            fh.write(event.model_dump_json() + "\n")
+        self.store.append_event(job_id, event.model_dump_json())
         info = apply_event(self.store.job_info(job_id), type_, data, event.id)
         self.store.put_job(info)
         return event
@@ -329,11 +333,7 @@ class EmbeddedBackend:
             await self.hub.append(event)
 
     def _archived(self, job_id: str) -> list[JobEvent]:
-        path = self.store.job_dir(job_id) / "events.jsonl"
-        if not path.exists():
-            return []
-        lines = path.read_text(encoding="utf-8").splitlines()
-        return [JobEvent.model_validate(json.loads(line)) for line in lines if line.strip()]
+        return [JobEvent.model_validate(json.loads(line)) for line in self.store.events(job_id)]
 
     async def events(self, job_id: str, after: int = 0) -> AsyncIterator[JobEvent]:
         await self.status(job_id)  # NotFoundError for unknown jobs

@@ -9,12 +9,10 @@ writes files through the :class:`~workers.store.Store`; job status is a fold ove
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from collections.abc import Callable
 from typing import Any
 
-from cachetools import LRUCache, cachedmethod
 from pydantic import ValidationError
 
 from engines.base import Engine, EngineError, Solution, Stopped, foot_floor_arrays
@@ -28,14 +26,18 @@ from schemas.bases import DatabaseSpecBase, JobRequestBase
 from schemas.databases import parse_database_spec
 from schemas.jobs import parse_job_request
 
+from .engine_cache import EngineCache as EngineCache  # re-exported: where it lived before
+from .engine_cache import OpenArrays
 from .inputs import InputError, attach_from_store
-from .store import NotFoundError, Store, load_npz, now, npz_bytes
+from .store import NotFoundError, Store, now, npz_bytes
 
 log = logging.getLogger("segue.worker")
 
 Publish = Callable[[EventType, dict[str, Any]], None]
 ShouldStop = Callable[[], bool]
-LoadDatabaseBytes = Callable[[str], bytes]
+OnLoad = Callable[[bool], None]
+"""``on_load(True)`` before a job loads its database, ``on_load(False)`` after (the supervisor times
+the load apart from the job's budget)."""
 
 
 class JobFailure(Exception):
@@ -45,29 +47,6 @@ class JobFailure(Exception):
         super().__init__(message)
         self.code = code
         self.message = message
-
-
-def _engine_key(
-    cache: EngineCache, db_id: str, engine_cls: type[Engine], load_bytes: LoadDatabaseBytes
-) -> tuple[str, str]:
-    return db_id, engine_cls.name
-
-
-class EngineCache:
-    """Loaded engines by database id and engine, the least recently used evicted (one per process:
-    each engine process, and the API process for live sessions).
-
-    ``get`` loads an engine on a miss with ``load_bytes(db_id)`` (the database's ``data.npz`` bytes);
-    it is safe to call from several threads (two misses of one key may both load)."""
-
-    def __init__(self, capacity: int = 4) -> None:
-        self.capacity = capacity
-        self._engines: LRUCache[tuple[str, str], Engine] = LRUCache(maxsize=capacity)
-        self._lock = threading.Lock()
-
-    @cachedmethod(lambda self: self._engines, key=_engine_key, lock=lambda self: self._lock)
-    def get(self, db_id: str, engine_cls: type[Engine], load_bytes: LoadDatabaseBytes) -> Engine:
-        return engine_cls.load(load_npz(load_bytes(db_id)))
 
 
 SaveResult = Callable[[str, Motion, Report], None]
@@ -179,9 +158,10 @@ def execute_job(
     publish: Publish,
     should_stop: ShouldStop,
     cache: EngineCache,
-    load_database_bytes: LoadDatabaseBytes | None = None,
-    save_database_bytes: Callable[[str, bytes], None] | None = None,
     attempt: int = 1,
+    *,
+    open_arrays: OpenArrays | None = None,
+    on_load: OnLoad | None = None,
 ) -> None:
     """Run a job to its terminal event (never raises for job-level problems).
 
@@ -194,16 +174,18 @@ def execute_job(
         Called with each event type and data, in order.
     should_stop:
         True once the job is cancelled (polled by the engine).
-    load_database_bytes, save_database_bytes:
-        Database array access (default: the store's files; the Redis backend adds its cache).
+    open_arrays:
+        A database's arrays by id (default: the store's, memory-mapped from its local copy).
+    on_load:
+        Told when loading the database starts (True) and ends (False).
     """
-    load = load_database_bytes or store.database_arrays_bytes
+    load = open_arrays or store.database_arrays
     publish(EventType.started, {})
     try:
         if kind == "build":
-            _build(store, payload["database"], publish, should_stop, save_database_bytes)
+            _build(store, payload["database"], publish, should_stop)
         elif kind == "synth":
-            _synth(store, job_id, payload["request"], publish, should_stop, cache, load, attempt)
+            _synth(store, job_id, payload["request"], publish, should_stop, cache, load, attempt, on_load)
         elif kind == "task":  # a small job for an API request (workers.tasks)
             from .tasks import run_task
 
@@ -222,7 +204,15 @@ def execute_job(
 def build_database_bytes(
     spec: DatabaseSpecBase, clips: list[ClipInput], publish: Publish, should_stop: ShouldStop
 ) -> tuple[bytes, MotionLibrary]:
-    """The npz bytes of a database (motion library + the kind's arrays), with progress events.
+    """:func:`build_database_arrays` as the bytes of one ``.npz`` (``segue build``'s folders)."""
+    arrays, library = build_database_arrays(spec, clips, publish, should_stop)
+    return npz_bytes(arrays), library
+
+
+def build_database_arrays(
+    spec: DatabaseSpecBase, clips: list[ClipInput], publish: Publish, should_stop: ShouldStop
+) -> tuple[dict[str, Any], MotionLibrary]:
+    """The arrays of a database (motion library + the kind's arrays), with progress events.
 
     Raises :class:`JobFailure` with code ``cancelled`` when stopped."""
     engine_cls = kind_class(spec.kind)
@@ -246,7 +236,7 @@ def build_database_bytes(
     publish(EventType.progress, {"fraction": 0.99, "message": "measuring the examples (quality reference)"})
     arrays.update(engine_cls.quality_reference_of(library, arrays).to_arrays())
     arrays.update(foot_floor_arrays(library, engine_cls.example_clips(library, arrays)))
-    return npz_bytes(arrays), library
+    return arrays, library
 
 
 def _build(
@@ -254,7 +244,6 @@ def _build(
     db_id: str,
     publish: Publish,
     should_stop: ShouldStop,
-    save: Callable[[str, bytes], None] | None,
 ) -> None:
     info = store.database_info(db_id)
     spec = parse_database_spec(store.database_spec(db_id))
@@ -271,10 +260,8 @@ def _build(
             # the spec's unit, else the clip's own (declared at upload, e.g. a bundled sample's, or guessed)
             units = source.units if source.units is not None else store.clip_info(source.clip).units
             clips.append(ClipInput(source.display_name(), store.clip_bytes(source.clip), units, labels))
-        data, library = build_database_bytes(spec, clips, publish, should_stop)
-        store.put_database_arrays(db_id, data)
-        if save is not None:
-            save(db_id, data)
+        arrays, library = build_database_arrays(spec, clips, publish, should_stop)
+        store.put_database_arrays(db_id, arrays)
     except JobFailure as exc:
         store.put_database_info(
             info.model_copy(update={"status": DatabaseStatus.failed, "error": exc.message})
@@ -335,8 +322,9 @@ def _synth(
     publish: Publish,
     should_stop: ShouldStop,
     cache: EngineCache,
-    load: LoadDatabaseBytes,
+    load: OpenArrays,
     attempt: int = 1,
+    on_load: OnLoad | None = None,
 ) -> None:
     request = parse_job_request(request_data)
     if request.database is None:
@@ -354,7 +342,13 @@ def _synth(
         attach_from_store(store, request)
     except InputError as exc:
         raise JobFailure("invalid_request", str(exc)) from None
-    engine = cache.get(request.database, engine_cls, load)
+    if on_load is not None:
+        on_load(True)
+    try:
+        engine = cache.get(request.database, engine_cls, load)
+    finally:
+        if on_load is not None:
+            on_load(False)
 
     def save(rid: str, motion: Motion, report: Report) -> None:
         store.put_result(job_id, rid, motion, report)

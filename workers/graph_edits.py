@@ -79,7 +79,7 @@ def derive(info: DatabaseInfo, arrays: Any, body: GraphEdits) -> tuple[DatabaseI
 def derive_in_store(store: Store, info: DatabaseInfo, body: GraphEdits) -> tuple[DatabaseInfo, bool]:
     """Derive from a ready database of the store; returns the derived database's info and whether
     it was created (False: the same edits of the same parent exist already, returned as they are)."""
-    arrays = load_npz(store.database_arrays_bytes(info.id))
+    arrays = store.database_arrays(info.id)
     derived, out = derive(info, arrays, body)
     try:
         existing = store.database_info(derived.id)
@@ -87,7 +87,7 @@ def derive_in_store(store: Store, info: DatabaseInfo, body: GraphEdits) -> tuple
             return existing, False
     except NotFoundError:
         pass
-    store.put_database_arrays(derived.id, npz_bytes(out))  # the data first: never a ready info without it
+    store.put_database_arrays(derived.id, out)  # the data first: never a ready info without it
     store.put_database_info(derived, store.database_spec(info.id))
     return store.database_info(derived.id), True
 

@@ -158,7 +158,7 @@ class RedisBackend:
     # -- jobs -------------------------------------------------------------------------------------
     async def submit(self, info: JobInfo, kind: str, payload: dict[str, Any]) -> JobInfo:
         client, publisher = self._redis()
-        self.store.job_dir(info.id)  # NotFoundError for an invalid id
+        self.store.check_id(info.id)  # NotFoundError for an invalid id
         try:
             if not await client.set(self.keys.job(info.id), info.model_dump_json(), nx=True):
                 return await self.status(info.id)  # submitted before: nothing to do
@@ -268,7 +268,7 @@ class RedisBackend:
 
     async def status(self, job_id: str) -> JobInfo:
         client, _ = self._redis()
-        self.store.job_dir(job_id)  # NotFoundError for an invalid id
+        self.store.check_id(job_id)  # NotFoundError for an invalid id
         try:
             raw = await client.get(self.keys.job(job_id))
         except (redis.ConnectionError, redis.TimeoutError):

@@ -37,7 +37,7 @@ from schemas import EventType, JobEvent, JobInfo
 
 from .execute import apply_event
 from .redis_keys import EVENTS_MAXLEN, RedisKeys
-from .store import NotFoundError, Store, _atomic_write
+from .store import NotFoundError, Store
 
 log = logging.getLogger("segue.redis")
 
@@ -75,7 +75,7 @@ def archive_events(store: Store, job_id: str, entries: Entries) -> None:
     """Write a job's events to the store's ``events.jsonl`` (atomically, whole file)."""
     lines = [decode_event(fields).model_dump_json() for _, fields in entries]
     try:
-        _atomic_write(store.job_dir(job_id) / "events.jsonl", ("\n".join(lines) + "\n").encode())
+        store.put_events(job_id, lines)
     except (OSError, NotFoundError):
         log.exception("could not archive the events of job %s", job_id)
 
@@ -83,14 +83,10 @@ def archive_events(store: Store, job_id: str, entries: Entries) -> None:
 def read_archive(store: Store, job_id: str) -> list[JobEvent]:
     """The events archived in the store (empty when there are none)."""
     try:
-        path = store.job_dir(job_id) / "events.jsonl"
+        lines = store.events(job_id)
     except NotFoundError:
         return []
-    if not path.exists():
-        return []
-    return [
-        JobEvent.model_validate(json.loads(line)) for line in path.read_text("utf-8").splitlines() if line
-    ]
+    return [JobEvent.model_validate(json.loads(line)) for line in lines]
 
 
 @dataclass(slots=True)

@@ -15,8 +15,8 @@ Queue (a Redis with ``maxmemory-policy noeviction``)::
 
 Cache (may be a separate Redis with ``allkeys-lru``; losing it only costs a reload from disk)::
 
-    segue:db:<id>:n              chunk count of the database's ``data.npz`` bytes
-    segue:db:<id>:<i>            chunk ``i`` (4 MiB each, the last one shorter)
+    segue:db:<key>:n             chunk count of a cached database object (``.npy`` bytes; key: its store key)
+    segue:db:<key>:<i>           chunk ``i`` (4 MiB each, the last one shorter)
 """
 
 from __future__ import annotations

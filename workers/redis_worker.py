@@ -23,8 +23,10 @@ Protocol (key names in :mod:`workers.redis_keys`):
   second ``started`` (its data names the worker and the attempt) and continues the same event ids.
 - **Cancel.** ``should_stop`` checks ``segue:cancel:<job>`` (and the terminal marker) at most every
   50 ms; :func:`workers.execute.execute_job` then publishes ``cancelled`` with the best result so far.
-- **Databases.** Loaded through the Redis cache (:mod:`workers.redis_cache`) falling back to the
-  store's ``data.npz``; loaded engines stay in a per-worker LRU (:class:`~workers.execute.EngineCache`).
+- **Databases.** Memory-mapped from the worker's local copy (:meth:`~workers.store.Store.database_dir`:
+  the store's own files when local, else downloaded once from the object store, small objects
+  through the Redis cache :mod:`workers.redis_cache`); loaded engines stay in a per-worker LRU
+  bounded by bytes (:class:`~workers.engine_cache.EngineCache`).
   A build takes ``segue:lock:build:<db>`` (``SET NX EX``); a second build of the same database waits
   for the lock, then reuses the ready database instead of building it again.
 - **Stopping.** SIGTERM/SIGINT: finish the current job, then exit. A second signal releases the job
@@ -57,7 +59,6 @@ from engines.registry import warm_compiled
 from schemas import DatabaseStatus, EventType
 
 from .budget import shortfall
-from .redis_cache import DatabaseCache
 from .redis_events import EventPublisher
 from .redis_keys import DEAD_MAXLEN, RedisKeys
 from .settings import Settings, get_settings, with_options
@@ -123,23 +124,23 @@ class Worker:
         self.settings = s = settings
         self.name = s.worker_name or default_name()
         self.keys = RedisKeys(s.redis_prefix)
-        self.store = Store(s.data_dir)
+        self.store = Store.from_settings(s)
         # blocking reads must end before the socket timeout (redis-py's default is 5 s)
         timeout = s.block_ms / 1000 + 5
         self.client = redis.Redis.from_url(redis_url, decode_responses=True, socket_timeout=timeout)
         cache_url = s.redis_cache_url or redis_url
         self.cache_client = redis.Redis.from_url(cache_url)
         self.publisher = EventPublisher(self.client, self.store, self.keys)
-        self.db_cache = DatabaseCache(
-            self.cache_client, self.store, self.keys, chunk_size=s.cache_chunk_bytes
-        )
         config = ChildConfig(
-            store_root=str(self.store.root),
+            store_root=self.store.url,
             plugins=engine_plugins(s.engine_plugins),
-            engine_cache=s.engine_cache,
+            engine_cache_bytes=s.engine_cache_mb << 20,
             cache_url=cache_url,
             prefix=s.redis_prefix,
             chunk_size=s.cache_chunk_bytes,
+            cache_dir=str(self.store.root),
+            disk_cache_bytes=s.disk_cache_mb << 20,
+            cache_max_object_bytes=s.cache_max_object_mb << 20,
         )
         self.engine = EngineProcess(
             self.name,
@@ -148,6 +149,7 @@ class Worker:
             self._relay_end,
             cancel_grace_s=s.cancel_grace_s,
             max_rss_bytes=s.max_rss_bytes,
+            load_timeout_s=s.load_timeout_s,
         )
         self._touch = self.client.register_script(_TOUCH_LUA)
         self._extend = self.client.register_script(_EXTEND_LUA)
@@ -383,7 +385,7 @@ class Worker:
             payload = json.loads(fields["payload"])
             if not isinstance(payload, dict):
                 raise ValueError("payload is not an object")
-            self.store.job_dir(job_id)  # validates the id
+            self.store.check_id(job_id)
         except (KeyError, ValueError, NotFoundError) as exc:
             self._dead_letter(entry_id, fields, deliveries, f"malformed job entry: {exc}")
             return
@@ -536,7 +538,7 @@ class Worker:
     def _database_ready(self, db_id: str) -> bool:
         try:
             ready = self.store.database_info(db_id).status == DatabaseStatus.ready
-            return ready and (self.store.db_dir(db_id) / "data.npz").exists()
+            return ready and self.store.has_database_arrays(db_id)
         except NotFoundError:
             return False
 
@@ -621,11 +623,14 @@ def run_worker(settings: Settings, stop: threading.Event | None = None) -> int:
     main thread); returns the number of jobs processed.
 
     The fields it reads (:class:`~workers.settings.Settings`): ``redis_url`` (the queue Redis,
-    ``noeviction``), ``data_dir`` (shared with the API), ``worker_name`` (default host-pid-random),
+    ``noeviction``), ``store_url`` (the store shared with the API; default ``data_dir``, then
+    shared through a volume), ``data_dir`` (with an object store: this worker's local cache),
+    ``worker_name`` (default host-pid-random),
     ``heartbeat_s`` / ``heartbeat_ttl_s`` (a worker silent for the TTL is dead), ``max_deliveries``,
     ``block_ms``, ``redis_prefix``, ``redis_cache_url`` (a separate ``allkeys-lru`` cache Redis),
-    ``cache_chunk_bytes``, ``reclaim_idle_s`` (the backstop for hung workers), ``engine_cache``,
-    the job limits (``job_grace_s``, ``cancel_grace_s``, ``max_job_memory_mb``) and
+    ``cache_chunk_bytes``, ``reclaim_idle_s`` (the backstop for hung workers), ``engine_cache_mb``,
+    ``disk_cache_mb``, ``load_timeout_s``, ``cache_max_object_mb``, the job limits
+    (``job_grace_s``, ``cancel_grace_s``, ``max_job_memory_mb``) and
     ``engine_plugins``.
     """
     from engines.registry import load_plugins

@@ -32,7 +32,18 @@ class Settings(BaseSettings):
 
     model_config = SettingsConfigDict(env_prefix="SEGUE_", extra="ignore", frozen=True)
 
-    data_dir: Path = Field(default=Path("./segue-data"), description="the store's root directory")
+    data_dir: Path = Field(
+        default=Path("./segue-data"),
+        description="the store's directory (when store_url is unset), and this process's local cache",
+    )
+    store_url: str | None = Field(
+        default=None,
+        description="where everything durable lives: a directory or s3://bucket/prefix (endpoint and "
+        "credentials from the standard AWS variables, AWS_ENDPOINT_URL for MinIO/Ceph); unset = data_dir",
+    )
+    disk_cache_mb: int = Field(
+        default=8192, ge=1, description="databases downloaded from an object store kept on local disk, MiB"
+    )
     redis_url: str | None = Field(default=None, description="Redis job backend; unset = embedded pool")
     workers: int = Field(default=2, ge=1, le=256, description="embedded backend: worker processes")
     api_tokens: Annotated[tuple[str, ...], NoDecode] = Field(
@@ -127,7 +138,20 @@ class Settings(BaseSettings):
         default=30.0, gt=0, description="entries not refreshed this long are taken over (hung workers)"
     )
     cache_chunk_bytes: int = Field(default=CHUNK_SIZE, ge=1, description="database cache chunk size")
-    engine_cache: int = Field(default=4, ge=1, le=256, description="loaded databases kept per process")
+    engine_cache_mb: int = Field(
+        default=2048,
+        ge=0,
+        description="loaded databases kept per engine process, MiB of their arrays (least recently "
+        "used dropped first; 0: keep none)",
+    )
+    load_timeout_s: float = Field(
+        default=300.0, gt=0, description="hard time limit of loading a job's database (not the job's budget)"
+    )
+    cache_max_object_mb: int = Field(
+        default=64,
+        ge=0,
+        description="database objects up to this size are also cached in Redis for other workers (0: none)",
+    )
     cancel_poll_s: float = Field(default=0.05, gt=0, description="how often a worker checks for a cancel")
     lock_ttl_s: float = Field(default=30.0, gt=0, description="a build lock's lifetime (refreshed)")
     hang_grace_s: float = Field(

@@ -1,22 +1,34 @@
-"""The durable store: clips, databases, jobs and results on disk (one directory tree).
+"""The durable store: clips, files, databases, jobs, events and results, in one object store.
 
-Layout under ``root``::
+The objects live in a local directory (the default) or an S3-compatible bucket
+(:mod:`workers.objects`, chosen by ``SEGUE_STORE_URL``); this class keeps the names and formats.
+Keys::
 
     clips/<sha256>.bvh            uploaded bytes (as uploaded, possibly gzip)
     clips/<sha256>.json           ClipInfo
     clips/<sha256>.owners         JSON list of the principals holding the clip (likewise files/,
                                   databases/<id>/owners): content-addressed things are shared, each
                                   holder sees and deletes only its own hold
+    files/<sha256>.bin|.json      other uploads (MIDI, audio) and their FileInfo
     databases/<id>/spec.json      the validated spec (clip references resolved to ids)
     databases/<id>/info.json      DatabaseInfo
-    databases/<id>/data.npz       motion library + kind-specific arrays (allow_pickle=False)
+    databases/<id>/arrays.json    manifest of the arrays (:mod:`engines.container`), written last
+    databases/<id>/arrays/*.npy   motion library + kind-specific arrays, one uncompressed .npy each
+    databases/<id>/data.npz       the same arrays as written before (read, and converted once)
     jobs/<id>/request.json        {"kind", "payload"}
     jobs/<id>/info.json           JobInfo
+    jobs/<id>/events.jsonl        the job's events (the backends' archive)
     jobs/<id>/results/<rid>.npz   result motion (motion.serialize arrays)
     jobs/<id>/results/<rid>.json  Report
+    jobs/<id>/exports/<name>      derived bytes of a result (exports), by whoever makes them
 
-Every write goes to a temporary file first and is renamed into place, so a crash or a concurrent
-reader never sees half a file, and nothing already stored is changed by a failed request.
+Every write replaces an object whole (atomically: a crash or a concurrent reader never sees half an
+object), and nothing already stored is changed by a failed request.
+
+A process's own disk is a cache only: an engine memory-maps a database from
+:meth:`Store.database_dir`, which for a local store is the database's own directory and for an
+object store a copy downloaded once into the process's cache directory, evicted by bytes
+(:class:`workers.dbcache.DiskCache`).
 """
 
 from __future__ import annotations
@@ -24,26 +36,32 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import os
-import shutil
-import tempfile
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, BinaryIO, Literal
 
 import numpy as np
 
+from engines import container
 from motion import Motion, MotionError
 from motion.bvh import BvhLimits, detect_units, parse_bvh
 from motion.serialize import motion_from_arrays, motion_to_arrays
 from schemas import ClipInfo, DatabaseInfo, JobInfo, Report
 from schemas.files import FileInfo
 
+from .dbcache import DiskCache, ObjectCache
+from .objects import LocalObjects, ObjectNotFound, Objects, atomic_write, open_objects
+
 Arrays = dict[str, Any]
 Owned = Literal["clips", "files", "databases"]
 Visible = Callable[[str], bool]
 """``visible(id)``: may the caller see the clip, file or database with this id (ownership filter)."""
+
+LEGACY_NPZ = "data.npz"
+DEFAULT_DISK_CACHE_BYTES = 8 << 30
 
 
 class NotFoundError(LookupError):
@@ -55,18 +73,10 @@ def now() -> datetime:
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(path, data)
 
 
-def npz_bytes(arrays: Arrays) -> bytes:
+def npz_bytes(arrays: Mapping[str, Any]) -> bytes:
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     return buf.getvalue()
@@ -96,13 +106,78 @@ def _safe_id(value: str) -> str:
     return value
 
 
-class Store:
-    """Clips, databases, jobs and results under one directory (see the module docstring)."""
+def _seekable(fh: BinaryIO) -> bool:
+    seekable = getattr(fh, "seekable", None)
+    return bool(seekable()) if callable(seekable) else False
 
-    def __init__(self, root: str | Path) -> None:
-        self.root = Path(root)
-        for sub in ("clips", "files", "databases", "jobs"):
-            (self.root / sub).mkdir(parents=True, exist_ok=True)
+
+class Store:
+    """Clips, files, databases, jobs and results in one object store (see the module docstring).
+
+    ``location`` is a directory, a store URL (``s3://bucket/prefix``) or an :class:`Objects`
+    backend. ``cache_dir`` is this process's local cache of databases for an object store (default:
+    ``./segue-data``); a local store needs none (its files are mapped in place).
+    ``disk_cache_bytes`` bounds that cache; ``object_cache`` (the Redis database cache) sits
+    between the object store and the disk cache when given.
+    """
+
+    def __init__(
+        self,
+        location: str | Path | Objects,
+        cache_dir: str | Path | None = None,
+        *,
+        disk_cache_bytes: int = DEFAULT_DISK_CACHE_BYTES,
+        object_cache: ObjectCache | None = None,
+    ) -> None:
+        self.objects: Objects = open_objects(location) if isinstance(location, str | Path) else location
+        self.url = self.objects.url
+        local = self.objects.local_path("clips")
+        self.local = local is not None
+        self.root = (
+            Path(self.url) if isinstance(self.objects, LocalObjects) else Path(cache_dir or "segue-data")
+        )
+        """The local directory this process uses: the store itself when local, else its cache."""
+        self.cache = DiskCache(self.root / "cache" / "databases", disk_cache_bytes)
+        self.object_cache = object_cache
+        self._infos: dict[str, bytes] = {}  # immutable info objects (clips, files) by key
+        self._lock = threading.Lock()
+
+    @classmethod
+    def from_settings(cls, settings: Any, object_cache: ObjectCache | None = None) -> Store:
+        """The store a :class:`~workers.settings.Settings` names (``store_url``, default ``data_dir``)."""
+        return cls(
+            settings.store_url or settings.data_dir,
+            settings.data_dir,
+            disk_cache_bytes=settings.disk_cache_mb << 20,
+            object_cache=object_cache,
+        )
+
+    # -- small helpers ------------------------------------------------------------------------
+    def _get(self, key: str, missing: str) -> bytes:
+        try:
+            return self.objects.get(key)
+        except ObjectNotFound:
+            raise NotFoundError(missing) from None
+
+    def _immutable(self, key: str, missing: str) -> bytes:
+        """An object that never changes once written (clip and file infos), kept in memory."""
+        with self._lock:
+            data = self._infos.get(key)
+        if data is None:
+            data = self._get(key, missing)
+            with self._lock:
+                if len(self._infos) > 100_000:
+                    self._infos.clear()
+                self._infos[key] = data
+        return data
+
+    def _forget(self, key: str) -> None:
+        with self._lock:
+            self._infos.pop(key, None)
+
+    def check_id(self, item_id: str) -> str:
+        """``item_id`` when it is a valid clip, database or job id, else :class:`NotFoundError`."""
+        return _safe_id(item_id)
 
     # -- clips --------------------------------------------------------------------------------
     def put_clip(
@@ -113,9 +188,11 @@ class Store:
         Raises :class:`motion.MotionError` (a ``BvhError``) for invalid content; nothing is written then.
         """
         digest = hashlib.sha256(data).hexdigest()
-        existing = self.root / "clips" / f"{digest}.json"
-        if existing.exists():
-            return ClipInfo.model_validate_json(existing.read_bytes())
+        key = f"clips/{digest}.json"
+        try:
+            return ClipInfo.model_validate_json(self.objects.get(key))
+        except ObjectNotFound:
+            pass
         motion = parse_bvh(data, units=units, limits=limits, source=name, name=name)
         guess = detect_units(motion)
         info = ClipInfo(
@@ -129,24 +206,31 @@ class Store:
             size_bytes=len(data),
             created_at=now(),
         )
-        _atomic_write(self.root / "clips" / f"{digest}.bvh", data)
-        _atomic_write(existing, info.model_dump_json().encode())
+        self.objects.put(f"clips/{digest}.bvh", data)
+        if not self.objects.put(key, info.model_dump_json().encode(), if_absent=True):
+            return ClipInfo.model_validate_json(self.objects.get(key))  # a concurrent upload won
         return info
 
     def clip_info(self, clip_id: str) -> ClipInfo:
-        p = self.root / "clips" / f"{_safe_id(clip_id)}.json"
-        if not p.exists():
-            raise NotFoundError(f"no clip {clip_id!r}")
-        return ClipInfo.model_validate_json(p.read_bytes())
+        key = f"clips/{_safe_id(clip_id)}.json"
+        return ClipInfo.model_validate_json(self._immutable(key, f"no clip {clip_id!r}"))
 
     def clip_bytes(self, clip_id: str) -> bytes:
-        p = self.root / "clips" / f"{_safe_id(clip_id)}.bvh"
-        if not p.exists():
-            raise NotFoundError(f"no clip {clip_id!r}")
-        return p.read_bytes()
+        return self._get(f"clips/{_safe_id(clip_id)}.bvh", f"no clip {clip_id!r}")
+
+    def _infos_under(self, kind: str) -> list[bytes]:
+        out = []
+        for name in self.objects.children(kind):
+            key = f"{kind}/{name}"
+            if name.endswith(".json"):
+                try:
+                    out.append(self._immutable(key, key))
+                except NotFoundError:  # deleted since the listing
+                    continue
+        return out
 
     def list_clips(self) -> list[ClipInfo]:
-        infos = [ClipInfo.model_validate_json(p.read_bytes()) for p in (self.root / "clips").glob("*.json")]
+        infos = [ClipInfo.model_validate_json(b) for b in self._infos_under("clips")]
         return sorted(infos, key=lambda c: c.created_at)
 
     def find_clip(self, ref: str, visible: Visible | None = None) -> ClipInfo:
@@ -170,20 +254,20 @@ class Store:
     def delete_clip(self, clip_id: str) -> None:
         info = self.clip_info(clip_id)
         for suffix in (".json", ".bvh", ".owners"):
-            (self.root / "clips" / f"{info.id}{suffix}").unlink(missing_ok=True)
+            self.objects.delete(f"clips/{info.id}{suffix}")
+        self._forget(f"clips/{info.id}.json")
 
     # -- holders of content-addressed things ----------------------------------------------------
-    def _owners_path(self, kind: Owned, item_id: str) -> Path:
+    def _owners_key(self, kind: Owned, item_id: str) -> str:
         if kind == "databases":
-            return self.db_dir(item_id) / "owners"
-        return self.root / kind / f"{_safe_id(item_id)}.owners"
+            return f"databases/{_safe_id(item_id)}/owners"
+        return f"{kind}/{_safe_id(item_id)}.owners"
 
     def owners(self, kind: Owned, item_id: str) -> set[str]:
         """The principals holding a clip, file or database (empty: recorded before owners were)."""
-        p = self._owners_path(kind, item_id)
         try:
-            return set(json.loads(p.read_bytes()))
-        except (OSError, ValueError):
+            return set(json.loads(self.objects.get(self._owners_key(kind, item_id))))
+        except (ObjectNotFound, ValueError):
             return set()
 
     def add_owner(self, kind: Owned, item_id: str, principal: str) -> bool:
@@ -191,92 +275,167 @@ class Store:
         held = self.owners(kind, item_id)
         if principal in held:
             return False
-        _atomic_write(self._owners_path(kind, item_id), json.dumps(sorted(held | {principal})).encode())
+        self.objects.put(self._owners_key(kind, item_id), json.dumps(sorted(held | {principal})).encode())
         return True
 
     def remove_owner(self, kind: Owned, item_id: str, principal: str) -> set[str]:
         """Drop ``principal``'s hold; returns the holders left."""
         held = self.owners(kind, item_id) - {principal}
-        _atomic_write(self._owners_path(kind, item_id), json.dumps(sorted(held)).encode())
+        self.objects.put(self._owners_key(kind, item_id), json.dumps(sorted(held)).encode())
         return held
 
     # -- databases ----------------------------------------------------------------------------
-    def db_dir(self, db_id: str) -> Path:
-        return self.root / "databases" / _safe_id(db_id)
+    def _db(self, db_id: str) -> str:
+        return f"databases/{_safe_id(db_id)}"
 
     def put_database_info(self, info: DatabaseInfo, spec: dict[str, Any] | None = None) -> None:
-        d = self.db_dir(info.id)
+        d = self._db(info.id)
         if spec is not None:
-            _atomic_write(d / "spec.json", json.dumps(spec, sort_keys=True).encode())
-        _atomic_write(d / "info.json", info.model_dump_json().encode())
+            self.objects.put(f"{d}/spec.json", json.dumps(spec, sort_keys=True).encode())
+        self.objects.put(f"{d}/info.json", info.model_dump_json().encode())
 
     def database_info(self, db_id: str) -> DatabaseInfo:
-        p = self.db_dir(db_id) / "info.json"
-        if not p.exists():
-            raise NotFoundError(f"no database {db_id!r}")
-        return DatabaseInfo.model_validate_json(p.read_bytes())
+        data = self._get(f"{self._db(db_id)}/info.json", f"no database {db_id!r}")
+        return DatabaseInfo.model_validate_json(data)
 
     def database_spec(self, db_id: str) -> dict[str, Any]:
-        p = self.db_dir(db_id) / "spec.json"
-        if not p.exists():
-            raise NotFoundError(f"no database {db_id!r}")
-        return dict(json.loads(p.read_bytes()))
+        return dict(json.loads(self._get(f"{self._db(db_id)}/spec.json", f"no database {db_id!r}")))
 
     def list_databases(self) -> list[DatabaseInfo]:
         out = []
-        for d in (self.root / "databases").iterdir():
-            if (d / "info.json").exists():
-                out.append(DatabaseInfo.model_validate_json((d / "info.json").read_bytes()))
+        for db_id in self.objects.children("databases"):
+            try:
+                out.append(DatabaseInfo.model_validate_json(self.objects.get(f"databases/{db_id}/info.json")))
+            except (ObjectNotFound, ValueError):  # being written or deleted, or not an id
+                continue
         return sorted(out, key=lambda i: i.created_at)
 
-    def put_database_arrays(self, db_id: str, data: bytes) -> None:
-        _atomic_write(self.db_dir(db_id) / "data.npz", data)
+    def put_database_arrays(self, db_id: str, arrays: Mapping[str, Any] | bytes) -> None:
+        """Store a database's arrays (a mapping, or the bytes of an ``.npz`` of them): one ``.npy``
+        object each, then the manifest (the commit point: readers never see a partial set)."""
+        d = self._db(db_id)
+        if isinstance(arrays, bytes | bytearray | memoryview):
+            try:
+                arrays = load_npz(bytes(arrays))
+            except (ValueError, OSError) as exc:
+                raise ValueError(f"database {db_id!r}: not an .npz of arrays ({exc})") from None
+        manifest, files = container.pack(arrays)
+        for file, data in files:
+            self.objects.put(f"{d}/{container.ARRAYS_DIR}/{file}", data)
+        self.objects.put(f"{d}/{container.MANIFEST}", manifest.to_bytes())
+
+    def database_manifest(self, db_id: str) -> container.Manifest:
+        """The manifest of a database's arrays, converting a database stored as ``data.npz``
+        (before arrays were stored one per object) on first use. Raises :class:`NotFoundError`."""
+        d = self._db(db_id)
+        try:
+            return container.Manifest.from_bytes(self.objects.get(f"{d}/{container.MANIFEST}"))
+        except ObjectNotFound:
+            pass
+        try:
+            legacy = self.objects.get(f"{d}/{LEGACY_NPZ}")
+        except ObjectNotFound:
+            raise NotFoundError(f"database {db_id!r} has no built data") from None
+        self.put_database_arrays(db_id, legacy)  # the .npz stays: an upgrade loses nothing
+        return container.Manifest.from_bytes(self.objects.get(f"{d}/{container.MANIFEST}"))
+
+    def has_database_arrays(self, db_id: str) -> bool:
+        """True when the database's arrays are stored (in either layout)."""
+        d = self._db(db_id)
+        return self.objects.exists(f"{d}/{container.MANIFEST}") or self.objects.exists(f"{d}/{LEGACY_NPZ}")
+
+    def database_dir(self, db_id: str) -> Path:
+        """A local directory holding the database's arrays (:mod:`engines.container`) for
+        memory-mapping: the store's own directory when local, else this process's cached copy
+        (downloaded on first use, through the object cache when there is one)."""
+        manifest = self.database_manifest(db_id)
+        d = self._db(db_id)
+        own = self.objects.local_path(d)
+        if own is not None:
+            return own
+        return self.cache.fetch(db_id, manifest, lambda file, path: self._fetch(f"{d}/{file}", path))
+
+    def _fetch(self, key: str, path: Path) -> None:
+        if self.object_cache is not None:
+            data = self.object_cache.get(key)
+            if data is not None:
+                atomic_write(path, data)
+                return
+        size = self.objects.download(key, path)
+        if self.object_cache is not None and self.object_cache.wants(size):
+            self.object_cache.put(key, path.read_bytes())
+
+    def database_arrays(self, db_id: str) -> dict[str, np.ndarray]:
+        """Every array of a database, large ones memory-mapped from :meth:`database_dir`."""
+        return container.load_all(self.database_dir(db_id))
+
+    @contextmanager
+    def open_database(self, db_id: str) -> Iterator[Mapping[str, np.ndarray]]:
+        """A database's arrays, each read when first indexed: mapped from the store's files when
+        local, fetched one object each from an object store (nothing written to local disk), so a
+        query reading a few small arrays costs those."""
+        manifest = self.database_manifest(db_id)
+        d = self._db(db_id)
+        own = self.objects.local_path(d)
+        if own is not None:
+            yield container.open_arrays(own)
+            return
+        cached = self.cache.path_if_cached(db_id)
+        if cached is not None:
+            yield container.open_arrays(cached)
+            return
+
+        def load(name: str) -> np.ndarray:
+            key = f"{d}/{container.ARRAYS_DIR}/{manifest.files[name]}"
+            return container.array_from_npy(self._get(key, f"database {db_id!r} lost array {name!r}"))
+
+        yield container.LazyArrays(manifest, load)
 
     def database_arrays_bytes(self, db_id: str) -> bytes:
-        p = self.db_dir(db_id) / "data.npz"
-        if not p.exists():
-            raise NotFoundError(f"database {db_id!r} has no built data")
-        return p.read_bytes()
+        """The database's arrays as the bytes of one ``.npz`` (for exports and tools that want a
+        single file; engines map :meth:`database_dir` instead)."""
+        with self.open_database(db_id) as arrays:
+            return npz_bytes({name: arrays[name] for name in arrays})
 
     def delete_database(self, db_id: str) -> None:
-        d = self.db_dir(db_id)
-        if not d.exists():
+        d = self._db(db_id)
+        if not self.objects.list(d):
             raise NotFoundError(f"no database {db_id!r}")
-        shutil.rmtree(d, ignore_errors=True)
+        self.objects.delete_prefix(d)
+        self.cache.evict(db_id)
 
     # -- other input files (MIDI...) ------------------------------------------------------------
     def put_file(self, name: str, data: bytes) -> FileInfo:
         """Store an uploaded input file once per content hash (no parsing: engines validate it)."""
         digest = hashlib.sha256(data).hexdigest()
-        meta = self.root / "files" / f"{digest}.json"
-        if meta.exists():
-            return FileInfo.model_validate_json(meta.read_bytes())
+        key = f"files/{digest}.json"
+        try:
+            return FileInfo.model_validate_json(self.objects.get(key))
+        except ObjectNotFound:
+            pass
         info = FileInfo(
             id=digest, name=name, size_bytes=len(data), media_type=_media_type(data), created_at=now()
         )
-        _atomic_write(self.root / "files" / f"{digest}.bin", data)
-        _atomic_write(meta, info.model_dump_json().encode())
+        self.objects.put(f"files/{digest}.bin", data)
+        if not self.objects.put(key, info.model_dump_json().encode(), if_absent=True):
+            return FileInfo.model_validate_json(self.objects.get(key))  # a concurrent upload won
         return info
 
     def delete_file(self, file_id: str) -> None:
         info = self.file_info(file_id)
         for suffix in (".json", ".bin", ".owners"):
-            (self.root / "files" / f"{info.id}{suffix}").unlink(missing_ok=True)
+            self.objects.delete(f"files/{info.id}{suffix}")
+        self._forget(f"files/{info.id}.json")
 
     def file_info(self, file_id: str) -> FileInfo:
-        p = self.root / "files" / f"{_safe_id(file_id)}.json"
-        if not p.exists():
-            raise NotFoundError(f"no file {file_id!r}")
-        return FileInfo.model_validate_json(p.read_bytes())
+        key = f"files/{_safe_id(file_id)}.json"
+        return FileInfo.model_validate_json(self._immutable(key, f"no file {file_id!r}"))
 
     def file_bytes(self, file_id: str) -> bytes:
-        p = self.root / "files" / f"{_safe_id(file_id)}.bin"
-        if not p.exists():
-            raise NotFoundError(f"no file {file_id!r}")
-        return p.read_bytes()
+        return self._get(f"files/{_safe_id(file_id)}.bin", f"no file {file_id!r}")
 
     def list_files(self) -> list[FileInfo]:
-        infos = [FileInfo.model_validate_json(p.read_bytes()) for p in (self.root / "files").glob("*.json")]
+        infos = [FileInfo.model_validate_json(b) for b in self._infos_under("files")]
         return sorted(infos, key=lambda f: f.created_at)
 
     def input_bytes(self, upload_id: str) -> bytes:
@@ -312,111 +471,142 @@ class Store:
         return max(named)[1]
 
     # -- jobs and results -----------------------------------------------------------------------
-    def job_dir(self, job_id: str) -> Path:
-        return self.root / "jobs" / _safe_id(job_id)
+    def _job(self, job_id: str) -> str:
+        return f"jobs/{_safe_id(job_id)}"
 
     def put_job(self, info: JobInfo, request: dict[str, Any] | None = None) -> None:
-        d = self.job_dir(info.id)
+        d = self._job(info.id)
         if request is not None:
-            _atomic_write(d / "request.json", json.dumps(request).encode())
-        _atomic_write(d / "info.json", info.model_dump_json().encode())
+            self.objects.put(f"{d}/request.json", json.dumps(request).encode())
+        self.objects.put(f"{d}/info.json", info.model_dump_json().encode())
 
     def job_info(self, job_id: str) -> JobInfo:
-        p = self.job_dir(job_id) / "info.json"
-        if not p.exists():
-            raise NotFoundError(f"no job {job_id!r}")
-        return JobInfo.model_validate_json(p.read_bytes())
+        return JobInfo.model_validate_json(self._get(f"{self._job(job_id)}/info.json", f"no job {job_id!r}"))
 
     def list_jobs(self) -> list[JobInfo]:
         """Every job, oldest first."""
         out = []
-        for d in (self.root / "jobs").iterdir():
-            p = d / "info.json"
-            if p.exists():
-                out.append(JobInfo.model_validate_json(p.read_bytes()))
+        for job_id in self.objects.children("jobs"):
+            try:
+                out.append(JobInfo.model_validate_json(self.objects.get(f"jobs/{job_id}/info.json")))
+            except (ObjectNotFound, ValueError):  # being written or deleted, or not an id
+                continue
         return sorted(out, key=lambda i: i.created_at)
 
     def delete_job(self, job_id: str) -> None:
         """Remove a job's record, request, events and results (NotFoundError when there is none)."""
-        d = self.job_dir(job_id)
-        if not (d / "info.json").exists():
+        d = self._job(job_id)
+        if not self.objects.exists(f"{d}/info.json"):
             raise NotFoundError(f"no job {job_id!r}")
-        shutil.rmtree(d, ignore_errors=True)
+        self.objects.delete_prefix(d)
+
+    def discard_job(self, job_id: str) -> None:
+        """Remove whatever a job left (a submission the backend refused), without checks."""
+        self.objects.delete_prefix(self._job(job_id))
 
     def job_request(self, job_id: str) -> dict[str, Any]:
-        p = self.job_dir(job_id) / "request.json"
-        if not p.exists():
-            raise NotFoundError(f"no job {job_id!r}")
-        return dict(json.loads(p.read_bytes()))
+        return dict(json.loads(self._get(f"{self._job(job_id)}/request.json", f"no job {job_id!r}")))
 
     def put_result(self, job_id: str, result_id: str, motion: Motion, report: Report) -> None:
-        d = self.job_dir(job_id) / "results"
-        _atomic_write(d / f"{_safe_id(result_id)}.npz", npz_bytes(motion_to_arrays(motion)))
-        _atomic_write(d / f"{result_id}.json", report.model_dump_json().encode())
+        d = f"{self._job(job_id)}/results/{_safe_id(result_id)}"
+        self.objects.put(f"{d}.npz", npz_bytes(motion_to_arrays(motion)))
+        self.objects.put(f"{d}.json", report.model_dump_json().encode())
 
     def result_motion(self, job_id: str, result_id: str) -> Motion:
-        p = self.job_dir(job_id) / "results" / f"{_safe_id(result_id)}.npz"
-        if not p.exists():
-            raise NotFoundError(f"job {job_id!r} has no result {result_id!r}")
+        key = f"{self._job(job_id)}/results/{_safe_id(result_id)}.npz"
+        data = self._get(key, f"job {job_id!r} has no result {result_id!r}")
         try:
-            return motion_from_arrays(load_npz(p.read_bytes()))
+            return motion_from_arrays(load_npz(data))
         except (ValueError, MotionError) as exc:
             raise NotFoundError(f"result {result_id!r} is unreadable: {exc}") from None
 
     def result_report(self, job_id: str, result_id: str) -> Report:
-        p = self.job_dir(job_id) / "results" / f"{_safe_id(result_id)}.json"
-        if not p.exists():
-            raise NotFoundError(f"job {job_id!r} has no result {result_id!r}")
-        return Report.model_validate_json(p.read_bytes())
+        key = f"{self._job(job_id)}/results/{_safe_id(result_id)}.json"
+        return Report.model_validate_json(self._get(key, f"job {job_id!r} has no result {result_id!r}"))
 
-    # -- derived files: result exports and staged uploads (workers.tasks) -----------------------
+    # -- event archives and derived bytes -------------------------------------------------------
+    def put_events(self, job_id: str, lines: list[str]) -> None:
+        """Replace a job's event archive (one JSON event per line)."""
+        self.objects.put(f"{self._job(job_id)}/events.jsonl", ("\n".join(lines) + "\n").encode())
+
+    def append_event(self, job_id: str, line: str) -> None:
+        """Add one event line to a job's archive (a file append when local; a read and a whole
+        write on an object store, which has no append)."""
+        key = f"{self._job(job_id)}/events.jsonl"
+        own = self.objects.local_path(key)
+        if own is not None:
+            own.parent.mkdir(parents=True, exist_ok=True)
+            with open(own, "a", encoding="utf-8") as fh:
+                fh.write(line + "\n")
+            return
+        try:
+            old = self.objects.get(key)
+        except ObjectNotFound:
+            old = b""
+        self.objects.put(key, old + line.encode() + b"\n")
+
+    def events(self, job_id: str) -> list[str]:
+        """The lines of a job's event archive (empty when there is none)."""
+        try:
+            data = self.objects.get(f"{self._job(job_id)}/events.jsonl")
+        except ObjectNotFound:
+            return []
+        return [line for line in data.decode("utf-8").splitlines() if line.strip()]
+
+    def put_export(self, job_id: str, name: str, data: bytes) -> None:
+        """Store derived bytes of a job's result (an export) under ``name`` (a safe file name)."""
+        self.objects.put(self._export_key(job_id, name), data)
+
+    def export_bytes(self, job_id: str, name: str) -> bytes:
+        """Bytes stored by :meth:`put_export` (:class:`NotFoundError` when there are none)."""
+        return self._get(self._export_key(job_id, name), f"job {job_id!r} has no export {name!r}")
+
+    def open_export(self, job_id: str, name: str) -> BinaryIO:
+        """A stored export opened for reading in chunks, never read whole (:class:`NotFoundError`
+        when not made yet)."""
+        try:
+            return self.objects.open(self._export_key(job_id, name))
+        except ObjectNotFound:
+            raise NotFoundError(f"job {job_id!r} has no export {name!r}") from None
+
+    def _export_key(self, job_id: str, name: str) -> str:
+        if not name or "/" in name or name.startswith(".") or len(name) > 200:
+            raise NotFoundError(f"no such export {name!r}")
+        return f"{self._job(job_id)}/exports/{name}"
+
     def result_shape(self, job_id: str, result_id: str) -> tuple[int, int, float]:
-        """``(frames, joints, fps)`` of a stored result, from its arrays' headers only (no array
-        is read: what an API decides an export's size by)."""
+        """``(frames, joints, fps)`` of a stored result from its arrays' headers only (no array is
+        read: what an API decides an export's size by)."""
         import zipfile
 
-        p = self.job_dir(job_id) / "results" / f"{_safe_id(result_id)}.npz"
-        if not p.exists():
-            raise NotFoundError(f"job {job_id!r} has no result {result_id!r}")
+        key = f"{self._job(job_id)}/results/{_safe_id(result_id)}.npz"
         try:
-            with zipfile.ZipFile(p) as zf:
-                with zf.open("rotations.npy") as fh:
-                    major, _ = np.lib.format.read_magic(fh)
+            fh = self.objects.open(key)
+        except ObjectNotFound:
+            raise NotFoundError(f"job {job_id!r} has no result {result_id!r}") from None
+        try:
+            with fh, zipfile.ZipFile(fh if _seekable(fh) else io.BytesIO(fh.read())) as zf:
+                with zf.open("rotations.npy") as member:
+                    major, _ = np.lib.format.read_magic(member)
                     read_header = (
                         np.lib.format.read_array_header_1_0
                         if major == 1
                         else np.lib.format.read_array_header_2_0
                     )
-                    shape, _, _ = read_header(fh)
-                with zf.open("fps.npy") as fh:
-                    fps = float(np.lib.format.read_array(fh, allow_pickle=False))
+                    shape, _, _ = read_header(member)
+                with zf.open("fps.npy") as member:
+                    fps = float(np.lib.format.read_array(member, allow_pickle=False))
         except (KeyError, ValueError, OSError, zipfile.BadZipFile) as exc:
             raise NotFoundError(f"result {result_id!r} is unreadable: {exc}") from None
         return int(shape[0]), int(shape[1]), fps
 
-    def _export_path(self, job_id: str, key: str) -> Path:
-        return self.job_dir(job_id) / "exports" / _safe_id(key)
-
-    def put_export(self, job_id: str, key: str, data: bytes) -> None:
-        """Keep the bytes of a result's export under ``key`` (removed with the job)."""
-        _atomic_write(self._export_path(job_id, key), data)
-
-    def open_export(self, job_id: str, key: str) -> io.BufferedReader:
-        """A stored export, opened for reading in chunks (``NotFoundError`` when not made yet)."""
-        try:
-            return open(self._export_path(job_id, key), "rb")
-        except FileNotFoundError:
-            raise NotFoundError(f"job {job_id!r} has no export {key!r}") from None
-
+    # -- staged uploads: bytes kept until a worker has checked them (workers.tasks) -------------
     def put_staged(self, key: str, data: bytes) -> None:
         """Keep an upload's bytes until a worker has checked them (:meth:`delete_staged` after)."""
-        _atomic_write(self.root / "staged" / _safe_id(key), data)
+        self.objects.put(f"staged/{_safe_id(key)}", data)
 
     def staged_bytes(self, key: str) -> bytes:
-        p = self.root / "staged" / _safe_id(key)
-        if not p.exists():
-            raise NotFoundError(f"no staged upload {key!r}")
-        return p.read_bytes()
+        return self._get(f"staged/{_safe_id(key)}", f"no staged upload {key!r}")
 
     def delete_staged(self, key: str) -> None:
-        (self.root / "staged" / _safe_id(key)).unlink(missing_ok=True)
+        self.objects.delete(f"staged/{_safe_id(key)}")

@@ -8,6 +8,7 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+from collections.abc import Mapping
 from typing import Any, Literal
 
 import numpy as np
@@ -29,10 +30,17 @@ _KEYS = ("names", "frame_counts", "fps", "root_positions")
 _REPORTS = ("graph.report",)
 
 
-def _library_arrays(npz: bytes) -> dict[str, Any]:
+def _library_arrays(npz: bytes | Mapping[str, Any]) -> dict[str, Any]:
     """The ``library.*`` arrays of a database (skeleton, clip names and frame counts, joint 0's
-    positions), read without loading the engine's own arrays."""
+    positions), read without loading the engine's own arrays (from the bytes of an ``.npz``, or
+    a lazily read mapping: :meth:`workers.store.Store.open_database`)."""
     out: dict[str, Any] = {}
+    if isinstance(npz, Mapping):
+        for key in npz:
+            wanted = key.startswith("library.skeleton.") or key.removeprefix("library.") in _KEYS
+            if wanted or key in _REPORTS:
+                out[key] = np.asarray(npz[key])
+        return out
     with zipfile.ZipFile(io.BytesIO(npz)) as zf:
         for member in zf.namelist():
             key = member.removesuffix(".npy")
@@ -43,7 +51,9 @@ def _library_arrays(npz: bytes) -> dict[str, Any]:
     return out
 
 
-def summarize(spec: dict[str, Any], npz: bytes, source_units: dict[str, str]) -> DatabaseSummary:
+def summarize(
+    spec: dict[str, Any], npz: bytes | Mapping[str, Any], source_units: dict[str, str]
+) -> DatabaseSummary:
     """The summary of a database from its stored ``spec`` (clips resolved to ids, with names), its
     arrays ``npz`` and the units of each uploaded clip (by id)."""
     arrays = _library_arrays(npz)
@@ -125,4 +135,5 @@ def database_summary(store: Store, db_id: str) -> DatabaseSummary:
                 units[clip_id] = store.clip_info(clip_id).units
             except NotFoundError:  # a clip deleted since the build: its units are unknown
                 continue
-    return summarize(spec, store.database_arrays_bytes(db_id), units)
+    with store.open_database(db_id) as arrays:
+        return summarize(spec, arrays, units)

@@ -3,14 +3,16 @@ starve, and budgets, cancels and memory enforced from outside the engine.
 
 An :class:`EngineProcess` is one long-lived child process (``spawn``) that runs one job at a time
 with :func:`workers.execute.execute_job` and sends its events back over a pipe; it keeps its
-:class:`~workers.execute.EngineCache` between jobs. The owner (the embedded backend in the API
+:class:`~workers.engine_cache.EngineCache` between jobs. The owner (the embedded backend in the API
 process, or a ``segue worker``) gives it a :class:`Task`; a watch thread of the owner relays the
 child's events (``on_event``) and calls ``on_end`` once per task with an :data:`Outcome`:
 
 * ``finished`` — the child reported the job over (it published the terminal event itself);
 * ``crashed`` — the child died (SIGKILL, the OOM killer, a segfault): the owner re-runs the job;
 * ``cancel_timeout`` — a cancel was asked and the job had not ended ``cancel_grace_s`` later;
-* ``time_limit`` — the job ran past its hard time limit (``budget_s`` + room for assembly);
+* ``time_limit`` — the job ran past its hard time limit (``budget_s`` + room for assembly), or
+  loading its database took longer than ``load_timeout_s`` (the load is not charged to the job's
+  limit: the child says when it starts and ends loading, and the job's clock stops meanwhile);
 * ``memory_limit`` — the child's resident memory passed ``max_rss_bytes``.
 
 In the last three cases the supervisor kills the child (SIGKILL); the owner publishes the terminal
@@ -49,11 +51,17 @@ class ChildConfig:
     """What a child process needs to run jobs (picklable)."""
 
     store_root: str
+    """The store's location: a directory or a store URL (``s3://bucket/prefix``)."""
     plugins: list[str] = field(default_factory=list)
-    engine_cache: int = 4
+    engine_cache_bytes: int = 2048 << 20
     cache_url: str | None = None
     prefix: str = "segue:"
     chunk_size: int = 4 << 20
+    cache_dir: str | None = None
+    """The local cache directory (databases downloaded from an object store); default: the
+    store's directory when local, else ``./segue-data``."""
+    disk_cache_bytes: int = 8 << 30
+    cache_max_object_bytes: int = 64 << 20
 
 
 @dataclass(slots=True)
@@ -68,6 +76,8 @@ class Task:
     seq: int = 0
     started: float = 0.0
     cancel_asked: float | None = None
+    loading_since: float | None = None
+    """When the child started loading the job's database (timed apart from the job's limit)."""
     best: str | None = None
     terminal: bool = False
     context: Any = None
@@ -121,29 +131,34 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
 
     from motion.allocator import tune_process
 
-    from .execute import EngineCache, execute_job
+    from .engine_cache import EngineCache
+    from .execute import execute_job
     from .store import Store
 
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="segue-parent-watch").start()
     tune_process()
     for module in config.plugins:
         importlib.import_module(module)
-    store = Store(config.store_root)
-    cache = EngineCache(config.engine_cache)
-    load = save = None
-    if config.cache_url:
+    object_cache = None
+    if config.cache_url and config.cache_max_object_bytes > 0:
         import redis
 
         from .redis_cache import DatabaseCache
         from .redis_keys import RedisKeys
 
-        db_cache = DatabaseCache(
+        object_cache = DatabaseCache(
             redis.Redis.from_url(config.cache_url),
-            store,
             RedisKeys(config.prefix),
             chunk_size=config.chunk_size,
+            max_object_bytes=config.cache_max_object_bytes,
         )
-        load, save = db_cache.load, db_cache.save
+    store = Store(
+        config.store_root,
+        config.cache_dir,
+        disk_cache_bytes=config.disk_cache_bytes,
+        object_cache=object_cache,
+    )
+    cache = EngineCache(config.engine_cache_bytes)
     events.send(("ready", os.getpid()))
     while True:
         try:
@@ -160,6 +175,9 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
         def should_stop(seq: int = seq) -> bool:
             return bool(cancel.value == seq)
 
+        def on_load(loading: bool, seq: int = seq) -> None:
+            events.send(("load", seq, loading, time.monotonic()))
+
         execute_job(
             store,
             job_id,
@@ -168,9 +186,8 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
             publish,
             should_stop,
             cache,
-            load_database_bytes=load,
-            save_database_bytes=save,
-            attempt=attempt,
+            attempt,
+            on_load=on_load,
         )
         events.send(("end", seq))
 
@@ -192,6 +209,7 @@ class EngineProcess:
         *,
         cancel_grace_s: float = 2.0,
         max_rss_bytes: int | None = None,
+        load_timeout_s: float | None = None,
         poll_s: float = 0.05,
         on_ready: Callable[[], None] | None = None,
         spawner: Callable[[Callable[[], None]], None] | None = None,
@@ -203,6 +221,7 @@ class EngineProcess:
         that thread in ``/proc/<pid>/task/<pid>/children``); default: the watch thread."""
         self.on_event, self.on_end = on_event, on_end
         self.cancel_grace_s, self.max_rss_bytes, self.poll_s = cancel_grace_s, max_rss_bytes, poll_s
+        self.load_timeout_s = load_timeout_s
         self._ctx = mp.get_context("spawn")
         self._lock = threading.Lock()
         self._task: Task | None = None
@@ -366,7 +385,14 @@ class EngineProcess:
                     "cancel_timeout",
                     f"the job did not stop {self.cancel_grace_s:g} s after its cancel",
                 )
-            if task.time_limit_s is not None and now - task.started > task.time_limit_s:
+            if task.loading_since is not None:
+                if self.load_timeout_s is not None and now - task.loading_since > self.load_timeout_s:
+                    return self._kill(
+                        process,
+                        "time_limit",
+                        f"loading the job's database took longer than {self.load_timeout_s:g} s",
+                    )
+            elif task.time_limit_s is not None and now - task.started > task.time_limit_s:
                 return self._kill(
                     process, "time_limit", f"the job ran past its {task.time_limit_s:g}-s time limit"
                 )
@@ -406,6 +432,13 @@ class EngineProcess:
                 self.on_event(task, type_, data, when)
             except Exception:
                 log.exception("job %s: relaying a %s event failed", task.job_id, type_.value)
+        elif kind == "load":
+            now = time.monotonic()
+            if message[2]:
+                task.loading_since = now
+            elif task.loading_since is not None:
+                task.started += now - task.loading_since  # the load is not the job's time
+                task.loading_since = None
         elif kind == "end":
             self._finish(task, "finished", "")
 

@@ -19,7 +19,7 @@ from fastapi import APIRouter, Depends, Query, Response, status
 from pydantic import Field, TypeAdapter
 from starlette.concurrency import run_in_threadpool
 
-from engines.base import EngineError, UnknownClipError, open_database
+from engines.base import EngineError, UnknownClipError
 from engines.registry import kind_class
 from schemas import DatabaseInfo, DatabaseStatus, parse_database_spec
 from schemas.annotations import ClipLabels, LabelCorrection
@@ -56,12 +56,12 @@ def _corrected_spec(store: Store, info: DatabaseInfo, corrections: list[LabelCor
     spec = parse_database_spec(store.database_spec(info.id))
     if not any(c.action == "accept" for c in corrections):
         return engine.corrected_spec(spec, corrections, None)
-    with open_database(store.db_dir(info.id) / "data.npz") as arrays:
+    with store.open_database(info.id) as arrays:
         return engine.corrected_spec(spec, corrections, arrays)
 
 
 def _clip_labels(store: Store, info: DatabaseInfo, clip: str, start: int, end: int | None) -> ClipLabels:
-    with open_database(store.db_dir(info.id) / "data.npz") as arrays:
+    with store.open_database(info.id) as arrays:
         return kind_class(info.kind).clip_labels(arrays, clip, start, end)
 
 

@@ -36,7 +36,7 @@ from pydantic import TypeAdapter, ValidationError
 from engines.base import EngineError, LiveControlSession
 from engines.registry import kind_class
 from schemas.control import ControlSessionMessage, ControlSessionPath, ControlSessionPose
-from workers.execute import EngineCache
+from workers.engine_cache import EngineCache
 from workers.store import Store
 
 from ..deps import EnginesDep, SessionQuotaDep, SettingsDep, StoreDep
@@ -53,7 +53,7 @@ def _open(
     engines: EngineCache, store: Store, db_id: str, latency_s: float, k: float | None
 ) -> LiveControlSession:
     """A live control session on a database (its engine loaded once per process)."""
-    engine = engines.get(db_id, kind_class("control"), store.database_arrays_bytes)
+    engine = engines.get(db_id, kind_class("control"), store.database_arrays)
     return engine.live_control(latency_s=latency_s, k=k)
 
 

@@ -18,7 +18,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Response, status
 from starlette.concurrency import run_in_threadpool
 
-from engines.base import EngineError, open_database
+from engines.base import EngineError
 from schemas import DatabaseInfo, DatabaseStatus
 from schemas.rhythm_graph import GraphEdits, MovementGraph
 from workers.graph_edits import derive_in_store, graph_of, require_rhythm
@@ -48,7 +48,7 @@ def _ready_rhythm(info: DatabaseInfo) -> None:
 
 
 def _graph(store: Store, info: DatabaseInfo) -> MovementGraph:
-    with open_database(store.db_dir(info.id) / "data.npz") as arrays:
+    with store.open_database(info.id) as arrays:
         return graph_of(arrays, info, store.database_spec(info.id))
 
 

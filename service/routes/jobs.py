@@ -110,8 +110,7 @@ async def _check_joints(store: Store, job_request: JobRequestBase) -> None:
     named = getattr(job_request, "named_joints", None)
     if named is None:
         return
-    npz = str(store.db_dir(str(job_request.database)) / "data.npz")
-    names = (await run_in_threadpool(database_facts, npz)).joint_names
+    names = (await run_in_threadpool(database_facts, store, str(job_request.database))).joint_names
     missing = [(where, joint) for where, joint in named() if names and joint not in names]
     if missing:
         shown = ", ".join(names[:16]) + (f", ... (+{len(names) - 16})" if len(names) > 16 else "")
@@ -130,8 +129,7 @@ async def _check_budget(
     settings: Settings, store: Store, limiter: anyio.CapacityLimiter, job_request: JobRequestBase
 ) -> None:
     """413 ``over_budget`` when the request asks for more work than the server's limits allow."""
-    npz = str(store.db_dir(str(job_request.database)) / "data.npz")
-    facts = await run_in_threadpool(database_facts, npz)
+    facts = await run_in_threadpool(database_facts, store, str(job_request.database))
     work = await anyio.to_thread.run_sync(
         estimate_work, job_request, facts.fps, facts.joints, facts.clip_frames, limiter=limiter
     )

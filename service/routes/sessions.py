@@ -36,7 +36,7 @@ from pydantic import TypeAdapter, ValidationError
 from engines.base import LiveSession
 from engines.registry import kind_class
 from schemas.rhythm import SessionBeat, SessionBpm, SessionDirection, SessionMessage, SessionStop
-from workers.execute import EngineCache
+from workers.engine_cache import EngineCache
 from workers.store import Store
 
 from ..deps import EnginesDep, SessionQuotaDep, SettingsDep, StoreDep
@@ -53,7 +53,7 @@ def _open_session(
     engines: EngineCache, store: Store, db_id: str, kind: str, seed: int, fps: float | None, accent: float
 ) -> tuple[LiveSession, dict[str, Any]]:
     """A live session on a database (its engine loaded once per process) and its first message."""
-    engine = engines.get(db_id, kind_class(kind), store.database_arrays_bytes)
+    engine = engines.get(db_id, kind_class(kind), store.database_arrays)
     session = engine.live_session(seed=seed, fps=fps, accent=accent)
     return session, session.skeleton_message()
 

@@ -19,7 +19,7 @@ from service.deps import app_settings
 from service.errors import install_error_handlers
 from service.limits import SessionQuota
 from service.settings import Settings
-from workers.execute import EngineCache
+from workers.engine_cache import EngineCache
 from workers.store import Store
 
 REPO = Path(__file__).resolve().parents[2]

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import gzip
 import io
-import shutil
 import time
 from typing import Any
 
@@ -110,7 +109,7 @@ def test_a_worker_export_is_the_bytes_the_api_made(
     params = {"format": "json", "max_fps": 24, "events": "contacts"}
     inline = client.get(f"/v1/jobs/{walk_job}/result", params=params)
     assert inline.status_code == 200, inline.text
-    shutil.rmtree(_store(client).job_dir(walk_job) / "exports")  # forget the stored export
+    _store(client).objects.delete_prefix(f"jobs/{walk_job}/exports")  # forget the stored export
     monkeypatch.setattr("workers.result_export.INLINE_JOINT_FRAMES", 0)
     monkeypatch.setattr("service.exports.make_export", _no_parse_here)
     made = client.get(f"/v1/jobs/{walk_job}/result", params=params)

@@ -35,7 +35,7 @@ def finished_job(store: Store) -> JobInfo:
         JobEvent(id=i, job=info.id, type=EventType(t), time=time.time(), data={}).model_dump_json()
         for i, t in enumerate(TYPES, start=1)
     ]
-    (store.job_dir(info.id) / "events.jsonl").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    store.put_events(info.id, lines)
     return info
 
 

@@ -138,6 +138,12 @@ def store(tmp_path: Path) -> Store:
     return Store(tmp_path / "data")
 
 
+@pytest.fixture
+def s3_store(s3_url: str, tmp_path: Path) -> Store:
+    """A store on the S3 server, with this process's cache under ``tmp_path/api``."""
+    return Store(s3_url, tmp_path / "api")
+
+
 def add_database(store: Store, build: bool = True, fps: float = 30.0) -> str:
     """A clips database of the bundled walk sample (built in-process unless ``build`` is False)."""
     clip = store.put_clip("walk.bvh.gz", sample_path("walk").read_bytes())
@@ -189,7 +195,8 @@ def worker_thread(redis_url: str, store: Store, name: str, **fields: Any) -> Ite
     :class:`~workers.settings.Settings`); stopped (and joined) on exit."""
     stop = threading.Event()
     fields = {"heartbeat_s": 0.2, "heartbeat_ttl_s": 1.0, "block_ms": 100, **fields}
-    settings = Settings(redis_url=redis_url, data_dir=store.root, worker_name=name, **fields)
+    fields = {"store_url": store.url, "data_dir": store.root, **fields}
+    settings = Settings(redis_url=redis_url, worker_name=name, **fields)
     thread = threading.Thread(target=run_worker, args=(settings, stop), daemon=True)
     thread.start()
     try:
@@ -207,6 +214,7 @@ def spawn_worker(redis_url: str, store: Store, name: str, *extra: str) -> subpro
         os.environ,
         PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
         SEGUE_ENGINE_PLUGINS=PLUGINS,
+        SEGUE_STORE_URL=store.url,
     )
     cmd = [
         sys.executable,

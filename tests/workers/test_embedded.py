@@ -157,7 +157,7 @@ def test_jobs_left_unfinished_by_a_dead_server_run_again_at_start(tmp_path: Path
         JobEvent(id=1, job="stale1", type=EventType.queued, time=1.0).model_dump_json(),
         JobEvent(id=2, job="stale1", type=EventType.started, time=2.0).model_dump_json(),
     ]
-    (store.job_dir("stale1") / "events.jsonl").write_text("\n".join(lines) + "\n")
+    store.put_events("stale1", lines)
 
     async def second() -> list[JobEvent]:
         backend = EmbeddedBackend(store, workers=1)

@@ -102,7 +102,7 @@ def _supervised(store: Store, **kwargs: Any) -> tuple[EngineProcess, list[tuple[
     seen: list[tuple[str, Any]] = []
     process = EngineProcess(
         "t",
-        ChildConfig(store_root=str(store.root), plugins=engine_plugins()),
+        ChildConfig(store_root=store.url, plugins=engine_plugins()),
         lambda task, type_, data, when: seen.append((type_.value, data)),
         lambda task, outcome, detail: seen.append(("end", outcome)),
         **kwargs,

@@ -64,9 +64,7 @@ def test_publisher_ids_contiguous_and_one_terminal(rclient: redis.Redis, store: 
     assert rclient.ttl(KEYS.events(job.id)) > 0  # finished jobs expire from Redis...
     for info in (store.job_info(job.id), pub.store.job_info(job.id)):  # ...and stay on disk
         assert info.status == JobStatus.done and info.result == "r1" and info.last_event == 4
-    archived = [
-        json.loads(line) for line in (store.job_dir(job.id) / "events.jsonl").read_text().splitlines()
-    ]
+    archived = [json.loads(line) for line in store.events(job.id)]
     assert [a["id"] for a in archived] == [1, 2, 3, 4]
     # a lost counter (flushed Redis) continues after the last id this publisher saw, never reusing ids
     job2 = new_job(store, "synth", {"request": {}})
@@ -161,8 +159,7 @@ def test_resume_after_replays_exactly_the_missed_events(
             await third.close()
         # events lost everywhere (a partial archive, Redis empty): readers get what there is and
         # return instead of waiting for a terminal event that will never come
-        archive = store.job_dir(job.id) / "events.jsonl"
-        archive.write_text("\n".join(e.model_dump_json() for e in full[:3]) + "\n", encoding="utf-8")
+        store.put_events(job.id, [e.model_dump_json() for e in full[:3]])
         fourth = RedisBackend(store, redis_url)
         fourth.quiet_check_s = 0.2
         await fourth.start()
@@ -382,5 +379,5 @@ def test_delete_a_finished_job_refuse_a_running_one(
     with worker_thread(redis_url, store, "t1"):
         ids = run(scenario())
     for job_id in ids:
-        assert not store.job_dir(job_id).exists()
+        assert store.objects.list(f"jobs/{job_id}") == []
         assert not rclient.exists(KEYS.job(job_id), KEYS.events(job_id), KEYS.event_seq(job_id))

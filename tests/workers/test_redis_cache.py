@@ -1,4 +1,4 @@
-"""The database cache: chunked npz bytes in Redis over the store's durable copy.
+"""The database cache: chunked store objects in Redis between the object store and workers' disks.
 
 Chunking, eviction and outage handling are unit-tested on fakeredis (a real server adds nothing
 there); surviving FLUSHALL is tested end to end with workers on the real server.
@@ -7,6 +7,7 @@ there); surviving FLUSHALL is tested end to end with workers on the real server.
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 
 import fakeredis
 import numpy as np
@@ -17,7 +18,7 @@ from schemas import EventType, JobEvent
 from workers.redis_backend import RedisBackend
 from workers.redis_cache import DatabaseCache
 from workers.redis_keys import RedisKeys
-from workers.store import NotFoundError, Store, load_npz
+from workers.store import Store
 
 from .conftest import GUARD_S, add_database, new_job, run, worker_thread
 
@@ -48,76 +49,81 @@ def fake() -> tuple[fakeredis.FakeServer, redis.Redis]:
     return server, fakeredis.FakeRedis(server=server)
 
 
-def test_chunked_round_trip_and_set_nx(fake: tuple[fakeredis.FakeServer, redis.Redis], store: Store) -> None:
+def test_chunked_round_trip_and_set_nx(fake: tuple[fakeredis.FakeServer, redis.Redis]) -> None:
     _, client = fake
-    cache = DatabaseCache(client, store, KEYS, chunk_size=1000, ttl_s=60)
+    cache = DatabaseCache(client, KEYS, chunk_size=1000, ttl_s=60)
     data = np.random.default_rng(0).bytes(5500)
-    assert cache.get("db1") is None
-    assert cache.put("db1", data) is True
-    assert client.get(KEYS.db_count("db1")) == b"6"
-    assert [len(client.get(KEYS.db_chunk("db1", i)) or b"") for i in range(6)] == [1000] * 5 + [500]
-    assert 0 < client.ttl(KEYS.db_chunk("db1", 0)) <= 60
-    assert cache.get("db1") == data
-    assert cache.put("db1", b"other bytes") is False  # already cached: not overwritten
-    assert cache.get("db1") == data
-    assert cache.put("empty", b"") is True and cache.get("empty") == b""
+    key = "databases/db1/arrays/x.npy"
+    assert cache.get(key) is None
+    assert cache.write(key, data) is True
+    assert client.get(KEYS.db_count(key)) == b"6"
+    assert [len(client.get(KEYS.db_chunk(key, i)) or b"") for i in range(6)] == [1000] * 5 + [500]
+    assert 0 < client.ttl(KEYS.db_chunk(key, 0)) <= 60
+    assert cache.get(key) == data
+    assert cache.write(key, b"other bytes") is False  # already cached: not overwritten
+    assert cache.get(key) == data
+    assert cache.write("empty", b"") is True and cache.get("empty") == b""
 
 
-def test_eviction_and_outage_fall_back_to_disk(
-    fake: tuple[fakeredis.FakeServer, redis.Redis], store: Store
-) -> None:
+def test_eviction_and_outage_are_misses(fake: tuple[fakeredis.FakeServer, redis.Redis]) -> None:
     server, client = fake
-    db = add_database(store)
-    disk = store.database_arrays_bytes(db)
-    cache = DatabaseCache(client, store, KEYS, chunk_size=max(1, len(disk) // 3))
-    assert cache.load(db) == disk  # miss: read from disk, then cached
-    count = int(client.get(KEYS.db_count(db)) or 0)
-    assert count >= 3
-    client.delete(KEYS.db_chunk(db, 1))  # evicted by allkeys-lru
-    assert cache.get(db) is None and not client.exists(KEYS.db_count(db))  # incomplete: dropped
-    assert cache.load(db) == disk and cache.get(db) == disk  # repopulated
-    server.connected = False  # the cache Redis is down: the disk copy serves
-    assert cache.load(db) == disk
-    cache.save(db, disk)  # only logged
-    with pytest.raises(NotFoundError):
-        cache.load("nosuchdb")
+    cache = DatabaseCache(client, KEYS, chunk_size=100, max_object_bytes=1000)
+    assert cache.wants(1000) and not cache.wants(1001)
+    data = bytes(range(250))
+    cache.put("k", data)
+    client.delete(KEYS.db_chunk("k", 1))  # evicted by allkeys-lru
+    assert cache.get("k") is None and not client.exists(KEYS.db_count("k"))  # incomplete: dropped
+    cache.put("k", data)
+    assert cache.get("k") == data  # repopulated
+    server.connected = False  # the cache Redis is down: a miss, only logged
+    assert cache.get("k") is None
+    cache.put("k", data)
+    with pytest.raises(redis.ConnectionError):
+        cache.read("k")
 
 
-def test_database_cache_survives_flushall(redis_url: str, rclient: redis.Redis, store: Store) -> None:
-    db = add_database(store, build=False)
+def test_workers_share_downloads_through_redis(
+    redis_url: str, rclient: redis.Redis, s3_url: str, tmp_path: Path
+) -> None:
+    """With an object store, a worker fetches each database object through Redis: the first
+    download fills it, a fresh worker with an empty disk reads it from there, and a FLUSHALL
+    only costs a download from the object store."""
+    api = Store(s3_url, tmp_path / "api")
+    db = add_database(api, build=False)
     chunk = 32 << 10
     bytes_client = redis.Redis.from_url(redis_url)
 
     async def run_job(kind: str, payload: dict[str, object]) -> list[JobEvent]:
-        backend = RedisBackend(store, redis_url)
+        backend = RedisBackend(api, redis_url)
         await backend.start()
         try:
-            job = new_job(store, kind, payload)
+            job = new_job(api, kind, payload)
             await backend.submit(job, kind, payload)
             return await asyncio.wait_for(_all(backend, job.id), GUARD_S)
         finally:
             await backend.close()
 
-    def cached() -> bytes:
-        n = int(bytes_client.get(KEYS.db_count(db)) or 0)
-        return b"".join(bytes_client.get(KEYS.db_chunk(db, i)) or b"" for i in range(n))
+    def cached_keys() -> set[str]:
+        return {k.decode().removesuffix(":n") for k in bytes_client.scan_iter(KEYS.db_count("*"))}
 
-    with worker_thread(redis_url, store, "t1", cache_chunk_bytes=chunk):
-        built = run(run_job("build", {"database": db}))
-    disk = store.database_arrays_bytes(db)
-    assert built[-1].type == EventType.done and len(disk) > 2 * chunk
-    assert int(bytes_client.get(KEYS.db_count(db)) or 0) == -(-len(disk) // chunk)
-    assert cached() == disk  # populated by the build
-    assert sorted(load_npz(cached())) == sorted(load_npz(disk))
-
-    rclient.flushall()  # Redis loses the cache (and the queue): the database is rebuilt from disk
     request = {"engine": "clip", "database": db, "clip": "walk", "start": 0, "end": 20}
-    # a fresh worker: empty in-memory LRU
-    with worker_thread(redis_url, store, "t2", cache_chunk_bytes=chunk):
+    with worker_thread(redis_url, api, "t1", data_dir=tmp_path / "w1", cache_chunk_bytes=chunk):
+        built = run(run_job("build", {"database": db}))
+        assert built[-1].type == EventType.done
+        first = run(run_job("synth", {"request": request}))
+    assert first[-1].type == EventType.done
+    manifest = api.database_manifest(db)
+    objects = {f"databases/{db}/arrays/{f}" for f in manifest.files.values()}
+    assert {KEYS.db_count(k).removesuffix(":n") for k in objects} <= cached_keys()
+    assert not (tmp_path / "api" / "cache").exists()  # the API process downloaded nothing
+    assert (tmp_path / "w1" / "cache" / "databases" / db / "arrays.json").is_file()
+
+    rclient.flushall()  # the cache (and the queue) lost: the object store serves
+    with worker_thread(redis_url, api, "t2", data_dir=tmp_path / "w2", cache_chunk_bytes=chunk):
         events = run(run_job("synth", {"request": request}))
     assert events[-1].type == EventType.done
-    assert store.result_motion(events[-1].job, events[-1].data["result"]).num_frames == 20
-    assert cached() == disk
+    assert api.result_motion(events[-1].job, events[-1].data["result"]).num_frames == 20
+    assert {KEYS.db_count(k).removesuffix(":n") for k in objects} <= cached_keys()
     bytes_client.close()
 
 

@@ -1,0 +1,142 @@
+"""A process's local cache of databases downloaded from an object store, bounded by bytes.
+
+An engine memory-maps a database's ``.npy`` files (:mod:`engines.container`), which needs them on
+a local disk. With an object store (``s3://``), :class:`DiskCache` downloads a database's arrays
+once into ``<data dir>/cache/databases/<id>/`` and every engine process on the host maps the same
+files (one copy in the page cache). The cache is a cache only: anything in it can be deleted at any
+time and is downloaded again.
+
+* A download goes to a temporary directory renamed into place when complete (the manifest written
+  last), so two processes fetching the same database never see half of one; the loser of the rename
+  discards its copy.
+* After each download the least recently used databases (by the manifest's modification time,
+  touched on every use) are deleted until the cache holds at most ``max_bytes``; the one just
+  fetched stays even when it alone is larger. Deleting files another process has mapped is safe on
+  POSIX: its pages stay valid until it unmaps them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Protocol
+
+from engines import container
+
+
+class ObjectCache(Protocol):
+    """A shared cache of store objects in front of the object store (the Redis database cache)."""
+
+    def get(self, key: str) -> bytes | None:
+        """The cached bytes, or None."""
+        ...
+
+    def put(self, key: str, data: bytes) -> None:
+        """Cache ``data`` (failures are the cache's to log, never the caller's)."""
+        ...
+
+    def wants(self, size: int) -> bool:
+        """Whether an object of ``size`` bytes belongs in the cache."""
+        ...
+
+
+Fetch = Callable[[str, Path], None]
+"""``fetch(file, path)``: write the database object ``arrays/<file>`` (or ``arrays.json``) to ``path``."""
+
+
+class DiskCache:
+    """Databases downloaded under ``root`` (one directory each), at most ``max_bytes`` in all."""
+
+    def __init__(self, root: str | Path, max_bytes: int) -> None:
+        self.root = Path(root)
+        self.max_bytes = max_bytes
+        self._lock = threading.Lock()
+
+    def _dir(self, db_id: str) -> Path:
+        return self.root / db_id
+
+    def path_if_cached(self, db_id: str) -> Path | None:
+        """The cached copy's directory (its use recorded), or None."""
+        d = self._dir(db_id)
+        manifest = d / container.MANIFEST
+        try:
+            os.utime(manifest)
+        except OSError:
+            return None
+        return d
+
+    def fetch(self, db_id: str, manifest: container.Manifest, fetch: Fetch) -> Path:
+        """The directory of the database's arrays, downloaded with ``fetch`` unless cached."""
+        cached = self.path_if_cached(db_id)
+        if cached is not None:
+            return cached
+        self.root.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=self.root, prefix=f".{db_id}."))
+        try:
+            (tmp / container.ARRAYS_DIR).mkdir()
+            for name, file in manifest.files.items():
+                path = tmp / container.ARRAYS_DIR / file
+                fetch(f"{container.ARRAYS_DIR}/{file}", path)
+                size = path.stat().st_size
+                if size != manifest.sizes[name]:
+                    raise OSError(f"database {db_id}: {file} has {size} bytes, not {manifest.sizes[name]}")
+            (tmp / container.MANIFEST).write_bytes(manifest.to_bytes())
+            try:
+                tmp.rename(self._dir(db_id))
+            except OSError:  # another process got there first: use its copy
+                shutil.rmtree(tmp, ignore_errors=True)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        self.evict_over(keep=db_id)
+        return self._dir(db_id)
+
+    def entries(self) -> list[tuple[float, int, str]]:
+        """``(last use, bytes, id)`` of every complete cached database, oldest first."""
+        out: list[tuple[float, int, str]] = []
+        if not self.root.is_dir():
+            return out
+        for d in self.root.iterdir():
+            manifest = d / container.MANIFEST
+            if d.name.startswith(".") or not manifest.is_file():
+                continue
+            try:
+                size = container.read_manifest(d).total_bytes
+                out.append((manifest.stat().st_mtime, size, d.name))
+            except (OSError, container.ContainerError):
+                continue
+        return sorted(out)
+
+    def total_bytes(self) -> int:
+        return sum(size for _, size, _ in self.entries())
+
+    def evict_over(self, keep: str | None = None) -> list[str]:
+        """Delete the least recently used databases until at most ``max_bytes`` stay; their ids."""
+        with self._lock:
+            entries = self.entries()
+            total = sum(size for _, size, _ in entries)
+            evicted = []
+            for _, size, db_id in entries:
+                if total <= self.max_bytes:
+                    break
+                if db_id == keep:
+                    continue
+                self.evict(db_id)
+                total -= size
+                evicted.append(db_id)
+            return evicted
+
+    def evict(self, db_id: str) -> None:
+        """Drop one database's copy (renamed away first, so no reader sees a half-deleted one)."""
+        d = self._dir(db_id)
+        if not d.exists():
+            return
+        gone = self.root / f".{db_id}.evicted.{os.getpid()}.{threading.get_ident()}"
+        with contextlib.suppress(OSError):
+            d.rename(gone)
+            shutil.rmtree(gone, ignore_errors=True)
