@@ -491,7 +491,3 @@ def finish_solution(
     solution.quality = report
     solution.constraint_errors = report.constraint_errors
     return solution
-
-
-def empty_arrays() -> Arrays:
-    return {"_": np.zeros(0)}
