@@ -54,7 +54,7 @@ from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import CollectingEmitter, Solution  # noqa: E402
+from engines.base import CollectingEmitter, Run, Solution  # noqa: E402
 from engines.control.dp import (  # noqa: E402
     cost_to_go,
     interpretation,
@@ -159,7 +159,7 @@ def first_solution(engine: ControlEngine, request: Any, input_s: float, repeat: 
     wall, cpu = [], []
     for _ in range(repeat):
         emit = FirstSolution()
-        engine.search(request, 60.0, emit, emit.stop)
+        engine.search(request, Run(60.0, emit.stop, emit))
         if emit.first is None:
             raise RuntimeError("the engine emitted no solution")
         wall.append(emit.first[0])
@@ -252,10 +252,10 @@ def measure(engine: ControlEngine, request: Any, input_s: float, repeat: int) ->
     fast = request.model_copy(update={"exact": False})
     fast.attach_inputs(dict(request._inputs))
     t_search, _ = best_of(
-        repeat, lambda: engine.search(fast, 60.0, CollectingEmitter(), lambda: False), "search_beam"
+        repeat, lambda: engine.search(fast, Run(60.0, emit=CollectingEmitter())), "search_beam"
     )
     t_full, _ = best_of(
-        repeat, lambda: engine.search(request, 60.0, CollectingEmitter(), lambda: False), "search_exact"
+        repeat, lambda: engine.search(request, Run(60.0, emit=CollectingEmitter())), "search_exact"
     )
     out.update(
         search_beam_x_realtime=round(input_s / t_search, 1),

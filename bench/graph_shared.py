@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from engines.base import CollectingEmitter, foot_floor_arrays
+from engines.base import CollectingEmitter, Run, foot_floor_arrays
 from engines.graph import shared as shared_module
 from engines.graph.build import build_graph
 from engines.graph.engine import GraphEngine
@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
             request = parse_job_request(body)
             rec = CollectingEmitter()
             t0 = time.perf_counter()
-            eng.search(request, args.budget, rec, lambda: False)
+            eng.search(request, Run(args.budget, emit=rec))
             elapsed = time.perf_counter() - t0
             best = rec.best
             if best is None or best.quality is None:

@@ -449,22 +449,17 @@ def cmd_build(args: argparse.Namespace) -> int:
             f"built {info.kind} database {info.id[:12]} in {args.out}: {len(info.clips)} clips, "
             f"{info.frames} frames at {info.fps:g} fps"
         )
-        for line in kept_lines(Path(args.out) / "data.npz"):
+        for line in kept_lines(Path(args.out)):
             print(line)
     return 0
 
 
-def kept_lines(npz: Path, limit: int = 20) -> list[str]:
-    """What a graph build kept and left out (its report in the database's ``data.npz``), one line
-    per dropped clip up to ``limit``; no lines for other kinds of database."""
-    import numpy as np
+def kept_lines(db_dir: Path, limit: int = 20) -> list[str]:
+    """What a graph build kept and left out (the ``graph`` part of the database's summary), one
+    line per dropped clip up to ``limit``; no lines for other kinds of database."""
+    from workers.summary import database_dir_summary
 
-    from workers.summary import graph_kept
-
-    with np.load(npz, allow_pickle=False) as z:
-        if "graph.report" not in z.files:
-            return []
-        kept = graph_kept(z["graph.report"])
+    kept = database_dir_summary(db_dir).graph
     if kept is None:
         return []
     total = kept.kept_frames + kept.dropped_frames

@@ -23,10 +23,13 @@ from typing import Any
 
 from cachetools import LRUCache, cached
 
+from engines.base import DatabaseFacts
+from engines.registry import engine_class
+from schemas.bases import JobRequestBase
+from schemas.jobs import parse_job_request
+
 BASE_MEMORY_BYTES = 300 * 1024 * 1024
 """A worker process with the engines loaded (numpy, scipy, scikit-learn) and a database."""
-BYTES_PER_JOINT_FRAME = {"rhythm": 400, "control": 300, "graph": 300, "annotations": 300, "clip": 200}
-"""Peak working memory per output joint-frame, by engine (others: the largest)."""
 SECONDS_PER_JOINT_FRAME = 4e-6
 """Compute per output joint-frame after the search budget (assembly, blending, foot clean-up)."""
 
@@ -58,71 +61,23 @@ class WorkEstimate:
         return asdict(self)
 
 
-def _music_seconds(request: Any) -> float | None:
-    music = request.music
-    if music.bpm is not None:
-        return float(music.duration_s)
-    length: float | None = None
-    if music.beats_s is not None:
-        length = float(music.beats_s[-1])
-    elif music.midi is not None:
-        try:
-            from engines.rhythm.music import parse_midi
-
-            tempo = parse_midi(request.input_bytes(music.midi))
-            length = float(tempo.tick_to_seconds([tempo.end_tick])[0])
-        except Exception:  # an unreadable file fails in the engine, with its own message
-            length = None
-    if music.duration_s is not None:
-        length = float(music.duration_s) if length is None else min(length, float(music.duration_s))
-    return length
+def expected_frames(request: JobRequestBase, facts: DatabaseFacts) -> int | None:
+    """Output frames per character that ``request`` asks for at the output rate (None: unknown),
+    as its engine estimates them (:meth:`engines.base.Engine.estimate`)."""
+    return engine_class(request.engine).estimate(request, facts).frames
 
 
-def expected_frames(request: Any, db_fps: float, clip_frames: dict[str, int] | None = None) -> int | None:
-    """Output frames per character that ``request`` asks for at the output rate (None: unknown).
-
-    ``clip_frames``: frames of the database's clips at the database rate, by name (for ``clip``)."""
-    engine = getattr(request, "engine", None)
-    fps = float(getattr(request, "fps", None) or db_fps)
-    if engine == "graph":
-        return int(request.frames) if request.frames is not None else round(float(request.seconds) * fps)
-    if engine == "annotations":
-        return int(request.frames)
-    if engine == "rhythm":
-        seconds = _music_seconds(request)
-        return None if seconds is None else round(seconds * fps)
-    if engine == "control":
-        trajectory = request.control.trajectory
-        if trajectory is not None:
-            return round((len(trajectory.points) - 1) / float(trajectory.fps) * fps) + 1
-        return None  # a control clip: its length is checked by the upload limits
-    if engine == "clip":
-        total = (clip_frames or {}).get(request.clip)
-        end = request.end if request.end is not None else total
-        return None if end is None else max(0, min(end, total or end) - request.start)
-    frames = getattr(request, "frames", None)
-    return int(frames) if isinstance(frames, int) else None
-
-
-def estimate_work(
-    request: Any, db_fps: float, joints: int, clip_frames: dict[str, int] | None = None
-) -> WorkEstimate:
-    """The cost of a validated request against a database of rate ``db_fps`` and ``joints`` joints."""
-    engine = str(getattr(request, "engine", ""))
-    cast = getattr(request, "characters", 1) or 1
-    characters = (len(cast) if isinstance(cast, list) else int(cast)) * (
-        2 if getattr(request, "couples", False) else 1
-    )
-    fps = float(getattr(request, "fps", None) or db_fps)
-    frames = expected_frames(request, db_fps, clip_frames)
-    budget = float(getattr(request, "budget_s", 0.0))
-    if frames is None:
-        return WorkEstimate(None, characters, joints, fps, None, None, budget)
-    joint_frames = characters * frames * max(joints, 1)
-    per = BYTES_PER_JOINT_FRAME.get(engine, max(BYTES_PER_JOINT_FRAME.values()))
-    memory = BASE_MEMORY_BYTES + joint_frames * per
+def estimate_work(request: JobRequestBase, facts: DatabaseFacts) -> WorkEstimate:
+    """The cost of a validated request against a database with ``facts`` (rate, joints, clips)."""
+    out = engine_class(request.engine).estimate(request, facts)
+    joints = facts.joints
+    budget = float(request.budget_s)
+    if out.frames is None:
+        return WorkEstimate(None, out.characters, joints, out.fps, None, None, budget)
+    joint_frames = out.characters * out.frames * max(joints, 1)
+    memory = BASE_MEMORY_BYTES + joint_frames * out.bytes_per_joint_frame
     seconds = budget + joint_frames * SECONDS_PER_JOINT_FRAME
-    return WorkEstimate(frames, characters, joints, fps, joint_frames, memory, round(seconds, 3))
+    return WorkEstimate(out.frames, out.characters, joints, out.fps, joint_frames, memory, round(seconds, 3))
 
 
 def check_work(work: WorkEstimate, limits: WorkLimits) -> list[str]:
@@ -157,16 +112,6 @@ def check_work(work: WorkEstimate, limits: WorkLimits) -> list[str]:
     return problems
 
 
-@dataclass(frozen=True, slots=True)
-class DatabaseFacts:
-    """What a budget needs of a built database: rate, joints and clip lengths (database frames)."""
-
-    fps: float
-    joints: int
-    clip_frames: dict[str, int]
-    joint_names: tuple[str, ...] = ()
-
-
 @cached(LRUCache(maxsize=256), lock=threading.Lock())
 def database_facts(npz_path: str) -> DatabaseFacts:
     """Read the facts from a database's ``data.npz`` (only the small arrays are loaded; a built
@@ -196,13 +141,11 @@ def shortfall(store: Any, job_id: str, payload: dict[str, Any], result: str | No
     if result is None or not isinstance(request_data, dict):
         return None
     try:
-        from schemas.jobs import parse_job_request
-
         request = parse_job_request(request_data)
         if request.database is None:
             return None
         facts = database_facts(str(store.db_dir(request.database) / "data.npz"))
-        wanted = expected_frames(request, facts.fps, facts.clip_frames)
+        wanted = expected_frames(request, facts)
         got = store.result_report(job_id, result).frames
     except Exception:  # a flag is a courtesy: never fail a finished job over it
         return None

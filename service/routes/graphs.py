@@ -21,7 +21,7 @@ from starlette.concurrency import run_in_threadpool
 from engines.base import EngineError, open_database
 from schemas import DatabaseInfo, DatabaseStatus
 from schemas.rhythm_graph import GraphEdits, MovementGraph
-from workers.graph_edits import derive_in_store, graph_of, require_rhythm
+from workers.graph_edits import derive_in_store, graph_of, movement_graph_engine
 from workers.store import Store
 
 from ..deps import PrincipalDep, StoreDep
@@ -37,10 +37,10 @@ EDITS_BODY = json_body_doc(
 EditsBody = Annotated[GraphEdits, Depends(json_body(GraphEdits.model_validate))]
 
 
-def _ready_rhythm(info: DatabaseInfo) -> None:
-    """422 unless a rhythm database; 409 unless built."""
+def _ready_graph(info: DatabaseInfo) -> None:
+    """422 unless a database with a movement graph; 409 unless built."""
     try:
-        require_rhythm(info)
+        movement_graph_engine(info)
     except EngineError as exc:
         raise ApiError(422, "invalid_request", str(exc)) from None
     if info.status != DatabaseStatus.ready:
@@ -58,7 +58,7 @@ async def movement_graph(db_id: str, store: StoreDep, principal: PrincipalDep) -
     clip span, thumbnail pose) and the transitions synthesis draws from (probability, kinematic
     and behavioural likelihoods, learned or added by an edit)."""
     info = await run_in_threadpool(database_for, store, principal, db_id)
-    _ready_rhythm(info)
+    _ready_graph(info)
     return await run_in_threadpool(_graph, store, info)
 
 
@@ -88,7 +88,7 @@ async def edit_graph(
     offending edit and the groups otherwise. The parent is untouched;
     the derived database records it and the edits (``derived_from``) and is used like any other."""
     info = await run_in_threadpool(database_for, store, principal, db_id)
-    _ready_rhythm(info)
+    _ready_graph(info)
     try:
         derived, created = await run_in_threadpool(derive_in_store, store, info, body)
     except EngineError as exc:

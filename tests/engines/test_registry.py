@@ -6,6 +6,8 @@ import pytest
 
 from engines import registry
 from engines.registry import UnavailableError, engine_class, kind_class
+from schemas.databases import ClipsDatabaseSpec
+from schemas.jobs import ClipRequest
 
 
 @pytest.mark.parametrize(
@@ -19,7 +21,11 @@ def test_built_in_engines_load_by_name_and_kind(engine: str, kind: str) -> None:
 
 
 def test_an_engine_whose_module_is_missing_is_unavailable(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(registry._BUILT_IN, "ghost", ("engines.ghost_engine", "GhostEngine", "haunted"))
+    monkeypatch.setitem(
+        registry._BUILT_IN,
+        "ghost",
+        registry.BuiltIn("engines.ghost_engine", "GhostEngine", "haunted", ClipRequest, ClipsDatabaseSpec),
+    )
     with pytest.raises(UnavailableError, match="engine 'ghost' is not available"):
         engine_class("ghost")
     with pytest.raises(UnavailableError, match="kind 'haunted' is not available"):
