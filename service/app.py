@@ -22,9 +22,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.utils import get_openapi
 from pydantic import TypeAdapter
 
-from engines.registry import load_plugins
-from schemas import DatabaseSpec
-from schemas.jobs import JobRequest
+from engines.registry import load_plugins, request_union, spec_union
 from schemas.rhythm_graph import GraphEdits
 from workers.backend import JobBackend
 from workers.embedded import EmbeddedBackend
@@ -90,8 +88,8 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
 
 
 BODY_SCHEMAS: dict[str, Any] = {
-    "JobRequest": JobRequest,
-    "DatabaseSpec": DatabaseSpec,
+    "JobRequest": request_union(),
+    "DatabaseSpec": spec_union(),
     "LabelCorrections": Corrections,
     "GraphEdits": GraphEdits,
 }

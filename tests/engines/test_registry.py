@@ -35,3 +35,22 @@ def test_an_engine_whose_module_is_missing_is_unavailable(monkeypatch: pytest.Mo
 def test_unknown_names_list_what_is_available() -> None:
     with pytest.raises(UnavailableError, match="available: .*clip"):
         engine_class("nope")
+
+
+def test_the_registry_and_the_schemas_name_the_same_models() -> None:
+    """The unions of the OpenAPI document come from the registry; the schemas' own parsers
+    (``parse_job_request``, ``parse_database_spec``) must accept exactly the same models."""
+    from typing import get_args
+
+    from schemas.databases import DatabaseSpec
+    from schemas.jobs import REQUEST_MODELS, JobRequest
+
+    built_in = registry._BUILT_IN
+    for name, entry in built_in.items():
+        assert REQUEST_MODELS[name] is entry.request_model
+        assert engine_class(name).request_model is entry.request_model
+        assert engine_class(name).spec_model is entry.spec_model
+    requests = get_args(get_args(registry.request_union())[0])
+    specs = get_args(get_args(registry.spec_union())[0])
+    assert requests == get_args(get_args(JobRequest)[0])
+    assert specs == get_args(get_args(DatabaseSpec)[0])
