@@ -62,14 +62,9 @@ from engines.control.dp import (  # noqa: E402
     solve,
     typical_segment_cost,
 )
-from engines.control.engine import (  # noqa: E402
-    BEAM_CELLS,
-    BEAM_WIDTH,
-    QUICK_CELLS,
-    QUICK_WIDTH,
-    ControlEngine,
-)
+from engines.control.engine import ControlEngine  # noqa: E402
 from engines.control.points import resample_cloud  # noqa: E402
+from engines.control.schedule import BEAM_CELLS, BEAM_WIDTH, QUICK_CELLS, QUICK_WIDTH  # noqa: E402
 from engines.library import ClipInput, build_library, library_to_arrays  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.bvh import parse_bvh  # noqa: E402

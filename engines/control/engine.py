@@ -18,7 +18,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from functools import lru_cache
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -69,11 +69,10 @@ from .dp import (
     solve,
     typical_segment_cost,
 )
-
-if TYPE_CHECKING:
-    from .session import LiveControl
 from .placement import add_body_costs
 from .points import derived_control, joint_cloud, resample_cloud, trajectory_control
+from .schedule import BEAM_CELLS, BEAM_WIDTH, QUICK_CELLS, QUICK_WIDTH
+from .session import LiveControl
 
 Array = npt.NDArray[np.float64]
 
@@ -89,15 +88,6 @@ HOLD_SMOOTH_S = 0.1
 
 K_MOTION = 0.1
 K_WALK = 0.2
-
-# the anytime schedule: a quick narrow beam (width in typical single-segment interpretation costs, at
-# most 16 predecessors x 128 successors per boundary), a wider beam (width in the quick solution's mean
-# cost per segment, 64 x 256 cells: the exact optimum on all 14 leave-one-out salsa dances), then the exact
-# optimum (branch and bound)
-QUICK_WIDTH = 3.0
-QUICK_CELLS = (16, 128)
-BEAM_WIDTH = 10.0
-BEAM_CELLS = (64, 256)
 
 
 BODY_FADE_S = 2.0
@@ -242,9 +232,7 @@ class ControlEngine(Engine[ControlRequest, ControlDatabaseSpec]):
     def live_control(self, **settings: Any) -> LiveControl:
         """A live session driven by a streamed control (:class:`engines.control.session.LiveControl`;
         ``settings``: its ``latency_s``, ``k``, ``stretch_s``, ``solve_fps``, ``smoothing_s``)."""
-        from .session import LiveControl as Live  # the session module builds on this one
-
-        return Live(self, **settings)
+        return LiveControl(self, **settings)
 
     def continuity_weight(self, request: ControlRequest) -> float:
         """The request's ``k``, or the database kind's default (:data:`K_MOTION`, :data:`K_WALK`)."""

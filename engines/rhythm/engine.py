@@ -55,6 +55,7 @@ from ..library import MotionLibrary
 from .build import build_rhythm, tables_from_arrays
 from .choreography import edited_arrays, movement_graph, resolve_edits
 from .music import MusicError, bpm_beats, parse_midi
+from .session import LiveDancer
 from .synth import Control, Dancers, SpeedLimits, Tables, initial_dancers, synthesize
 
 Array = npt.NDArray[np.float64]
@@ -448,8 +449,6 @@ class RhythmEngine(Engine[RhythmRequest, RhythmDatabaseSpec]):
 
     def live_session(self, *, seed: int = 0, fps: float | None = None, accent: float = 0.6) -> LiveSession:
         """A dancer driven by beats as they happen (:class:`engines.rhythm.session.LiveDancer`)."""
-        from .session import LiveDancer  # the session module builds on this one
-
         return LiveDancer(self, seed=seed, fps=fps, accent=accent)
 
     def search(self, request: RhythmRequest, run: Run) -> Stopped:
