@@ -1,4 +1,4 @@
-"""Benchmark: two characters with shared constraints in the graph engine (engines.graph.shared).
+"""Benchmark: two characters with shared constraints in the graph engine (engines.graph.coupled).
 
 Builds a graph database from the bundled CMU walks (``sample:walk-05-01``, ``walk-10-04``,
 ``walk-12-02``, ``walk``: 30 fps, no ../shared needed) and runs, for each seed, two requests of
@@ -16,7 +16,7 @@ figures agree (``report_agrees``). Prints one JSON object: per run ``{"request",
 "meet_error_cm", "min_separation_cm", "ok", "report_agrees", "passes", "search_s"}`` and the
 summary (mean and worst meet error, worst separation shortfall, mean time per request).
 
-Options: ``--rounds`` (coupling rounds), ``--meet-weight`` (:data:`engines.graph.shared.MEET_WEIGHT`),
+Options: ``--rounds`` (coupling rounds), ``--meet-weight`` (:data:`engines.graph.coupled.MEET_WEIGHT`),
 ``--budget`` per request, ``--seeds``.
 """
 

@@ -46,7 +46,7 @@ from motion.quality import QualityInputs, QualityReport, assess
 from schemas.annotations import ClipLabels, LabelCorrection
 from schemas.bases import DatabaseSpecBase, JobRequestBase
 from schemas.databases import GraphKept
-from schemas.rhythm_graph import DerivedFrom, GraphEdits, MovementGraph, ResolvedEdit
+from schemas.movement_graph import DerivedFrom, GraphEdits, MovementGraph, ResolvedEdit
 
 from .library import ClipInput as ClipInput  # a clip as read, for the runtime that reads them
 from .library import MotionLibrary as MotionLibrary  # what a database is built from

@@ -6,7 +6,7 @@ A derived database is content-addressed like a built one: its id is the sha256 o
 id, the edits in canonical form (groups resolved to ids, ``connect``'s weight explicit) and the
 schema version, so posting the same edits again (by group id or by clip span) names the same
 database. It holds the parent's spec (so summaries and clip names stay as they were), the parent's
-arrays with the edited ``rhythm.p``, and a :class:`schemas.rhythm_graph.DerivedFrom` in its info
+arrays with the edited ``rhythm.p``, and a :class:`schemas.movement_graph.DerivedFrom` in its info
 (parent and edits). The parent is untouched; deleting either leaves the other whole (the arrays
 are a full copy: a database never depends on another being there).
 
@@ -25,7 +25,7 @@ from engines.base import EngineError
 from engines.registry import EngineClass, kind_class
 from schemas import DatabaseInfo, DatabaseStatus
 from schemas.common import SCHEMA_VERSION
-from schemas.rhythm_graph import DerivedFrom, GraphEdits, MovementGraph, ResolvedEdit
+from schemas.movement_graph import DerivedFrom, GraphEdits, MovementGraph, ResolvedEdit
 
 from .store import NotFoundError, Store, load_npz, now, npz_bytes
 

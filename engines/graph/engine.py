@@ -35,10 +35,10 @@ from ..base import (
 )
 from ..library import MotionLibrary, with_mirrors
 from .build import build_graph, build_work
+from .coupled import CoupledSearch
 from .model import EdgeTree, FootContacts, RootTracks
 from .paths import GraphIndex
 from .search import GraphSearch
-from .shared import CoupledSearch
 from .tracks import foot_contacts
 
 
@@ -96,7 +96,7 @@ class GraphEngine(Engine[GraphRequest, GraphDatabaseSpec]):
         # one BLAS thread: matrix products reduce in one order whatever the machine's cores
         with threadpool_limits(limits=1, user_api="blas"):
             if request.characters:
-                # several characters with shared constraints are searched jointly (engines.graph.shared)
+                # several characters with shared constraints are searched jointly (engines.graph.coupled)
                 coupled = self.searcher(request.seed, CoupledSearch)
                 return coupled.run(request, run.budget_s, emit, run.should_stop)
             return self.searcher(request.seed).run(request, run.budget_s, emit, run.should_stop)

@@ -214,7 +214,7 @@ def compile_problem(
     keepaways: tuple[KeepawayTarget, ...] = (),
 ) -> Problem:
     """Check a :class:`schemas.graph.GraphRequest` against the database and compile it, with the
-    ``keepaways`` a coupled search derives from other characters (:mod:`engines.graph.shared`).
+    ``keepaways`` a coupled search derives from other characters (:mod:`engines.graph.coupled`).
 
     Raises :class:`~engines.base.EngineError` for constraints the database cannot serve: times
     outside the output, unknown clips, joints or labels, clip frames out of range, or two pose

@@ -268,7 +268,7 @@ class GraphSearch:
 
         ``keepaways`` (moving keep-out targets), ``warm`` (a path that joins the first seeds, so
         the search returns nothing worse) and ``cap`` (the whole request's time cap) serve the
-        coupled search of several characters (:mod:`engines.graph.shared`); the best path emitted
+        coupled search of several characters (:mod:`engines.graph.coupled`); the best path emitted
         is left in :attr:`best_path_`."""
         if request.rounds is not None:
             max_rounds = int(request.rounds)

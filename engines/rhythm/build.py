@@ -2,7 +2,7 @@
 
 :func:`build_rhythm` is the engine's ``build``: it analyses the motion beats of every example
 (:func:`motion.beats.detect_beats`, or the spec's ``clip_beats``), cuts and normalizes the basic
-movements (:mod:`engines.rhythm.movements`), groups them (:mod:`engines.rhythm.graph`), builds the
+movements (:mod:`engines.rhythm.movements`), groups them (:mod:`engines.rhythm.movement_graph`), builds the
 movement transition graph and stores everything as ``rhythm.*`` arrays. :func:`tables_from_arrays`
 loads them for synthesis.
 
@@ -36,7 +36,7 @@ from ..base import Arrays, Emitter, EngineError, ShouldStop
 from ..library import MotionLibrary
 from .beatkeys import beat_keys, movement_speed
 from .blend import fit_blender
-from .graph import k_medoids, medoids, subtractive_clustering, transition_graph
+from .movement_graph import k_medoids, medoids, subtractive_clustering, transition_graph
 from .movements import Example, Movements, extract_movements, movement_differences, transition_differences
 from .reach import describe as describe_graph
 from .synth import Tables

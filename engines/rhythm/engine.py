@@ -31,8 +31,8 @@ from motion.goals import BeatGoal, Character, Goal, HoldGoal, LengthGoal, Point,
 from motion.metrics import beat_align_scores
 from motion.plausibility import SPEED_P99_MARGIN, SPEED_WINDOW_S
 from motion.quality import QualityInputs
+from schemas.movement_graph import DerivedFrom, GraphEdits, MovementGraph, ResolvedEdit
 from schemas.rhythm import RhythmDatabaseSpec, RhythmRequest
-from schemas.rhythm_graph import DerivedFrom, GraphEdits, MovementGraph, ResolvedEdit
 
 from ..base import (
     Arrays,

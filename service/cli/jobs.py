@@ -1,5 +1,5 @@
 """``segue build``, ``synth``, ``graph`` and ``graph-edit``: jobs run in this process on database
-directories (:mod:`workers.local`, :mod:`workers.graph_edits`), with their progress echoed.
+directories (:mod:`workers.local`, :mod:`workers.movement_graphs`), with their progress echoed.
 
 Only the standard library at module level (each command imports what it needs).
 """
@@ -118,7 +118,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
 
 def cmd_graph(args: argparse.Namespace) -> int:
-    from workers.graph_edits import graph_of_dir
+    from workers.movement_graphs import graph_of_dir
 
     graph = graph_of_dir(Path(args.db))
     if args.json:
@@ -149,8 +149,8 @@ def cmd_graph(args: argparse.Namespace) -> int:
 
 
 def cmd_graph_edit(args: argparse.Namespace) -> int:
-    from schemas.rhythm_graph import GraphEdits
-    from workers.graph_edits import derive_dir
+    from schemas.movement_graph import GraphEdits
+    from workers.movement_graphs import derive_dir
 
     data = json.loads(Path(args.edits).read_bytes())
     body = GraphEdits.model_validate({"edits": data} if isinstance(data, list) else data)

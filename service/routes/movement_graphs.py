@@ -6,7 +6,7 @@ a thumbnail pose, transitions with their probability and kinematic and behaviour
 ``POST .../graph-edits`` connects, cuts and weights transitions (groups by id or by a clip span),
 checks what the edits change (no new dead end, no group made unreachable that was reachable)
 and stores the result as a derived,
-content-addressed database (:mod:`workers.graph_edits`): 201 when created, 200 when the same edits
+content-addressed database (:mod:`workers.movement_graphs`): 201 when created, 200 when the same edits
 of the same parent exist already. It is quick (the parent's arrays with one matrix replaced), so it
 runs in a worker thread of the API, not as a job.
 """
@@ -20,8 +20,8 @@ from starlette.concurrency import run_in_threadpool
 
 from engines.base import EngineError, open_database
 from schemas import DatabaseInfo, DatabaseStatus
-from schemas.rhythm_graph import GraphEdits, MovementGraph
-from workers.graph_edits import derive_in_store, graph_of, movement_graph_engine
+from schemas.movement_graph import GraphEdits, MovementGraph
+from workers.movement_graphs import derive_in_store, graph_of, movement_graph_engine
 from workers.store import Store
 
 from ..deps import PrincipalDep, StoreDep

@@ -13,7 +13,7 @@ from pydantic import ValidationError
 from engines.base import EngineError, Run
 from engines.rhythm.build import dip_agreement, snap_to_speed_minima, speed_dips
 from engines.rhythm.engine import RhythmEngine, music_beats
-from engines.rhythm.graph import k_medoids, subtractive_clustering, transition_graph
+from engines.rhythm.movement_graph import k_medoids, subtractive_clustering, transition_graph
 from engines.rhythm.movements import warp_frames
 from engines.rhythm.music import MusicError, bpm_beats, parse_midi, write_midi
 from engines.rhythm.synth import warp
