@@ -35,7 +35,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
-from typing import Any, ClassVar, Generic, Literal, Protocol, TypeVar
+from typing import Any, ClassVar, Generic, Literal, Protocol, TypeAlias, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -621,6 +621,10 @@ class Engine(ABC, Generic[RequestT, SpecT]):
         """Answer a request, calling ``run.emit.solution`` for every improvement, until the work
         the request asks for is done or ``run`` says to stop (its time cap, a cancel); returns
         why it stopped."""
+
+
+AnyEngine: TypeAlias = Engine[Any, Any]
+"""A loaded engine, whatever its request and spec models (what the runtime holds)."""
 
 
 FLOOR_PREFIX = "quality.floor."

@@ -24,9 +24,9 @@ from schemas.graph import GraphRequest
 from schemas.jobs import ClipRequest, register_request_model
 from schemas.rhythm import RhythmDatabaseSpec, RhythmRequest
 
-from .base import Engine, EngineError
+from .base import AnyEngine, EngineError
 
-EngineClass = type[Engine[Any, Any]]
+EngineClass = type[AnyEngine]
 """An engine class, whatever its request and spec models."""
 
 

@@ -17,8 +17,8 @@ from typing import Any
 from cachetools import LRUCache, cachedmethod
 from pydantic import ValidationError
 
-from engines.base import ClipInput, Engine, EngineError, MotionLibrary, Run, Solution, Stopped
-from engines.registry import UnavailableError, kind_class
+from engines.base import AnyEngine, ClipInput, EngineError, MotionLibrary, Run, Solution, Stopped
+from engines.registry import EngineClass, UnavailableError, kind_class
 from motion import Motion, MotionError
 from motion.plausibility import Reference
 from motion.quality import assess
@@ -46,7 +46,7 @@ class JobFailure(Exception):
 
 
 def _engine_key(
-    cache: EngineCache, db_id: str, engine_cls: type[Engine], load_bytes: LoadDatabaseBytes
+    cache: EngineCache, db_id: str, engine_cls: EngineClass, load_bytes: LoadDatabaseBytes
 ) -> tuple[str, str]:
     return db_id, engine_cls.name
 
@@ -60,11 +60,11 @@ class EngineCache:
 
     def __init__(self, capacity: int = 4) -> None:
         self.capacity = capacity
-        self._engines: LRUCache[tuple[str, str], Engine] = LRUCache(maxsize=capacity)
+        self._engines: LRUCache[tuple[str, str], AnyEngine] = LRUCache(maxsize=capacity)
         self._lock = threading.Lock()
 
     @cachedmethod(lambda self: self._engines, key=_engine_key, lock=lambda self: self._lock)
-    def get(self, db_id: str, engine_cls: type[Engine], load_bytes: LoadDatabaseBytes) -> Engine:
+    def get(self, db_id: str, engine_cls: EngineClass, load_bytes: LoadDatabaseBytes) -> AnyEngine:
         return engine_cls.load(load_npz(load_bytes(db_id)))
 
 
@@ -278,7 +278,7 @@ def _build(
 
 
 def run_search(
-    engine: Engine,
+    engine: AnyEngine,
     request: JobRequestBase,
     job_id: str,
     publish: Publish,
