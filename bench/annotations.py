@@ -44,7 +44,7 @@ sys.path.insert(0, str(ROOT))
 from engines.annotations.build import SVM_DIMS, build_annotated, embed_library, standardize  # noqa: E402
 from engines.annotations.engine import AnnotationEngine, AnnotationSearch  # noqa: E402
 from engines.annotations.propagate import Propagation, propagate  # noqa: E402
-from engines.base import CollectingEmitter  # noqa: E402
+from engines.base import CollectingEmitter, Run  # noqa: E402
 from engines.library import ClipInput, MotionLibrary, build_library, library_to_arrays  # noqa: E402
 from motion import rotations as rot  # noqa: E402
 from motion.ground import ground_frames  # noqa: E402
@@ -173,7 +173,7 @@ def bench_search(engine: AnnotationEngine, args: argparse.Namespace) -> dict[str
         times.append(time.perf_counter() - t0)
     rec = CollectingEmitter()
     t0 = time.perf_counter()
-    engine.search(req, args.budget, rec, lambda: False)
+    engine.search(req, Run(args.budget, emit=rec))
     wall = time.perf_counter() - t0
     state2 = AnnotationSearch(engine.db, req)
     t0 = time.perf_counter()

@@ -54,7 +54,7 @@ from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import CollectingEmitter, Solution  # noqa: E402
+from engines.base import CollectingEmitter, Run, Solution  # noqa: E402
 from engines.control.dp import (  # noqa: E402
     cost_to_go,
     interpretation,
@@ -62,14 +62,9 @@ from engines.control.dp import (  # noqa: E402
     solve,
     typical_segment_cost,
 )
-from engines.control.engine import (  # noqa: E402
-    BEAM_CELLS,
-    BEAM_WIDTH,
-    QUICK_CELLS,
-    QUICK_WIDTH,
-    ControlEngine,
-)
+from engines.control.engine import ControlEngine  # noqa: E402
 from engines.control.points import resample_cloud  # noqa: E402
+from engines.control.schedule import BEAM_CELLS, BEAM_WIDTH, QUICK_CELLS, QUICK_WIDTH  # noqa: E402
 from engines.library import ClipInput, build_library, library_to_arrays  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.bvh import parse_bvh  # noqa: E402
@@ -159,7 +154,7 @@ def first_solution(engine: ControlEngine, request: Any, input_s: float, repeat: 
     wall, cpu = [], []
     for _ in range(repeat):
         emit = FirstSolution()
-        engine.search(request, 60.0, emit, emit.stop)
+        engine.search(request, Run(60.0, emit.stop, emit))
         if emit.first is None:
             raise RuntimeError("the engine emitted no solution")
         wall.append(emit.first[0])
@@ -252,10 +247,10 @@ def measure(engine: ControlEngine, request: Any, input_s: float, repeat: int) ->
     fast = request.model_copy(update={"exact": False})
     fast.attach_inputs(dict(request._inputs))
     t_search, _ = best_of(
-        repeat, lambda: engine.search(fast, 60.0, CollectingEmitter(), lambda: False), "search_beam"
+        repeat, lambda: engine.search(fast, Run(60.0, emit=CollectingEmitter())), "search_beam"
     )
     t_full, _ = best_of(
-        repeat, lambda: engine.search(request, 60.0, CollectingEmitter(), lambda: False), "search_exact"
+        repeat, lambda: engine.search(request, Run(60.0, emit=CollectingEmitter())), "search_exact"
     )
     out.update(
         search_beam_x_realtime=round(input_s / t_search, 1),

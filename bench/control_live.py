@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from control_salsa import POINTS, SALSA, engine_for, follower_errors, held_dances, moved  # noqa: E402
 
-from engines.base import CollectingEmitter  # noqa: E402
+from engines.base import CollectingEmitter, Run  # noqa: E402
 from engines.control.engine import ControlEngine  # noqa: E402
 from engines.control.session import LiveControl  # noqa: E402
 from motion import Motion  # noqa: E402
@@ -98,7 +98,7 @@ def offline(engine: ControlEngine, leader: Motion) -> Motion:
     request = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}})
     request.attach_inputs({"lead.bvh": bvh_text(leader).encode()})
     out = CollectingEmitter()
-    engine.search(request, request.budget_s, out, lambda: False)
+    engine.search(request, Run(request.budget_s, emit=out))
     return min(out.solutions, key=lambda s: s.score).motion
 
 

@@ -70,7 +70,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import CollectingEmitter  # noqa: E402
+from engines.base import CollectingEmitter, Run  # noqa: E402
 from engines.control.engine import ControlEngine  # noqa: E402
 from engines.library import (  # noqa: E402
     ClipInput,
@@ -315,7 +315,7 @@ def synthesize(
     request.attach_inputs({"lead.bvh": bvh_text(leader).encode()})
     quiet = CollectingEmitter()
     t0 = time.perf_counter()
-    engine.search(request, request.budget_s, quiet, lambda: False)
+    engine.search(request, Run(request.budget_s, emit=quiet))
     synth_s = time.perf_counter() - t0
     if not quiet.solutions:
         raise RuntimeError(f"the engine found no solution within {request.budget_s} s")

@@ -42,7 +42,7 @@ from scipy.ndimage import uniform_filter1d
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import CollectingEmitter  # noqa: E402
+from engines.base import CollectingEmitter, Run  # noqa: E402
 from engines.control.engine import ControlEngine  # noqa: E402
 from engines.library import ClipInput, build_library, library_to_arrays  # noqa: E402
 from motion import Motion  # noqa: E402
@@ -103,7 +103,7 @@ def held_walk(engine: ControlEngine, path_file: Path, fps: float) -> dict[str, A
     )
     out = CollectingEmitter()
     t0 = time.perf_counter()
-    engine.search(request, request.budget_s, out, lambda: False)
+    engine.search(request, Run(request.budget_s, emit=out))
     synth_s = time.perf_counter() - t0
     sol = min(out.solutions, key=lambda s: s.score)
     motion = sol.motion

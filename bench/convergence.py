@@ -31,7 +31,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import CollectingEmitter, Engine, foot_floor_arrays  # noqa: E402
+from engines.base import CollectingEmitter, Engine, Run, foot_floor_arrays  # noqa: E402
 from engines.library import ClipInput, build_library, library_to_arrays  # noqa: E402
 from engines.registry import kind_class  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
@@ -120,7 +120,7 @@ def curve(
     request = parse_job_request(data)
     rec = CpuEmitter()
     t0, c0 = time.perf_counter(), time.process_time()
-    engine.search(request, 600.0, rec, lambda: False)
+    engine.search(request, Run(600.0, emit=rec))
     total, cpu = time.perf_counter() - t0, time.process_time() - c0
     points = [
         [int(s.metrics.get(metric, i + 1)), round(float(s.score), 5), round(t, 3), round(c - c0, 3)]

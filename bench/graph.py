@@ -33,7 +33,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import CollectingEmitter, foot_floor_arrays  # noqa: E402
+from engines.base import CollectingEmitter, Run, foot_floor_arrays  # noqa: E402
 from engines.graph.build import build_graph  # noqa: E402
 from engines.graph.engine import GraphEngine  # noqa: E402
 from engines.library import ClipInput, build_library  # noqa: E402
@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         }
     )
     rec = CollectingEmitter()
-    stopped = engine.search(request, args.budget, rec, lambda: False)
+    stopped = engine.search(request, Run(args.budget, emit=rec))
     events = [(t, float(sol.score), sol) for t, sol in zip(rec.times, rec.solutions, strict=True)]
     if not events:
         print(json.dumps({"error": "no solution"}))

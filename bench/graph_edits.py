@@ -42,8 +42,8 @@ from engines.rhythm.choreography import GraphEditError, apply_edits, edited_arra
 from engines.rhythm.engine import RhythmEngine, music_beats  # noqa: E402
 from engines.rhythm.synth import draw_probabilities  # noqa: E402
 from schemas.databases import parse_database_spec  # noqa: E402
+from schemas.movement_graph import ResolvedEdit  # noqa: E402
 from schemas.rhythm import RhythmRequest  # noqa: E402
-from schemas.rhythm_graph import ResolvedEdit  # noqa: E402
 from workers.execute import build_database_bytes  # noqa: E402
 from workers.store import load_npz, npz_bytes  # noqa: E402
 

@@ -1,4 +1,4 @@
-"""Benchmark: two characters with shared constraints in the graph engine (engines.graph.shared).
+"""Benchmark: two characters with shared constraints in the graph engine (engines.graph.coupled).
 
 Builds a graph database from the bundled CMU walks (``sample:walk-05-01``, ``walk-10-04``,
 ``walk-12-02``, ``walk``: 30 fps, no ../shared needed) and runs, for each seed, two requests of
@@ -16,7 +16,7 @@ figures agree (``report_agrees``). Prints one JSON object: per run ``{"request",
 "meet_error_cm", "min_separation_cm", "ok", "report_agrees", "passes", "search_s"}`` and the
 summary (mean and worst meet error, worst separation shortfall, mean time per request).
 
-Options: ``--rounds`` (coupling rounds), ``--meet-weight`` (:data:`engines.graph.shared.MEET_WEIGHT`),
+Options: ``--rounds`` (coupling rounds), ``--meet-weight`` (:data:`engines.graph.coupled.MEET_WEIGHT`),
 ``--budget`` per request, ``--seeds``.
 """
 
@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from engines.base import CollectingEmitter, foot_floor_arrays
+from engines.base import CollectingEmitter, Run, foot_floor_arrays
 from engines.graph import shared as shared_module
 from engines.graph.build import build_graph
 from engines.graph.engine import GraphEngine
@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
             request = parse_job_request(body)
             rec = CollectingEmitter()
             t0 = time.perf_counter()
-            eng.search(request, args.budget, rec, lambda: False)
+            eng.search(request, Run(args.budget, emit=rec))
             elapsed = time.perf_counter() - t0
             best = rec.best
             if best is None or best.quality is None:

@@ -30,7 +30,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import CollectingEmitter  # noqa: E402
+from engines.base import CollectingEmitter, Run  # noqa: E402
 from engines.library import ClipInput, build_library, library_to_arrays  # noqa: E402
 from engines.rhythm.audio import audio_beats  # noqa: E402
 from engines.rhythm.engine import RhythmEngine  # noqa: E402
@@ -134,7 +134,7 @@ def _dance(seeds: list[int]) -> dict[str, Any]:
             req = RhythmRequest.model_validate(body)
             req.attach_inputs({"song.wav": song})
             keep = CollectingEmitter()
-            engine.search(req, 30.0, keep, lambda: False)
+            engine.search(req, Run(30.0, emit=keep))
             sol = keep.latest
             assert sol is not None and sol.quality is not None
             mint, bail, _ = beat_align_scores(sol.motion.global_positions(), sol.motion.fps, beats)

@@ -155,10 +155,10 @@ def main() -> None:
                 time.sleep(0.02)
         store = Store(tmp / "data")
         db_id = _database(store)
-        env = dict(os.environ, PYTHONPATH=str(REPO))
+        env = dict(os.environ, PYTHONPATH=str(REPO), SEGUE_LOG_LEVEL="WARNING")
         for i in range(args.workers):
-            cmd = [sys.executable, "-m", "workers.redis_worker", "--redis", url, "--data", str(store.root)]
-            workers.append(subprocess.Popen([*cmd, "--name", f"bench{i}", "--log-level", "WARNING"], env=env))
+            cmd = [sys.executable, "-m", "service.cli", "worker", "--redis", url, "--data", str(store.root)]
+            workers.append(subprocess.Popen([*cmd, "--name", f"bench{i}"], env=env))
         keys = RedisKeys()
         while sum(bool(client.exists(keys.worker(f"bench{i}"))) for i in range(args.workers)) < args.workers:
             time.sleep(0.05)

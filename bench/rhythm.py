@@ -30,7 +30,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engines.base import CollectingEmitter, Solution  # noqa: E402
+from engines.base import CollectingEmitter, Run, Solution  # noqa: E402
 from engines.library import ClipInput, MotionLibrary, build_library, library_to_arrays  # noqa: E402
 from engines.rhythm.engine import RhythmEngine, music_beats  # noqa: E402
 from engines.rhythm.music import bpm_beats  # noqa: E402
@@ -81,7 +81,7 @@ def _sweep(engine: RhythmEngine, bpms: list[float]) -> list[dict[str, Any]]:
                 if accent is not None:
                     body["accent"] = accent
                 keep = CollectingEmitter()
-                engine.search(RhythmRequest.model_validate(body), 10.0, keep, lambda: False)
+                engine.search(RhythmRequest.model_validate(body), Run(10.0, emit=keep))
                 assert keep.latest is not None and keep.latest.quality is not None
                 q = keep.latest.quality
                 mint.append(q.metrics["beat_align_mint"])
@@ -170,12 +170,12 @@ def main() -> None:
     req = RhythmRequest.model_validate({"music": {"bpm": args.bpm, "duration_s": 20}, "seed": 2})
     keep = CollectingEmitter()
     t2 = time.perf_counter()
-    engine.search(req, 10.0, keep, lambda: False)
+    engine.search(req, Run(10.0, emit=keep))
     search_s = time.perf_counter() - t2
     assert keep.latest is not None
     sol = keep.latest
     plain = CollectingEmitter()
-    engine.search(req.model_copy(update={"accent": 0.0}), 10.0, plain, lambda: False)
+    engine.search(req.model_copy(update={"accent": 0.0}), Run(10.0, emit=plain))
     assert plain.latest is not None
 
     if args.sweep:

@@ -2,23 +2,28 @@
 
 Engines follow the estimator style of DESIGN.md: a database object is built once from a motion
 library (:mod:`engines.library`) and stored as arrays; a loaded engine then answers
-``search(request, budget_s, emit, should_stop)``, calling ``emit.solution`` every time its best
-score improves (anytime) and polling ``should_stop`` (cancel). Engines never import the service,
-the workers or Redis.
+``search(request, run)``, calling ``run.emit.solution`` every time its best score improves
+(anytime) and asking ``run.over()`` between units of work (cancel, time cap). Engines never
+import the service, the workers or Redis.
 
 Every search is bounded by *work* derived from the request (the graph's rounds, the annotation
 engine's passes, the control engine's stages, the rhythm engine's single pass), never by the
 clock, so a request and its seed give the same bytes on any machine and at any load. The time
-budget ``budget_s`` is only a safety cap: a :class:`Run` carries both bounds and the cancel flag,
-and ``search`` returns why it stopped (:class:`Stopped`), which the runtime puts in the ``done``
+budget ``budget_s`` is only a safety cap: a :class:`Run` carries the emitter, the time cap and the
+cancel flag, and ``search`` returns why it stopped (:class:`Stopped`), which the runtime puts in the ``done``
 event and the report.
 
-This module, :mod:`engines.registry` and the package itself are all the service may import of the
-engines (``tests/test_layering.py``): what a route needs of a database beyond running jobs goes
-through the small query API of :class:`Engine` -- :meth:`Engine.clip_labels` and
-:meth:`Engine.corrected_spec` read a few arrays of a lazily opened database file
-(:func:`open_database`, :mod:`engines.container`), and :meth:`Engine.live_session` starts a
-:class:`LiveSession`.
+This module, :mod:`engines.registry` and the package itself are all the workers and the service
+may import of the engines (``tests/test_layering.py``). An engine is the one place that knows its
+requests and databases: :class:`Engine` is generic in its request and spec models
+(``Engine[RequestT, SpecT]``, named by ``request_model``/``spec_model``) and answers, besides
+``build`` and ``search(request, run)``, what the runtime asks of it -- :meth:`Engine.estimate`
+(the output a request asks for, for work budgets), :meth:`Engine.summarize` (its part of a
+database's summary) -- and the query API a route needs of a database: :meth:`Engine.clip_labels`
+and :meth:`Engine.corrected_spec` read a few arrays of a lazily opened database file
+(:func:`open_database`, :mod:`engines.container`), :meth:`Engine.movement_graph` and
+:meth:`Engine.edit_movement_graph` read and derive a movement graph, :meth:`Engine.live_session`
+starts a :class:`LiveSession`. A query an engine cannot answer raises :class:`EngineError`.
 """
 
 from __future__ import annotations
@@ -30,7 +35,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
-from typing import Any, ClassVar, Protocol
+from typing import Any, ClassVar, Generic, Literal, Protocol, TypeAlias, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -39,10 +44,14 @@ from motion import Motion, MotionError, Skeleton
 from motion.plausibility import Reference, reference_from_positions
 from motion.quality import QualityInputs, QualityReport, assess
 from schemas.annotations import ClipLabels, LabelCorrection
-from schemas.bases import DatabaseSpecBase
+from schemas.bases import DatabaseSpecBase, JobRequestBase
+from schemas.databases import GraphKept
+from schemas.movement_graph import DerivedFrom, GraphEdits, MovementGraph, ResolvedEdit
 
 from . import container
-from .library import MotionLibrary, library_from_arrays
+from .library import ClipInput as ClipInput  # a clip as read, for the runtime that reads them
+from .library import MotionLibrary as MotionLibrary  # what a database is built from
+from .library import build_library, library_from_arrays, library_to_arrays
 
 Arrays = dict[str, npt.NDArray[Any]]
 ShouldStop = Callable[[], bool]
@@ -117,7 +126,8 @@ CLOCK: Callable[[], float] = time.perf_counter
 
 
 class Run:
-    """The bounds of one search: the cancel flag, the time cap and why the search stopped.
+    """One search's runtime: where it reports (``emit``), its bounds (the cancel flag, the time
+    cap) and why it stopped.
 
     Engines bound their work by the request (rounds, passes, stages) and ask :meth:`over` between
     units of work; the first time the cap or the cancel flag ends the search, :attr:`stopped`
@@ -126,11 +136,12 @@ class Run:
 
     ``budget_s`` seconds are counted on :data:`CLOCK` (``time.perf_counter``; tests patch it to
     simulate a slow machine) from when the run is made; ``should_stop`` is polled at most every
-    ``poll_s`` seconds (it may be a Redis round trip).
+    ``poll_s`` seconds (it may be a Redis round trip). ``emit`` gets every solution and progress
+    report (default: a :class:`CollectingEmitter`, for running engines straight from Python).
 
     Example
     -------
-    >>> run = Run(10.0, lambda: False)
+    >>> run = Run(10.0)
     >>> for _ in range(3):
     ...     if run.over():
     ...         break
@@ -138,12 +149,30 @@ class Run:
     <Stopped.work: 'work'>
     """
 
-    __slots__ = ("_last_poll", "budget_s", "clock", "deadline", "poll_s", "should_stop", "stopped", "t0")
+    __slots__ = (
+        "_last_poll",
+        "budget_s",
+        "clock",
+        "deadline",
+        "emit",
+        "poll_s",
+        "should_stop",
+        "stopped",
+        "t0",
+    )
 
-    def __init__(self, budget_s: float, should_stop: ShouldStop, *, poll_s: float = 0.005) -> None:
+    def __init__(
+        self,
+        budget_s: float,
+        should_stop: ShouldStop = lambda: False,
+        emit: Emitter | None = None,
+        *,
+        poll_s: float = 0.005,
+    ) -> None:
         self.clock: Callable[[], float] = CLOCK
         self.budget_s = float(budget_s)
         self.should_stop = should_stop
+        self.emit: Emitter = CollectingEmitter() if emit is None else emit
         self.poll_s = poll_s
         self.t0 = self.clock()
         self.deadline = self.t0 + self.budget_s
@@ -322,15 +351,78 @@ class CollectingEmitter:
         return min(self.solutions, key=lambda s: s.score) if self.solutions else None
 
 
-class Engine(ABC):
+RequestT = TypeVar("RequestT", bound=JobRequestBase)
+SpecT = TypeVar("SpecT", bound=DatabaseSpecBase)
+
+Role = Literal["control", "target", "leader", "follower"]
+"""What a clip is in its database besides an example (a control database's pairs, a rhythm
+database's couples)."""
+ControlKind = Literal["motion", "path"]
+"""What a control database follows: a leader's motion (pairs with controls) or a path."""
+
+
+@dataclass(frozen=True, slots=True)
+class DatabaseFacts:
+    """What a work budget needs of a built database: its rate (fps), its joints and the frames of
+    each clip at its rate, by name."""
+
+    fps: float
+    joints: int
+    clip_frames: dict[str, int]
+    joint_names: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class OutputEstimate:
+    """The output a request asks of its engine, as far as known before running it: ``frames`` per
+    character at the output rate ``fps`` (``None``: unknown until run), ``characters`` output
+    motions, and the engine's peak working memory per output joint-frame (bytes).
+
+    What the request's input files add, from their headers and capped counts only (bounded time
+    and memory whatever a file holds): ``input_bytes`` the engine holds while reading them (a
+    recording decoded), and ``problems``, sentences for a budget refusal (a MIDI file with
+    millions of events or a 1 µs tempo)."""
+
+    frames: int | None
+    characters: int
+    fps: float
+    bytes_per_joint_frame: int
+    input_bytes: int = 0
+    problems: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class KindSummary:
+    """An engine's part of a database summary: the clips' roles, what a control database follows,
+    whether a rhythm database has couples, what a graph build kept."""
+
+    roles: dict[str, Role] = field(default_factory=dict)
+    control: ControlKind | None = None
+    couples: bool = False
+    graph: GraphKept | None = None
+
+
+BYTES_PER_JOINT_FRAME = 400
+"""Peak working memory per output joint-frame of an engine that does not say (the largest of the
+built-in engines', measured on CMU salsa at 120 fps)."""
+
+
+class Engine(ABC, Generic[RequestT, SpecT]):
     """A loaded engine: a database ready to answer requests.
 
-    Subclasses set ``name`` (the request's ``engine``) and ``kind`` (the database kind it needs),
-    implement :meth:`build` (the kind-specific arrays) and :meth:`search`.
+    Subclasses set ``name`` (the request's ``engine``), ``kind`` (the database kind it needs),
+    ``request_model`` and ``spec_model`` (their schemas, from which the registry builds the
+    request and spec unions), implement :meth:`build` (the kind-specific arrays) and
+    :meth:`search`, and override what else they know (:meth:`estimate`, :meth:`summarize`, the
+    query API).
     """
 
     name: ClassVar[str]
     kind: ClassVar[str]
+    request_model: ClassVar[type[JobRequestBase]]
+    spec_model: ClassVar[type[DatabaseSpecBase]]
+    summary_arrays: ClassVar[tuple[str, ...]] = ()
+    """Arrays of a database besides the library's that :meth:`summarize` reads."""
 
     def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
         self.library = library
@@ -339,27 +431,71 @@ class Engine(ABC):
         self._floors: dict[tuple[str, ...], dict[int, tuple[float, float]]] = {}
 
     @classmethod
-    def load(cls, arrays: Arrays) -> Engine:
+    def load(cls, arrays: Arrays) -> Engine[RequestT, SpecT]:
         """The engine loaded from a built database's arrays (the motion library and the kind's)."""
         return cls(library_from_arrays(arrays), arrays)
 
     @classmethod
-    def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+    def build_database(
+        cls, spec: SpecT, clips: list[ClipInput], emit: Emitter, should_stop: ShouldStop
+    ) -> tuple[Arrays, MotionLibrary]:
+        """A database of ``spec`` built from ``clips``: its arrays (the motion library, the kind's
+        :meth:`build`, the examples' quality reference and foot floor) and its library, with
+        progress reported to ``emit``. Raises :class:`InterruptedError` once ``should_stop()``."""
+        emit.progress(0.1, f"reading {len(clips)} clips")
+        library = cls.library_for(spec, build_library(clips, spec.fps))
+        if should_stop():
+            raise InterruptedError("build cancelled")
+        emit.progress(0.5, f"{library.total_frames} frames at {library.fps:g} fps")
+        extra = cls.build(spec, library, emit, should_stop)
+        if should_stop():
+            raise InterruptedError("build cancelled")
+        arrays = library_to_arrays(library)
+        arrays.update(extra)
+        emit.progress(0.99, "measuring the examples (quality reference)")
+        arrays.update(cls.quality_reference_of(library, arrays).to_arrays())
+        arrays.update(foot_floor_arrays(library, cls.example_clips(library, arrays)))
+        return arrays, library
+
+    @classmethod
+    def build(cls, spec: SpecT, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
         """Kind-specific database arrays computed from the library (default: none)."""
         return {}
 
     @classmethod
-    def library_for(cls, spec: Any, library: MotionLibrary) -> MotionLibrary:
+    def library_for(cls, spec: SpecT, library: MotionLibrary) -> MotionLibrary:
         """The library a database of ``spec`` is built from and stores, given its clips as read
         (default: as read; graph databases add mirror images with ``mirror``)."""
         return library
 
     @classmethod
-    def build_work(cls, spec: Any, frames: int) -> BuildWork | None:
+    def build_work(cls, spec: SpecT, frames: int) -> BuildWork | None:
         """Estimated CPU time and peak memory of building a database of ``frames`` frames (at its
         rate) with ``spec``; ``None`` when the engine gives no estimate (then the service's frame
         limit applies)."""
         return None
+
+    @classmethod
+    def estimate(cls, request: RequestT, facts: DatabaseFacts) -> OutputEstimate:
+        """The output ``request`` asks for against a database with ``facts`` (for work budgets and
+        the short-result flag). Default: ``request.frames`` when the request has an integer one,
+        ``characters`` (a count or a list) times two for ``couples``, and
+        :data:`BYTES_PER_JOINT_FRAME`."""
+        frames = getattr(request, "frames", None)
+        cast = getattr(request, "characters", 1) or 1
+        characters = (len(cast) if isinstance(cast, list) else int(cast)) * (
+            2 if getattr(request, "couples", False) else 1
+        )
+        fps = float(getattr(request, "fps", None) or facts.fps)
+        return OutputEstimate(
+            int(frames) if isinstance(frames, int) else None, characters, fps, BYTES_PER_JOINT_FRAME
+        )
+
+    @classmethod
+    def summarize(cls, stored_spec: Mapping[str, Any], arrays: DatabaseArrays) -> KindSummary:
+        """The engine's part of a database's summary, from its spec as stored (JSON, clips resolved)
+        and its :attr:`summary_arrays` (default: nothing beyond the library's)."""
+        return KindSummary()
 
     @classmethod
     def example_clips(cls, library: MotionLibrary, arrays: Arrays) -> list[int]:
@@ -409,6 +545,12 @@ class Engine(ABC):
 
     # -- the query API (what the service may ask of a database besides jobs) ---------------------
     @classmethod
+    def check_labels(cls, database_id: str) -> None:
+        """Raise :class:`EngineError` unless this kind of database carries labels
+        (:meth:`clip_labels`, :meth:`corrected_spec`)."""
+        raise EngineError(f"database {database_id} is {cls.kind!r}, not 'annotated'")
+
+    @classmethod
     def clip_labels(
         cls, arrays: DatabaseArrays, clip: str, start: int = 0, end: int | None = None
     ) -> ClipLabels:
@@ -425,6 +567,56 @@ class Engine(ABC):
         built database, needed when a correction accepts its propagated labels. Raises
         :class:`EngineError`."""
         raise EngineError(f"{cls.kind!r} databases carry no labels to correct; 'annotated' databases do")
+
+    @classmethod
+    def check_movement_graph(cls, database_id: str) -> None:
+        """Raise :class:`EngineError` unless this kind of database has a movement graph (checked
+        before its arrays are read)."""
+        raise EngineError(
+            f"database {database_id} is {cls.kind!r}: only 'rhythm' databases have a movement graph"
+        )
+
+    @classmethod
+    def movement_graph(
+        cls,
+        arrays: DatabaseArrays,
+        database_id: str,
+        stored_spec: Mapping[str, Any],
+        derived_from: DerivedFrom | None = None,
+    ) -> MovementGraph:
+        """The database's movement graph (its groups of movements and the transitions between
+        them); raises :class:`EngineError` for databases without one."""
+        cls.check_movement_graph(database_id)
+        raise NotImplementedError(f"{cls.__name__} has a movement graph but does not describe it")
+
+    @classmethod
+    def recording_beats(cls, data: bytes, tempo_bpm: float | None = None) -> dict[str, Any]:
+        """``{"duration_s", "tempo_bpm", "tempo_confidence", "beats_s", "downbeat_s"}`` of a music
+        recording's bytes (seconds), for engines that dance to music; raises :class:`EngineError`
+        (unreadable, silent, too long, no beat; or an engine that reads no music)."""
+        raise EngineError(f"engine {cls.name!r} reads no music recordings; the 'rhythm' engine does")
+
+    @classmethod
+    def edit_movement_graph(
+        cls, arrays: DatabaseArrays, edits: GraphEdits, database_id: str
+    ) -> tuple[list[ResolvedEdit], Arrays]:
+        """The edits resolved (groups to ids, weights explicit) and the arrays of the database
+        derived by them; raises :class:`EngineError` naming a broken rule, or for databases
+        without a movement graph."""
+        cls.check_movement_graph(database_id)
+        raise NotImplementedError(f"{cls.__name__} has a movement graph but does not edit it")
+
+    @classmethod
+    def check_live_session(cls, database_id: str) -> None:
+        """Raise :class:`EngineError` unless this kind of database dances live
+        (:meth:`live_session`; checked before the database is loaded)."""
+        raise EngineError(f"database {database_id} is {cls.kind!r}: only 'rhythm' databases dance live")
+
+    @classmethod
+    def check_live_control(cls, database_id: str) -> None:
+        """Raise :class:`EngineError` unless this kind of database follows a live control
+        (:meth:`live_control`; checked before the database is loaded)."""
+        raise EngineError(f"database {database_id} is {cls.kind!r}: only 'control' databases follow live")
 
     def live_session(self, *, seed: int = 0, fps: float | None = None, accent: float = 0.6) -> LiveSession:
         """A character driven live by events (``seed`` of its random choices, output ``fps``,
@@ -445,10 +637,14 @@ class Engine(ABC):
         return finish_solution(solution, inputs, self.quality_reference, positions)
 
     @abstractmethod
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
-        """Answer a request, calling ``emit.solution`` for every improvement, until the work the
-        request asks for is done, the time cap ``budget_s`` is reached or ``should_stop()``;
-        returns why it stopped (a :class:`Run` keeps the bounds)."""
+    def search(self, request: RequestT, run: Run) -> Stopped:
+        """Answer a request, calling ``run.emit.solution`` for every improvement, until the work
+        the request asks for is done or ``run`` says to stop (its time cap, a cancel); returns
+        why it stopped."""
+
+
+AnyEngine: TypeAlias = Engine[Any, Any]
+"""A loaded engine, whatever its request and spec models (what the runtime holds)."""
 
 
 FLOOR_PREFIX = "quality.floor."
@@ -505,7 +701,3 @@ def finish_solution(
     solution.quality = report
     solution.constraint_errors = report.constraint_errors
     return solution
-
-
-def empty_arrays() -> Arrays:
-    return {"_": np.zeros(0)}

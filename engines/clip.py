@@ -7,7 +7,6 @@ previews clips (the browser's library view) and is the minimal end-to-end job of
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 
@@ -15,17 +14,29 @@ from motion import MotionError
 from motion import rotations as rot
 from motion.ground import body_root, heading
 from motion.mirror import mirror
+from schemas.databases import ClipsDatabaseSpec
+from schemas.jobs import ClipRequest
 
-from .base import Emitter, Engine, EngineError, ShouldStop, Solution, Stopped
+from .base import DatabaseFacts, Engine, EngineError, OutputEstimate, Run, Solution, Stopped
 
 
-class ClipEngine(Engine):
+class ClipEngine(Engine[ClipRequest, ClipsDatabaseSpec]):
     """Excerpts of clips (request: :class:`schemas.jobs.ClipRequest`)."""
 
     name = "clip"
     kind = "clips"
+    request_model = ClipRequest
+    spec_model = ClipsDatabaseSpec
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+    @classmethod
+    def estimate(cls, request: ClipRequest, facts: DatabaseFacts) -> OutputEstimate:
+        """The excerpt's frames (known from the clip's length when ``end`` is left out)."""
+        total = facts.clip_frames.get(request.clip)
+        end = request.end if request.end is not None else total
+        frames = None if end is None else max(0, min(end, total or end) - request.start)
+        return OutputEstimate(frames, 1, facts.fps, 200)
+
+    def search(self, request: ClipRequest, run: Run) -> Stopped:
         try:
             source = self.library.clip(request.clip)
         except MotionError as exc:
@@ -51,5 +62,5 @@ class ClipEngine(Engine):
             q[:, 0] = rot.multiply(turn, q[:, 0])
             motion = replace(motion, root_positions=root, rotations=q)
         provenance = [(request.clip, f) for f in range(request.start, end)]
-        emit.solution(Solution(motion=motion, score=0.0, terms={"excerpt": 0.0}, provenance=provenance))
+        run.emit.solution(Solution(motion=motion, score=0.0, terms={"excerpt": 0.0}, provenance=provenance))
         return Stopped.work

@@ -1,28 +1,86 @@
-"""Which engines and database kinds this installation has.
+"""Which engines and database kinds this installation has: the one table of them.
 
-Engine issues add themselves here. Kinds named in the schemas whose engine has not landed yet are
-refused with a clear message instead of being half-built.
+Each engine is one line of :data:`_BUILT_IN` (its module, class, database kind and the request
+and spec models of :mod:`schemas`); the request and spec unions of the OpenAPI document and of
+validation are built from it (:func:`request_union`, :func:`spec_union`), and engine modules are
+imported only on first use (keeps the CLI quick to start). Plugins add engines with
+:func:`register`. Adding an engine touches its own package, its schema module and one line here.
 """
 
 from __future__ import annotations
 
 import importlib
 from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Annotated, Any, Union
 
-from .base import Engine
-from .clip import ClipEngine
+from pydantic import Field
 
-ENGINES: dict[str, type[Engine]] = {ClipEngine.name: ClipEngine}
-KIND_ENGINES: dict[str, type[Engine]] = {cls.kind: cls for cls in ENGINES.values()}
+from schemas.annotations import AnnotatedDatabaseSpec, AnnotationRequest
+from schemas.bases import DatabaseSpecBase, JobRequestBase
+from schemas.control import ControlDatabaseSpec, ControlRequest
+from schemas.databases import ClipsDatabaseSpec, GraphDatabaseSpec
+from schemas.graph import GraphRequest
+from schemas.jobs import ClipRequest, register_request_model
+from schemas.rhythm import RhythmDatabaseSpec, RhythmRequest
 
-_BUILT_IN: dict[str, tuple[str, str, str]] = {
-    "graph": ("engines.graph.engine", "GraphEngine", "graph"),
-    "control": ("engines.control.engine", "ControlEngine", "control"),
-    "annotations": ("engines.annotations.engine", "AnnotationEngine", "annotated"),
-    "rhythm": ("engines.rhythm.engine", "RhythmEngine", "rhythm"),
+from .base import AnyEngine, EngineError
+
+EngineClass = type[AnyEngine]
+"""An engine class, whatever its request and spec models."""
+
+
+@dataclass(frozen=True, slots=True)
+class BuiltIn:
+    """A built-in engine before it is imported: its module and class, the database kind it needs
+    and its request and spec models."""
+
+    module: str
+    cls: str
+    kind: str
+    request_model: type[JobRequestBase]
+    spec_model: type[DatabaseSpecBase]
+
+
+_BUILT_IN: dict[str, BuiltIn] = {
+    "clip": BuiltIn("engines.clip", "ClipEngine", "clips", ClipRequest, ClipsDatabaseSpec),
+    "graph": BuiltIn("engines.graph.engine", "GraphEngine", "graph", GraphRequest, GraphDatabaseSpec),
+    "control": BuiltIn(
+        "engines.control.engine", "ControlEngine", "control", ControlRequest, ControlDatabaseSpec
+    ),
+    "annotations": BuiltIn(
+        "engines.annotations.engine",
+        "AnnotationEngine",
+        "annotated",
+        AnnotationRequest,
+        AnnotatedDatabaseSpec,
+    ),
+    "rhythm": BuiltIn("engines.rhythm.engine", "RhythmEngine", "rhythm", RhythmRequest, RhythmDatabaseSpec),
 }
-"""Engines imported on first use, by engine name: (module, class, database kind). Keeps the CLI
-quick to start; an engine whose module has not landed is reported as unavailable."""
+"""The built-in engines by name, imported on first use; an engine whose module has not landed is
+reported as unavailable."""
+
+_SPEC_ORDER = ("clips", "control", "graph", "annotated", "rhythm")
+"""The order of the spec union's members (as the OpenAPI document has always listed them)."""
+
+ENGINES: dict[str, EngineClass] = {}
+KIND_ENGINES: dict[str, EngineClass] = {}
+
+
+def request_union() -> Any:
+    """The discriminated union (on ``engine``) of the built-in engines' request models, for the
+    OpenAPI document."""
+    models = tuple(b.request_model for b in _BUILT_IN.values())
+    return Annotated[Union[models], Field(discriminator="engine")]  # noqa: UP007 (a runtime tuple)
+
+
+def spec_union() -> Any:
+    """The discriminated union (on ``kind``) of the built-in database spec models, for the OpenAPI
+    document and validation."""
+    by_kind = {b.kind: b.spec_model for b in _BUILT_IN.values()}
+    kinds = [k for k in _SPEC_ORDER if k in by_kind] + [k for k in by_kind if k not in _SPEC_ORDER]
+    models = tuple(by_kind[k] for k in kinds)
+    return Annotated[Union[models], Field(discriminator="kind")]  # noqa: UP007 (a runtime tuple)
 
 
 def _load_built_in(name: str) -> None:
@@ -30,22 +88,25 @@ def _load_built_in(name: str) -> None:
     if target is None or name in ENGINES:
         return
     try:
-        module = importlib.import_module(target[0])
+        module = importlib.import_module(target.module)
     except ModuleNotFoundError as exc:
-        if exc.name is not None and target[0].startswith(exc.name):
+        if exc.name is not None and target.module.startswith(exc.name):
             return  # not in this installation: engine_class / kind_class say so
         raise
-    register(getattr(module, target[1]))
+    register(getattr(module, target.cls))
 
 
 def _engine_of_kind(kind: str) -> str:
-    return next((name for name, t in _BUILT_IN.items() if t[2] == kind), kind)
+    return next((name for name, t in _BUILT_IN.items() if t.kind == kind), kind)
 
 
-def register(engine: type[Engine]) -> type[Engine]:
-    """Add an engine (usable as a class decorator)."""
+def register(engine: EngineClass) -> EngineClass:
+    """Add an engine (usable as a class decorator); a plugin's request model becomes one that
+    :func:`schemas.parse_job_request` validates."""
     ENGINES[engine.name] = engine
     KIND_ENGINES.setdefault(engine.kind, engine)
+    if engine.name not in _BUILT_IN:
+        register_request_model(engine.name, engine.request_model)
     return engine
 
 
@@ -71,18 +132,18 @@ def engine_kind(name: str) -> str:
     if name in ENGINES:
         return ENGINES[name].kind
     if name in _BUILT_IN:
-        return _BUILT_IN[name][2]
+        return _BUILT_IN[name].kind
     return engine_class(name).kind  # raises UnavailableError naming the engines there are
 
 
 def require_kind(kind: str) -> None:
     """Raise :class:`UnavailableError` unless this installation can build databases of ``kind``
     (built-in kinds are not imported to say so)."""
-    if kind not in KIND_ENGINES and not any(t[2] == kind for t in _BUILT_IN.values()):
+    if kind not in KIND_ENGINES and not any(t.kind == kind for t in _BUILT_IN.values()):
         kind_class(kind)
 
 
-def engine_class(name: str) -> type[Engine]:
+def engine_class(name: str) -> EngineClass:
     """The engine class of a request's ``engine`` (imported on first use)."""
     _load_built_in(name)
     try:
@@ -94,7 +155,7 @@ def engine_class(name: str) -> type[Engine]:
         ) from None
 
 
-def kind_class(kind: str) -> type[Engine]:
+def kind_class(kind: str) -> EngineClass:
     """The engine class that builds and loads databases of ``kind`` (imported on first use)."""
     _load_built_in(_engine_of_kind(kind))
     try:
@@ -116,3 +177,41 @@ def warm_compiled(say: Callable[[str], None] | None = None, force: bool = False)
     except ModuleNotFoundError:  # an installation without the control engine
         return 0.0
     return warm(say, force)
+
+
+_load_built_in("clip")  # the smallest engine, always there (and named when another is missing)
+
+
+def recording_media_type(head: bytes) -> str | None:
+    """The media type of a music recording from its first bytes (WAV, FLAC, Ogg, MP3), else
+    ``None`` (the rhythm engine's decoder says what it reads; nothing is decoded here)."""
+    from .rhythm.audio import audio_media_type
+
+    return audio_media_type(head)
+
+
+def recording_beats(data: bytes, tempo_bpm: float | None = None) -> dict[str, Any]:
+    """The beats of a music recording, analysed by the engine that dances to music
+    (:meth:`engines.base.Engine.recording_beats`); raises :class:`EngineError`."""
+    return kind_class("rhythm").recording_beats(data, tempo_bpm)
+
+
+__all__ = [
+    "ENGINES",
+    "KIND_ENGINES",
+    "BuiltIn",
+    "EngineClass",
+    "EngineError",
+    "UnavailableError",
+    "engine_class",
+    "engine_kind",
+    "kind_class",
+    "load_plugins",
+    "recording_beats",
+    "recording_media_type",
+    "register",
+    "request_union",
+    "require_kind",
+    "spec_union",
+    "warm_compiled",
+]

@@ -87,10 +87,6 @@ class Motion:
         """Time from the first to the last frame, seconds."""
         return max(self.num_frames - 1, 0) / self.fps
 
-    def frame_times(self) -> Array:
-        """``(F,)`` time of each frame in seconds, starting at 0."""
-        return np.arange(self.num_frames) / self.fps
-
     @property
     def metres_per_unit(self) -> float:
         """Metres in one unit of this motion (1.0 when the units are unknown)."""

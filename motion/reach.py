@@ -11,7 +11,7 @@ lengths are preserved. Positions are in the motion's units, Y up.
 Three entry points: :func:`reach` (many joints, per-frame targets and weights; the control engine's
 hand hold), :func:`reach_path` (one joint moved along by offsets; the rhythm couples' hand hold) and
 :func:`reach_at` (one joint onto a point at one frame, faded in and out; the graph engine's shared
-meetings, :mod:`engines.graph.shared`).
+meetings, :mod:`engines.graph.coupled`).
 """
 
 from __future__ import annotations

@@ -51,12 +51,6 @@ class UnitGuess:
     plausible: bool
 
 
-def vertical_extent(points: npt.NDArray[np.float64]) -> float:
-    """Y extent (max - min) of points ``(..., 3)``."""
-    y = np.asarray(points)[..., 1]
-    return float(y.max() - y.min()) if y.size else 0.0
-
-
 UP_AXIS_RATIO = 1.2
 """:func:`up_axis` says Z when the points' median extent along Z is this many times that along Y."""
 

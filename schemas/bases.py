@@ -53,6 +53,16 @@ class JobRequestBase(Strict):
         attaches the bytes (:meth:`attach_inputs`) before the engine runs."""
         return []
 
+    def audio_inputs(self) -> list[str]:
+        """The input files that must be music recordings (checked at submission by their first
+        bytes); engines that read recordings override this."""
+        return []
+
+    def named_joints(self) -> list[tuple[str, str]]:
+        """``(where, joint name)`` of every joint the request names, to check against the database's
+        skeleton at submission; engines whose requests name joints override this."""
+        return []
+
     def attach_inputs(self, files: dict[str, bytes]) -> None:
         """Give the request the bytes of its input files, keyed by reference."""
         self._inputs.update(files)

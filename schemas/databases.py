@@ -59,8 +59,8 @@ class GraphDatabaseSpec(DatabaseSpecBase):
 # Kind-specific specs defined in their engine's schema module (they import DatabaseSpecBase from here).
 from .annotations import AnnotatedDatabaseSpec  # noqa: E402
 from .control import ControlDatabaseSpec  # noqa: E402
+from .movement_graph import DerivedFrom  # noqa: E402
 from .rhythm import RhythmDatabaseSpec  # noqa: E402
-from .rhythm_graph import DerivedFrom  # noqa: E402
 
 DatabaseSpec = Annotated[
     ClipsDatabaseSpec | ControlDatabaseSpec | GraphDatabaseSpec | AnnotatedDatabaseSpec | RhythmDatabaseSpec,

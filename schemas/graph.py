@@ -187,7 +187,7 @@ class GraphRequest(JobRequestBase):
         default=3,
         ge=0,
         le=20,
-        description="rounds of coordinate descent over the characters (engines.graph.shared)",
+        description="rounds of coordinate descent over the characters (engines.graph.coupled)",
     )
     weights: GraphWeights = Field(default_factory=GraphWeights)
     smoothing_frames: int = Field(default=15, ge=0, le=300, description="displacement smoothing half-width")

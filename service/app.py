@@ -22,10 +22,8 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.utils import get_openapi
 from pydantic import TypeAdapter
 
-from engines.registry import load_plugins
-from schemas import DatabaseSpec
-from schemas.jobs import JobRequest
-from schemas.rhythm_graph import GraphEdits
+from engines.registry import load_plugins, request_union, spec_union
+from schemas.movement_graph import GraphEdits
 from workers.backend import JobBackend
 from workers.embedded import EmbeddedBackend
 from workers.engine_cache import EngineCache
@@ -37,8 +35,7 @@ from .limits import JobQuota, SessionQuota
 from .links import add_links
 from .metrics import HttpMetricsMiddleware, Metrics, observe_terminal_events
 from .routes import annotations as annotation_routes
-from .routes import clips, control_sessions, databases, events, files, health, jobs, sessions
-from .routes import graphs as graph_routes
+from .routes import clips, control_sessions, databases, events, files, health, jobs, movement_graphs, sessions
 from .routes.annotations import Corrections
 from .settings import Settings, get_settings
 from .web import mount_web
@@ -90,8 +87,8 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
 
 
 BODY_SCHEMAS: dict[str, Any] = {
-    "JobRequest": JobRequest,
-    "DatabaseSpec": DatabaseSpec,
+    "JobRequest": request_union(),
+    "DatabaseSpec": spec_union(),
     "LabelCorrections": Corrections,
     "GraphEdits": GraphEdits,
 }
@@ -136,7 +133,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         files,
         databases,
         annotation_routes,
-        graph_routes,
+        movement_graphs,
         jobs,
         events,
         health,

@@ -30,7 +30,7 @@ from websockets.sync.client import ClientConnection, connect
 
 from schemas import ClipInfo, DatabaseInfo, DatabaseStatus, JobEvent, JobInfo, Report
 from schemas.files import FileInfo
-from schemas.rhythm_graph import GraphEdits, MovementGraph
+from schemas.movement_graph import GraphEdits, MovementGraph
 
 
 class SegueError(Exception):

@@ -213,7 +213,7 @@ def run_demo(name: str, out_root: Path, say: Say = print) -> DemoResult:
     from motion.io import load_motion, save_motion
     from workers.local import EventWriter, build_to_dir, synth_from_dir, write_result
 
-    from .cli import quality_summary
+    from .summaries import quality_summary
 
     demo = DEMOS[name]
     t_start = time.perf_counter()
@@ -280,7 +280,7 @@ def run_classic(out: Path, synth: bool, say: Say = print) -> None:
     from motion.io import load_motion, save_motion
     from motion.samples import sample_path
 
-    from .cli import inspect_summary
+    from .summaries import inspect_summary
 
     out.mkdir(parents=True, exist_ok=True)
     path = sample_path("salsa-leader")

@@ -6,7 +6,8 @@ results (``service``) -> client. So:
 * ``motion`` imports no other package of the project;
 * ``schemas`` imports none but ``motion``; ``engines`` imports ``motion`` and ``schemas`` only;
 * ``workers`` never imports ``service``;
-* ``service`` reaches engines only through ``engines``, ``engines.registry`` and ``engines.base``.
+* ``workers`` and ``service`` reach engines only through ``engines``, ``engines.registry`` and
+  ``engines.base`` (an engine's knowledge is asked of its class, never imported from its package).
 
 Every import counts, at the top of a module or inside a function (a lazy import is still a
 dependency), relative ones resolved.
@@ -31,8 +32,9 @@ FORBIDDEN: dict[str, frozenset[str]] = {
 }
 """Packages each package must not import."""
 
-SERVICE_ENGINE_MODULES = frozenset({"engines", "engines.registry", "engines.base"})
-"""The only engine modules the service may import."""
+ENGINE_FACE = frozenset({"engines", "engines.registry", "engines.base"})
+"""The only engine modules the packages above ``engines`` (workers, service) may import."""
+ABOVE_ENGINES = frozenset({"workers", "service"})
 
 
 def _module_name(path: Path) -> str:
@@ -75,8 +77,8 @@ def violations(package: str) -> list[str]:
         for line, name in imports_of(path):
             top = name.split(".")[0]
             bad = top in FORBIDDEN[package]
-            if package == "service" and top == "engines":
-                bad = name not in SERVICE_ENGINE_MODULES
+            if package in ABOVE_ENGINES and top == "engines":
+                bad = name not in ENGINE_FACE
             if bad:
                 found.append(f"{path.relative_to(ROOT)}:{line}: {name}")
     return found
@@ -100,5 +102,13 @@ def test_the_checker_sees_violations() -> None:
             "service.routes.jobs",
         ]
         assert violations("service") == ["service/_layering_probe.py:2: engines.annotations.search"]
+    finally:
+        probe.unlink()
+    probe = ROOT / "workers" / "_layering_probe.py"
+    probe.write_text(
+        "from engines.rhythm.audio import audio_beats\nfrom engines.base import Run\n", encoding="utf-8"
+    )
+    try:
+        assert violations("workers") == ["workers/_layering_probe.py:1: engines.rhythm.audio"]
     finally:
         probe.unlink()

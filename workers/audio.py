@@ -1,13 +1,13 @@
-"""Music beats of a recording file for the CLI's ``segue beats SONG.wav`` (the service reaches
-engines only through the registry, so the file is read and analysed here, as a job would)."""
+"""Music beats of a recording file for the CLI's ``segue beats SONG.wav``: the file is read here
+(size-limited) and analysed by the engine that reads music (:func:`engines.registry.recording_beats`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
 
-from engines.rhythm.audio import audio_beats
-from engines.rhythm.music import MusicError
+from engines.base import EngineError
+from engines.registry import recording_beats as analyse
 
 from .inputs import MAX_INPUT_BYTES, InputError
 
@@ -26,14 +26,7 @@ def recording_beats(path: Path, tempo_bpm: float | None = None) -> dict[str, Any
     except OSError as exc:
         raise InputError(f"{path}: {exc.strerror or exc}") from None
     try:
-        found = audio_beats(data, tempo_bpm)
-    except MusicError as exc:
+        found = analyse(data, tempo_bpm)
+    except EngineError as exc:
         raise InputError(f"{path}: {exc}") from None
-    return {
-        "file": str(path),
-        "duration_s": round(found.duration_s, 6),
-        "tempo_bpm": round(found.tempo_bpm, 4),
-        "tempo_confidence": found.tempo_confidence,
-        "beats_s": [round(float(t), 6) for t in found.beats_s],
-        "downbeat_s": None if found.downbeat is None else round(float(found.beats_s[found.downbeat]), 6),
-    }
+    return {"file": str(path), **found}

@@ -28,10 +28,13 @@ from typing import Any
 
 from cachetools import LRUCache, cached
 
+from engines.base import DatabaseFacts
+from engines.registry import engine_class
+from schemas.bases import JobRequestBase
+from schemas.jobs import parse_job_request
+
 BASE_MEMORY_BYTES = 300 * 1024 * 1024
 """A worker process with the engines loaded (numpy, scipy, scikit-learn) and a database."""
-BYTES_PER_JOINT_FRAME = {"rhythm": 400, "control": 300, "graph": 300, "annotations": 300, "clip": 200}
-"""Peak working memory per output joint-frame, by engine (others: the largest)."""
 SECONDS_PER_JOINT_FRAME = 4e-6
 """Compute per output joint-frame after the search budget (assembly, blending, foot clean-up)."""
 
@@ -65,118 +68,26 @@ class WorkEstimate:
         return asdict(self)
 
 
-@dataclass(frozen=True, slots=True)
-class InputFacts:
-    """What a request's input files add to its budget (:mod:`workers.input_facts`): the music's
-    length in seconds (None: unknown), the bytes decoding it holds, and the problems found."""
-
-    music_s: float | None = None
-    decode_bytes: int = 0
-    problems: tuple[str, ...] = ()
+def expected_frames(request: JobRequestBase, facts: DatabaseFacts) -> int | None:
+    """Output frames per character that ``request`` asks for at the output rate (None: unknown),
+    as its engine estimates them (:meth:`engines.base.Engine.estimate`)."""
+    return engine_class(request.engine).estimate(request, facts).frames
 
 
-def input_facts(request: Any) -> InputFacts:
-    """The input facts of a rhythm request's music (header reads and capped counts only: bounded
-    time and memory whatever the file holds; other requests have none)."""
-    music = getattr(request, "music", None)
-    if music is None:
-        return InputFacts()
-    if music.bpm is not None:
-        return InputFacts(float(music.duration_s))
-    length: float | None = None
-    decode = 0
-    problems: tuple[str, ...] = ()
-    if music.beats_s is not None:
-        length = float(music.beats_s[-1])
-    elif music.midi is not None:
-        from .input_facts import midi_facts
-
-        midi = midi_facts(_input(request, music.midi))
-        length, problems = midi.duration_s, midi.problems
-    elif music.audio is not None:
-        from .input_facts import audio_facts
-
-        audio = audio_facts(_input(request, music.audio))
-        if audio is not None:
-            length, decode = audio.duration_s, audio.decoded_bytes
-    if music.duration_s is not None:
-        length = float(music.duration_s) if length is None else min(length, float(music.duration_s))
-    return InputFacts(length, decode, problems)
-
-
-def _input(request: Any, ref: str) -> bytes:
-    try:
-        return bytes(request.input_bytes(ref))
-    except KeyError:  # not attached (a caller that estimates without the files)
-        return b""
-
-
-def _control_frames(request: Any, fps: float) -> int | None:
-    """Output frames of a control request driven by a BVH (its header's frames, at ``fps``)."""
-    from motion import BvhError
-    from motion.bvh_header import bvh_header
-
-    ref = getattr(request.control, "bvh", None)
-    data = _input(request, ref) if ref is not None else b""
-    if not data:
-        return None
-    try:
-        head = bvh_header(data)
-    except BvhError:  # unreadable: the engine names the fault when the job runs
-        return None
-    return round(head.duration_s * fps) + 1
-
-
-def expected_frames(
-    request: Any, db_fps: float, clip_frames: dict[str, int] | None = None, facts: InputFacts | None = None
-) -> int | None:
-    """Output frames per character that ``request`` asks for at the output rate (None: unknown).
-
-    ``clip_frames``: frames of the database's clips at the database rate, by name (for ``clip``);
-    ``facts``: the request's :func:`input_facts` when the caller has them already."""
-    engine = getattr(request, "engine", None)
-    fps = float(getattr(request, "fps", None) or db_fps)
-    if engine == "graph":
-        return int(request.frames) if request.frames is not None else round(float(request.seconds) * fps)
-    if engine == "annotations":
-        return int(request.frames)
-    if engine == "rhythm":
-        seconds = (facts or input_facts(request)).music_s
-        return None if seconds is None else round(seconds * fps)
-    if engine == "control":
-        trajectory = request.control.trajectory
-        if trajectory is not None:
-            return round((len(trajectory.points) - 1) / float(trajectory.fps) * fps) + 1
-        return _control_frames(request, fps)
-    if engine == "clip":
-        total = (clip_frames or {}).get(request.clip)
-        end = request.end if request.end is not None else total
-        return None if end is None else max(0, min(end, total or end) - request.start)
-    frames = getattr(request, "frames", None)
-    return int(frames) if isinstance(frames, int) else None
-
-
-def estimate_work(
-    request: Any, db_fps: float, joints: int, clip_frames: dict[str, int] | None = None
-) -> WorkEstimate:
-    """The cost of a validated request against a database of rate ``db_fps`` and ``joints`` joints."""
-    engine = str(getattr(request, "engine", ""))
-    cast = getattr(request, "characters", 1) or 1
-    characters = (len(cast) if isinstance(cast, list) else int(cast)) * (
-        2 if getattr(request, "couples", False) else 1
-    )
-    fps = float(getattr(request, "fps", None) or db_fps)
-    facts = input_facts(request)
-    frames = expected_frames(request, db_fps, clip_frames, facts)
-    budget = float(getattr(request, "budget_s", 0.0))
-    if frames is None:
-        return WorkEstimate(None, characters, joints, fps, None, None, budget, facts.problems)
-    joint_frames = characters * frames * max(joints, 1)
-    per = BYTES_PER_JOINT_FRAME.get(engine, max(BYTES_PER_JOINT_FRAME.values()))
-    memory = BASE_MEMORY_BYTES + joint_frames * per + facts.decode_bytes
+def estimate_work(request: JobRequestBase, facts: DatabaseFacts) -> WorkEstimate:
+    """The cost of a validated request against a database with ``facts`` (rate, joints, clips):
+    its engine's estimate of the output, plus what its input files add (headers and capped
+    counts only, so bounded whatever the files hold)."""
+    out = engine_class(request.engine).estimate(request, facts)
+    joints = facts.joints
+    budget = float(request.budget_s)
+    if out.frames is None:
+        return WorkEstimate(None, out.characters, joints, out.fps, None, None, budget, out.problems)
+    joint_frames = out.characters * out.frames * max(joints, 1)
+    memory = BASE_MEMORY_BYTES + joint_frames * out.bytes_per_joint_frame + out.input_bytes
     seconds = budget + joint_frames * SECONDS_PER_JOINT_FRAME
     return WorkEstimate(
-        frames, characters, joints, fps, joint_frames, memory, round(seconds, 3), facts.problems
+        out.frames, out.characters, joints, out.fps, joint_frames, memory, round(seconds, 3), out.problems
     )
 
 
@@ -212,16 +123,6 @@ def check_work(work: WorkEstimate, limits: WorkLimits) -> list[str]:
     return problems
 
 
-@dataclass(frozen=True, slots=True)
-class DatabaseFacts:
-    """What a budget needs of a built database: rate, joints and clip lengths (database frames)."""
-
-    fps: float
-    joints: int
-    clip_frames: dict[str, int]
-    joint_names: tuple[str, ...] = ()
-
-
 @cached(LRUCache(maxsize=256), key=lambda store, db_id: (store.url, db_id), lock=threading.Lock())
 def database_facts(store: Any, db_id: str) -> DatabaseFacts:
     """Read the facts from a database of ``store`` (a :class:`~workers.store.Store`; only the small
@@ -249,13 +150,11 @@ def shortfall(store: Any, job_id: str, payload: dict[str, Any], result: str | No
     if result is None or not isinstance(request_data, dict):
         return None
     try:
-        from schemas.jobs import parse_job_request
-
         request = parse_job_request(request_data)
         if request.database is None:
             return None
         facts = database_facts(store, request.database)
-        wanted = expected_frames(request, facts.fps, facts.clip_frames)
+        wanted = expected_frames(request, facts)
         got = store.result_report(job_id, result).frames
     except Exception:  # a flag is a courtesy: never fail a finished job over it
         return None

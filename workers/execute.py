@@ -15,20 +15,18 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from engines.base import Engine, EngineError, Solution, Stopped, foot_floor_arrays
-from engines.library import ClipInput, MotionLibrary, build_library, library_to_arrays
-from engines.registry import UnavailableError, engine_class, kind_class
+from engines.base import AnyEngine, ClipInput, EngineError, MotionLibrary, Run, Solution, Stopped
+from engines.registry import UnavailableError, kind_class
 from motion import Motion, MotionError
 from motion.plausibility import Reference
 from motion.quality import assess
 from schemas import DatabaseStatus, EventType, JobInfo, JobStatus, ProvenanceEntry, Report
 from schemas.bases import DatabaseSpecBase, JobRequestBase
 from schemas.databases import parse_database_spec
-from schemas.jobs import parse_job_request
 
 from .engine_cache import EngineCache as EngineCache  # re-exported: where it lived before
 from .engine_cache import OpenArrays
-from .inputs import InputError, attach_from_store
+from .prepare import PrepareError, prepare
 from .store import NotFoundError, Store, now, npz_bytes
 
 log = logging.getLogger("segue.worker")
@@ -212,30 +210,14 @@ def build_database_bytes(
 def build_database_arrays(
     spec: DatabaseSpecBase, clips: list[ClipInput], publish: Publish, should_stop: ShouldStop
 ) -> tuple[dict[str, Any], MotionLibrary]:
-    """The arrays of a database (motion library + the kind's arrays), with progress events.
-
-    Raises :class:`JobFailure` with code ``cancelled`` when stopped."""
+    """The arrays of a database (:meth:`engines.base.Engine.build_database`), with progress
+    events. Raises :class:`JobFailure` with code ``cancelled`` when stopped."""
     engine_cls = kind_class(spec.kind)
-    publish(EventType.progress, {"fraction": 0.1, "message": f"reading {len(clips)} clips"})
-    library = engine_cls.library_for(spec, build_library(clips, spec.fps))
-    if should_stop():
-        raise JobFailure("cancelled", "build cancelled")
-    publish(
-        EventType.progress,
-        {"fraction": 0.5, "message": f"{library.total_frames} frames at {library.fps:g} fps"},
-    )
     recorder = SolutionRecorder("build", engine_cls.name, publish, lambda *_: None)
     try:
-        extra = engine_cls.build(spec, library, recorder, should_stop)
+        arrays, library = engine_cls.build_database(spec, clips, recorder, should_stop)
     except InterruptedError:
         raise JobFailure("cancelled", "build cancelled") from None
-    if should_stop():
-        raise JobFailure("cancelled", "build cancelled")
-    arrays = library_to_arrays(library)
-    arrays.update(extra)
-    publish(EventType.progress, {"fraction": 0.99, "message": "measuring the examples (quality reference)"})
-    arrays.update(engine_cls.quality_reference_of(library, arrays).to_arrays())
-    arrays.update(foot_floor_arrays(library, engine_cls.example_clips(library, arrays)))
     return arrays, library
 
 
@@ -288,7 +270,7 @@ def _build(
 
 
 def run_search(
-    engine: Engine,
+    engine: AnyEngine,
     request: JobRequestBase,
     job_id: str,
     publish: Publish,
@@ -301,7 +283,7 @@ def run_search(
     a ``stopped_reason`` line, also written into the best result's report); raises
     :class:`JobFailure` when it found nothing."""
     recorder = SolutionRecorder(job_id, engine.name, publish, save, attempt, engine.quality_reference)
-    stopped = engine.search(request, request.budget_s, recorder, should_stop) or Stopped.work
+    stopped = engine.search(request, Run(request.budget_s, should_stop, recorder)) or Stopped.work
     if should_stop():
         stopped = Stopped.cancelled
     best = recorder.best_result
@@ -326,26 +308,14 @@ def _synth(
     attempt: int = 1,
     on_load: OnLoad | None = None,
 ) -> None:
-    request = parse_job_request(request_data)
-    if request.database is None:
-        raise JobFailure("invalid_request", "the request names no database")
-    info = store.database_info(request.database)
-    if info.status != DatabaseStatus.ready:
-        raise JobFailure("database_not_ready", f"database {request.database} is {info.status.value}")
-    engine_cls = engine_class(request.engine)
-    if engine_cls.kind != info.kind:
-        raise JobFailure(
-            "invalid_request",
-            f"engine {engine_cls.name!r} needs a {engine_cls.kind!r} database, not {info.kind!r}",
-        )
     try:
-        attach_from_store(store, request)
-    except InputError as exc:
-        raise JobFailure("invalid_request", str(exc)) from None
+        prepared = prepare(request_data, store)
+    except PrepareError as exc:
+        raise JobFailure(exc.code, exc.message) from None
     if on_load is not None:
         on_load(True)
     try:
-        engine = cache.get(request.database, engine_cls, load)
+        engine = cache.get(prepared.database.id, prepared.engine, load)
     finally:
         if on_load is not None:
             on_load(False)
@@ -353,7 +323,7 @@ def _synth(
     def save(rid: str, motion: Motion, report: Report) -> None:
         store.put_result(job_id, rid, motion, report)
 
-    run_search(engine, request, job_id, publish, should_stop, save, attempt)
+    run_search(engine, prepared.request, job_id, publish, should_stop, save, attempt)
 
 
 def apply_event(info: JobInfo, event_type: EventType, data: dict[str, Any], event_id: int) -> JobInfo:

@@ -4,7 +4,7 @@ under the same content id the API would give it (``segue serve --import DIR``).
 A folder holds ``info.json``, ``spec.json`` (its clips as the spec file named them, each with the
 ``sha256`` of the clip's bytes) and ``data.npz``. The import checks that the folder is what it says:
 the id in ``info.json`` must be :func:`schemas.databases.database_id` of the spec and the clips'
-hashes (for a derived database: :func:`workers.graph_edits.derived_database_id` of that parent and
+hashes (for a derived database: :func:`workers.movement_graphs.derived_database_id` of that parent and
 its edits), and the arrays must hold a database library. The store then holds it as if it had been
 built through ``POST /v1/databases``: its spec names each clip by its hash, ``ready``, no build job.
 Clips given as ``sample:NAME`` are stored too (their units show in the summary); other clip files
@@ -29,7 +29,7 @@ from motion.samples import is_clip_sample, sample_name, sample_path
 from schemas import DatabaseInfo, DatabaseStatus
 from schemas.databases import database_id, parse_database_spec
 
-from .graph_edits import derived_database_id
+from .movement_graphs import derived_database_id
 from .store import NotFoundError, Store
 
 

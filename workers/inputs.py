@@ -57,8 +57,7 @@ def resolve_inputs(store: Store, request: JobRequestBase, visible: Visible | Non
 def _check_audio(store: Store, request: JobRequestBase, resolved: dict[str, str]) -> None:
     """Refuse, at submission, a recording input whose content is not WAV, FLAC, Ogg or MP3 (its
     first bytes only: decoding happens in the worker)."""
-    audio_inputs = getattr(request, "audio_inputs", None)
-    for ref in audio_inputs() if audio_inputs is not None else []:
+    for ref in request.audio_inputs():
         try:
             media = store.file_info(resolved[ref]).media_type
         except NotFoundError:
@@ -70,14 +69,14 @@ def _check_audio(store: Store, request: JobRequestBase, resolved: dict[str, str]
             )
 
 
-def attach_from_store(store: Store, request: JobRequestBase) -> None:
-    """Attach the bytes of every input file from the store (worker side)."""
-    ids = resolve_inputs(store, request)
+def attach_resolved(store: Store, request: JobRequestBase) -> None:
+    """Attach the bytes of every input file from the store, by the upload ids of
+    ``request.inputs`` (resolved with :func:`resolve_inputs`)."""
     files = {}
-    for ref, upload_id in ids.items():
+    for ref in request.input_files():
         try:
-            files[ref] = store.input_bytes(upload_id)
-        except NotFoundError as exc:
+            files[ref] = store.input_bytes(request.inputs[ref])
+        except (KeyError, NotFoundError) as exc:
             raise InputError(f"input file {ref!r}: {exc} (was it deleted after submission?)") from None
     request.attach_inputs(files)
 

@@ -20,8 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
-from engines.library import ClipInput
-from engines.registry import engine_class
+from engines.base import ClipInput
 from motion import Motion, MotionError
 from motion.export.events import result_events, sorted_events
 from motion.io import save_motion
@@ -29,10 +28,9 @@ from motion.samples import declared_units, resolve_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobEvent, Report
 from schemas.bases import DatabaseSpecBase
 from schemas.databases import database_id, parse_database_spec
-from schemas.jobs import parse_job_request
 
 from .execute import JobFailure, build_database_bytes, run_search
-from .inputs import InputError, attach_from_dir
+from .prepare import PrepareError, prepare_in_dir
 from .store import load_npz, now
 
 Publish = Callable[[EventType, dict[str, Any]], None]
@@ -120,25 +118,17 @@ def synth_from_dir(
     request_data = json.loads(request_path.read_bytes())
     if budget_s is not None and isinstance(request_data, dict):
         request_data["budget_s"] = budget_s
-    request = parse_job_request(request_data)
     try:
-        attach_from_dir(request, request_path.resolve().parent)
-    except InputError as exc:
-        raise JobFailure("invalid_request", str(exc)) from None
-    try:
-        info = DatabaseInfo.model_validate_json((db_dir / "info.json").read_bytes())
+        prepared = prepare_in_dir(request_data, request_path.resolve().parent, db_dir)
         arrays = load_npz((db_dir / "data.npz").read_bytes())
+    except PrepareError as exc:
+        raise JobFailure(exc.code, exc.message) from None
     except OSError as exc:
         raise JobFailure(
             "invalid_request", f"{db_dir} is not a database directory ({exc.strerror or exc})"
         ) from None
-    engine_cls = engine_class(request.engine)
-    if engine_cls.kind != info.kind:
-        raise JobFailure(
-            "invalid_request",
-            f"engine {engine_cls.name!r} needs a {engine_cls.kind!r} database, " f"not {info.kind!r}",
-        )
-    engine = engine_cls.load(arrays)
+    engine = prepared.engine.load(arrays)
+    request = prepared.request
     results: dict[str, tuple[Motion, Report]] = {}
 
     def save(rid: str, motion: Motion, report: Report) -> None:

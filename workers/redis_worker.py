@@ -37,7 +37,6 @@ All processes must see the same data directory (the store holds clips, databases
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import logging
@@ -47,13 +46,12 @@ import socket
 import threading
 import time
 import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from types import FrameType
 from typing import Any, cast
 
 import redis
-from pydantic import ValidationError
 
 from engines.registry import warm_compiled
 from schemas import DatabaseStatus, EventType
@@ -61,7 +59,7 @@ from schemas import DatabaseStatus, EventType
 from .budget import shortfall
 from .redis_events import EventPublisher
 from .redis_keys import DEAD_MAXLEN, RedisKeys
-from .settings import Settings, get_settings, with_options
+from .settings import Settings
 from .store import NotFoundError, Store
 from .supervisor import (
     ChildConfig,
@@ -647,32 +645,6 @@ def run_worker(settings: Settings, stop: threading.Event | None = None) -> int:
             restore()
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """``segue worker``'s options; each overrides the :class:`~workers.settings.Settings` field it
-    names (default: the environment's ``SEGUE_*`` value)."""
-    parser = argparse.ArgumentParser(prog="segue worker", description="Run Segue jobs from a Redis queue.")
-    add = parser.add_argument
-    add("--redis", dest="redis_url", help="queue Redis URL ($SEGUE_REDIS_URL)")
-    add("--cache-redis", dest="redis_cache_url", help="cache Redis ($SEGUE_REDIS_CACHE_URL)")
-    add("--data", dest="data_dir", help="data directory shared with the API ($SEGUE_DATA_DIR, ./segue-data)")
-    add("--name", dest="worker_name", help="consumer name (default: host-pid-random)")
-    add("--prefix", dest="redis_prefix", help="Redis key prefix")
-    add("--heartbeat", dest="heartbeat_s", type=float, help="heartbeat period, seconds")
-    add("--ttl", dest="heartbeat_ttl_s", type=float, help="heartbeat lifetime, seconds")
-    add("--max-deliveries", type=int, help="attempts before a job is dead-lettered")
-    add("--block-ms", type=int, help="XREADGROUP block time")
-    add("--reclaim-idle", dest="reclaim_idle_s", type=float, help="idle backstop for hung workers, s")
-    add("--chunk-size", dest="cache_chunk_bytes", type=int, help="database cache chunk size, bytes")
-    add(
-        "--max-memory-mb",
-        dest="max_job_memory_mb",
-        type=int,
-        help="a job whose engine process passes this resident memory is stopped (0: no limit)",
-    )
-    add("--log-level", help="log level ($SEGUE_LOG_LEVEL, INFO)")
-    return parser
-
-
 def serve(settings: Settings, warm: bool = True) -> int:
     """Run a worker as a command: logging set up, the compiled kernels made ready before the first
     job (``warm``: :func:`engines.registry.warm_compiled`, a fraction of a second once numba's cache
@@ -690,19 +662,3 @@ def serve(settings: Settings, warm: bool = True) -> int:
         log.error("worker stopped: %s", exc)
         return 1
     return 0
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m workers.redis_worker --redis URL --data DIR [--name N]``."""
-    parser = build_parser()
-    try:
-        settings = with_options(get_settings(), **vars(parser.parse_args(argv)))
-    except ValidationError as exc:
-        parser.error(str(exc))
-    if not settings.redis_url:
-        parser.error("give --redis or set SEGUE_REDIS_URL")
-    return serve(settings)
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

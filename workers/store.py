@@ -88,11 +88,11 @@ def load_npz(data: bytes) -> dict[str, np.ndarray]:
 
 
 def _media_type(data: bytes) -> str:
-    from engines.rhythm.audio import audio_media_type
+    from engines.registry import recording_media_type
 
     if data[:4] == b"MThd":
         return "audio/midi"
-    audio = audio_media_type(data[:16])
+    audio = recording_media_type(data[:16])
     if audio is not None:
         return audio
     if data[:9].upper().startswith(b"HIERARCHY") or data[:2] == b"\x1f\x8b":

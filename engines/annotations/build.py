@@ -18,11 +18,13 @@ Arrays stored beside the motion library (all numeric or str, JSON in 0-d str arr
 
 from __future__ import annotations
 
-from typing import Any, overload
+from typing import overload
 
 import numpy as np
 import numpy.typing as npt
 from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
+
+from schemas.annotations import AnnotatedDatabaseSpec
 
 from ..base import Arrays, Emitter, ShouldStop
 from ..library import MotionLibrary
@@ -54,7 +56,7 @@ def _check(should_stop: ShouldStop) -> None:
 
 
 def embed_library(
-    library: MotionLibrary, spec: Any
+    library: MotionLibrary, spec: AnnotatedDatabaseSpec
 ) -> tuple[SvmEmbedding, FloatArray, FloatArray, FloatArray]:
     """Per database frame: the SVM window embedding (raw metres; ``combined`` ``(F, E)``, and with
     ``spec.refine_changes`` and a context window also its ``fine`` window columns ``(F, E_f)``,
@@ -110,7 +112,9 @@ def standardize(
     return np.asarray(z @ principal_axes(z[pick], dims).T)
 
 
-def build_annotated(spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+def build_annotated(
+    spec: AnnotatedDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
+) -> Arrays:
     """The annotated database arrays of ``spec`` (:class:`schemas.annotations.AnnotatedDatabaseSpec`).
 
     BLAS runs single-threaded here (:data:`BLAS_THREADS`): the matrices are small, and on a loaded
@@ -119,7 +123,9 @@ def build_annotated(spec: Any, library: MotionLibrary, emit: Emitter, should_sto
         return _build(spec, library, emit, should_stop)
 
 
-def _build(spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+def _build(
+    spec: AnnotatedDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
+) -> Arrays:
     counts = [m.num_frames for m in library.motions]
     clip_of_frame = np.repeat(np.arange(len(counts), dtype=np.intp), counts)
     emit.progress(0.05, "embedding frames")

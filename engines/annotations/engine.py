@@ -13,12 +13,13 @@ Example
 >>> req = AnnotationRequest(frames=450, timeline=[{"label": "walk", "start": 0, "end": 200},
 ...     {"label": "run", "start": 200, "end": 450}], seed=3)
 >>> engine = AnnotationEngine(library, arrays)  # doctest: +SKIP
->>> engine.search(req, 2.0, emit, lambda: False)  # doctest: +SKIP
+>>> engine.search(req, Run(2.0))  # doctest: +SKIP
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -27,10 +28,22 @@ from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 from motion.floorfit import CorrectionLimits
 from motion.looping import close_loop, with_loop_goal
 from schemas import LabelRange
-from schemas.annotations import AnnotatedDatabaseSpec, ClipLabels, LabelCorrection
+from schemas.annotations import AnnotatedDatabaseSpec, AnnotationRequest, ClipLabels, LabelCorrection
 from schemas.bases import DatabaseSpecBase
 
-from ..base import Arrays, DatabaseArrays, Emitter, Engine, EngineError, Run, ShouldStop, Solution, Stopped
+from ..base import (
+    Arrays,
+    DatabaseArrays,
+    DatabaseFacts,
+    Emitter,
+    Engine,
+    EngineError,
+    OutputEstimate,
+    Run,
+    ShouldStop,
+    Solution,
+    Stopped,
+)
 from ..library import MotionLibrary
 from .assemble import Frames, assemble, discontinuity, label_report, quality_inputs
 from .build import BLAS_THREADS, build_annotated
@@ -53,7 +66,7 @@ from .search import (
 class AnnotationSearch:
     """One request's anytime search state (pools, random generator)."""
 
-    def __init__(self, db: Database, request: Any) -> None:
+    def __init__(self, db: Database, request: AnnotationRequest) -> None:
         self.db = db
         self.request = request
         self.pb = Problem.compile(request, db)
@@ -106,11 +119,13 @@ class AnnotationSearch:
         return Candidate.of(db, pb, sigma)
 
 
-class AnnotationEngine(Engine):
+class AnnotationEngine(Engine[AnnotationRequest, AnnotatedDatabaseSpec]):
     """Motion synthesis from annotations: SVM label propagation and coarse-to-fine DP."""
 
     name = "annotations"
     kind = "annotated"
+    request_model = AnnotationRequest
+    spec_model = AnnotatedDatabaseSpec
 
     def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
         super().__init__(library, arrays)
@@ -118,8 +133,21 @@ class AnnotationEngine(Engine):
         self.frames = Frames(library, arrays)
 
     @classmethod
-    def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+    def build(
+        cls, spec: AnnotatedDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
+    ) -> Arrays:
         return build_annotated(spec, library, emit, should_stop)
+
+    @classmethod
+    def estimate(cls, request: AnnotationRequest, facts: DatabaseFacts) -> OutputEstimate:
+        """``frames`` (database frames); 300 bytes per joint-frame."""
+        return replace(
+            super().estimate(request, facts), frames=int(request.frames), bytes_per_joint_frame=300
+        )
+
+    @classmethod
+    def check_labels(cls, database_id: str) -> None:
+        """Every annotated database carries labels."""
 
     @classmethod
     def clip_labels(
@@ -142,7 +170,9 @@ class AnnotationEngine(Engine):
         table = None if arrays is None else LabelTable.read(arrays)
         return apply_corrections(spec, list(corrections), table)
 
-    def solution(self, cand: Candidate, pb: Problem, request: Any, passes: int, elapsed: float) -> Solution:
+    def solution(
+        self, cand: Candidate, pb: Problem, request: AnnotationRequest, passes: int, elapsed: float
+    ) -> Solution:
         """The assembled motion and report of a candidate."""
         ref = self.quality_reference
         limits = CorrectionLimits(ref.root_speed_max, ref.turn_rate_max)
@@ -182,17 +212,16 @@ class AnnotationEngine(Engine):
         inputs = quality_inputs(self.db, self.frames, pb, cand.sigma, cuts)
         return self.finish(solution, with_loop_goal(inputs) if getattr(request, "loop", False) else inputs)
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+    def search(self, request: AnnotationRequest, run: Run) -> Stopped:
         """``request.passes`` coarse-to-fine passes (each from a fresh random active set drawn from
-        the request's seed), emitting every better motion; ``budget_s`` and ``should_stop()`` only
-        cut the passes short (the first pass always completes). BLAS runs single-threaded
+        the request's seed), emitting every better motion; the run's time cap and cancel only cut
+        the passes short (the first pass always completes). BLAS runs single-threaded
         (:data:`~engines.annotations.build.BLAS_THREADS`), so sums are reduced in one order."""
-        run = Run(budget_s, should_stop)
         with threadpool_limits(limits=BLAS_THREADS):
-            self._search(request, run, emit)
+            self._search(request, run, run.emit)
         return run.outcome()
 
-    def _search(self, request: Any, run: Run, emit: Emitter) -> None:
+    def _search(self, request: AnnotationRequest, run: Run, emit: Emitter) -> None:
         state = AnnotationSearch(self.db, request)
         best = float("inf")
         for passes in range(1, int(request.passes) + 1):

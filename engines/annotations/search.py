@@ -50,12 +50,12 @@ pooled motion, each in O(1) from the cached per-frame placements, and the best r
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from motion.rotations import wrap_angle
+from schemas.annotations import AnnotationRequest
 
 from ..base import Arrays, EngineError
 from ..library import MotionLibrary
@@ -189,7 +189,7 @@ class Problem:
     changes: IntArray  # (n,) number of timeline changes up to each output frame
 
     @classmethod
-    def compile(cls, request: Any, db: Database) -> Problem:
+    def compile(cls, request: AnnotationRequest, db: Database) -> Problem:
         n = int(request.frames)
         names = list(dict.fromkeys(e.label for e in request.timeline))
         unknown = [x for x in names if x not in db.vocab]

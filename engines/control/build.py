@@ -20,6 +20,7 @@ from scipy.cluster.hierarchy import fcluster, linkage
 
 from motion import Motion, MotionError
 from motion.contacts import detect_contacts
+from schemas.control import ControlDatabaseSpec
 
 from ..base import Arrays, EngineError, ShouldStop
 from ..library import MotionLibrary
@@ -257,7 +258,9 @@ def _hands(names: list[str]) -> list[str]:
     return [n for n in names if "hand" in n.lower() or "wrist" in n.lower()]
 
 
-def build_control_database(spec: Any, library: MotionLibrary, should_stop: ShouldStop) -> ControlDatabase:
+def build_control_database(
+    spec: ControlDatabaseSpec, library: MotionLibrary, should_stop: ShouldStop
+) -> ControlDatabase:
     """Segment, cluster and store the example pairs of a :class:`schemas.control.ControlDatabaseSpec`:
     every pair's control and target clouds, contacts and hand hold (:func:`_example_pair`), its
     instances (segments) from the spec's segmentation, then the instances clustered on their
@@ -269,8 +272,9 @@ def build_control_database(spec: Any, library: MotionLibrary, should_stop: Shoul
     if derived and any(p.control is not None for p in spec.pairs):
         raise EngineError("either every pair has a control clip or none does (derived walk controls)")
     cjoints: list[str] = []
-    if not derived:
-        cskel = library.clip(spec.pairs[0].control).skeleton
+    first_control = spec.pairs[0].control
+    if first_control is not None:
+        cskel = library.clip(first_control).skeleton
         # the control cloud leaves the feet out by default: a leader's steps say little about where
         # the follower stands, and on the CMU salsa couples they add noise to the alignment (mean
         # leave-one-out error 0.172 x height without them, 0.186 with them)
@@ -279,7 +283,7 @@ def build_control_database(spec: Any, library: MotionLibrary, should_stop: Shoul
     if seg.method == "beats":
         everyone = [library.clip(p.target) for p in spec.pairs]
         everyone += [library.clip(p.control) for p in spec.pairs if p.control is not None]
-        tempo = consensus_tempo(everyone, tuple(seg.tempo_bpm))
+        tempo = consensus_tempo(everyone, (seg.tempo_bpm[0], seg.tempo_bpm[1]))
     examples: list[_ExamplePair] = []
     for k, pair in enumerate(spec.pairs):
         if should_stop():
@@ -336,7 +340,7 @@ class _ExamplePair:
 
 
 def _example_pair(
-    spec: Any,
+    spec: ControlDatabaseSpec,
     library: MotionLibrary,
     k: int,
     pair: Any,

@@ -15,17 +15,19 @@ from __future__ import annotations
 
 import re
 import time
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from functools import lru_cache
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import gaussian_filter1d
 from threadpoolctl import ThreadpoolController, threadpool_limits  # type: ignore[import-untyped]
 
-from motion import Motion, MotionError
+from motion import BvhError, Motion, MotionError
 from motion.bvh import parse_bvh
+from motion.bvh_header import bvh_header
 from motion.compiled import fast_fk
 from motion.floorfit import faded_shifts
 from motion.goals import BodyGoal, FootplantGoal, Goal, HandholdGoal, LengthGoal, PathGoal, planted_speeds
@@ -34,8 +36,23 @@ from motion.quality import QualityInputs
 from motion.reach import reach, smooth_weights
 from motion.samples import declared_units, upload_units
 from motion.vectors import norms
+from schemas.control import ControlDatabaseSpec, ControlRequest
 
-from ..base import Arrays, Emitter, Engine, EngineError, Run, ShouldStop, Solution, Stopped
+from ..base import (
+    Arrays,
+    DatabaseArrays,
+    DatabaseFacts,
+    Emitter,
+    Engine,
+    EngineError,
+    KindSummary,
+    OutputEstimate,
+    Role,
+    Run,
+    ShouldStop,
+    Solution,
+    Stopped,
+)
 from ..library import MotionLibrary
 from .assemble import Assembled, assemble, body_rooted
 from .build import ControlDatabase, build_control_database
@@ -53,11 +70,10 @@ from .dp import (
     solve,
     typical_segment_cost,
 )
-
-if TYPE_CHECKING:
-    from .session import LiveControl
 from .placement import add_body_costs
 from .points import derived_control, joint_cloud, resample_cloud, trajectory_control
+from .schedule import BEAM_CELLS, BEAM_WIDTH, QUICK_CELLS, QUICK_WIDTH
+from .session import LiveControl
 
 Array = npt.NDArray[np.float64]
 
@@ -73,15 +89,6 @@ HOLD_SMOOTH_S = 0.1
 
 K_MOTION = 0.1
 K_WALK = 0.2
-
-# the anytime schedule: a quick narrow beam (width in typical single-segment interpretation costs, at
-# most 16 predecessors x 128 successors per boundary), a wider beam (width in the quick solution's mean
-# cost per segment, 64 x 256 cells: the exact optimum on all 14 leave-one-out salsa dances), then the exact
-# optimum (branch and bound)
-QUICK_WIDTH = 3.0
-QUICK_CELLS = (16, 128)
-BEAM_WIDTH = 10.0
-BEAM_CELLS = (64, 256)
 
 
 BODY_FADE_S = 2.0
@@ -141,11 +148,49 @@ def _thread_pools() -> ThreadpoolController:
     return ThreadpoolController()
 
 
-class ControlEngine(Engine):
+def _header_frames(request: ControlRequest, ref: str, fps: float) -> int | None:
+    """Output frames at ``fps`` of the control BVH ``ref``, from its header only (None when it is
+    not attached or its header is unreadable)."""
+    try:
+        data = bytes(request.input_bytes(ref))
+        head = bvh_header(data) if data else None
+    except (KeyError, BvhError):
+        return None
+    return None if head is None else round(head.duration_s * fps) + 1
+
+
+class ControlEngine(Engine[ControlRequest, ControlDatabaseSpec]):
     """Example-based control: segment DP from a control motion to a target motion."""
 
     name = "control"
     kind = "control"
+    request_model = ControlRequest
+    spec_model = ControlDatabaseSpec
+
+    @classmethod
+    def estimate(cls, request: ControlRequest, facts: DatabaseFacts) -> OutputEstimate:
+        """A path's frames at the output rate, or a control clip's from its BVH header (an
+        unreadable header leaves them unknown: the search names the fault). 300 bytes per
+        joint-frame."""
+        base = super().estimate(request, facts)
+        trajectory = request.control.trajectory
+        frames = None
+        if trajectory is not None:
+            frames = round((len(trajectory.points) - 1) / float(trajectory.fps) * base.fps) + 1
+        elif request.control.bvh is not None:
+            frames = _header_frames(request, request.control.bvh, base.fps)
+        return replace(base, frames=frames, bytes_per_joint_frame=300)
+
+    @classmethod
+    def summarize(cls, stored_spec: Mapping[str, Any], arrays: DatabaseArrays) -> KindSummary:
+        """The pairs' roles (control, target) and whether the database follows motions or paths."""
+        roles: dict[str, Role] = {}
+        for pair in stored_spec.get("pairs") or []:
+            roles[pair["target"]] = "target"
+            if pair.get("control"):
+                roles[pair["control"]] = "control"
+        follows = any(p.get("control") for p in stored_spec.get("pairs") or [])
+        return KindSummary(roles=roles, control="motion" if follows else "path")
 
     def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
         super().__init__(library, arrays)
@@ -195,14 +240,16 @@ class ControlEngine(Engine):
             pair_bounds=np.stack((lo, self.db.offsets[rows[:, 0] + 1] - 1), axis=-1),
         )
 
+    @classmethod
+    def check_live_control(cls, database_id: str) -> None:
+        """Every control database follows a live control."""
+
     def live_control(self, **settings: Any) -> LiveControl:
         """A live session driven by a streamed control (:class:`engines.control.session.LiveControl`;
         ``settings``: its ``latency_s``, ``k``, ``stretch_s``, ``solve_fps``, ``smoothing_s``)."""
-        from .session import LiveControl as Live  # the session module builds on this one
+        return LiveControl(self, **settings)
 
-        return Live(self, **settings)
-
-    def continuity_weight(self, request: Any) -> float:
+    def continuity_weight(self, request: ControlRequest) -> float:
         """The request's ``k``, or the database kind's default (:data:`K_MOTION`, :data:`K_WALK`)."""
         if request.k is not None:
             return float(request.k)
@@ -222,7 +269,9 @@ class ControlEngine(Engine):
         return [i for i, name in enumerate(library.names) if name in targets]
 
     @classmethod
-    def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+    def build(
+        cls, spec: ControlDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
+    ) -> Arrays:
         try:
             with threadpool_limits(limits=1):
                 db = build_control_database(spec, library, should_stop)
@@ -233,7 +282,7 @@ class ControlEngine(Engine):
 
     # ------------------------------------------------------------------------------------ input
 
-    def control_cloud(self, request: Any) -> ControlInputCloud:
+    def control_cloud(self, request: ControlRequest) -> ControlInputCloud:
         """The request's control as a cloud of the database's control kind (joints or floor pair)."""
         ctl = request.control
         sep = float(self.db.meta.get("hip_separation_m", 0.2))
@@ -254,21 +303,24 @@ class ControlEngine(Engine):
                 speed_window_s=tr.speed_window_s,
             )
             return ControlInputCloud(cloud, float(tr.fps), "trajectory", path)
+        bvh = ctl.bvh
+        if bvh is None:
+            raise EngineError("the control names neither a 'bvh' file nor a 'trajectory'")
         try:
-            data = request.input_bytes(ctl.bvh)
+            data = request.input_bytes(bvh)
         except KeyError as exc:
             raise EngineError(str(exc.args[0])) from None
         # a motion database reads only its control joints (and their ancestors) of the control
         names = None if self.db.derived else list(self.db.meta["control_joints"])
         # a bundled sample (named sample:NAME, or uploaded as its own file) in the unit the sample
         # catalogue declares, any other file as declared or guessed
-        units = ctl.units if ctl.units is not None else declared_units(ctl.bvh) or upload_units(ctl.bvh, data)
+        units = ctl.units if ctl.units is not None else declared_units(bvh) or upload_units(bvh, data)
         try:
-            motion = parse_bvh(data, units=units, source=ctl.bvh, name="control", joints=names)
+            motion = parse_bvh(data, units=units, source=bvh, name="control", joints=names)
             if names is not None and any(n not in motion.skeleton.names for n in names):
-                motion = parse_bvh(data, units=units, source=ctl.bvh, name="control")  # for the message
+                motion = parse_bvh(data, units=units, source=bvh, name="control")  # for the message
         except MotionError as exc:
-            raise EngineError(f"control {ctl.bvh!r}: {exc}") from None
+            raise EngineError(f"control {bvh!r}: {exc}") from None
         read_as = (
             f"{motion.units!r} (as declared)"
             if ctl.units is not None
@@ -283,9 +335,9 @@ class ControlEngine(Engine):
         if self.db.derived:
             cloud = derived_control(motion, sep, pos)
         else:
-            cloud = joint_cloud(motion, list(self.db.meta["control_joints"]), f"control {ctl.bvh!r}", pos)
-            self._check_size(cloud, ctl.bvh, read_as)
-        return ControlInputCloud(cloud, motion.fps, ctl.bvh)
+            cloud = joint_cloud(motion, list(self.db.meta["control_joints"]), f"control {bvh!r}", pos)
+            self._check_size(cloud, bvh, read_as)
+        return ControlInputCloud(cloud, motion.fps, bvh)
 
     def _check_size(self, cloud: Array, what: str, read_as: str) -> None:
         """Refuse a control motion whose size (:func:`control_extent` of its ``(F, P, 3)`` cloud,
@@ -305,7 +357,7 @@ class ControlEngine(Engine):
             'salsa samples are read so), or "cm", "m", "in"'
         )
 
-    def _constraints(self, request: Any, t_solve: int, rate: float) -> list[tuple[int, float]]:
+    def _constraints(self, request: ControlRequest, t_solve: int, rate: float) -> list[tuple[int, float]]:
         """``(kept instance index, time s)`` of the request's hard constraints."""
         out: list[tuple[int, float]] = []
         inst = self.db.instances
@@ -316,7 +368,7 @@ class ControlEngine(Engine):
                         f"constraints[{i}]: no instance {c.instance} (the database has {inst.shape[0]})"
                     )
                 g = int(c.instance)
-            else:
+            elif c.clip_frame is not None:
                 pair_ids = [k for k, (ctl, tgt) in enumerate(self.db.pairs) if c.clip in (ctl, tgt)]
                 if not pair_ids:
                     raise EngineError(f"constraints[{i}]: no pair uses a clip named {c.clip!r}")
@@ -330,6 +382,8 @@ class ControlEngine(Engine):
                         f"constraints[{i}]: frame {c.clip_frame} of {c.clip!r} is in no instance"
                     )
                 g = int(hit[0])
+            else:
+                raise EngineError(f"constraints[{i}]: give either 'instance' or both 'clip' and 'clip_frame'")
             local = int(self.local_of_[self.db.representative[g]])
             if c.time_s * rate >= t_solve:
                 raise EngineError(f"constraints[{i}]: time {c.time_s} s is after the end of the control")
@@ -338,17 +392,16 @@ class ControlEngine(Engine):
 
     # ----------------------------------------------------------------------------------- search
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+    def search(self, request: ControlRequest, run: Run) -> Stopped:
         """The stages of :meth:`_search` (the search's work: fixed by the request, so the same
-        request gives the same bytes on any machine); ``budget_s`` and ``should_stop()`` only cut
-        the stages after the first short. BLAS runs single-threaded (one reduction order)."""
-        run = Run(budget_s, should_stop)
+        request gives the same bytes on any machine); the run's time cap and cancel only cut the
+        stages after the first short. BLAS runs single-threaded (one reduction order)."""
         # the solver's matrices are small: BLAS threads only contend (10-50x slower on a busy machine)
         with _thread_pools().limit(limits=1):
-            self._search(request, run, emit)
+            self._search(request, run, run.emit)
         return run.outcome()
 
-    def _search(self, request: Any, run: Run, emit: Emitter) -> None:
+    def _search(self, request: ControlRequest, run: Run, emit: Emitter) -> None:
         """The anytime schedule: interpret the control (:meth:`_interpret`), then solve the segment
         DP with a quick beam, a wider beam and (``exact``) the optimum, re-time every better solution
         at the full rate and emit it when that improves the score too. Every stage runs (the
@@ -403,7 +456,7 @@ class ControlEngine(Engine):
             timings = {"prep_s": prep_s, "solve_s": solve_s, "retime_s": retime_s}
             emit.solution(self._assembled(pb, ctl, res, timed, stage, request, timings))
 
-    def _interpret(self, request: Any, ctl: ControlInputCloud) -> _Interpreted:
+    def _interpret(self, request: ControlRequest, ctl: ControlInputCloud) -> _Interpreted:
         """The control resampled to the solve rate, the legal (segment, duration) cells and their
         interpretation costs D (with the hard constraints), the cost to go, and the weights."""
         rate_full = self.db.fps
@@ -463,7 +516,7 @@ class ControlEngine(Engine):
         return self.body_column_
 
     def _body_placements(
-        self, request: Any, ctl: ControlInputCloud, rate: float, frames: int
+        self, request: ControlRequest, ctl: ControlInputCloud, rate: float, frames: int
     ) -> list[tuple[int, Array]]:
         """``(solve frame, xz)`` of the request's body placements; an error names one after the
         control's end."""
@@ -478,7 +531,7 @@ class ControlEngine(Engine):
             out.append((frame, np.asarray(b.position, dtype=np.float64)))
         return out
 
-    def _place_bodies(self, motion: Motion, request: Any) -> Motion:
+    def _place_bodies(self, motion: Motion, request: ControlRequest) -> Motion:
         """The motion moved on the floor so that its body passes through the request's placements:
         each placement's remaining distance (what the search's choice of examples left) is faded in
         over the :data:`BODY_FADE_S` before it and out over the same time after it
@@ -501,7 +554,7 @@ class ControlEngine(Engine):
         stage: str,
         seg_unit: float,
         best_coarse: float | None,
-        request: Any,
+        request: ControlRequest,
         should_stop: ShouldStop | None,
     ) -> DPResult:
         """One stage's DP: ``quick`` (a narrow beam in typical segment costs), ``beam`` (wider, in
@@ -532,7 +585,7 @@ class ControlEngine(Engine):
         res: DPResult,
         timed: Timed,
         stage: str,
-        request: Any,
+        request: ControlRequest,
         timings: dict[str, float],
     ) -> Solution:
         """The target segments of a re-timed solution concatenated, smoothed and cleaned up, with
@@ -561,7 +614,7 @@ class ControlEngine(Engine):
         cell_inst: npt.NDArray[np.intp],
         cell_dur: npt.NDArray[np.intp],
         rate: float,
-        request: Any,
+        request: ControlRequest,
         constraints: list[tuple[int, float]],
         window: int,
         inst: Instances,
@@ -594,7 +647,7 @@ class ControlEngine(Engine):
         except Infeasible as exc:
             raise EngineError(str(exc)) from None
 
-    def _cleanup(self, out: Assembled, request: Any) -> Motion:
+    def _cleanup(self, out: Assembled, request: ControlRequest) -> Motion:
         """The assembled motion with its feet kept planted where the examples' contacts say
         (:func:`motion.footskate.remove_foot_skate`, above the examples' floor)."""
         motion = out.motion

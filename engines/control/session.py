@@ -20,18 +20,41 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
+from motion import Motion
+
 from ..base import EngineError
 from .assemble import assemble
-from .dp import Infeasible, Timed, align_points, cost_to_go, interpretation, legal_cells, retime, solve
+from .build import ControlDatabase
+from .dp import (
+    Infeasible,
+    Instances,
+    Timed,
+    align_points,
+    cost_to_go,
+    interpretation,
+    legal_cells,
+    retime,
+    solve,
+)
 from .points import floor_pair_cloud, resample_cloud, trajectory_control
+from .schedule import QUICK_CELLS, QUICK_WIDTH
 
-if TYPE_CHECKING:
-    from .engine import ControlEngine
+
+class FollowedEngine(Protocol):
+    """What a live follower needs of a loaded control engine
+    (:class:`engines.control.engine.ControlEngine`)."""
+
+    db: ControlDatabase
+    kept_: npt.NDArray[np.intp]
+    solver_instances_: Instances
+
+    def target_motion(self, name: str) -> tuple[Motion, int]: ...
+
 
 Array = npt.NDArray[np.float64]
 
@@ -71,7 +94,7 @@ class LiveControl:
 
     def __init__(
         self,
-        engine: ControlEngine,
+        engine: FollowedEngine,
         latency_s: float = 1.2,
         k: float | None = None,
         stretch_s: float = 0.15,
@@ -242,7 +265,6 @@ class LiveControl:
         """The quick-beam DP of a window of control frames (database rate), re-timed at full rate;
         its first segment pays continuity against the last committed one. ``None`` when no sequence
         of segments tiles the window (a few more frames will make it possible)."""
-        from .engine import QUICK_CELLS, QUICK_WIDTH
 
         x = resample_cloud(window, self.fps, self.rate)
         cell_inst, cell_dur = legal_cells(self.lengths_s, self.rate, self.stretch_s, None)

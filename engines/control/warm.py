@@ -27,10 +27,9 @@ from motion import parse_bvh
 from motion.bvh import bvh_text
 from motion.jitcache import cache_dir
 from motion.samples import resolve_path
-from schemas.databases import parse_database_spec
-from schemas.jobs import parse_job_request
+from schemas.control import ControlDatabaseSpec, ControlRequest
 
-from ..base import CollectingEmitter
+from ..base import CollectingEmitter, Run
 from ..library import ClipInput, build_library, library_to_arrays
 from .engine import ControlEngine
 
@@ -44,7 +43,7 @@ def _clip(ref: str, start: int, end: int, name: str) -> ClipInput:
 
 
 def _engine(spec_data: dict[str, object], clips: list[ClipInput]) -> ControlEngine:
-    spec = parse_database_spec(spec_data)
+    spec = ControlDatabaseSpec.model_validate(spec_data)
     library = build_library(clips, spec.fps)
     arrays = ControlEngine.build(spec, library, CollectingEmitter(), lambda: False)
     arrays.update(library_to_arrays(library))
@@ -63,9 +62,11 @@ def _salsa() -> None:
         },
         [lead, follow],
     )
-    request = parse_job_request({"engine": "control", "control": {"bvh": "control.bvh"}, "budget_s": 600})
+    request = ControlRequest.model_validate(
+        {"engine": "control", "control": {"bvh": "control.bvh"}, "budget_s": 600}
+    )
     request._inputs["control.bvh"] = _clip("sample:salsa-leader-02", 120, 480, "control").data
-    engine.search(request, request.budget_s, CollectingEmitter(), lambda: False)
+    engine.search(request, Run(request.budget_s))
 
 
 def _walk() -> None:
@@ -82,10 +83,10 @@ def _walk() -> None:
     )
     t = np.arange(90) / 30.0
     points = [[float(1.2 * s), float(0.3 * np.sin(s))] for s in t]
-    request = parse_job_request(
+    request = ControlRequest.model_validate(
         {"engine": "control", "control": {"trajectory": {"fps": 30, "points": points}}, "budget_s": 600}
     )
-    engine.search(request, request.budget_s, CollectingEmitter(), lambda: False)
+    engine.search(request, Run(request.budget_s))
 
 
 def _layouts() -> None:

@@ -57,6 +57,7 @@ from motion.goals import (
 from motion.ground import apply_floor_transform, body_root, ground_frames, static_reference_root
 from motion.quality import QualityInputs
 from motion.smoothing import smooth_cuts
+from schemas.graph import GraphRequest
 
 from ..library import MotionLibrary
 from .model import FloatArray, FootContacts, IntArray, RootTracks
@@ -176,7 +177,7 @@ def assemble(
     tracks: RootTracks,
     pieces: Pieces,
     placement: Placement,
-    request: Any,
+    request: GraphRequest,
     problem: Problem | None = None,
     *,
     feet: bool = True,

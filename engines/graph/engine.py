@@ -10,25 +10,46 @@ request with several ``characters`` is searched jointly by ``shared.py``.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
-from ..base import Arrays, BuildWork, Emitter, Engine, ShouldStop, Solution, Stopped
+from schemas.databases import DroppedClip, GraphDatabaseSpec, GraphKept
+from schemas.graph import GraphRequest
+
+from ..base import (
+    Arrays,
+    BuildWork,
+    DatabaseArrays,
+    DatabaseFacts,
+    Emitter,
+    Engine,
+    KindSummary,
+    OutputEstimate,
+    Run,
+    ShouldStop,
+    Solution,
+    Stopped,
+)
 from ..library import MotionLibrary, with_mirrors
 from .build import build_graph, build_work
+from .coupled import CoupledSearch
 from .model import EdgeTree, FootContacts, RootTracks
 from .paths import GraphIndex
 from .search import GraphSearch
-from .shared import CoupledSearch
 from .tracks import foot_contacts
 
 
-class GraphEngine(Engine):
+class GraphEngine(Engine[GraphRequest, GraphDatabaseSpec]):
     """Randomized anytime search of a hierarchical motion graph (Arikan & Forsyth 2002)."""
 
     name = "graph"
     kind = "graph"
+    request_model = GraphRequest
+    spec_model = GraphDatabaseSpec
+    summary_arrays = ("graph.report",)
 
     def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
         super().__init__(library, arrays)
@@ -39,36 +60,46 @@ class GraphEngine(Engine):
         self.contacts = FootContacts.from_arrays(arrays) or foot_contacts(library)
 
     @classmethod
-    def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+    def build(
+        cls, spec: GraphDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
+    ) -> Arrays:
         return build_graph(spec, library, emit, should_stop)
 
     @classmethod
-    def library_for(cls, spec: Any, library: MotionLibrary) -> MotionLibrary:
-        return with_mirrors(library) if getattr(spec, "mirror", False) else library
+    def library_for(cls, spec: GraphDatabaseSpec, library: MotionLibrary) -> MotionLibrary:
+        return with_mirrors(library) if spec.mirror else library
 
     @classmethod
-    def build_work(cls, spec: Any, frames: int) -> BuildWork:
+    def build_work(cls, spec: GraphDatabaseSpec, frames: int) -> BuildWork:
         return build_work(frames, spec.candidates)
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+    @classmethod
+    def estimate(cls, request: GraphRequest, facts: DatabaseFacts) -> OutputEstimate:
+        """``frames``, or ``seconds`` at the output rate, per character; 300 bytes per joint-frame."""
+        base = super().estimate(request, facts)
+        if request.frames is not None:
+            frames = int(request.frames)
+        else:
+            frames = round(float(request.seconds or 0.0) * base.fps)
+        return replace(base, frames=frames, bytes_per_joint_frame=300)
+
+    @classmethod
+    def summarize(cls, stored_spec: Mapping[str, Any], arrays: DatabaseArrays) -> KindSummary:
+        """What the build kept of the graph and left out (:func:`graph_kept`)."""
+        return KindSummary(graph=graph_kept(arrays["graph.report"]) if "graph.report" in arrays else None)
+
+    def search(self, request: GraphRequest, run: Run) -> Stopped:
+        emit = run.emit
         note = left_out_note(self.arrays)
         if note is not None:
             emit = _NotingEmitter(emit, note)
-        # several characters with shared constraints are searched jointly (engines.graph.shared);
         # one BLAS thread: matrix products reduce in one order whatever the machine's cores
-        searcher = CoupledSearch if getattr(request, "characters", None) else GraphSearch
         with threadpool_limits(limits=1, user_api="blas"):
-            return self._run(searcher, request, budget_s, emit, should_stop)
-
-    def _run(
-        self,
-        searcher: type[GraphSearch] | type[CoupledSearch],
-        request: Any,
-        budget_s: float,
-        emit: Emitter,
-        should_stop: ShouldStop,
-    ) -> Stopped:
-        return self.searcher(request.seed, searcher).run(request, budget_s, emit, should_stop)
+            if request.characters:
+                # several characters with shared constraints are searched jointly (engines.graph.coupled)
+                coupled = self.searcher(request.seed, CoupledSearch)
+                return coupled.run(request, run.budget_s, emit, run.should_stop)
+            return self.searcher(request.seed).run(request, run.budget_s, emit, run.should_stop)
 
     def searcher(
         self, seed: int, kind: type[GraphSearch] | type[CoupledSearch] = GraphSearch
@@ -85,7 +116,25 @@ class GraphEngine(Engine):
         )
 
 
-def left_out_note(arrays: Any) -> str | None:
+def graph_kept(report_json: Any) -> GraphKept | None:
+    """The kept-component part of a graph build's report (``graph.report``, 0-d JSON text);
+    ``None`` for databases built before the report had it."""
+    report = json.loads(str(report_json))
+    kept = report.get("kept")
+    if kept is None:
+        return None
+    return GraphKept(
+        candidates=report.get("candidates", "all_pairs"),
+        leaf_edges=int(report["leaf_edges"]),
+        kept_clips=int(kept["clips"]),
+        kept_frames=int(kept["frames"]),
+        moving_frames=int(kept["moving_frames"]),
+        dropped_frames=int(report["dropped_frames"]),
+        dropped=[DroppedClip.model_validate(d) for d in report["dropped_clips"]],
+    )
+
+
+def left_out_note(arrays: DatabaseArrays) -> str | None:
     """What a missed goal's report adds when the build left clips out of the graph (their frames
     cannot be played); ``None`` when it kept every clip or the database predates the report."""
     if "graph.report" not in arrays:

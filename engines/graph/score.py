@@ -46,6 +46,7 @@ from motion import MotionError
 from motion.contacts import foot_joints
 from motion.regions import FloorRegion
 from motion.rotations import rotate_floor, wrap_angle
+from schemas.graph import GraphRequest
 
 from ..base import EngineError
 from ..library import MotionLibrary
@@ -207,20 +208,22 @@ def _frame_of(c: Any, fps: float) -> int:
 
 
 def compile_problem(
-    request: Any,
+    request: GraphRequest,
     library: MotionLibrary,
     tracks: RootTracks,
     keepaways: tuple[KeepawayTarget, ...] = (),
 ) -> Problem:
     """Check a :class:`schemas.graph.GraphRequest` against the database and compile it, with the
-    ``keepaways`` a coupled search derives from other characters (:mod:`engines.graph.shared`).
+    ``keepaways`` a coupled search derives from other characters (:mod:`engines.graph.coupled`).
 
     Raises :class:`~engines.base.EngineError` for constraints the database cannot serve: times
     outside the output, unknown clips, joints or labels, clip frames out of range, or two pose
     constraints at one time.
     """
     fps = library.fps
-    length = int(request.frames) if request.frames is not None else max(round(request.seconds * fps), 2)
+    length = (
+        int(request.frames) if request.frames is not None else max(round((request.seconds or 0.0) * fps), 2)
+    )
     w = request.weights
     weights = {
         "continuity": float(w.continuity),

@@ -72,7 +72,6 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -80,6 +79,7 @@ import numpy.typing as npt
 from motion.floorfit import CorrectionLimits
 from motion.looping import close_loop, with_loop_goal
 from motion.plausibility import Reference
+from schemas.graph import GraphRequest
 
 from ..base import Emitter, EngineError, Run, ShouldStop, Solution, Stopped, finish_solution
 from ..library import MotionLibrary
@@ -249,7 +249,7 @@ class GraphSearch:
     # -- public ------------------------------------------------------------------------------
     def run(
         self,
-        request: Any,
+        request: GraphRequest,
         budget_s: float,
         emit: Emitter,
         should_stop: ShouldStop,
@@ -268,9 +268,9 @@ class GraphSearch:
 
         ``keepaways`` (moving keep-out targets), ``warm`` (a path that joins the first seeds, so
         the search returns nothing worse) and ``cap`` (the whole request's time cap) serve the
-        coupled search of several characters (:mod:`engines.graph.shared`); the best path emitted
+        coupled search of several characters (:mod:`engines.graph.coupled`); the best path emitted
         is left in :attr:`best_path_`."""
-        if getattr(request, "rounds", None) is not None:
+        if request.rounds is not None:
             max_rounds = int(request.rounds)
         run = cap if cap is not None else Run(budget_s, should_stop)
         problem = compile_problem(request, self.library, self.tracks, keepaways)
@@ -619,14 +619,16 @@ class GraphSearch:
         return out
 
     # -- emission ----------------------------------------------------------------------------
-    def _emit(self, emit: Emitter, request: Any, path: Path, *, rank: int, local: bool) -> Path:
+    def _emit(self, emit: Emitter, request: GraphRequest, path: Path, *, rank: int, local: bool) -> Path:
         ev = evaluate(self.index_, self._problem, path)
         if rank == 0:
             self.best_path_ = ev.path
         emit.solution(self.solution(ev, request, rank=rank, local=local))
         return path
 
-    def solution(self, ev: Evaluation, request: Any, *, rank: int = 0, local: bool = False) -> Solution:
+    def solution(
+        self, ev: Evaluation, request: GraphRequest, *, rank: int = 0, local: bool = False
+    ) -> Solution:
         """The :class:`~engines.base.Solution` of an evaluated path (assembled motion, quality report)."""
         motion, provenance = assemble(
             self.library,

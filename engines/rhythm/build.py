@@ -2,7 +2,7 @@
 
 :func:`build_rhythm` is the engine's ``build``: it analyses the motion beats of every example
 (:func:`motion.beats.detect_beats`, or the spec's ``clip_beats``), cuts and normalizes the basic
-movements (:mod:`engines.rhythm.movements`), groups them (:mod:`engines.rhythm.graph`), builds the
+movements (:mod:`engines.rhythm.movements`), groups them (:mod:`engines.rhythm.movement_graph`), builds the
 movement transition graph and stores everything as ``rhythm.*`` arrays. :func:`tables_from_arrays`
 loads them for synthesis.
 
@@ -30,12 +30,13 @@ from scipy.signal import argrelextrema
 
 from motion import Motion, MotionError
 from motion.mirror import mirror
+from schemas.rhythm import RhythmDatabaseSpec
 
 from ..base import Arrays, Emitter, EngineError, ShouldStop
 from ..library import MotionLibrary
 from .beatkeys import beat_keys, movement_speed
 from .blend import fit_blender
-from .graph import k_medoids, medoids, subtractive_clustering, transition_graph
+from .movement_graph import k_medoids, medoids, subtractive_clustering, transition_graph
 from .movements import Example, Movements, extract_movements, movement_differences, transition_differences
 from .reach import describe as describe_graph
 from .synth import Tables
@@ -87,13 +88,13 @@ def dip_agreement(beats_s: Array, dips_s: Array, sigma_s: float = 0.05) -> float
     return float(np.mean(np.exp(-(d**2) / (2 * sigma_s**2))))
 
 
-def _detect(motion: Motion, spec: Any, tempo: tuple[float, float]) -> Array:
+def _detect(motion: Motion, spec: RhythmDatabaseSpec, tempo: tuple[float, float]) -> Array:
     from motion.beats import detect_beats
 
     return np.asarray(detect_beats(motion, use_positions=spec.use_positions, tempo_bpm=tempo).times_s)
 
 
-def example_beats(motions: list[Motion], names: list[str], spec: Any) -> list[Array]:
+def example_beats(motions: list[Motion], names: list[str], spec: RhythmDatabaseSpec) -> list[Array]:
     """Motion beats (seconds) of each example, harmonized to one tempo octave (module doc)."""
     given = spec.clip_beats or {}
     lo, hi = spec.tempo_bpm
@@ -125,7 +126,9 @@ def example_beats(motions: list[Motion], names: list[str], spec: Any) -> list[Ar
     return [np.asarray(given[n], dtype=np.float64) if n in given else found[i] for i, n in enumerate(names)]
 
 
-def _examples(spec: Any, library: MotionLibrary) -> tuple[list[Example], list[str], list[str | None]]:
+def _examples(
+    spec: RhythmDatabaseSpec, library: MotionLibrary
+) -> tuple[list[Example], list[str], list[str | None]]:
     names = list(library.names)
     if spec.partners:
         used = {p.leader for p in spec.partners} | {p.follower for p in spec.partners}
@@ -175,7 +178,9 @@ def consecutive_runs(
     return runs
 
 
-def build_rhythm(spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+def build_rhythm(
+    spec: RhythmDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
+) -> Arrays:
     """The ``rhythm.*`` arrays of a database (module doc)."""
     emit.progress(0.55, "motion beats")
     try:

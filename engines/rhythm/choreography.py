@@ -3,7 +3,7 @@
 The paper lets a choreographer connect groups whose transitions the examples left out, adjust the
 likelihoods of transitions, and avoid dead ends. Here:
 
-* :func:`movement_graph` describes a built database's graph (:class:`schemas.rhythm_graph.MovementGraph`):
+* :func:`movement_graph` describes a built database's graph (:class:`schemas.movement_graph.MovementGraph`):
   each group with its representative movement (the medoid) as a span of an example clip and a
   thumbnail pose, each transition with the probability synthesis draws with and its kinematic and
   behavioural likelihoods.
@@ -43,7 +43,7 @@ from scipy.sparse.csgraph import connected_components
 from motion import Motion
 from motion.ground import body_root
 from motion.serialize import skeleton_from_arrays
-from schemas.rhythm_graph import (
+from schemas.movement_graph import (
     ClipSpan,
     DerivedFrom,
     GraphEdit,

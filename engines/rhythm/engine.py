@@ -19,7 +19,8 @@ Provenance follows character 0 (the leader of couple 0).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -30,18 +31,38 @@ from motion.goals import BeatGoal, Character, Goal, HoldGoal, LengthGoal, Point,
 from motion.metrics import beat_align_scores
 from motion.plausibility import SPEED_P99_MARGIN, SPEED_WINDOW_S
 from motion.quality import QualityInputs
+from schemas.movement_graph import DerivedFrom, GraphEdits, MovementGraph, ResolvedEdit
+from schemas.rhythm import RhythmDatabaseSpec, RhythmRequest
 
-from ..base import Arrays, Emitter, Engine, EngineError, LiveSession, ShouldStop, Solution, Stopped
+from ..base import (
+    Arrays,
+    DatabaseArrays,
+    DatabaseFacts,
+    Emitter,
+    Engine,
+    EngineError,
+    KindSummary,
+    LiveSession,
+    OutputEstimate,
+    Role,
+    Run,
+    ShouldStop,
+    Solution,
+    Stopped,
+)
 from ..combine import combine_motions, combined_characters
 from ..library import MotionLibrary
 from .build import build_rhythm, tables_from_arrays
+from .choreography import edited_arrays, movement_graph, resolve_edits
 from .music import MusicError, bpm_beats, parse_midi
+from .music_facts import audio_facts, midi_facts
+from .session import LiveDancer
 from .synth import Control, Dancers, SpeedLimits, Tables, initial_dancers, synthesize
 
 Array = npt.NDArray[np.float64]
 
 
-def music_beats(request: Any, beats_per_movement: int = 1) -> Array:
+def music_beats(request: RhythmRequest, beats_per_movement: int = 1) -> Array:
     """``(B,)`` beat times in seconds of the request's music (:class:`schemas.rhythm.Music`).
 
     When a recording's downbeat is found, movements (``beats_per_movement`` beats each) start on
@@ -49,7 +70,7 @@ def music_beats(request: Any, beats_per_movement: int = 1) -> Array:
     the opening period (dropped instead if those would fall before 0 s)."""
     music = request.music
     try:
-        if music.bpm is not None:
+        if music.bpm is not None and music.duration_s is not None:  # the schema gives both or neither
             beats = bpm_beats(music.bpm, music.duration_s, music.offset_s)
         elif music.midi is not None:
             beats = parse_midi(_input(request, music.midi)).beat_times()
@@ -71,6 +92,49 @@ def music_beats(request: Any, beats_per_movement: int = 1) -> Array:
     return beats
 
 
+@dataclass(frozen=True, slots=True)
+class MusicEstimate:
+    """What a request's music adds to its budget before the search: its length in seconds (None:
+    unknown), the bytes decoding it holds, and problems (sentences) found in its header."""
+
+    seconds: float | None = None
+    decode_bytes: int = 0
+    problems: tuple[str, ...] = ()
+
+
+def music_estimate(request: RhythmRequest) -> MusicEstimate:
+    """The music's length as far as known before the search, from headers and capped counts only
+    (:mod:`engines.rhythm.music_facts`: bounded time and memory whatever the file holds): a fixed
+    tempo's duration, the last given beat, a MIDI file's end, a recording's header; ``duration_s``
+    bounds each."""
+    music = request.music
+    if music.bpm is not None and music.duration_s is not None:  # the schema gives both or neither
+        return MusicEstimate(float(music.duration_s))
+    length: float | None = None
+    decode = 0
+    problems: tuple[str, ...] = ()
+    if music.beats_s is not None:
+        length = float(music.beats_s[-1])
+    elif music.midi is not None:
+        midi = midi_facts(_attached(request, music.midi))
+        length, problems = midi.duration_s, midi.problems
+    elif music.audio is not None:
+        audio = audio_facts(_attached(request, music.audio))
+        if audio is not None:
+            length, decode = audio.duration_s, audio.decoded_bytes
+    if music.duration_s is not None:
+        length = float(music.duration_s) if length is None else min(length, float(music.duration_s))
+    return MusicEstimate(length, decode, problems)
+
+
+def _attached(request: RhythmRequest, ref: str) -> bytes:
+    """An input file's bytes, or none when the caller estimates without the files attached."""
+    try:
+        return bytes(request.input_bytes(ref))
+    except KeyError:
+        return b""
+
+
 def _on_the_bar(beats: Array, downbeat: int | None, per_movement: int) -> Array:
     """``beats`` shifted by whole beats so that the ``downbeat`` starts a movement (doc above)."""
     lead = 0 if downbeat is None or per_movement < 2 else downbeat % per_movement
@@ -81,7 +145,7 @@ def _on_the_bar(beats: Array, downbeat: int | None, per_movement: int) -> Array:
     return np.concatenate((before, beats)) if before[0] >= 0 else beats[lead:]
 
 
-def _input(request: Any, ref: str) -> bytes:
+def _input(request: RhythmRequest, ref: str) -> bytes:
     try:
         return bytes(request.input_bytes(ref))
     except KeyError as exc:
@@ -179,11 +243,82 @@ def _with_avoidance(
     return control
 
 
-class RhythmEngine(Engine):
+class RhythmEngine(Engine[RhythmRequest, RhythmDatabaseSpec]):
     """Music-synchronized rhythmic motion from a movement transition graph (module doc)."""
 
     name = "rhythm"
     kind = "rhythm"
+    request_model = RhythmRequest
+    spec_model = RhythmDatabaseSpec
+
+    @classmethod
+    def estimate(cls, request: RhythmRequest, facts: DatabaseFacts) -> OutputEstimate:
+        """The music's length (:func:`music_estimate`) at the output rate, per dancer (two per
+        couple); 400 bytes per joint-frame, plus a recording's decoding."""
+        base = super().estimate(request, facts)
+        music = music_estimate(request)
+        frames = None if music.seconds is None else round(music.seconds * base.fps)
+        return replace(
+            base,
+            frames=frames,
+            bytes_per_joint_frame=400,
+            input_bytes=music.decode_bytes,
+            problems=music.problems,
+        )
+
+    @classmethod
+    def summarize(cls, stored_spec: Mapping[str, Any], arrays: DatabaseArrays) -> KindSummary:
+        """The couples' roles (leader, follower)."""
+        roles: dict[str, Role] = {}
+        for couple in stored_spec.get("partners") or []:
+            roles[couple["leader"]] = "leader"
+            roles[couple["follower"]] = "follower"
+        return KindSummary(roles=roles, couples=bool(stored_spec.get("partners")))
+
+    @classmethod
+    def check_movement_graph(cls, database_id: str) -> None:
+        """Every rhythm database has one."""
+
+    @classmethod
+    def movement_graph(
+        cls,
+        arrays: DatabaseArrays,
+        database_id: str,
+        stored_spec: Mapping[str, Any],
+        derived_from: DerivedFrom | None = None,
+    ) -> MovementGraph:
+        """The movement transition graph (:func:`engines.rhythm.choreography.movement_graph`)."""
+        w1 = stored_spec.get("kinematic_weight")
+        return movement_graph(arrays, database_id, float(w1) if w1 is not None else None, derived_from)
+
+    @classmethod
+    def recording_beats(cls, data: bytes, tempo_bpm: float | None = None) -> dict[str, Any]:
+        """The beats of a recording (:func:`engines.rhythm.audio.audio_beats`): its length, tempo
+        (with ``tempo_confidence`` in [0, 1], how clearly the onsets pick this metrical level over
+        the others, 0.5 = another is as likely, None when ``tempo_bpm`` was given), beat times and
+        downbeat (None when no downbeat is clear), seconds rounded to the microsecond."""
+        from .audio import audio_beats  # librosa: imported only when a recording is read
+
+        try:
+            found = audio_beats(data, tempo_bpm)
+        except MusicError as exc:
+            raise EngineError(str(exc)) from None
+        return {
+            "duration_s": round(found.duration_s, 6),
+            "tempo_bpm": round(found.tempo_bpm, 4),
+            "tempo_confidence": found.tempo_confidence,
+            "beats_s": [round(float(t), 6) for t in found.beats_s],
+            "downbeat_s": None if found.downbeat is None else round(float(found.beats_s[found.downbeat]), 6),
+        }
+
+    @classmethod
+    def edit_movement_graph(
+        cls, arrays: DatabaseArrays, edits: GraphEdits, database_id: str
+    ) -> tuple[list[ResolvedEdit], Arrays]:
+        """The edits resolved and the edited arrays (:mod:`engines.rhythm.choreography`); raises
+        :class:`~engines.rhythm.choreography.GraphEditError` naming the edit that breaks a rule."""
+        resolved = resolve_edits(edits.edits, arrays)
+        return resolved, edited_arrays(arrays, resolved)
 
     def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
         super().__init__(library, arrays)
@@ -196,7 +331,9 @@ class RhythmEngine(Engine):
         self.follower_skeleton = library.clip(followers[0]).skeleton if followers and followers[0] else None
 
     @classmethod
-    def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+    def build(
+        cls, spec: RhythmDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
+    ) -> Arrays:
         return build_rhythm(spec, library, emit, should_stop)
 
     @property
@@ -210,7 +347,7 @@ class RhythmEngine(Engine):
 
     # -- synthesis ----------------------------------------------------------------------------
     def make_control(
-        self, request: Any, beats: Array, dancers: Dancers
+        self, request: RhythmRequest, beats: Array, dancers: Dancers
     ) -> Callable[[int, Dancers], Control | None] | None:
         """The per-movement control of a request (None: free dancing)."""
         t = self.tables
@@ -246,7 +383,7 @@ class RhythmEngine(Engine):
             return _with_avoidance(inner, 0.9 * request.spacing_m, 0.5)
         return inner
 
-    def synthesize(self, request: Any, beats: Array) -> tuple[list[Motion], list[Motion], Any]:
+    def synthesize(self, request: RhythmRequest, beats: Array) -> tuple[list[Motion], list[Motion], Any]:
         """Character motions (leaders), partner motions (couples) and the raw rendering."""
         t = self.tables
         if request.couples and not t.couples:
@@ -335,24 +472,27 @@ class RhythmEngine(Engine):
         fig = hold_figures(np.concatenate(dists), max_m)
         return {"examples_held_fraction": fig["held_fraction"], "examples_median_cm": fig["median_cm"]}
 
+    @classmethod
+    def check_live_session(cls, database_id: str) -> None:
+        """Every rhythm database dances live."""
+
     def live_session(self, *, seed: int = 0, fps: float | None = None, accent: float = 0.6) -> LiveSession:
         """A dancer driven by beats as they happen (:class:`engines.rhythm.session.LiveDancer`)."""
-        from .session import LiveDancer  # the session module builds on this one
-
         return LiveDancer(self, seed=seed, fps=fps, accent=accent)
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+    def search(self, request: RhythmRequest, run: Run) -> Stopped:
         """One pass over the music (the search's work: one walk of the movement graph drawn from
         the request's seed, so the same request gives the same bytes on any machine). The pass is
-        short and always completes: ``budget_s`` never cuts it (``Stopped.work``); a cancel before
+        short and always completes: the time cap never cuts it (``Stopped.work``); a cancel before
         the foot cleanup ends it without an answer (``Stopped.cancelled``)."""
+        emit = run.emit
         beats = music_beats(request, self.tables.beats_per_movement)
         emit.progress(0.1, f"{beats.size} music beats")
         leaders, partners, r = self.synthesize(request, beats)
         if request.footskate:
             leaders = [_clean(m, self.foot_floor(m.skeleton)) for m in leaders]
             partners = [_clean(m, self.foot_floor(m.skeleton)) for m in partners]
-            if should_stop():
+            if run.cancelled():
                 return Stopped.cancelled
         hold = request.hand_hold
         if hold is not None and hold.reach and partners:

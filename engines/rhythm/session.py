@@ -10,19 +10,40 @@ WebSocket (``service/routes/sessions.py``) only moves messages; this class holds
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
+from motion import Skeleton
+
 from .beatkeys import warp_frames
-from .engine import RhythmEngine
-from .synth import Control, MovementPlan, accented, bounded_accent, initial_dancers, plan_movement, render
+from .synth import (
+    Control,
+    MovementPlan,
+    SpeedLimits,
+    Tables,
+    accented,
+    bounded_accent,
+    initial_dancers,
+    plan_movement,
+    render,
+)
 
 Array = npt.NDArray[np.float64]
 
 MIN_PERIOD_S = 0.2
 MAX_PERIOD_S = 3.0
+
+
+class DancingEngine(Protocol):
+    """What a live dancer needs of a loaded rhythm engine (:class:`engines.rhythm.engine.RhythmEngine`)."""
+
+    tables: Tables
+    leader_skeleton: Skeleton
+
+    @property
+    def speed_limits(self) -> SpeedLimits: ...
 
 
 class LiveDancer:
@@ -37,7 +58,7 @@ class LiveDancer:
     """
 
     def __init__(
-        self, engine: RhythmEngine, seed: int = 0, fps: float | None = None, accent: float = 0.6
+        self, engine: DancingEngine, seed: int = 0, fps: float | None = None, accent: float = 0.6
     ) -> None:
         self.engine = engine
         self.tables = engine.tables

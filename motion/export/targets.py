@@ -45,10 +45,6 @@ class Target:
     up: str
     forward: str
 
-    @property
-    def metres_to_units(self) -> float:
-        return {"m": 1.0, "cm": 100.0}[self.units]
-
     def describe(self) -> dict[str, str]:
         return {
             "target": self.name,

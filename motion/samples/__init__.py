@@ -58,10 +58,6 @@ def sample_path(name: str) -> Path:
         raise MotionError(f"no bundled sample {name!r}; available: {', '.join(SAMPLES)}") from None
 
 
-def sample_names() -> list[str]:
-    return list(SAMPLES)
-
-
 def is_clip_sample(name: str) -> bool:
     """True when the sample is a motion clip (a ``.bvh.gz``), False for other files (MIDI)."""
     return SAMPLES.get(name, "").endswith(".bvh.gz")

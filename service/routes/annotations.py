@@ -43,9 +43,11 @@ CorrectionsBody = Annotated[list[LabelCorrection], Depends(json_body(CORRECTIONS
 
 
 def _annotated(info: DatabaseInfo, ready: bool) -> None:
-    """422 unless the database is ``annotated``; 409 unless it is built when ``ready`` is asked."""
-    if info.kind != "annotated":
-        raise ApiError(422, "invalid_request", f"database {info.id} is {info.kind!r}, not 'annotated'")
+    """422 unless the database carries labels; 409 unless it is built when ``ready`` is asked."""
+    try:
+        kind_class(info.kind).check_labels(info.id)
+    except EngineError as exc:
+        raise ApiError(422, "invalid_request", str(exc)) from None
     if ready and info.status != DatabaseStatus.ready:
         raise conflict("database_not_ready", f"database {info.id} is {info.status.value}")
 

@@ -34,7 +34,7 @@ from fastapi.websockets import WebSocketDisconnect
 from pydantic import TypeAdapter, ValidationError
 
 from engines.base import EngineError, LiveControlSession
-from engines.registry import kind_class
+from engines.registry import EngineClass, kind_class
 from schemas.control import ControlSessionMessage, ControlSessionPath, ControlSessionPose
 from workers.engine_cache import EngineCache
 from workers.store import Store
@@ -49,11 +49,15 @@ MAX_MESSAGE_CHARS = 65536
 """Longest client message (240 frames of 4 joints is about 30 KB)."""
 
 
+def _follows(engine: EngineClass, db_id: str) -> None:
+    engine.check_live_control(db_id)
+
+
 def _open(
-    engines: EngineCache, store: Store, db_id: str, latency_s: float, k: float | None
+    engines: EngineCache, store: Store, db_id: str, kind: str, latency_s: float, k: float | None
 ) -> LiveControlSession:
-    """A live control session on a database (its engine loaded once per process)."""
-    engine = engines.get(db_id, kind_class("control"), store.database_arrays)
+    """A live control session on a database of ``kind`` (its engine loaded once per process)."""
+    engine = engines.get(db_id, kind_class(kind), store.database_arrays)
     return engine.live_control(latency_s=latency_s, k=k)
 
 
@@ -76,11 +80,11 @@ async def control_session(
     token: WebSocketToken = None,
 ) -> None:
     """Generate the target from a control streamed live (see the module doc for the protocol)."""
-    async with live_session_database(websocket, settings, token, store, quota, database, "control") as info:
+    async with live_session_database(websocket, settings, token, store, quota, database, _follows) as info:
         if info is None:
             return
         try:
-            session = await anyio.to_thread.run_sync(_open, engines, store, database, latency_s, k)
+            session = await anyio.to_thread.run_sync(_open, engines, store, database, info.kind, latency_s, k)
         except EngineError as exc:
             await websocket.close(code=4400, reason=str(exc)[:120])
             return

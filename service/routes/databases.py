@@ -12,10 +12,10 @@ from fastapi import APIRouter, Depends, Request, Response, status
 from pydantic import TypeAdapter
 from starlette.concurrency import run_in_threadpool
 
-from engines.registry import kind_class, require_kind
+from engines.registry import kind_class, require_kind, spec_union
 from motion import MotionError
 from motion.resample import resampled_frames
-from schemas import ClipSource, DatabaseInfo, DatabaseSpec, DatabaseStatus
+from schemas import ClipSource, DatabaseInfo, DatabaseStatus
 from schemas.bases import DatabaseSpecBase
 from schemas.clips import labels_past_clip_end
 from schemas.databases import DatabaseSummary, database_id, parse_database_spec
@@ -33,7 +33,7 @@ from ..jsonbody import delete_route, json_body, json_body_doc
 from ..metrics import Metrics
 from ..owners import database_for, release, visible
 
-SPEC_ADAPTER: TypeAdapter[Any] = TypeAdapter(DatabaseSpec)
+SPEC_ADAPTER: TypeAdapter[Any] = TypeAdapter(spec_union())
 SPEC_BODY = json_body_doc("DatabaseSpec", "A database spec: the clips (uploaded) and the kind's settings.")
 
 

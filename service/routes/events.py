@@ -21,6 +21,8 @@ from fastapi import APIRouter, Query, WebSocket
 from fastapi.websockets import WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
+from engines.base import EngineError
+from engines.registry import EngineClass, kind_class
 from schemas import DatabaseInfo, EventType, JobEvent, JobInfo
 from workers.backend import JobBackend
 from workers.store import NotFoundError, Store
@@ -138,12 +140,13 @@ async def live_session_database(
     store: Store,
     quota: SessionQuota,
     database: str,
-    kind: str,
+    check: Callable[[EngineClass, str], None],
 ) -> AsyncIterator[DatabaseInfo | None]:
     """The handshake of a live session on a database (rhythm and control sessions): the caller
     (:func:`websocket_owned`), a place in its session quota (HTTP 429 / close 4429), the socket
-    accepted, and the database a ready one of ``kind`` (else close 4400). Yields the database's
-    info while the quota place is held, or None once the socket was refused or closed."""
+    accepted, and the database a ready one whose engine passes ``check(engine class, database
+    id)`` (an ``EngineError`` says why not; else close 4400). Yields the database's info while the
+    quota place is held, or None once the socket was refused or closed."""
 
     async def find(principal: Principal) -> DatabaseInfo:
         return await anyio.to_thread.run_sync(database_for, store, principal, database)
@@ -160,10 +163,12 @@ async def live_session_database(
         return
     with quota.hold(principal.name):
         await websocket.accept()
-        if info.kind != kind or info.status.value != "ready":
-            await websocket.close(
-                code=4400, reason=f"database {database} is not a ready {kind} database"[:120]
-            )
+        try:
+            check(kind_class(info.kind), info.id)
+            if info.status.value != "ready":
+                raise EngineError(f"database {database} is {info.status.value}, not ready")
+        except EngineError as exc:
+            await websocket.close(code=4400, reason=str(exc)[:120])
             yield None
             return
         yield info

@@ -8,13 +8,12 @@ import anyio
 from fastapi import APIRouter, Depends, Query, Response, status
 from starlette.concurrency import run_in_threadpool
 
-from engines.registry import engine_kind
-from schemas import DatabaseStatus, JobInfo, Report, parse_job_request
+from schemas import JobInfo, Report, parse_job_request
 from schemas.bases import JobRequestBase
 from schemas.jobs import JobKind, JobStatus
 from workers.backend import JobBackend, JobNotFinished
 from workers.budget import check_work, database_facts, estimate_work
-from workers.inputs import InputError, attach_from_store, resolve_inputs
+from workers.prepare import Prepared, PrepareError, prepare
 from workers.result_export import ExportSpec
 from workers.store import Store
 
@@ -70,48 +69,42 @@ async def submit(
 
     The request's work (output frames x characters x joints, memory, time) is checked against the
     server's limits first: 413 ``over_budget`` names each number over its limit."""
-    engine = job_request.engine
-    if job_request.database is None:
-        raise ApiError(422, "invalid_request", "the request names no database ('database': <database id>)")
-    db = await run_in_threadpool(database_for, store, principal, job_request.database)
-    if db.status != DatabaseStatus.ready:
-        detail = f" ({db.error})" if db.error else ""
-        raise conflict(
-            "database_not_ready",
-            f"database {db.id} is {db.status.value}{detail}; submit once it is ready",
-            {"database": db.id, "status": db.status.value, "build_job": db.build_job},
+    mine = visible(store, principal, "clips", "files")
+
+    def prepared() -> Prepared:
+        return prepare(
+            job_request, store, visible=mine, database=lambda db_id: database_for(store, principal, db_id)
         )
-    kind = engine_kind(engine)
-    if kind != db.kind:
-        raise ApiError(
-            422,
-            "wrong_database_kind",
-            f"engine {engine!r} needs a {kind!r} database; database {db.id} is {db.kind!r}",
-        )
+
     try:
-        mine = visible(store, principal, "clips", "files")
-        job_request.inputs = await run_in_threadpool(resolve_inputs, store, job_request, mine)
-        await run_in_threadpool(attach_from_store, store, job_request)
-    except InputError as exc:
-        raise ApiError(422, exc.code, str(exc), {"inputs": job_request.input_files()}) from None
+        db = (await run_in_threadpool(prepared)).database
+    except PrepareError as exc:
+        raise ApiError(exc.status, exc.code, exc.message, exc.details or None) from None
     await _check_budget(settings, store, limiter, job_request)
     await _check_joints(store, job_request)
     quota.check(principal.name)
     payload = {"request": job_request.model_dump(mode="json")}
     info = await submit_job(
-        store, backend, metrics, JobKind.synth, payload, engine=engine, database=db.id, owner=principal.name
+        store,
+        backend,
+        metrics,
+        JobKind.synth,
+        payload,
+        engine=job_request.engine,
+        database=db.id,
+        owner=principal.name,
     )
     quota.add(principal.name, info.id)
     return info
 
 
 async def _check_joints(store: Store, job_request: JobRequestBase) -> None:
-    """422 ``unknown_joint`` when a graph request names a joint the database's skeleton lacks."""
-    named = getattr(job_request, "named_joints", None)
-    if named is None:
+    """422 ``unknown_joint`` when a request names a joint the database's skeleton lacks."""
+    named = job_request.named_joints()
+    if not named:
         return
     names = (await run_in_threadpool(database_facts, store, str(job_request.database))).joint_names
-    missing = [(where, joint) for where, joint in named() if names and joint not in names]
+    missing = [(where, joint) for where, joint in named if names and joint not in names]
     if missing:
         shown = ", ".join(names[:16]) + (f", ... (+{len(names) - 16})" if len(names) > 16 else "")
         problems = [
@@ -130,9 +123,7 @@ async def _check_budget(
 ) -> None:
     """413 ``over_budget`` when the request asks for more work than the server's limits allow."""
     facts = await run_in_threadpool(database_facts, store, str(job_request.database))
-    work = await anyio.to_thread.run_sync(
-        estimate_work, job_request, facts.fps, facts.joints, facts.clip_frames, limiter=limiter
-    )
+    work = await anyio.to_thread.run_sync(estimate_work, job_request, facts, limiter=limiter)
     problems = check_work(work, settings.work_limits)
     if problems:
         raise ApiError(

@@ -34,7 +34,7 @@ from fastapi.websockets import WebSocketDisconnect
 from pydantic import TypeAdapter, ValidationError
 
 from engines.base import LiveSession
-from engines.registry import kind_class
+from engines.registry import EngineClass, kind_class
 from schemas.rhythm import SessionBeat, SessionBpm, SessionDirection, SessionMessage, SessionStop
 from workers.engine_cache import EngineCache
 from workers.store import Store
@@ -47,6 +47,10 @@ router = APIRouter(prefix="/v1/sessions", tags=["sessions"])
 _MESSAGES: TypeAdapter[Any] = TypeAdapter(SessionMessage)
 MAX_MESSAGE_CHARS = 4096
 """Longest client message (every valid one is well under 200 characters)."""
+
+
+def _dances(engine: EngineClass, db_id: str) -> None:
+    engine.check_live_session(db_id)
 
 
 def _open_session(
@@ -85,7 +89,7 @@ async def rhythm_session(
     token: WebSocketToken = None,
 ) -> None:
     """Dance to beats sent live (see the module doc for the message format)."""
-    async with live_session_database(websocket, settings, token, store, quota, database, "rhythm") as info:
+    async with live_session_database(websocket, settings, token, store, quota, database, _dances) as info:
         if info is None:
             return
         dancer, skeleton = await anyio.to_thread.run_sync(

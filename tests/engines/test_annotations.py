@@ -23,7 +23,7 @@ from engines.annotations.search import (
     solve_level,
     spliced,
 )
-from engines.base import EngineError
+from engines.base import EngineError, Run
 from engines.library import MotionLibrary, library_to_arrays
 from schemas.annotations import AnnotatedDatabaseSpec, AnnotationRequest, FrameConstraint, LabelCorrection
 from tests.engines.emitters import Collect
@@ -95,7 +95,7 @@ def test_search_follows_timeline(engine: AnnotationEngine) -> None:
         footskate=False,
     )
     rec = Collect()
-    engine.search(req, 0.3, rec, lambda: False)
+    engine.search(req, Run(0.3, emit=rec))
     assert rec.solutions, "no solution emitted"
     scores = [s.score for s in rec.solutions]
     assert scores == sorted(scores, reverse=True) and len(set(scores)) == len(scores)
@@ -111,7 +111,7 @@ def test_search_follows_timeline(engine: AnnotationEngine) -> None:
 def test_unknown_label_is_a_client_error(engine: AnnotationEngine) -> None:
     req = AnnotationRequest(frames=40, timeline=[{"label": "jump", "start": 0, "end": 40}])
     with pytest.raises(EngineError, match="jump"):
-        engine.search(req, 0.1, Collect(), lambda: False)
+        engine.search(req, Run(0.1, emit=Collect()))
 
 
 def test_dp_matches_brute_force() -> None:
@@ -166,7 +166,7 @@ def test_frame_constraint_is_honoured(engine: AnnotationEngine) -> None:
         footskate=False,
     )
     rec = Collect()
-    engine.search(req, 0.2, rec, lambda: False)
+    engine.search(req, Run(0.2, emit=rec))
     best = rec.solutions[-1]
     assert best.provenance[37] == ("slow2.bvh", 50)
     assert best.constraint_errors["frame[0]"]["met"] is True
@@ -179,9 +179,7 @@ def test_frame_constraint_is_honoured(engine: AnnotationEngine) -> None:
     rec = Collect()
     engine.search(
         req.model_copy(update={"frame_constraints": [FrameConstraint(**c) for c in close]}),
-        0.2,
-        rec,
-        lambda: False,
+        Run(0.2, emit=rec),
     )
     best = rec.solutions[-1]
     assert [best.provenance[t] for t in (10, 12, 79)] == [
@@ -292,7 +290,7 @@ def test_loop_option_closes_the_clip_and_is_reported(engine: AnnotationEngine) -
         frames=120, seed=2, timeline=[{"label": "slow", "start": 0, "end": 120}], footskate=False, loop=True
     )
     rec = Collect()
-    engine.search(req, 0.3, rec, lambda: False)
+    engine.search(req, Run(0.3, emit=rec))
     best = rec.solutions[-1]
     loop = best.constraint_errors["loop"]
     assert loop["satisfied"] and loop["pose_cm"] < 1.0 and loop["last_frame"] == 119, loop

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from engines.annotations.engine import AnnotationEngine
+from engines.base import Run
 from engines.library import ClipInput, build_library, library_to_arrays
 from motion.metrics import foot_slip
 from schemas.annotations import AnnotatedDatabaseSpec, AnnotationRequest
@@ -53,7 +54,7 @@ def test_walk_then_run_on_real_data() -> None:
         footskate=False,
     )
     rec = Collect()
-    engine.search(req, 0.5, rec, lambda: False)
+    engine.search(req, Run(0.5, emit=rec))
     best = rec.solutions[-1]
     steady = [i for i in range(150) if abs(i - 75) >= 15]
     ok = [truth[best.provenance[i][0]] == ("walk" if i < 75 else "run") for i in steady]

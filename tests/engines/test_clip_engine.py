@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engines.base import EngineError
+from engines.base import EngineError, Run
 from engines.clip import ClipEngine
 from engines.library import ClipInput, build_library, library_from_arrays, library_to_arrays
 from motion import MotionError
@@ -56,7 +56,7 @@ def test_clip_engine_excerpt_mirror_and_placement(library) -> None:  # type: ign
             "heading_deg": 45,
         }
     )
-    engine.search(req, 1.0, out, lambda: False)
+    engine.search(req, Run(1.0, emit=out))
     (sol,) = out.solutions
     assert sol.motion.num_frames == 60
     assert sol.provenance[0] == ("follower", 30) and sol.provenance[-1] == ("follower", 89)
@@ -73,11 +73,8 @@ def test_clip_engine_excerpt_mirror_and_placement(library) -> None:  # type: ign
 def test_clip_engine_bad_requests(library) -> None:  # type: ignore[no-untyped-def]
     engine = ClipEngine(library, {})
     with pytest.raises(EngineError, match="no clip named 'x'"):
-        engine.search(parse_job_request({"engine": "clip", "clip": "x"}), 1.0, Collect(), lambda: False)
+        engine.search(parse_job_request({"engine": "clip", "clip": "x"}), Run(1.0, emit=Collect()))
     with pytest.raises(EngineError, match="outside clip"):
         engine.search(
-            parse_job_request({"engine": "clip", "clip": "leader", "start": 5000}),
-            1.0,
-            Collect(),
-            lambda: False,
+            parse_job_request({"engine": "clip", "clip": "leader", "start": 5000}), Run(1.0, emit=Collect())
         )

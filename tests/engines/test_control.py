@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from engines.base import EngineError
+from engines.base import EngineError, Run
 from engines.control.build import cluster_instances, instances_from_boundaries
 from engines.control.dp import (
     Infeasible,
@@ -304,7 +304,7 @@ def test_walk_from_a_path_follows_it() -> None:
         {"engine": "control", "control": {"trajectory": {"fps": 30, "points": path.tolist()}}, "budget_s": 5}
     )
     out = Collect()
-    engine.search(req, 5.0, out, lambda: False)
+    engine.search(req, Run(5.0, emit=out))
     assert out.solutions and all(b.score < a.score for a, b in itertools.pairwise(out.solutions))
     sol = out.solutions[-1]
     assert sol.motion.num_frames == 150 and sol.motion.fps == 30.0
@@ -318,13 +318,13 @@ def test_walk_from_a_path_follows_it() -> None:
         {"engine": "control", "control": {"trajectory": {"fps": 30, "points": (path * 8).tolist()}}}
     )
     with pytest.raises(EngineError, match="too fast"):
-        engine.search(fast, 5.0, Collect(), lambda: False)
+        engine.search(fast, Run(5.0, emit=Collect()))
     # a control shorter than any segment cannot be interpreted
     short = parse_job_request(
         {"engine": "control", "control": {"trajectory": {"fps": 30, "points": path[:5].tolist()}}}
     )
     with pytest.raises(EngineError, match="cannot be tiled"):
-        engine.search(short, 5.0, Collect(), lambda: False)
+        engine.search(short, Run(5.0, emit=Collect()))
 
 
 def test_context_and_velocity_continuity_options() -> None:
@@ -440,7 +440,7 @@ def test_rigid_alignment_option_end_to_end() -> None:
         )
         req.attach_inputs({"c.bvh": bvh_text(lean).encode()})
         out = Collect()
-        engine.search(req, 5.0, out, lambda: False)
+        engine.search(req, Run(5.0, emit=out))
         sol = out.solutions[-1]
         hips = sol.motion.global_positions()[:, 0]
         errors[mode] = float(np.linalg.norm(hips - hips_in, axis=-1).mean())

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from engines.base import EngineError
+from engines.base import EngineError, Run
 from engines.control.engine import ControlEngine
 from engines.library import ClipInput, build_library, library_to_arrays
 from motion import Motion
@@ -78,7 +78,7 @@ def synth(engine: ControlEngine, lead: Motion, **fields: object) -> Any:
     req = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}, **fields})
     req.attach_inputs({"lead.bvh": bvh_text(lead).encode()})
     out = Collect()
-    engine.search(req, 5.0, out, lambda: False)
+    engine.search(req, Run(5.0, emit=out))
     return out.solutions[-1]
 
 
@@ -91,7 +91,7 @@ def test_the_follower_of_a_known_dance_is_recovered_where_it_stood(sample_couple
     req = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}, "budget_s": 5})
     req.attach_inputs({"lead.bvh": bvh_text(lead).encode()})
     out = Collect()
-    engine.search(req, 5.0, out, lambda: False)
+    engine.search(req, Run(5.0, emit=out))
     sol = out.solutions[-1]
     assert sol.motion.num_frames == 600 and sol.motion.fps == 120.0  # the control's length and rate
     assert follower_error(sol.motion, follow) < 0.08  # the same dance: where the real follower stood
@@ -111,7 +111,7 @@ def test_the_follower_of_a_known_dance_is_recovered_where_it_stood(sample_couple
     )
     req.attach_inputs({"lead.bvh": bvh_text(lead).encode()})
     out = Collect()
-    engine.search(req, 5.0, out, lambda: False)
+    engine.search(req, Run(5.0, emit=out))
     seg = [
         s
         for s in out.solutions[-1].annotations["segments"]
@@ -121,7 +121,7 @@ def test_the_follower_of_a_known_dance_is_recovered_where_it_stood(sample_couple
     # a control file the runtime did not attach is refused with a clear error
     req = parse_job_request({"engine": "control", "control": {"bvh": "x.bvh"}})
     with pytest.raises(EngineError, match="not provided"):
-        engine.search(req, 5.0, Collect(), lambda: False)
+        engine.search(req, Run(5.0, emit=Collect()))
 
 
 @pytest.mark.skipif(not (DATA / "cmu-salsa").exists(), reason="shared data absent")
@@ -138,7 +138,7 @@ def test_leave_one_out_salsa_beats_the_average_partner() -> None:
     req = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}, "exact": False})
     req.attach_inputs({"lead.bvh": bvh_text(lead).encode()})
     out = Collect()
-    engine.search(req, 10.0, out, lambda: False)
+    engine.search(req, Run(10.0, emit=out))
     height = float(lead.global_positions()[:, lead.skeleton.names.index("head"), 1].max())
     assert follower_error(out.solutions[-1].motion, follow) / height < 0.3  # average partner: 0.375
 
@@ -193,7 +193,7 @@ def test_the_report_says_whether_the_feet_stay_where_the_examples_plant_them(
         req = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}, "footskate": cleanup})
         req.attach_inputs({"lead.bvh": bvh_text(lead).encode()})
         out = Collect()
-        engine.search(req, 5.0, out, lambda: False)
+        engine.search(req, Run(5.0, emit=out))
         sol = out.solutions[-1]
         assert sol.quality is not None
         entries[cleanup] = (sol.quality.constraint_errors["footplants"], sol.quality.reasons)
@@ -280,7 +280,7 @@ def test_a_leader_read_in_another_unit_than_the_database_is_refused_naming_the_u
         req = parse_job_request({"engine": "control", "control": control, "budget_s": 5})
         req.attach_inputs({"sample:salsa-leader-12": data})
         out = Collect()
-        three_couples.search(req, 5.0, out, lambda: False)
+        three_couples.search(req, Run(5.0, emit=out))
         return out.solutions[-1]
 
     with pytest.raises(

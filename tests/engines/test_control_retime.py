@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import engines.control.engine as control_engine
+from engines.base import Run
 from engines.control.dp import (
     Infeasible,
     Instances,
@@ -364,5 +365,5 @@ def test_retime_equals_the_reference_on_salsa(held: str, monkeypatch: pytest.Mon
     for extra in ({}, {"alignment": "rigid"}):
         request = parse_job_request({"engine": "control", "control": {"bvh": "lead.bvh"}, **extra})
         request.attach_inputs({"lead.bvh": lead})
-        engine.search(request, 60.0, CollectingEmitter(), lambda: False)
+        engine.search(request, Run(60.0, emit=CollectingEmitter()))
     assert False in calls and True in calls

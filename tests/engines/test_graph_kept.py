@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from engines.base import Run
 from engines.graph.build import build_graph
 from engines.graph.engine import GraphEngine, left_out_note
 from schemas.jobs import parse_job_request
@@ -30,7 +31,7 @@ def test_missed_goal_names_the_clips_left_out() -> None:
         }
     )
     emit = Collect()
-    engine.search(request, 5.0, emit, lambda: False)
+    engine.search(request, Run(5.0, emit=emit))
     best = emit.best
     assert best is not None and best.quality is not None and not best.quality.ok
     assert note in best.quality.reasons

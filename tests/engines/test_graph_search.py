@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from engines import base as engines_base
-from engines.base import EngineError, Solution, Stopped
+from engines.base import EngineError, Run, Solution, Stopped
 from engines.graph.assemble import assemble, body_frames, quality_inputs
 from engines.graph.model import EdgeTree, RootTracks
 from engines.graph.paths import (
@@ -526,7 +526,7 @@ def test_bandai_end_to_end() -> None:
         }
     )
     out = Collect()
-    engine.search(req, 2.0, out, lambda: False)
+    engine.search(req, Run(2.0, emit=out))
     best = min(out.solutions, key=lambda s: s.score)
     m = best.motion
     assert m.num_frames == 300

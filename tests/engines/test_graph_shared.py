@@ -1,4 +1,4 @@
-"""Several characters with shared constraints in the graph engine (engines.graph.shared), end to end
+"""Several characters with shared constraints in the graph engine (engines.graph.coupled), end to end
 on real motion capture (the bundled CMU walks) through the CLI, the report checked against an
 independent forward kinematics of the written BVH."""
 
@@ -200,7 +200,7 @@ def test_shared_constraints_need_characters() -> None:
 def test_shared_cost_is_finite_past_a_short_output() -> None:
     """A character whose search ran out of time with a short path shortens the output; a meet
     past its end costs like a 1 m miss, an apart counts only the frames there are."""
-    from engines.graph.shared import shared_cost
+    from engines.graph.coupled import shared_cost
     from motion.goals import ApartGoal, MeetGoal, Point
     from tests.motion.test_goals_shared import two_points
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from engines.annotations.engine import AnnotationEngine
-from engines.base import Solution
+from engines.base import Run, Solution
 from engines.graph.search import GraphSearch
 from engines.library import library_to_arrays
 from engines.rhythm.engine import RhythmEngine
@@ -96,9 +96,7 @@ def test_annotations_unreachable_end_and_label_goals(annotations: AnnotationEngi
     out = Collect()
     annotations.search(
         AnnotationRequest(frames=96, seed=4, timeline=timeline, end={"position": [0.0, 60.0]}),
-        60.0,  # a safety cap: the passes bound the work
-        out,
-        lambda: False,
+        Run(60.0, emit=out),  # 60 s: a safety cap, the passes bound the work
     )
     q = best(out).quality
     assert q is not None and not q.ok
@@ -120,7 +118,7 @@ def test_control_walk_that_cannot_keep_up_with_its_path_is_not_ok() -> None:
         {"engine": "control", "control": {"trajectory": {"fps": 30, "points": path.tolist()}}, "budget_s": 3}
     )
     out = Collect()
-    engine.search(req, 60.0, out, lambda: False)
+    engine.search(req, Run(60.0, emit=out))
     q = best(out).quality
     assert q is not None and not q.ok
     assert not q.constraint_errors["path"]["satisfied"] and q.constraint_errors["path"]["rms_cm"] > 10
@@ -129,7 +127,7 @@ def test_control_walk_that_cannot_keep_up_with_its_path_is_not_ok() -> None:
         {"engine": "control", "control": {"trajectory": {"fps": 30, "points": (path / 2.5).tolist()}}}
     )
     out = Collect()
-    engine.search(slow, 60.0, out, lambda: False)
+    engine.search(slow, Run(60.0, emit=out))
     path_error = best(out).constraint_errors["path"]
     assert path_error["satisfied"] and path_error["rms_cm"] < 10
 
@@ -159,7 +157,7 @@ def test_rhythm_music_too_fast_to_dance_is_not_ok(rhythm: RhythmEngine) -> None:
         {"engine": "rhythm", "music": {"bpm": 3 * 60 / period, "duration_s": 6}, "seed": 1}
     )
     out = Collect()
-    rhythm.search(req, 5.0, out, lambda: False)
+    rhythm.search(req, Run(5.0, emit=out))
     q = best(out).quality
     assert q is not None and not q.ok
     assert "music" in q.constraint_errors and q.constraint_errors["length"]["satisfied"]
@@ -171,7 +169,7 @@ def test_rhythm_at_the_examples_tempo_is_ok_and_reports_beats(rhythm: RhythmEngi
     period = rhythm.tables.period_s
     req = parse_job_request({"engine": "rhythm", "music": {"bpm": 60 / period, "duration_s": 8}, "seed": 1})
     out = Collect()
-    rhythm.search(req, 5.0, out, lambda: False)
+    rhythm.search(req, Run(5.0, emit=out))
     q = best(out).quality
     assert q is not None
     plausible = {k: v["ok"] for k, v in q.plausibility.items()}

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from engines.base import EngineError
+from engines.base import EngineError, Run
 from engines.rhythm.build import dip_agreement, snap_to_speed_minima, speed_dips
 from engines.rhythm.engine import RhythmEngine, music_beats
-from engines.rhythm.graph import k_medoids, subtractive_clustering, transition_graph
+from engines.rhythm.movement_graph import k_medoids, subtractive_clustering, transition_graph
 from engines.rhythm.movements import warp_frames
 from engines.rhythm.music import MusicError, bpm_beats, parse_midi, write_midi
 from engines.rhythm.synth import warp
@@ -217,7 +217,7 @@ def test_synthetic_end_to_end_lands_beats_on_music(synthetic: Any) -> None:
         {"music": {"beats_s": music}, "seed": 3, "accent": 0.0, "footskate": False}
     )
     rec = Collect()
-    engine.search(req, 5.0, rec, lambda: False)
+    engine.search(req, Run(5.0, emit=rec))
     sol = rec.solutions[-1]
     m = sol.motion
     assert m.num_frames == int(np.floor(music[-1] * 30)) + 1
@@ -260,7 +260,7 @@ def test_directions_steer_and_crowd_avoids(synthetic: Any) -> None:
     gaps = np.linalg.norm(end[:, None] - end[None], axis=-1)[np.triu_indices(4, 1)]
     assert gaps.min() > 0.2
     rec = Collect()
-    engine.search(req, 5.0, rec, lambda: False)
+    engine.search(req, Run(5.0, emit=rec))
     combined = rec.solutions[-1].motion
     assert combined.num_joints == 1 + 4 * leaders[0].num_joints
     assert combined.skeleton.names[1].startswith("c0_")
@@ -270,7 +270,7 @@ def test_couples_need_partners(synthetic: Any) -> None:
     _, _, engine = synthetic
     req = RhythmRequest.model_validate({"music": {"bpm": 120, "duration_s": 4}, "couples": True})
     with pytest.raises(EngineError, match="partners"):
-        engine.search(req, 1.0, Collect(), lambda: False)
+        engine.search(req, Run(1.0, emit=Collect()))
 
 
 def test_couples_move_together() -> None:

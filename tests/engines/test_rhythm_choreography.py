@@ -24,7 +24,7 @@ from engines.rhythm.choreography import (
 from engines.rhythm.reach import describe as describe_graph
 from engines.rhythm.reach import start_only_groups, unreachable_groups
 from engines.rhythm.synth import draw_probabilities
-from schemas.rhythm_graph import ClipSpan, GraphEdits, ResolvedEdit
+from schemas.movement_graph import ClipSpan, GraphEdits, ResolvedEdit
 from tests.engines.rhythm_salsa import SAMPLES, group_walks, salsa_arrays, transition_counts
 
 SEEDS = range(40)

@@ -11,7 +11,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from engines.base import CollectingEmitter
+from engines.base import CollectingEmitter, Run
 from engines.library import ClipInput
 from engines.rhythm.engine import RhythmEngine, music_beats
 from engines.rhythm.synth import partner_fade_frames
@@ -51,7 +51,7 @@ def test_the_follower_moves_no_faster_than_the_examples(seed: int) -> None:
         {"engine": "rhythm", "music": {"bpm": bpm, "duration_s": 12}, "couples": True, "seed": seed}
     )
     out = CollectingEmitter()
-    engine.search(req, 60.0, out, lambda: False)
+    engine.search(req, Run(60.0, emit=out))
     assert out.best is not None and out.best.quality is not None
     plaus = out.best.quality.plausibility
     for name in ("root_speed", "root_speed_p99", "turn_rate"):

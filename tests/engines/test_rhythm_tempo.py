@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from engines.base import Run
 from engines.rhythm.engine import RhythmEngine
 from engines.rhythm.synth import beat_rates, too_fast
 from schemas import parse_job_request
@@ -41,7 +42,7 @@ def test_beat_rates_scale_with_the_tempo(engine: RhythmEngine) -> None:
 def _dance(engine: RhythmEngine, bpm: float, seed: int) -> Any:
     req = parse_job_request({"engine": "rhythm", "music": {"bpm": bpm, "duration_s": 20}, "seed": seed})
     out = Collect()
-    engine.search(req, 10.0, out, lambda: False)
+    engine.search(req, Run(10.0, emit=out))
     return best(out)
 
 

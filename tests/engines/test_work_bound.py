@@ -142,7 +142,7 @@ def annotation_request(**kw: Any) -> AnnotationRequest:
 
 def search(engine: Engine, req: Any) -> tuple[Collect, Stopped]:
     out = Collect()
-    return out, engine.search(req, req.budget_s, out, lambda: False)
+    return out, engine.search(req, Run(req.budget_s, emit=out))
 
 
 def test_annotations_do_their_passes_at_any_clock_speed(

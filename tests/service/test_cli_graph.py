@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from schemas import DatabaseInfo
-from schemas.rhythm_graph import MovementGraph
+from schemas.movement_graph import MovementGraph
 from service.cli import main
 from tests.engines.rhythm_salsa import SPEC
 
@@ -167,8 +167,8 @@ def test_graph_into_a_closed_pipe_ends_quietly(db_dir: Path) -> None:
 def test_serve_import_takes_a_derived_folder_too(db_dir: Path, tmp_path: Path) -> None:
     """``segue serve --import``: a folder ``segue graph-edit`` wrote is imported under its derived id
     (checked against its parent's spec and clips and its edits), like the folder it came from."""
-    from workers.graph_edits import graph_of_dir
     from workers.imports import import_database_dir
+    from workers.movement_graphs import graph_of_dir
     from workers.store import Store
 
     t = graph_of_dir(db_dir / "db").transitions[0]

@@ -11,7 +11,7 @@ import pytest
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
-from engines.base import CollectingEmitter
+from engines.base import CollectingEmitter, Run
 from engines.control.engine import ControlEngine
 from engines.library import library_to_arrays
 from motion.ground import ground_frames
@@ -83,7 +83,7 @@ def test_a_path_streamed_over_the_websocket_is_walked_with_a_fixed_latency(clien
     )
     engine: ControlEngine = walk_engine()
     out = CollectingEmitter()
-    engine.search(request, 5.0, out, lambda: False)
+    engine.search(request, Run(5.0, emit=out))
     offline = out.solutions[-1].motion.global_positions()[:, 0] * out.solutions[-1].motion.metres_per_unit
     assert float(np.linalg.norm((root - offline)[:, [0, 2]], axis=-1).mean()) < 0.15
 

@@ -9,7 +9,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from schemas.jobs import parse_job_request
-from workers.inputs import InputError, attach_from_dir, attach_from_store, resolve_inputs
+from workers.inputs import InputError, attach_from_dir, attach_resolved, resolve_inputs
 from workers.store import Store
 
 from .conftest import wait_events
@@ -70,7 +70,8 @@ def test_store_resolution_by_id_and_name(tmp_path: Path) -> None:
     request = parse_job_request({"engine": "scripted", "input": "a.mid"})
     assert resolve_inputs(store, request) == {"a.mid": a.id}
     by_id = parse_job_request({"engine": "scripted", "input": a.id})
-    attach_from_store(store, by_id)
+    by_id.inputs = resolve_inputs(store, by_id)
+    attach_resolved(store, by_id)
     assert by_id.input_bytes(a.id) == MIDI
     with pytest.raises(InputError, match="b.mid"):
         resolve_inputs(store, parse_job_request({"engine": "scripted", "input": "b.mid"}))

@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from engines.rhythm.choreography import GraphEditError, apply_edits
-from schemas.rhythm_graph import MovementGraph, ResolvedEdit
+from schemas.movement_graph import MovementGraph, ResolvedEdit
 from tests.engines.rhythm_salsa import SPEC
 
 from .conftest import ready_database, wait_events

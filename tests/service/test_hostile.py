@@ -122,18 +122,22 @@ def test_work_budget_is_checked_at_submission(
 
 
 def test_work_estimate_counts_characters_frames_and_joints() -> None:
+    from engines.base import DatabaseFacts
     from schemas.jobs import parse_job_request
     from workers.budget import WorkLimits, check_work, estimate_work
 
     crowd = parse_job_request(
         {"engine": "rhythm", "music": {"bpm": 120, "duration_s": 20}, "characters": 200, "database": "d"}
     )
-    work = estimate_work(crowd, 120.0, 38)
+    work = estimate_work(crowd, DatabaseFacts(120.0, 38, {}))
     assert (work.frames, work.characters, work.joint_frames) == (2400, 200, 2400 * 200 * 38)
     problems = check_work(work, WorkLimits())
     assert any("joint-frames" in p for p in problems) and any("MiB" in p for p in problems)
     long_graph = parse_job_request({"engine": "graph", "frames": 100_000, "database": "d"})
-    assert any("output frames" in p for p in check_work(estimate_work(long_graph, 30.0, 25), WorkLimits()))
+    assert any(
+        "output frames" in p
+        for p in check_work(estimate_work(long_graph, DatabaseFacts(30.0, 25, {})), WorkLimits())
+    )
 
 
 def test_reupload_with_other_units_is_a_conflict(client: TestClient, walk_clip: dict[str, Any]) -> None:

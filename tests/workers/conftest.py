@@ -208,44 +208,29 @@ def worker_thread(redis_url: str, store: Store, name: str, **fields: Any) -> Ite
             raise RuntimeError(f"worker thread {name} did not stop")
 
 
-def spawn_worker(redis_url: str, store: Store, name: str, *extra: str) -> subprocess.Popen[bytes]:
-    """A ``python -m workers.redis_worker`` process (heartbeat 0.2 s, TTL 1 s)."""
+def spawn_worker(redis_url: str, store: Store, name: str, **settings: str) -> subprocess.Popen[bytes]:
+    """A ``segue worker`` process (heartbeat 0.2 s, TTL 1 s, 100-ms blocking reads; ``settings``:
+    more :class:`workers.settings.Settings` fields as their ``SEGUE_*`` variables, e.g.
+    ``heartbeat_ttl_s="600"``)."""
+    own = {"heartbeat_s": "0.2", "heartbeat_ttl_s": "1.0", "block_ms": "100", "log_level": "WARNING"}
     env = dict(
         os.environ,
         PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
         SEGUE_ENGINE_PLUGINS=PLUGINS,
         SEGUE_STORE_URL=store.url,
     )
-    cmd = [
-        sys.executable,
-        "-m",
-        "workers.redis_worker",
-        "--redis",
-        redis_url,
-        "--data",
-        str(store.root),
-        "--name",
-        name,
-        "--heartbeat",
-        "0.2",
-        "--ttl",
-        "1.0",
-        "--block-ms",
-        "100",
-        "--log-level",
-        "WARNING",
-        *extra,
-    ]
-    return subprocess.Popen(cmd, env=env, cwd=REPO)
+    env.update({f"SEGUE_{key.upper()}": value for key, value in {**own, **settings}.items()})
+    cmd = [sys.executable, "-m", "service.cli", "worker", "--redis", redis_url, "--data", str(store.root)]
+    return subprocess.Popen([*cmd, "--name", name], env=env, cwd=REPO)
 
 
 @contextlib.contextmanager
 def worker_processes(
-    redis_url: str, store: Store, names: list[str], *extra: str
+    redis_url: str, store: Store, names: list[str], **settings: str
 ) -> Iterator[dict[str, subprocess.Popen[bytes]]]:
-    """``spawn_worker`` for each name (``extra``: more worker options, e.g. ``--ttl 600``); killed
-    (SIGKILL) on exit if still running."""
-    procs = {name: spawn_worker(redis_url, store, name, *extra) for name in names}
+    """``spawn_worker`` for each name (``settings``: more worker settings, e.g.
+    ``heartbeat_ttl_s="600"``); killed (SIGKILL) on exit if still running."""
+    procs = {name: spawn_worker(redis_url, store, name, **settings) for name in names}
     try:
         yield procs
     finally:

@@ -9,13 +9,14 @@ excerpt of the database's first clip (10 + i frames), so results download.
 from __future__ import annotations
 
 import time
-from typing import Any, Literal
+from typing import Literal
 
 from pydantic import Field
 
-from engines.base import Emitter, Engine, EngineError, ShouldStop, Solution, Stopped
+from engines.base import Engine, EngineError, Run, Solution, Stopped
 from engines.registry import register
-from schemas.jobs import JobRequestBase, register_request_model
+from schemas.bases import JobRequestBase
+from schemas.databases import ClipsDatabaseSpec
 
 
 class ScriptedRequest(JobRequestBase):
@@ -36,11 +37,14 @@ class ScriptedRequest(JobRequestBase):
 
 
 @register
-class ScriptedEngine(Engine):
+class ScriptedEngine(Engine[ScriptedRequest, ClipsDatabaseSpec]):
     name = "scripted"
     kind = "clips"
+    request_model = ScriptedRequest
+    spec_model = ClipsDatabaseSpec
 
-    def search(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+    def search(self, request: ScriptedRequest, run: Run) -> Stopped:
+        budget_s, emit, should_stop = run.budget_s, run.emit, run.should_stop
         clip = self.library.motions[0]
         name = self.library.names[0]
         t0 = time.monotonic()
@@ -67,6 +71,3 @@ class ScriptedEngine(Engine):
                 )
             )
         return Stopped.work
-
-
-register_request_model("scripted", ScriptedRequest)

@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 import soundfile as sf
 
+from engines.base import DatabaseFacts
 from engines.rhythm.music import parse_midi
+from engines.rhythm.music_facts import MAX_BEATS, audio_facts, midi_facts
 from motion.samples import sample_path
 from schemas import parse_job_request
 from workers.budget import WorkLimits, check_work, estimate_work
-from workers.input_facts import MAX_BEATS, audio_facts, midi_facts
 
 
 def _random_midi(rng: random.Random) -> bytes:
@@ -96,15 +97,19 @@ def _rhythm(db_music: dict[str, Any], files: dict[str, bytes], characters: int =
     return request
 
 
+def _facts(fps: float) -> DatabaseFacts:
+    return DatabaseFacts(fps, 38, {})
+
+
 def test_an_hour_of_audio_is_over_budget_whatever_the_dancers() -> None:
     buf = io.BytesIO()
     sf.write(buf, np.zeros((8_000 * 3600, 1), dtype=np.int16), 8_000, format="FLAC")
     hour = buf.getvalue()
-    work = estimate_work(_rhythm({"audio": "song.flac"}, {"song.flac": hour}), 120.0, 38)
+    work = estimate_work(_rhythm({"audio": "song.flac"}, {"song.flac": hour}), _facts(120.0))
     assert work.frames == 3600 * 120
     assert any("output frames" in p for p in check_work(work, WorkLimits()))
     crowd = estimate_work(
-        _rhythm({"audio": "song.flac", "duration_s": 20}, {"song.flac": hour}, 10_000), 120.0, 38
+        _rhythm({"audio": "song.flac", "duration_s": 20}, {"song.flac": hour}, 10_000), _facts(120.0)
     )
     assert crowd.frames == 20 * 120 and crowd.memory_bytes is not None
     assert crowd.memory_bytes > 8_000 * 3600 * 2 * 4  # the whole recording is decoded
@@ -113,7 +118,7 @@ def test_an_hour_of_audio_is_over_budget_whatever_the_dancers() -> None:
 
 def test_midi_problems_reach_the_budget() -> None:
     track = bytes([0x00, 0x90, 60, 100]) + bytes([0x00, 60, 0]) * 250_000
-    work = estimate_work(_rhythm({"midi": "long.mid"}, {"long.mid": _smf(track)}), 120.0, 38)
+    work = estimate_work(_rhythm({"midi": "long.mid"}, {"long.mid": _smf(track)}), _facts(120.0))
     assert any("events" in p for p in check_work(work, WorkLimits()))
 
 
@@ -124,7 +129,7 @@ def test_a_control_bvh_counts_its_frames() -> None:
     from motion import parse_bvh
 
     lead = parse_bvh(data)
-    work = estimate_work(request, lead.fps, 38)
+    work = estimate_work(request, _facts(lead.fps))
     assert work.frames == lead.num_frames
-    short = estimate_work(request, lead.fps, 38)
+    short = estimate_work(request, _facts(lead.fps))
     assert check_work(short, WorkLimits(max_output_frames=lead.num_frames - 1))

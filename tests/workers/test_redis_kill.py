@@ -103,7 +103,7 @@ def test_sigterm_finishes_the_current_job_then_exits(
 ) -> None:
     db = add_database(store)
     # a heartbeat TTL far longer than the test: the worker's key can only go by its own goodbye
-    with worker_processes(redis_url, store, ["w1"], "--ttl", "600") as procs:
+    with worker_processes(redis_url, store, ["w1"], heartbeat_ttl_s="600") as procs:
         wait_for(lambda: rclient.exists(KEYS.worker("w1")), what="the worker to start")
 
         async def scenario() -> list[JobEvent]:

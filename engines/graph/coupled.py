@@ -82,6 +82,7 @@ from motion.ground import body_root
 from motion.plausibility import Reference
 from motion.quality import QualityInputs
 from motion.reach import reach_at
+from schemas.graph import GraphRequest
 
 from ..base import (
     CollectingEmitter,
@@ -197,7 +198,7 @@ class CoupledSearch:
             raise EngineError(f"{where}: output frame {t} is outside the motion (0..{length - 1})")
         return t
 
-    def shared_goals(self, request: Any, length: int) -> list[tuple[MeetGoal | ApartGoal, float]]:
+    def shared_goals(self, request: GraphRequest, length: int) -> list[tuple[MeetGoal | ApartGoal, float]]:
         """The request's shared constraints as goals on the combined output (joint indices of the
         combined skeleton: ``1 + character * J + joint``), each with its weight."""
         nj = self.skeleton.num_joints
@@ -231,7 +232,7 @@ class CoupledSearch:
 
     def _derived(
         self,
-        request: Any,
+        request: GraphRequest,
         i: int,
         shared: list[tuple[MeetGoal | ApartGoal, float]],
         states: list[_State | None],
@@ -242,7 +243,7 @@ class CoupledSearch:
         from schemas.graph import BodyConstraint, JointConstraint
 
         nj = self.skeleton.num_joints
-        own = list(request.characters[i].constraints)
+        own = list((request.characters or [])[i].constraints)
         keep: list[KeepawayTarget] = []
         me = states[i]
         for goal, wt in shared:
@@ -315,12 +316,12 @@ class CoupledSearch:
         return np.stack((hips[:, 0], np.zeros(hips.shape[0]), hips[:, 2]), axis=-1)
 
     # -- the search ----------------------------------------------------------------------------
-    def run(self, request: Any, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
+    def run(self, request: GraphRequest, budget_s: float, emit: Emitter, should_stop: ShouldStop) -> Stopped:
         """Search the characters jointly until the passes converge or ``coupling_rounds`` passes
         are done, emitting every better combination (module docstring); ``budget_s`` and
         ``should_stop()`` only cut it short. Returns why it stopped."""
         run = Run(budget_s, should_stop)
-        n = len(request.characters)
+        n = len(request.characters or [])
         base = [
             request.model_copy(
                 update={
@@ -330,7 +331,7 @@ class CoupledSearch:
                     "alternatives": 1,
                 }
             )
-            for c in request.characters
+            for c in request.characters or []
         ]
         owns = [compile_problem(b, self.library, self.tracks) for b in base]
         length = owns[0].length
@@ -391,7 +392,7 @@ class CoupledSearch:
 
     def _solution(
         self,
-        request: Any,
+        request: GraphRequest,
         states: list[_State],
         shared: list[tuple[MeetGoal | ApartGoal, float]],
         owns: list[Any],

@@ -6,7 +6,7 @@ a thumbnail pose, transitions with their probability and kinematic and behaviour
 ``POST .../graph-edits`` connects, cuts and weights transitions (groups by id or by a clip span),
 checks what the edits change (no new dead end, no group made unreachable that was reachable)
 and stores the result as a derived,
-content-addressed database (:mod:`workers.graph_edits`): 201 when created, 200 when the same edits
+content-addressed database (:mod:`workers.movement_graphs`): 201 when created, 200 when the same edits
 of the same parent exist already. It is quick (the parent's arrays with one matrix replaced), so it
 runs in a worker thread of the API, not as a job.
 """
@@ -20,8 +20,8 @@ from starlette.concurrency import run_in_threadpool
 
 from engines.base import EngineError
 from schemas import DatabaseInfo, DatabaseStatus
-from schemas.rhythm_graph import GraphEdits, MovementGraph
-from workers.graph_edits import derive_in_store, graph_of, require_rhythm
+from schemas.movement_graph import GraphEdits, MovementGraph
+from workers.movement_graphs import derive_in_store, graph_of, movement_graph_engine
 from workers.store import Store
 
 from ..deps import PrincipalDep, StoreDep
@@ -37,10 +37,10 @@ EDITS_BODY = json_body_doc(
 EditsBody = Annotated[GraphEdits, Depends(json_body(GraphEdits.model_validate))]
 
 
-def _ready_rhythm(info: DatabaseInfo) -> None:
-    """422 unless a rhythm database; 409 unless built."""
+def _ready_graph(info: DatabaseInfo) -> None:
+    """422 unless a database with a movement graph; 409 unless built."""
     try:
-        require_rhythm(info)
+        movement_graph_engine(info)
     except EngineError as exc:
         raise ApiError(422, "invalid_request", str(exc)) from None
     if info.status != DatabaseStatus.ready:
@@ -58,7 +58,7 @@ async def movement_graph(db_id: str, store: StoreDep, principal: PrincipalDep) -
     clip span, thumbnail pose) and the transitions synthesis draws from (probability, kinematic
     and behavioural likelihoods, learned or added by an edit)."""
     info = await run_in_threadpool(database_for, store, principal, db_id)
-    _ready_rhythm(info)
+    _ready_graph(info)
     return await run_in_threadpool(_graph, store, info)
 
 
@@ -88,7 +88,7 @@ async def edit_graph(
     offending edit and the groups otherwise. The parent is untouched;
     the derived database records it and the edits (``derived_from``) and is used like any other."""
     info = await run_in_threadpool(database_for, store, principal, db_id)
-    _ready_rhythm(info)
+    _ready_graph(info)
     try:
         derived, created = await run_in_threadpool(derive_in_store, store, info, body)
     except EngineError as exc:

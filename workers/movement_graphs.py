@@ -1,11 +1,12 @@
-"""Derived rhythm databases: a parent's movement transition graph edited by choreographic rules
-(:mod:`engines.rhythm.choreography`), stored as a database of its own.
+"""Movement graphs of databases and the databases derived by editing them: a parent's movement
+transition graph edited by choreographic rules (:meth:`engines.base.Engine.edit_movement_graph`,
+the rhythm engine's), stored as a database of its own.
 
 A derived database is content-addressed like a built one: its id is the sha256 of the parent's
 id, the edits in canonical form (groups resolved to ids, ``connect``'s weight explicit) and the
 schema version, so posting the same edits again (by group id or by clip span) names the same
 database. It holds the parent's spec (so summaries and clip names stay as they were), the parent's
-arrays with the edited ``rhythm.p``, and a :class:`schemas.rhythm_graph.DerivedFrom` in its info
+arrays with the edited ``rhythm.p``, and a :class:`schemas.movement_graph.DerivedFrom` in its info
 (parent and edits). The parent is untouched; deleting either leaves the other whole (the arrays
 are a full copy: a database never depends on another being there).
 
@@ -21,10 +22,10 @@ from pathlib import Path
 from typing import Any
 
 from engines.base import EngineError
-from engines.rhythm.choreography import edited_arrays, movement_graph, resolve_edits
+from engines.registry import EngineClass, kind_class
 from schemas import DatabaseInfo, DatabaseStatus
 from schemas.common import SCHEMA_VERSION
-from schemas.rhythm_graph import DerivedFrom, GraphEdits, MovementGraph, ResolvedEdit
+from schemas.movement_graph import DerivedFrom, GraphEdits, MovementGraph, ResolvedEdit
 
 from .store import NotFoundError, Store, load_npz, now, npz_bytes
 
@@ -39,29 +40,23 @@ def derived_database_id(parent: str, edits: list[ResolvedEdit]) -> str:
     return hashlib.sha256(b"graph-edits\n" + payload.encode()).hexdigest()
 
 
-def require_rhythm(info: DatabaseInfo) -> None:
-    """:class:`EngineError` unless ``info`` is a rhythm database."""
-    if info.kind != "rhythm":
-        raise EngineError(
-            f"database {info.id} is {info.kind!r}: only 'rhythm' databases have a movement graph"
-        )
+def movement_graph_engine(info: DatabaseInfo) -> EngineClass:
+    """The engine of ``info``'s kind; :class:`EngineError` unless its databases have a movement
+    graph."""
+    engine = kind_class(info.kind)
+    engine.check_movement_graph(info.id)
+    return engine
 
 
 def graph_of(arrays: Any, info: DatabaseInfo, spec: dict[str, Any]) -> MovementGraph:
-    """The movement graph of a ready rhythm database (its arrays, info and stored spec)."""
-    require_rhythm(info)
-    w1 = spec.get("kinematic_weight")
-    return movement_graph(
-        arrays, info.id, float(w1) if w1 is not None else None, derived_from=info.derived_from
-    )
+    """The movement graph of a ready database (its arrays, info and stored spec)."""
+    return movement_graph_engine(info).movement_graph(arrays, info.id, spec, info.derived_from)
 
 
 def derive(info: DatabaseInfo, arrays: Any, body: GraphEdits) -> tuple[DatabaseInfo, dict[str, Any]]:
     """The info and arrays of the database derived from ``info`` by ``body``'s edits. Raises
-    :class:`engines.rhythm.choreography.GraphEditError` (naming the edit) when a rule is broken."""
-    require_rhythm(info)
-    resolved = resolve_edits(body.edits, arrays)
-    out = edited_arrays(arrays, resolved)
+    :class:`engines.base.EngineError` (naming the edit) when a rule is broken."""
+    resolved, out = movement_graph_engine(info).edit_movement_graph(arrays, body, info.id)
     derived = DatabaseInfo(
         id=derived_database_id(info.id, resolved),
         kind=info.kind,

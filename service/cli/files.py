@@ -1,0 +1,310 @@
+"""``segue inspect``, ``beats``, ``convert``, ``retarget`` and ``samples``: motion files in and out.
+
+Only the standard library at module level (each command imports what it needs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ..summaries import inspect_summary
+
+if TYPE_CHECKING:
+    from motion.bvh import BvhLimits
+
+
+SAMPLE_PREFIX = "sample:"
+
+UNITS = ("cm", "cmu", "cmu-scaled", "ft", "in", "m", "mm")
+"""Length units the options accept (:data:`motion.units.METRES_PER_UNIT`; a test keeps them equal)."""
+TARGETS = ("gltf", "godot", "unity", "unreal")
+"""Export conventions (:data:`motion.export.targets.TARGETS`)."""
+OUTPUT_SUFFIXES = (".bvh", ".bvh.gz", ".glb", ".json", ".npz")
+"""Output formats by extension (:data:`motion.io.OUTPUT_SUFFIXES`)."""
+
+
+def _resolve(path: str) -> Path:
+    from motion.samples import resolve_path
+
+    return resolve_path(path)
+
+
+def _limits(args: argparse.Namespace) -> BvhLimits:
+    from motion.bvh import BvhLimits
+
+    return BvhLimits(max_joints=args.max_joints, max_frames=args.max_frames)
+
+
+UNITS_SOURCES = {
+    "declared": "declared",
+    "sample": "declared by the sample catalogue",
+    "gltf": "glTF files are in metres",
+}
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    from motion import MotionError
+    from motion.io import load_motion
+    from motion.retarget.character import GLTF_SUFFIXES, gltf_character, gltf_timing
+
+    path = _resolve(args.file)
+    timing = None
+    if path.name.lower().endswith(GLTF_SUFFIXES):
+        if args.units not in (None, "m"):
+            raise MotionError(
+                f"{path}: a glTF file is in metres (glTF's rule); --units {args.units} does not apply"
+            )
+        try:
+            raw = path.read_bytes()
+        except OSError as exc:
+            raise MotionError(f"{path}: {exc.strerror or exc}") from None
+        motion = gltf_character(raw, name=path.name.rsplit(".", 1)[0])  # the skin's bind pose
+        timing = gltf_timing(raw)
+    else:
+        motion = load_motion(path, units=args.units, limits=_limits(args))
+    info = inspect_summary(path, motion, args.units, args.up, timing)
+    if args.json:
+        print(json.dumps(info))
+        return 0
+    joints = info["joints"]
+    shown = ", ".join(joints[:12]) + (f", ... (+{len(joints) - 12})" if len(joints) > 12 else "")
+    guess = info["units_guess"]
+    print(f"{path}")
+    if timing is None and path.name.lower().endswith(GLTF_SUFFIXES):
+        print("  frames     none (no animation): the skin's bind pose")
+    else:
+        print(f"  frames     {info['frames']} at {info['fps']:g} fps ({info['duration_s']:.2f} s)")
+    print(f"  joints     {len(joints)}: {shown}")
+    print(f"  channels   {info['channels']}, end sites {info['end_sites']}")
+    where = " (the bind pose)" if timing is not None or info["units_source"] == "gltf" else ""
+    print(
+        f"  height     {info['height']:.4g} file units = {info['height_m']:.2f} m in {info['units']}{where}"
+    )
+    note = "" if guess["plausible"] else " (implausible: declare --units)"
+    src = UNITS_SOURCES.get(info["units_source"], f"guessed from height{note}")
+    print(f"  units      {info['units']} ({src})")
+    print(f"  up axis    {info['up'].upper()} ({info['up_source']})")
+    return 0
+
+
+def _tempo_range(text: str) -> tuple[float, float]:
+    from motion import MotionError
+
+    lo, sep, hi = text.partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        return float(lo), float(hi)
+    except ValueError:
+        raise MotionError(f"--tempo {text!r}: expected LOW:HIGH beats per minute, e.g. 40:200") from None
+
+
+def _beats_audio(path: Path, args: argparse.Namespace) -> int:
+    """``segue beats`` on a recording: music beats (:mod:`workers.audio`)."""
+    from workers.audio import recording_beats
+
+    info = recording_beats(path, args.tempo_bpm)
+    if args.json:
+        print(json.dumps(info))
+        return 0
+    print(f"{path}")
+    beats = info["beats_s"]
+    print(f"  duration   {info['duration_s']:.2f} s")
+    sure = "" if info["tempo_confidence"] is None else f" (confidence {info['tempo_confidence']:.2f})"
+    print(f"  tempo      {info['tempo_bpm']:.1f} bpm{sure}")
+    down = "none found" if info["downbeat_s"] is None else f"first at {info['downbeat_s']:.3f} s"
+    print(f"  beats      {len(beats)}, downbeat {down}")
+    shown = ", ".join(f"{t:.3f}" for t in beats[:16])
+    print(f"  times (s)  {shown}{', ...' if len(beats) > 16 else ''}")
+    return 0
+
+
+def cmd_beats(args: argparse.Namespace) -> int:
+    from motion.beats import detect_beats
+    from motion.io import load_motion
+    from schemas.rhythm import AUDIO_SUFFIXES
+
+    path = _resolve(args.file)
+    if str(path).lower().endswith(AUDIO_SUFFIXES):
+        return _beats_audio(path, args)
+    if args.tempo_bpm is not None:
+        raise OSError("--tempo-bpm is a hint for recordings (.wav .flac .ogg .mp3); use --tempo for motion")
+    motion = load_motion(path, limits=_limits(args))
+    joints: list[str | int] | None = None
+    if args.joints:
+        joints = [int(j) if j.strip().isdigit() else j.strip() for j in args.joints.split(",") if j.strip()]
+    beats = detect_beats(
+        motion, joints=joints, use_positions=args.positions, tempo_bpm=_tempo_range(args.tempo)
+    )
+    info = {
+        "file": str(path),
+        "fps": motion.fps,
+        "period_s": round(beats.period_s, 6),
+        "bpm": round(beats.bpm, 4),
+        "tempo_bpm": round(beats.bpm, 4),
+        "phase_s": round(beats.phase_s, 6),
+        "beats_s": [round(float(t), 6) for t in beats.times_s],
+        "candidates": int(beats.candidates_s.size),
+    }
+    if args.json:
+        print(json.dumps(info))
+        return 0
+    frames = beats.frames(motion.fps)
+    print(f"{path}")
+    period_frames = beats.period_s * motion.fps
+    print(f"  tempo      {info['bpm']:.1f} bpm (period {beats.period_s:.3f} s = {period_frames:.2f} frames)")
+    print(f"  beats      {len(frames)} from {info['candidates']} candidates")
+    shown = ", ".join(f"{t:.3f}" for t in beats.times_s[:16])
+    print(f"  times (s)  {shown}{', ...' if len(frames) > 16 else ''}")
+    return 0
+
+
+def _without_reference(motion: Any, source: str, args: argparse.Namespace) -> tuple[Any, list[str]]:
+    """The motion without the reference-pose frames it starts with (:mod:`motion.refpose`), and the
+    note to print. Bundled ``sample:`` clips are cleaned by default (``--keep-reference`` keeps the
+    frames); a user's file keeps its frame count unless ``--drop-reference`` asks (a note says when
+    such frames were found)."""
+    from motion.refpose import reference_lead, without_reference_lead
+
+    drop = args.drop_reference or (source.startswith("sample:") and not args.keep_reference)
+    if drop:
+        motion, dropped = without_reference_lead(motion)
+        if not dropped:
+            return motion, []
+        s = "s" if dropped > 1 else ""
+        return motion, [
+            f"dropped the first {dropped} frame{s} (a reference pose and the blend out of it; "
+            "--keep-reference keeps them)"
+        ]
+    found = reference_lead(motion)
+    if not found:
+        return motion, []
+    s = "s" if found > 1 else ""
+    return motion, [
+        f"the first {found} frame{s} look like a reference pose blending into the capture: kept "
+        "(--drop-reference drops them)"
+    ]
+
+
+def cmd_convert(args: argparse.Namespace) -> int:
+    from motion import MotionError
+    from motion.export.events import parse_kinds
+    from motion.ground import add_ground_root
+    from motion.io import load_motion, save_motion
+    from motion.resample import resample
+
+    src = _resolve(args.input)
+    motion = load_motion(src, units=args.in_units, limits=_limits(args))
+    reference: list[str] = []
+    if not args.frames:
+        motion, reference = _without_reference(motion, args.input, args)
+    if args.frames:
+        start, _, stop = args.frames.partition(":")
+        try:
+            motion = motion.slice(int(start or 0), int(stop) if stop else None)
+        except ValueError:
+            raise MotionError(f"--frames {args.frames!r}: expected START:STOP frame numbers") from None
+    if args.fps is not None:
+        motion = resample(motion, args.fps)
+    if args.ground_root and not args.output.lower().endswith(".glb"):
+        motion = add_ground_root(motion)
+    t0 = time.perf_counter()
+    events = parse_kinds(args.events) if args.events else ()
+    if set(events) - {"contacts"}:
+        raise MotionError("a motion file has contact events only; beats and labels come with results")
+    notes = save_motion(
+        motion, args.output, target=args.target, units=args.units, in_place=args.in_place, events=events
+    )
+    for note in reference + notes:
+        print(f"segue: note: {note}", file=sys.stderr)
+    if not args.quiet:
+        print(
+            f"wrote {args.output}: {motion.num_frames} frames at {motion.fps:g} fps, "
+            f"{motion.num_joints} joints, target {args.target} ({time.perf_counter() - t0:.2f} s)"
+        )
+    return 0
+
+
+def cmd_retarget(args: argparse.Namespace) -> int:
+    from motion import MotionError
+    from motion.export.bind import bound_glb
+    from motion.export.events import contact_events, parse_kinds
+    from motion.export.glb import write_glb
+    from motion.io import load_motion, save_motion
+    from motion.retarget import correspond, retarget
+    from motion.retarget.character import GLTF_SUFFIXES, load_character
+    from motion.retarget.rootmotion import default_root_motion
+    from motion.units import METRES_PER_UNIT
+
+    name_map = None
+    if args.map:
+        try:
+            name_map = json.loads(Path(args.map).read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise MotionError(f"{args.map}: cannot read the joint map: {exc.strerror or exc}") from None
+        if not isinstance(name_map, dict):
+            raise MotionError(
+                f"{args.map}: the joint map must be a JSON object {{source joint: character joint}}"
+            )
+    to = _resolve(args.to)
+    gltf_character = to.name.lower().endswith(GLTF_SUFFIXES)
+    glb_out = args.out.lower().endswith(".glb")
+    if args.animation_only and not (gltf_character and glb_out):
+        raise MotionError("--animation-only is for a glTF/GLB character written to a .glb")
+    kinds = parse_kinds(args.events) if args.events else ()
+    if set(kinds) - {"contacts"}:
+        raise MotionError("a retargeted motion has contact events only; beats and labels come with results")
+    motion = load_motion(_resolve(args.motion), units=args.in_units, limits=_limits(args))
+    motion, reference = _without_reference(motion, args.motion, args)
+    character = load_character(to, rest=args.rest, limits=_limits(args))
+    t0 = time.perf_counter()
+    corr = correspond(motion.skeleton, character.skeleton, name_map)
+    mode = args.root_motion or default_root_motion(args.target, corr.target_roles["Hips"])
+    out = retarget(motion, character, name_map=name_map, plant=not args.no_plant, root_motion=mode)
+    notes: list[str] = []
+    if glb_out:
+        events = contact_events(out) if kinds else None
+        if gltf_character:  # the character's own file, with the animation added
+            data = bound_glb(
+                to.read_bytes(), out, animation_only=args.animation_only, events=events, base_dir=to.parent
+            )
+            try:
+                Path(args.out).write_bytes(data)
+            except OSError as exc:
+                raise MotionError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+        else:  # exactly the BVH character's hierarchy (no ground joint added)
+            write_glb(out, args.out, ground_root=False, events=events)
+    else:
+        # the character's own units, exactly
+        keep = out.units in METRES_PER_UNIT
+        notes = save_motion(out, args.out, units=out.units if keep else None, events=kinds)
+    for note in reference + notes:
+        print(f"segue: note: {note}", file=sys.stderr)
+    if not args.quiet:
+        root = (
+            character.skeleton.names[0]
+            if mode in ("root", "none")
+            else character.skeleton.names[corr.target_roles["Hips"]]
+        )
+        print(
+            f"wrote {args.out}: {out.num_frames} frames at {out.fps:g} fps on {character.name or args.to} "
+            f"({out.num_joints} joints, {len(corr.pairs)} driven; "
+            f"{corr.source_preset} -> {corr.target_preset}, "
+            f"units {out.units}; root motion {mode}"
+            + ("" if mode == "none" else f" on {root!r}")
+            + f"; {time.perf_counter() - t0:.2f} s)"
+        )
+    return 0
+
+
+def cmd_samples(args: argparse.Namespace) -> int:
+    from motion.samples import SAMPLES, sample_path
+
+    for name in SAMPLES:
+        print(f"{SAMPLE_PREFIX}{name}\t{sample_path(name)}")
+    return 0
