@@ -647,9 +647,7 @@ PW_BLOCK = 128
 """NumPy's pairwise summation block (``PW_BLOCKSIZE`` of its ``pairwise_sum``)."""
 
 
-@njit(
-    "float64(float64[::1], int64, int64, int64[:, ::1], float64[::1])", cache=True, nogil=True
-)  # one signature: no literal-argument copies
+@njit(cache=True, nogil=True)  # compiled with its caller (callers pass a run-time lo: one copy)
 def _pairwise(a: np.ndarray, lo: int, n: int, tasks: np.ndarray, vals: np.ndarray) -> float:
     """``a[lo:lo + n].sum()`` in NumPy's order (its ``pairwise_sum``: eight partial sums up to
     :data:`PW_BLOCK` values, else the sums of two halves, the first a multiple of 8 long), so a
@@ -743,6 +741,7 @@ def state_alignments(
     buf = np.empty(n_max)
     tasks = np.empty((64, 3), dtype=np.int64)
     vals = np.empty(64)
+    zero = m - m  # a run-time 0 for _pairwise's lo: a literal would compile another copy
     max_, maz, sa = 0.0, 0.0, 0.0
     for j in range(m):
         r = order[j]
@@ -772,14 +771,14 @@ def state_alignments(
                     ax[k] = control[i0, q, 0] * b + control[i1, q, 0] * a
                     ay[k] = control[i0, q, 1] * b + control[i1, q, 1] * a
                     az[k] = control[i0, q, 2] * b + control[i1, q, 2] * a
-            max_ = _pairwise(ax, 0, n, tasks, vals) / n
-            maz = _pairwise(az, 0, n, tasks, vals) / n
+            max_ = _pairwise(ax, zero, n, tasks, vals) / n
+            maz = _pairwise(az, zero, n, tasks, vals) / n
             for k in range(n):
                 ax[k] -= max_
                 az[k] -= maz
             for k in range(n):
                 buf[k] = ax[k] * ax[k] + az[k] * az[k]
-            sa = _pairwise(buf, 0, n, tasks, vals)
+            sa = _pairwise(buf, zero, n, tasks, vals)
         for f in range(length):
             w = start[r] + f
             for q in range(npt):
@@ -787,24 +786,24 @@ def state_alignments(
                 wx[k] = xp[w, q, 0]
                 wy[k] = xp[w, q, 1]
                 wz[k] = xp[w, q, 2]
-        mwx = _pairwise(wx, 0, n, tasks, vals) / n
-        mwz = _pairwise(wz, 0, n, tasks, vals) / n
+        mwx = _pairwise(wx, zero, n, tasks, vals) / n
+        mwz = _pairwise(wz, zero, n, tasks, vals) / n
         for k in range(n):
             wx[k] -= mwx
             wz[k] -= mwz
         for k in range(n):
             buf[k] = ax[k] * wx[k] + az[k] * wz[k]
-        c = _pairwise(buf, 0, n, tasks, vals)
+        c = _pairwise(buf, zero, n, tasks, vals)
         for k in range(n):
             buf[k] = az[k] * wx[k] - ax[k] * wz[k]
-        s = _pairwise(buf, 0, n, tasks, vals)
+        s = _pairwise(buf, zero, n, tasks, vals)
         for k in range(n):
             buf[k] = wx[k] * wx[k] + wz[k] * wz[k]
-        sw = _pairwise(buf, 0, n, tasks, vals)
+        sw = _pairwise(buf, zero, n, tasks, vals)
         for k in range(n):
             e = wy[k] - ay[k]
             buf[k] = e * e
-        sy = _pairwise(buf, 0, n, tasks, vals)
+        sy = _pairwise(buf, zero, n, tasks, vals)
         rr = np.hypot(c, s)
         if rr > 0:
             cth, sth = c / rr, s / rr

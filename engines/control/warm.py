@@ -16,22 +16,22 @@ its first job); the Docker image runs it at build time.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from motion import parse_bvh
 from motion.bvh import bvh_text
-from motion.jitcache import cache_dir
 from motion.samples import resolve_path
 from schemas.databases import parse_database_spec
 from schemas.jobs import parse_job_request
 
 from ..base import CollectingEmitter
 from ..library import ClipInput, build_library, library_to_arrays
+from . import tier
 from .engine import ControlEngine
 
 Say = Callable[[str], None]
@@ -51,7 +51,10 @@ def _engine(spec_data: dict[str, object], clips: list[ClipInput]) -> ControlEngi
     return ControlEngine(library, arrays)
 
 
-def _salsa() -> None:
+def salsa_request() -> tuple[ControlEngine, Any]:
+    """The warm-up's salsa request: a database of one bundled pair (leader 02 and its follower,
+    12 s at 60 fps, two beats a segment) and 6 s of that leader as the control; the engine and the
+    parsed request (tests run it in both tiers, :mod:`engines.control.tier`)."""
     lead = _clip("sample:salsa-leader-02", 0, 720, "lead")
     follow = _clip("sample:salsa-follower-02", 0, 720, "follow")
     engine = _engine(
@@ -65,6 +68,11 @@ def _salsa() -> None:
     )
     request = parse_job_request({"engine": "control", "control": {"bvh": "control.bvh"}, "budget_s": 600})
     request._inputs["control.bvh"] = _clip("sample:salsa-leader-02", 120, 480, "control").data
+    return engine, request
+
+
+def _salsa() -> None:
+    engine, request = salsa_request()
     engine.search(request, request.budget_s, CollectingEmitter(), lambda: False)
 
 
@@ -105,23 +113,9 @@ def _layouts() -> None:
 
 
 def stamp() -> Path:
-    """The file that says this cache holds the kernels of these sources: named by a hash of the
-    compiled modules' paths, sizes and modification times (what numba keys its entries by) and the
-    numba and Python versions."""
-    import sys
-
-    import numba
-
-    from motion import compiled, numparse
-
-    from . import kernels
-
-    h = hashlib.sha256(f"{numba.__version__} {sys.version}".encode())
-    for module in (kernels, compiled, numparse, sys.modules[__name__]):
-        path = Path(str(module.__file__)).resolve()
-        st = path.stat()
-        h.update(f"{path} {st.st_size} {st.st_mtime_ns}".encode())
-    return cache_dir() / f"segue-warm-{h.hexdigest()[:16]}"
+    """The file that says this cache holds the kernels of these sources
+    (:func:`engines.control.tier.stamp`)."""
+    return tier.stamp()
 
 
 def warm(say: Say | None = None, force: bool = False) -> float:
@@ -136,6 +130,7 @@ def warm(say: Say | None = None, force: bool = False) -> float:
         return time.perf_counter() - t0
     if say is not None:
         say("compiling the control kernels (once per install: about 15 s of CPU)")
+    tier.use_compiled()  # the requests below run (and so compile) every compiled kernel
     _salsa()
     _walk()
     _layouts()
