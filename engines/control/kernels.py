@@ -28,78 +28,6 @@ from numba import njit  # noqa: E402
 INF = np.inf
 
 
-@njit(
-    "void(float64[:, :, ::1], int64, float64, float64, float64, float64, float64, float64, "
-    "float64[:, :, ::1], int64)",
-    cache=True,
-    nogil=True,
-)  # one signature: no literal-argument copies
-def _place(
-    pts: np.ndarray,
-    p: int,
-    c: float,
-    s: float,
-    sum_x: float,
-    sum_z: float,
-    wx: float,
-    wz: float,
-    out: np.ndarray,
-    o: int,
-) -> None:
-    """``out[o, q] = `` point ``pts[p, q]`` rotated about +Y by the alignment of cross terms ``(c, s)``
-    and translated so the template's floor mean ``(sum_x, sum_z)`` lands on the window's ``(wx, wz)``."""
-    r = np.hypot(c, s)
-    if r > 0:
-        cth, sth = c / r, s / r
-    else:
-        cth, sth = 1.0, 0.0
-    tx = wx - (cth * sum_x + sth * sum_z)
-    tz = wz - (cth * sum_z - sth * sum_x)
-    for q in range(pts.shape[1]):
-        x, y, z = pts[p, q, 0], pts[p, q, 1], pts[p, q, 2]
-        out[o, q, 0] = cth * x + sth * z + tx
-        out[o, q, 1] = y
-        out[o, q, 2] = -sth * x + cth * z + tz
-
-
-@njit(cache=True, nogil=True)
-def _aligned(
-    cell: int,
-    end: int,
-    pts: np.ndarray,
-    p: int,
-    CT: np.ndarray,
-    ST: np.ndarray,
-    sum_a: np.ndarray,
-    n_pts: np.ndarray,
-    dur: np.ndarray,
-    context: int,
-    cs: np.ndarray,
-    rot: np.ndarray,
-    trans: np.ndarray,
-    rigid: bool,
-    out: np.ndarray,
-    o: int,
-) -> None:
-    """``out[o] = `` the target points ``pts[p] (Q, 3)`` of ``cell`` placed by its alignment ending at ``end``
-    (:meth:`engines.control.dp.Interpretation.place`: the 3-D ``rot``, ``trans`` when ``rigid``)."""
-    if rigid:
-        for q in range(pts.shape[1]):
-            for i in range(3):
-                out[o, q, i] = (
-                    rot[cell, end, i, 0] * pts[p, q, 0]
-                    + rot[cell, end, i, 1] * pts[p, q, 1]
-                    + rot[cell, end, i, 2] * pts[p, q, 2]
-                    + trans[cell, end, i]
-                )
-        return
-    lo = max(end - dur[cell], 0)
-    inv = 1.0 / n_pts[cell]
-    wx = (cs[end + 2 * context, 0] - cs[lo, 0]) * inv
-    wz = (cs[end + 2 * context, 1] - cs[lo, 1]) * inv
-    _place(pts, p, CT[end, cell], ST[end, cell], sum_a[cell, 0] * inv, sum_a[cell, 1] * inv, wx, wz, out, o)
-
-
 BLOCK = 32
 """Predecessors screened at once by their centroid bound (one vectorized pass, no branches)."""
 
@@ -365,7 +293,8 @@ def _transform(
     c: float, s: float, ma0: float, ma1: float, wx: float, wz: float
 ) -> tuple[float, float, float, float]:
     """``cos, sin, tx, tz`` of the alignment with cross terms ``(c, s)`` taking the template's floor
-    mean ``(ma0, ma1)`` onto the window's ``(wx, wz)`` (as :func:`_place`)."""
+    mean ``(ma0, ma1)`` onto the window's ``(wx, wz)`` (the floor alignment of
+    :meth:`engines.control.dp.Interpretation.alignment`)."""
     r = np.hypot(c, s)
     if r > 0:
         cth, sth = c / r, s / r
@@ -436,7 +365,6 @@ def forward(
     pairs = 0
     pred = np.empty(cells, dtype=np.int64)
     order_buf = np.empty(cells, dtype=np.int64)
-    row0 = cells - cells  # 0 as a run-time int64: a literal 0 would compile another copy of _aligned
     tmp_buf = np.empty(cells, dtype=np.int64)
     pq = np.empty(cells)
     succ = np.empty(cells, dtype=np.int64)
@@ -511,25 +439,16 @@ def forward(
         # the predecessors' placed tails and their centroids
         for j in range(npred):
             c = ps[j]
-            if rigid:
-                _aligned(
-                    c,
-                    t,
-                    tails,
-                    cell_inst[c],
-                    CT,
-                    ST,
-                    sum_a,
-                    n_pts,
-                    dur,
-                    context,
-                    cs,
-                    rot,
-                    trans,
-                    rigid,
-                    ytab,
-                    j,
-                )
+            if rigid:  # the 3-D rigid alignment of this cell ending at t
+                p = cell_inst[c]
+                for a in range(nq):
+                    for b in range(3):
+                        ytab[j, a, b] = (
+                            rot[c, t, b, 0] * tails[p, a, 0]
+                            + rot[c, t, b, 1] * tails[p, a, 1]
+                            + rot[c, t, b, 2] * tails[p, a, 2]
+                            + trans[c, t, b]
+                        )
             else:
                 lo = max(t - dur[c], 0)
                 wx = (cs[t + 2 * context, 0] - cs[lo, 0]) * inv_n[c]
@@ -551,9 +470,14 @@ def forward(
             e = t + dur[c]
             p = cell_inst[c]
             if rigid:
-                _aligned(
-                    c, e, heads, p, CT, ST, sum_a, n_pts, dur, context, cs, rot, trans, rigid, hbuf, row0
-                )
+                for a in range(nq):
+                    for b in range(3):
+                        hbuf[0, a, b] = (
+                            rot[c, e, b, 0] * heads[p, a, 0]
+                            + rot[c, e, b, 1] * heads[p, a, 1]
+                            + rot[c, e, b, 2] * heads[p, a, 2]
+                            + trans[c, e, b]
+                        )
             else:
                 lo = max(e - dur[c], 0)
                 wx = (cs[e + 2 * context, 0] - cs[lo, 0]) * inv_n[c]
