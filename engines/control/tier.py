@@ -24,7 +24,7 @@ import sys
 from functools import lru_cache
 from pathlib import Path
 
-from motion.jitcache import cache_dir
+from motion.jitcache import cache_dir, mark_compiled_ready
 
 _state = {"ready": False}
 
@@ -59,6 +59,7 @@ def use_compiled() -> None:
     """From now on, this process runs the compiled secondary kernels (``segue warm`` calls this
     before it runs its requests, so that it compiles them)."""
     _state["ready"] = True
+    mark_compiled_ready()
 
 
 def compiled_ready() -> bool:
@@ -66,5 +67,5 @@ def compiled_ready() -> bool:
     (:func:`use_compiled`) or ``segue warm`` stamped numba's cache (checked each call until
     found: a server's background warm finishes while it serves)."""
     if not _state["ready"] and stamp().exists():
-        _state["ready"] = True
+        use_compiled()
     return _state["ready"]
