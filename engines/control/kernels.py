@@ -7,7 +7,9 @@ overhead dominated (about 15 ms per anytime stage on the salsa database). Compil
 ``cache=True``: the first call in a fresh environment compiles (a few seconds, see
 ``bench/control.py``'s ``first_call_s``), later processes load the machine code from numba's
 cache (:mod:`motion.jitcache`); ``segue warm`` (:mod:`engines.control.warm`) compiles them ahead of
-the first request.
+the first request. The secondary kernels below the forward pass (sampling, interpretation operands,
+cost to go, re-timing) have exact NumPy twins in :mod:`engines.control.dp`, which a process runs
+until ``segue warm`` compiled them (:mod:`engines.control.tier`).
 
 Exactness: every successor ``i`` scans its predecessors in increasing score ``q_j``; since
 continuity is never negative, once ``q_j`` reaches its best total so far (or what the upper bound

@@ -1,13 +1,15 @@
 """Whether this process runs the control engine's *secondary* compiled kernels or their NumPy twins.
 
-The control engine's forward DP pass (:func:`engines.control.kernels.forward`) is always compiled:
-in NumPy it costs far more than its compile. The secondary kernels -- the re-timing state alignments
-and chain, the cost-to-go bound and template sampling -- save a few milliseconds a request (the
-re-timing of a salsa dance 6.3 -> 1.3 ms, ``bench/control.py``) but cost about 5 CPU-s to compile
-in a fresh environment, which is most of what a first request (``segue demo control`` with an
-empty numba cache) would pay. Each has a NumPy twin that performs the same floating-point
-operations in the same order, so both give the same bits (the tests compare them on random
-problems and on real data).
+The control engine's forward DP pass (:func:`engines.control.kernels.forward`) and the motion
+kernels (:mod:`motion.compiled`) are always compiled: without them a request costs more than their
+compile. The secondary kernels -- template sampling, the interpretation's operands and residuals,
+the cost-to-go bound, the re-timing's state alignments and chain -- save a few milliseconds a
+request (the re-timing of a salsa dance 6.3 -> 1.3 ms, ``bench/control.py``) but cost about
+5 CPU-s to compile in a fresh environment, a third of what a first request (``segue demo control``
+with an empty numba cache) paid. Each has a NumPy twin in :mod:`engines.control.dp` that performs
+the same floating-point operations in the same order, so both give the same bits
+(``tests/engines/test_control_tier.py`` compares them on random problems and on a whole request).
+:mod:`motion.numparse` follows the same switch (:func:`motion.jitcache.compiled_ready`).
 
 A process runs the compiled kernels once they are *ready*: ``segue warm`` (run by ``segue serve``
 in the background, by ``segue worker`` before its first job and by the Docker image at build)

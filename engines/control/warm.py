@@ -1,16 +1,17 @@
 """Compile the control engine's kernels before the first request needs them (``segue warm``).
 
 The control engine's DP, alignment and re-timing kernels and :mod:`motion.compiled` are compiled
-by numba with ``cache=True``: the first call in a fresh environment compiles them (about 14 CPU-s
-for everything a control request runs, ``bench/cold_start.py``) and writes the machine code to
-numba's cache (:func:`motion.jitcache.cache_dir`); every later process loads it in a fraction of a
-second. :func:`warm` pays that compile off the request path: it runs two tiny control requests
+by numba with ``cache=True`` and kept in numba's cache (:func:`motion.jitcache.cache_dir`). A
+process that was not warmed compiles only what a request cannot do without -- the forward DP
+pass and the motion kernels, about 6 CPU-s with an empty cache -- and runs exact NumPy twins of
+the secondary kernels (:mod:`engines.control.tier`). :func:`warm` pays every compile off the
+request path: it switches this process to the compiled kernels, runs two tiny control requests
 on bundled samples (a salsa pair driven by a leader's motion, and walks driven by a floor
 trajectory), which call every kernel with the argument types real requests use, then leaves a
-stamp in the cache (:func:`stamp`) so that later starts skip it (numba would only load the code,
-but the two tiny requests still cost ~3 CPU-s). ``segue warm``,
-``segue serve`` and ``segue worker`` run it (the server in a background thread, a worker before
-its first job); the Docker image runs it at build time.
+stamp in the cache (:func:`stamp`): processes that find it run the compiled kernels, and later
+warms return at once (numba would only load the code, but the two tiny requests still cost ~3
+CPU-s). ``segue warm``, ``segue serve`` and ``segue worker`` run it (the server in a background
+process, a worker before its first job); the Docker image runs it at build time.
 """
 
 from __future__ import annotations
