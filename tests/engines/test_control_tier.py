@@ -109,8 +109,8 @@ def test_a_control_request_gives_the_same_bytes_in_both_tiers() -> None:
 
 def test_an_unwarmed_process_compiles_only_the_forward_path(tmp_path: Path) -> None:
     """A control request in a process whose cache was not warmed runs (so compiles, on a fresh
-    cache) the forward pass and the motion kernels, and none of the secondary kernels; after
-    :func:`tier.use_compiled` it runs every one."""
+    cache) the forward pass and the motion sampling kernel, and none of the secondary kernels nor
+    the FK kernel; after :func:`tier.use_compiled` it runs every one."""
     script = """
 import json, sys
 from pathlib import Path
@@ -124,7 +124,10 @@ engine, request = salsa_request()
 engine.search(request, request.budget_s, CollectingEmitter(), lambda: False)
 names = ["forward", "cost_to_go", "state_alignments", "retime_chain", "sample_frames",
          "duration_operands", "residual_block"]
-print(json.dumps({n: len(getattr(kernels, n).overloads) for n in names}))
+from motion import compiled
+counts = {n: len(getattr(kernels, n).overloads) for n in names}
+counts["_fk_kernel"] = len(compiled._fk_kernel.overloads)
+print(json.dumps(counts))
 """
     env = {**os.environ, "PYTHONPATH": str(ROOT)}  # numba's cache as configured: loading is enough
     ran = {}
@@ -140,7 +143,7 @@ print(json.dumps({n: len(getattr(kernels, n).overloads) for n in names}))
         )
         ran[mode] = json.loads(out.stdout.strip().splitlines()[-1])
     secondary = ["cost_to_go", "state_alignments", "retime_chain", "sample_frames"]
-    secondary += ["duration_operands", "residual_block"]
+    secondary += ["duration_operands", "residual_block", "_fk_kernel"]
     assert ran["twins"]["forward"] == 1
     assert all(ran["twins"][n] == 0 for n in secondary), ran["twins"]
     assert all(ran["compiled"][n] == 1 for n in ["forward", *secondary]), ran["compiled"]
