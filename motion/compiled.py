@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .errors import MotionError
-from .jitcache import configure
+from .jitcache import compiled_ready, configure
 from .motion import Motion
 from .resample import checked_frames
 
@@ -78,6 +78,46 @@ def _fk_kernel(
             pos[f, j, 2] = pos[f, p, 2] + (vz + w * cz + (x * cy - y * cx))
 
 
+def _fk_numpy(
+    parents: npt.NDArray[np.int64],
+    offsets: Array,
+    slot: npt.NDArray[np.int64],
+    root: Array,
+    jt: Array,
+    q: Array,
+    pos: Array,
+    grot: Array,
+) -> None:
+    """:func:`_fk_kernel` in NumPy, joint by joint over all frames at once: each value is the same
+    operations in the same order, so the same bits (its twin until ``segue warm`` compiled the
+    kernel, :func:`motion.jitcache.compiled_ready`; a parent precedes its children, as in a BVH)."""
+    for j in range(q.shape[1]):
+        bx, by, bz, bw = q[:, j, 0], q[:, j, 1], q[:, j, 2], q[:, j, 3]
+        if j == 0:
+            vx, vy, vz = root[:, 0], root[:, 1], root[:, 2]
+        elif slot[j] >= 0:
+            k = int(slot[j])
+            vx, vy, vz = jt[:, k, 0], jt[:, k, 1], jt[:, k, 2]
+        else:
+            vx, vy, vz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+        p = int(parents[j])
+        if p < 0:
+            grot[:, j, 0], grot[:, j, 1], grot[:, j, 2], grot[:, j, 3] = bx, by, bz, bw
+            pos[:, j, 0], pos[:, j, 1], pos[:, j, 2] = vx, vy, vz
+            continue
+        x, y, z, w = grot[:, p, 0], grot[:, p, 1], grot[:, p, 2], grot[:, p, 3]
+        grot[:, j, 0] = w * bx + x * bw + y * bz - z * by
+        grot[:, j, 1] = w * by - x * bz + y * bw + z * bx
+        grot[:, j, 2] = w * bz + x * by - y * bx + z * bw
+        grot[:, j, 3] = w * bw - x * bx - y * by - z * bz
+        cx = 2.0 * (y * vz - z * vy)
+        cy = 2.0 * (z * vx - x * vz)
+        cz = 2.0 * (x * vy - y * vx)
+        pos[:, j, 0] = pos[:, p, 0] + (vx + w * cx + (y * cz - z * cy))
+        pos[:, j, 1] = pos[:, p, 1] + (vy + w * cy + (z * cx - x * cz))
+        pos[:, j, 2] = pos[:, p, 2] + (vz + w * cz + (x * cy - y * cx))
+
+
 def fast_fk(motion: Motion) -> tuple[Array, Array]:
     """:meth:`Motion.fk` of ``motion`` in one compiled pass: global ``positions (F, J, 3)`` in the
     motion's units and ``rotations (F, J, 4)`` (frame-major arrays; the same values up to rounding)."""
@@ -88,7 +128,7 @@ def fast_fk(motion: Motion) -> tuple[Array, Array]:
     pos = np.empty((n, j, 3))
     grot = np.empty((n, j, 4))
     jt = motion.joint_translations if motion.joint_translations.shape[1] else np.zeros((n, 1, 3))
-    _fk_kernel(
+    (_fk_kernel if compiled_ready() else _fk_numpy)(
         np.asarray(sk.parents, dtype=np.int64),
         np.asarray(sk.offsets, dtype=np.float64),
         slot,

@@ -8,6 +8,11 @@ workers). numba keys each entry by the source file's path and modification time,
 and versions never share stale code. Call :func:`configure` before ``numba`` is imported (the
 modules with compiled kernels do); when numba was imported first (librosa imports it), the
 directory is set in its loaded configuration too.
+
+:func:`compiled_ready` says whether this process runs the compiled versions of kernels that have
+an exact NumPy twin (:mod:`motion.numparse`, the control engine's secondary kernels,
+:mod:`engines.control.tier`): only once ``segue warm`` compiled them, so that a first command does
+not pay a compile it cannot win back.
 """
 
 from __future__ import annotations
@@ -17,6 +22,8 @@ import sys
 from pathlib import Path
 
 ENV = "NUMBA_CACHE_DIR"
+
+_ready = {"compiled": False}
 
 
 def cache_dir() -> Path:
@@ -38,3 +45,14 @@ def configure() -> Path:
         if not getattr(config, "CACHE_DIR", ""):
             config.CACHE_DIR = os.environ[ENV]
     return path
+
+
+def mark_compiled_ready() -> None:
+    """Say that this process runs compiled kernels rather than their NumPy twins (called once
+    ``segue warm`` compiled them: its stamp is in the cache, or this process is warming)."""
+    _ready["compiled"] = True
+
+
+def compiled_ready() -> bool:
+    """Whether :func:`mark_compiled_ready` was called in this process."""
+    return _ready["compiled"]

@@ -13,23 +13,24 @@ long mantissas, stray characters) makes it return ``None``; the caller then uses
 which also locates the offending line.
 
 Two implementations give the same values bit for bit (tested on random text and real files): the
-compiled pass, used once numba is loaded in the process (workers and any process that ran the
-control engine, whose solver is compiled too; its kernel is cached in ``__pycache__``), and the
-vectorised numpy passes it replaced (~15 ms for that clip: whole tokens found with a few array
-passes, digits read as 8-byte words with the SWAR trick), used otherwise — importing numba and
-loading the kernel cost ~0.75 s, which a command-line call that reads one file (``segue inspect``)
-should not pay for ~10 ms.
+compiled pass, used once the process runs compiled kernels (:func:`motion.jitcache.compiled_ready`:
+``segue warm`` compiled them into numba's cache, as ``segue serve`` and ``segue worker`` do at
+start), and the vectorised numpy passes it replaced (~15 ms for that clip, 3-7 ms for a bundled
+salsa sample: whole tokens found with a few array passes, digits read as 8-byte words with the
+SWAR trick), used otherwise -- importing numba and loading the kernel cost ~0.75 s, and compiling
+it ~0.5 CPU-s, which a command-line call that reads a few files should not pay for ~10 ms.
 """
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+
+from .jitcache import compiled_ready
 
 _POW10 = 10.0 ** np.arange(9)
 
@@ -118,7 +119,7 @@ def parse_decimals(
         saves a buffer half the size of the text).
     compiled:
         Use the compiled pass (``True``) or the numpy passes (``False``); default: the compiled
-        one when numba is already loaded in the process (module docstring).
+        one once the process runs compiled kernels (module docstring).
 
     Returns
     -------
@@ -134,7 +135,7 @@ def parse_decimals(
     >>> parse_decimals(b"1e3") is None
     True
     """
-    if not ("numba" in sys.modules if compiled is None else compiled):
+    if not (compiled_ready() if compiled is None else compiled):
         values = _vectorized(data, start, row_length)
         if values is not None and max_values is not None and values.size > max_values:
             return None

@@ -39,6 +39,7 @@ from motion.align import kabsch, rotation_from_covariance
 from .kernels import cost_to_go as kernel_cost_to_go
 from .kernels import duration_operands, forward, residual_block, retime_chain, sample_frames, state_alignments
 from .points import sample_cloud
+from .tier import compiled_ready
 
 Array = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -166,7 +167,7 @@ def stretched_templates(inst: Instances, which: IntArray, d: int, rate: float, c
     if context and inst.pair_bounds is not None:
         b = inst.pair_bounds[which]
         pos = np.clip(pos, b[:, :1], b[:, 1:])
-    if inst.control.ndim == 3 and inst.control.dtype == np.float64:
+    if compiled_ready() and inst.control.ndim == 3 and inst.control.dtype == np.float64:
         return np.asarray(sample_frames(np.ascontiguousarray(inst.control), np.ascontiguousarray(pos)))
     return sample_cloud(inst.control, pos)
 
@@ -392,7 +393,9 @@ def _duration_block(
     centred = np.empty((2, n, n_pts)).transpose(1, 2, 0)
     lhs, rhs = np.empty((2 * n, n_pts)), np.empty((2 * nw, n_pts))
     lhs_y, rhs_y = np.empty((n, n_pts + 2)), np.empty((nw, n_pts + 2))
-    duration_operands(a, sa, np.ascontiguousarray(x), scale, centred, lhs, rhs, lhs_y, rhs_y)
+    ready = compiled_ready()
+    operands = duration_operands if ready else _operands_numpy
+    operands(a, sa, np.ascontiguousarray(x), scale, centred, lhs, rhs, lhs_y, rhs_y)
     ends = np.arange(d, t_len + 1)
     e2 = ends + c2
     sx, sz = sums.x[e2] - sums.x[ends - d], sums.z[e2] - sums.z[ends - d]
@@ -408,8 +411,55 @@ def _duration_block(
     rhs_y[:, n_pts + 1] = own_w
     # c = ax.wx + az.wz, s = az.wx - ax.wz and D = max(0, rest - 2 |(c, s)|) in one compiled pass
     rest = np.matmul(lhs_y, rhs_y.T, out=_scratch("rest", (n, nw)))
-    residual_block(g, rest, d_out, c_out, s_out)
+    (residual_block if ready else _residual_numpy)(g, rest, d_out, c_out, s_out)
     return np.asarray(sa[:, [0, 2]])
+
+
+def _operands_numpy(
+    a: Array,
+    sa: Array,
+    x: Array,
+    scale: float,
+    centred: Array,
+    lhs: Array,
+    rhs: Array,
+    lhs_y: Array,
+    rhs_y: Array,
+) -> None:
+    """:func:`engines.control.kernels.duration_operands` in NumPy (its twin,
+    :mod:`engines.control.tier`): the same arguments and outputs, each value the same single
+    operation, so the same bits."""
+    n, npt_all = a.shape[0], a.shape[1]
+    length = npt_all // x.shape[1]
+    nw = x.shape[0] - length + 1
+    np.subtract(a[..., 0], (sa[:, 0] / npt_all)[:, None], out=centred[..., 0])
+    np.subtract(a[..., 2], (sa[:, 2] / npt_all)[:, None], out=centred[..., 1])
+    np.multiply(centred[..., 0], scale, out=lhs[:n])
+    np.multiply(centred[..., 1], scale, out=lhs[n:])
+    np.multiply(a[..., 1], -2.0 * scale, out=lhs_y[:, :npt_all])
+    # the windows (nw, L, P, 3), flattened frame-major then point
+    win = np.lib.stride_tricks.sliding_window_view(x, length, axis=0).transpose(0, 3, 1, 2)
+    rhs[:nw] = win[..., 0].reshape(nw, npt_all)
+    rhs[nw:] = win[..., 2].reshape(nw, npt_all)
+    rhs_y[:, :npt_all] = win[..., 1].reshape(nw, npt_all)
+
+
+def _residual_numpy(g: Array, rest: Array, d_out: Array, c_out: Array, s_out: Array) -> None:
+    """:func:`engines.control.kernels.residual_block` in NumPy (its twin,
+    :mod:`engines.control.tier`): ``c``, ``s`` and ``D = max(0, rest - 2 |(c, s)|)`` by the same
+    operations in the same order, written time-major."""
+    n, nw = rest.shape
+    c = g[:n, :nw] + g[n:, nw:]
+    s = g[n:, :nw] - g[:n, nw:]
+    r = c * c
+    r += s * s
+    np.sqrt(r, out=r)
+    r *= -2.0
+    r += rest
+    np.maximum(r, 0.0, out=r)
+    c_out[...] = c.T
+    s_out[...] = s.T
+    d_out[...] = r.T
 
 
 def _rigid_interpretation(
@@ -493,9 +543,30 @@ def cost_to_go(D: Array, cell_dur: IntArray) -> Array:
     sorted ascending."""
     if np.any(np.diff(cell_dur) < 0):
         raise ValueError("cells must be sorted by duration (see legal_cells)")
+    if not compiled_ready():
+        return _cost_to_go_numpy(D, np.asarray(cell_dur))
     return np.asarray(
         kernel_cost_to_go(np.ascontiguousarray(D.T, dtype=np.float64), np.asarray(cell_dur, dtype=np.int64))
     )
+
+
+def _cost_to_go_numpy(D: Array, cell_dur: IntArray) -> Array:
+    """:func:`engines.control.kernels.cost_to_go` in NumPy (its twin, :mod:`engines.control.tier`):
+    per duration the best cell ending at each time, then the tiling from the end; the same minima
+    of the same sums, so the same bits."""
+    t_len = D.shape[1] - 1
+    durs, first = np.unique(cell_dur, return_index=True)
+    bounds = np.append(first, cell_dur.shape[0])
+    best = np.stack([D[bounds[g] : bounds[g + 1]].min(axis=0) for g in range(durs.size)])  # (G, T + 1)
+    F = np.full(t_len + 1, np.inf)
+    F[t_len] = 0.0
+    for t in range(t_len - 1, -1, -1):
+        ends = t + durs
+        ok = ends <= t_len
+        if ok.any():
+            e = ends[ok]
+            F[t] = np.min(best[np.flatnonzero(ok), e] + F[e])
+    return F
 
 
 @dataclass(slots=True)
@@ -796,7 +867,7 @@ class _StateAlignments:
         p = x.shape[1]
         durs = end - start
         ctl = inst.control
-        if not rigid and ctl.ndim == 3 and ctl.dtype == np.float64 and ctl.shape[1] == p:
+        if compiled_ready() and not rigid and ctl.ndim == 3 and ctl.dtype == np.float64 and ctl.shape[1] == p:
             out = np.empty((5, m))
             bounds = (
                 inst.pair_bounds[state_inst].astype(np.int64)
@@ -878,8 +949,9 @@ def _chain(
     G = np.concatenate([g.ravel() for g in blocks]) if blocks else np.zeros(0)
     g_offs = np.concatenate(([0], np.cumsum([g.size for g in blocks], dtype=np.int64)))
     chosen = np.empty(n_seg, dtype=np.int64)
+    chain = retime_chain if compiled_ready() else _chain_numpy
     score = float(
-        retime_chain(
+        chain(
             np.ascontiguousarray(al.D, dtype=np.float64),
             offs.astype(np.int64),
             start.astype(np.int64),
@@ -895,3 +967,42 @@ def _chain(
     if not np.isfinite(score):
         raise Infeasible("re-timing found no legal boundaries")
     return score, chosen.astype(np.intp)
+
+
+def _chain_numpy(
+    D: Array,
+    offs: npt.NDArray[np.int64],
+    start: npt.NDArray[np.int64],
+    end: npt.NDArray[np.int64],
+    yn: Array,
+    hn: Array,
+    G: Array,
+    g_offs: npt.NDArray[np.int64],
+    kq: float,
+    chosen: npt.NDArray[np.int64],
+) -> float:
+    """:func:`engines.control.kernels.retime_chain` in NumPy (its twin, :mod:`engines.control.tier`;
+    the same arguments, the same operations in their order, the first of equal totals: the same
+    bits). Returns the best score (``inf``: none) and writes the chosen states into ``chosen``."""
+    n_seg = offs.shape[0] - 1
+    m = D.shape[0]
+    Q = np.empty(m)
+    back = np.zeros(m, dtype=np.int64)
+    Q[offs[0] : offs[1]] = D[offs[0] : offs[1]]
+    for i in range(1, n_seg):
+        p0, p1, c0, c1 = int(offs[i - 1]), int(offs[i]), int(offs[i]), int(offs[i + 1])
+        npv, nc = p1 - p0, c1 - c0
+        g0 = int(g_offs[i - 1])
+        cont = (yn[p0:p1, None] + hn[None, c0:c1]) - G[g0 : g0 + npv * nc].reshape(npv, nc)
+        tot = Q[p0:p1, None] + kq * np.maximum(cont, 0.0)
+        tot[end[p0:p1, None] != start[None, c0:c1]] = np.inf
+        arg = np.argmin(tot, axis=0)
+        Q[c0:c1] = tot[arg, np.arange(nc)] + D[c0:c1]
+        back[c0:c1] = p0 + arg
+    lo = int(offs[n_seg - 1])
+    last = lo + int(np.argmin(Q[lo : int(offs[n_seg])]))
+    score = float(Q[last])
+    for i in range(n_seg - 1, -1, -1):
+        chosen[i] = last
+        last = int(back[last])
+    return score

@@ -7,7 +7,9 @@ overhead dominated (about 15 ms per anytime stage on the salsa database). Compil
 ``cache=True``: the first call in a fresh environment compiles (a few seconds, see
 ``bench/control.py``'s ``first_call_s``), later processes load the machine code from numba's
 cache (:mod:`motion.jitcache`); ``segue warm`` (:mod:`engines.control.warm`) compiles them ahead of
-the first request.
+the first request. The secondary kernels below the forward pass (sampling, interpretation operands,
+cost to go, re-timing) have exact NumPy twins in :mod:`engines.control.dp`, which a process runs
+until ``segue warm`` compiled them (:mod:`engines.control.tier`).
 
 Exactness: every successor ``i`` scans its predecessors in increasing score ``q_j``; since
 continuity is never negative, once ``q_j`` reaches its best total so far (or what the upper bound
@@ -26,78 +28,6 @@ configure()  # numba's cache outside the package, before numba is imported
 from numba import njit  # noqa: E402
 
 INF = np.inf
-
-
-@njit(
-    "void(float64[:, :, ::1], int64, float64, float64, float64, float64, float64, float64, "
-    "float64[:, :, ::1], int64)",
-    cache=True,
-    nogil=True,
-)  # one signature: no literal-argument copies
-def _place(
-    pts: np.ndarray,
-    p: int,
-    c: float,
-    s: float,
-    sum_x: float,
-    sum_z: float,
-    wx: float,
-    wz: float,
-    out: np.ndarray,
-    o: int,
-) -> None:
-    """``out[o, q] = `` point ``pts[p, q]`` rotated about +Y by the alignment of cross terms ``(c, s)``
-    and translated so the template's floor mean ``(sum_x, sum_z)`` lands on the window's ``(wx, wz)``."""
-    r = np.hypot(c, s)
-    if r > 0:
-        cth, sth = c / r, s / r
-    else:
-        cth, sth = 1.0, 0.0
-    tx = wx - (cth * sum_x + sth * sum_z)
-    tz = wz - (cth * sum_z - sth * sum_x)
-    for q in range(pts.shape[1]):
-        x, y, z = pts[p, q, 0], pts[p, q, 1], pts[p, q, 2]
-        out[o, q, 0] = cth * x + sth * z + tx
-        out[o, q, 1] = y
-        out[o, q, 2] = -sth * x + cth * z + tz
-
-
-@njit(cache=True, nogil=True)
-def _aligned(
-    cell: int,
-    end: int,
-    pts: np.ndarray,
-    p: int,
-    CT: np.ndarray,
-    ST: np.ndarray,
-    sum_a: np.ndarray,
-    n_pts: np.ndarray,
-    dur: np.ndarray,
-    context: int,
-    cs: np.ndarray,
-    rot: np.ndarray,
-    trans: np.ndarray,
-    rigid: bool,
-    out: np.ndarray,
-    o: int,
-) -> None:
-    """``out[o] = `` the target points ``pts[p] (Q, 3)`` of ``cell`` placed by its alignment ending at ``end``
-    (:meth:`engines.control.dp.Interpretation.place`: the 3-D ``rot``, ``trans`` when ``rigid``)."""
-    if rigid:
-        for q in range(pts.shape[1]):
-            for i in range(3):
-                out[o, q, i] = (
-                    rot[cell, end, i, 0] * pts[p, q, 0]
-                    + rot[cell, end, i, 1] * pts[p, q, 1]
-                    + rot[cell, end, i, 2] * pts[p, q, 2]
-                    + trans[cell, end, i]
-                )
-        return
-    lo = max(end - dur[cell], 0)
-    inv = 1.0 / n_pts[cell]
-    wx = (cs[end + 2 * context, 0] - cs[lo, 0]) * inv
-    wz = (cs[end + 2 * context, 1] - cs[lo, 1]) * inv
-    _place(pts, p, CT[end, cell], ST[end, cell], sum_a[cell, 0] * inv, sum_a[cell, 1] * inv, wx, wz, out, o)
 
 
 BLOCK = 32
@@ -365,7 +295,8 @@ def _transform(
     c: float, s: float, ma0: float, ma1: float, wx: float, wz: float
 ) -> tuple[float, float, float, float]:
     """``cos, sin, tx, tz`` of the alignment with cross terms ``(c, s)`` taking the template's floor
-    mean ``(ma0, ma1)`` onto the window's ``(wx, wz)`` (as :func:`_place`)."""
+    mean ``(ma0, ma1)`` onto the window's ``(wx, wz)`` (the floor alignment of
+    :meth:`engines.control.dp.Interpretation.alignment`)."""
     r = np.hypot(c, s)
     if r > 0:
         cth, sth = c / r, s / r
@@ -436,7 +367,6 @@ def forward(
     pairs = 0
     pred = np.empty(cells, dtype=np.int64)
     order_buf = np.empty(cells, dtype=np.int64)
-    row0 = cells - cells  # 0 as a run-time int64: a literal 0 would compile another copy of _aligned
     tmp_buf = np.empty(cells, dtype=np.int64)
     pq = np.empty(cells)
     succ = np.empty(cells, dtype=np.int64)
@@ -511,25 +441,16 @@ def forward(
         # the predecessors' placed tails and their centroids
         for j in range(npred):
             c = ps[j]
-            if rigid:
-                _aligned(
-                    c,
-                    t,
-                    tails,
-                    cell_inst[c],
-                    CT,
-                    ST,
-                    sum_a,
-                    n_pts,
-                    dur,
-                    context,
-                    cs,
-                    rot,
-                    trans,
-                    rigid,
-                    ytab,
-                    j,
-                )
+            if rigid:  # the 3-D rigid alignment of this cell ending at t
+                p = cell_inst[c]
+                for a in range(nq):
+                    for b in range(3):
+                        ytab[j, a, b] = (
+                            rot[c, t, b, 0] * tails[p, a, 0]
+                            + rot[c, t, b, 1] * tails[p, a, 1]
+                            + rot[c, t, b, 2] * tails[p, a, 2]
+                            + trans[c, t, b]
+                        )
             else:
                 lo = max(t - dur[c], 0)
                 wx = (cs[t + 2 * context, 0] - cs[lo, 0]) * inv_n[c]
@@ -551,9 +472,14 @@ def forward(
             e = t + dur[c]
             p = cell_inst[c]
             if rigid:
-                _aligned(
-                    c, e, heads, p, CT, ST, sum_a, n_pts, dur, context, cs, rot, trans, rigid, hbuf, row0
-                )
+                for a in range(nq):
+                    for b in range(3):
+                        hbuf[0, a, b] = (
+                            rot[c, e, b, 0] * heads[p, a, 0]
+                            + rot[c, e, b, 1] * heads[p, a, 1]
+                            + rot[c, e, b, 2] * heads[p, a, 2]
+                            + trans[c, e, b]
+                        )
             else:
                 lo = max(e - dur[c], 0)
                 wx = (cs[e + 2 * context, 0] - cs[lo, 0]) * inv_n[c]
@@ -647,9 +573,7 @@ PW_BLOCK = 128
 """NumPy's pairwise summation block (``PW_BLOCKSIZE`` of its ``pairwise_sum``)."""
 
 
-@njit(
-    "float64(float64[::1], int64, int64, int64[:, ::1], float64[::1])", cache=True, nogil=True
-)  # one signature: no literal-argument copies
+@njit(cache=True, nogil=True)  # compiled with its caller (callers pass a run-time lo: one copy)
 def _pairwise(a: np.ndarray, lo: int, n: int, tasks: np.ndarray, vals: np.ndarray) -> float:
     """``a[lo:lo + n].sum()`` in NumPy's order (its ``pairwise_sum``: eight partial sums up to
     :data:`PW_BLOCK` values, else the sums of two halves, the first a multiple of 8 long), so a
@@ -743,6 +667,7 @@ def state_alignments(
     buf = np.empty(n_max)
     tasks = np.empty((64, 3), dtype=np.int64)
     vals = np.empty(64)
+    zero = m - m  # a run-time 0 for _pairwise's lo: a literal would compile another copy
     max_, maz, sa = 0.0, 0.0, 0.0
     for j in range(m):
         r = order[j]
@@ -772,14 +697,14 @@ def state_alignments(
                     ax[k] = control[i0, q, 0] * b + control[i1, q, 0] * a
                     ay[k] = control[i0, q, 1] * b + control[i1, q, 1] * a
                     az[k] = control[i0, q, 2] * b + control[i1, q, 2] * a
-            max_ = _pairwise(ax, 0, n, tasks, vals) / n
-            maz = _pairwise(az, 0, n, tasks, vals) / n
+            max_ = _pairwise(ax, zero, n, tasks, vals) / n
+            maz = _pairwise(az, zero, n, tasks, vals) / n
             for k in range(n):
                 ax[k] -= max_
                 az[k] -= maz
             for k in range(n):
                 buf[k] = ax[k] * ax[k] + az[k] * az[k]
-            sa = _pairwise(buf, 0, n, tasks, vals)
+            sa = _pairwise(buf, zero, n, tasks, vals)
         for f in range(length):
             w = start[r] + f
             for q in range(npt):
@@ -787,24 +712,24 @@ def state_alignments(
                 wx[k] = xp[w, q, 0]
                 wy[k] = xp[w, q, 1]
                 wz[k] = xp[w, q, 2]
-        mwx = _pairwise(wx, 0, n, tasks, vals) / n
-        mwz = _pairwise(wz, 0, n, tasks, vals) / n
+        mwx = _pairwise(wx, zero, n, tasks, vals) / n
+        mwz = _pairwise(wz, zero, n, tasks, vals) / n
         for k in range(n):
             wx[k] -= mwx
             wz[k] -= mwz
         for k in range(n):
             buf[k] = ax[k] * wx[k] + az[k] * wz[k]
-        c = _pairwise(buf, 0, n, tasks, vals)
+        c = _pairwise(buf, zero, n, tasks, vals)
         for k in range(n):
             buf[k] = az[k] * wx[k] - ax[k] * wz[k]
-        s = _pairwise(buf, 0, n, tasks, vals)
+        s = _pairwise(buf, zero, n, tasks, vals)
         for k in range(n):
             buf[k] = wx[k] * wx[k] + wz[k] * wz[k]
-        sw = _pairwise(buf, 0, n, tasks, vals)
+        sw = _pairwise(buf, zero, n, tasks, vals)
         for k in range(n):
             e = wy[k] - ay[k]
             buf[k] = e * e
-        sy = _pairwise(buf, 0, n, tasks, vals)
+        sy = _pairwise(buf, zero, n, tasks, vals)
         rr = np.hypot(c, s)
         if rr > 0:
             cth, sth = c / rr, s / rr

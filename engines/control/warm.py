@@ -1,36 +1,37 @@
 """Compile the control engine's kernels before the first request needs them (``segue warm``).
 
 The control engine's DP, alignment and re-timing kernels and :mod:`motion.compiled` are compiled
-by numba with ``cache=True``: the first call in a fresh environment compiles them (about 14 CPU-s
-for everything a control request runs, ``bench/cold_start.py``) and writes the machine code to
-numba's cache (:func:`motion.jitcache.cache_dir`); every later process loads it in a fraction of a
-second. :func:`warm` pays that compile off the request path: it runs two tiny control requests
+by numba with ``cache=True`` and kept in numba's cache (:func:`motion.jitcache.cache_dir`). A
+process that was not warmed compiles only what a request cannot do without -- the forward DP
+pass and the motion kernels, about 6 CPU-s with an empty cache -- and runs exact NumPy twins of
+the secondary kernels (:mod:`engines.control.tier`). :func:`warm` pays every compile off the
+request path: it switches this process to the compiled kernels, runs two tiny control requests
 on bundled samples (a salsa pair driven by a leader's motion, and walks driven by a floor
 trajectory), which call every kernel with the argument types real requests use, then leaves a
-stamp in the cache (:func:`stamp`) so that later starts skip it (numba would only load the code,
-but the two tiny requests still cost ~3 CPU-s). ``segue warm``,
-``segue serve`` and ``segue worker`` run it (the server in a background thread, a worker before
-its first job); the Docker image runs it at build time.
+stamp in the cache (:func:`stamp`): processes that find it run the compiled kernels, and later
+warms return at once (numba would only load the code, but the two tiny requests still cost ~3
+CPU-s). ``segue warm``, ``segue serve`` and ``segue worker`` run it (the server in a background
+process, a worker before its first job); the Docker image runs it at build time.
 """
 
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from motion import parse_bvh
 from motion.bvh import bvh_text
-from motion.jitcache import cache_dir
 from motion.samples import resolve_path
 from schemas.control import ControlDatabaseSpec, ControlRequest
 
 from ..base import CollectingEmitter, Run
 from ..library import ClipInput, build_library, library_to_arrays
+from . import tier
 from .engine import ControlEngine
 
 Say = Callable[[str], None]
@@ -50,7 +51,10 @@ def _engine(spec_data: dict[str, object], clips: list[ClipInput]) -> ControlEngi
     return ControlEngine(library, arrays)
 
 
-def _salsa() -> None:
+def salsa_request() -> tuple[ControlEngine, ControlRequest]:
+    """The warm-up's salsa request: a database of one bundled pair (leader 02 and its follower,
+    12 s at 60 fps, two beats a segment) and 6 s of that leader as the control; the engine and the
+    parsed request (tests run it in both tiers, :mod:`engines.control.tier`)."""
     lead = _clip("sample:salsa-leader-02", 0, 720, "lead")
     follow = _clip("sample:salsa-follower-02", 0, 720, "follow")
     engine = _engine(
@@ -66,6 +70,11 @@ def _salsa() -> None:
         {"engine": "control", "control": {"bvh": "control.bvh"}, "budget_s": 600}
     )
     request._inputs["control.bvh"] = _clip("sample:salsa-leader-02", 120, 480, "control").data
+    return engine, request
+
+
+def _salsa() -> None:
+    engine, request = salsa_request()
     engine.search(request, Run(request.budget_s))
 
 
@@ -106,23 +115,9 @@ def _layouts() -> None:
 
 
 def stamp() -> Path:
-    """The file that says this cache holds the kernels of these sources: named by a hash of the
-    compiled modules' paths, sizes and modification times (what numba keys its entries by) and the
-    numba and Python versions."""
-    import sys
-
-    import numba
-
-    from motion import compiled, numparse
-
-    from . import kernels
-
-    h = hashlib.sha256(f"{numba.__version__} {sys.version}".encode())
-    for module in (kernels, compiled, numparse, sys.modules[__name__]):
-        path = Path(str(module.__file__)).resolve()
-        st = path.stat()
-        h.update(f"{path} {st.st_size} {st.st_mtime_ns}".encode())
-    return cache_dir() / f"segue-warm-{h.hexdigest()[:16]}"
+    """The file that says this cache holds the kernels of these sources
+    (:func:`engines.control.tier.stamp`)."""
+    return tier.stamp()
 
 
 def warm(say: Say | None = None, force: bool = False) -> float:
@@ -137,6 +132,7 @@ def warm(say: Say | None = None, force: bool = False) -> float:
         return time.perf_counter() - t0
     if say is not None:
         say("compiling the control kernels (once per install: about 15 s of CPU)")
+    tier.use_compiled()  # the requests below run (and so compile) every compiled kernel
     _salsa()
     _walk()
     _layouts()

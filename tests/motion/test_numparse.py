@@ -9,6 +9,7 @@ takes over), since the fast path divides an exact integer mantissa by a power of
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -299,3 +300,28 @@ def test_row_length_zero_allows_only_blank_lines() -> None:
     assert parse(b"\n1\n", row_length=0) is None
     assert parse(b"1 2\n3 4", row_length=2).tolist() == [1.0, 2.0, 3.0, 4.0]  # type: ignore[union-attr]
     assert parse(b"1 2\n3", row_length=2) is None
+
+
+def test_the_default_is_compiled_only_once_kernels_are_ready(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A process that was not warmed parses with the numpy passes (no compile); once
+    :func:`motion.jitcache.mark_compiled_ready` was called, with the compiled pass."""
+    from motion import jitcache, numparse
+
+    used: list[str] = []
+    kernel = numparse._kernel
+
+    def spy() -> Callable[..., int]:
+        used.append("compiled")
+        return kernel()
+
+    monkeypatch.setattr(numparse, "_kernel", spy)
+    monkeypatch.setitem(jitcache._ready, "compiled", False)
+    values = parse_decimals(b"1.5 2\n")
+    assert values is not None and values.tolist() == [1.5, 2.0]
+    assert used == []
+    jitcache.mark_compiled_ready()
+    values = parse_decimals(b"1.5 2\n")
+    assert values is not None and values.tolist() == [1.5, 2.0]
+    assert used == ["compiled"]
