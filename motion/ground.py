@@ -246,6 +246,63 @@ def static_reference_root(motions: Sequence[Motion]) -> StaticRoot | None:
     return p0, q0
 
 
+def usual_reference_root(motions: Sequence[Motion]) -> StaticRoot | None:
+    """Joint 0's fixed pose in the motions where it never moves, when those motions agree on one
+    pose and hold at least half of all frames and joint 0's children all carry animated
+    translations; else ``None``. The same as :func:`static_reference_root` when every motion
+    keeps it fixed.
+
+    Four Bandai-Namco clips (``dataset-1`` ``dash``, ``run``, ``walk-back`` and ``walk_002``)
+    translate ``joint_Root`` as well as ``Hips``: a library holding one of them has no static
+    reference root by the strict rule, and cut smoothing then swings whole bodies about the
+    origin. :func:`pin_reference_root` brings such clips to this pose."""
+    if not motions:
+        return None
+    sk = motions[0].skeleton
+    children = np.flatnonzero(sk.parents == 0)
+    if children.size == 0 or not np.all(np.isin(children, sk.translated_joints)):
+        return None
+    pose: StaticRoot | None = None
+    held = total = 0
+    for m in motions:
+        total += m.num_frames
+        p, q = m.root_positions[0], rot.standardize(m.rotations[0, 0])
+        if np.abs(m.root_positions - p).max() > 1e-9:
+            continue
+        if np.abs(rot.standardize(m.rotations[:, 0]) - q).max() > 1e-9:
+            continue
+        if pose is None:
+            pose = (p.copy(), q.copy())
+        elif np.abs(pose[0] - p).max() > 1e-9 or np.abs(pose[1] - q).max() > 1e-9:
+            return None
+        held += m.num_frames
+    return pose if pose is not None and 2 * held >= total else None
+
+
+def pin_reference_root(motion: Motion, static: StaticRoot) -> Motion:
+    """The motion with joint 0 held at the pose ``static`` in every frame and its children
+    re-expressed so that every other joint's global position and rotation is unchanged (joint 0's
+    own motion moves into its children, which must carry animated translations)."""
+    p0, q0 = static
+    sk = motion.skeleton
+    pr, qr = motion.root_positions, motion.rotations[:, 0]
+    q0i = rot.conjugate(q0)[None]
+    q = motion.rotations.copy()
+    jt = motion.joint_translations.copy()
+    tj = list(sk.translated_joints)
+    for c in np.flatnonzero(sk.parents == 0):
+        if int(c) not in tj:
+            name = sk.names[int(c)]
+            raise MotionError(f"joint {name!r} under the reference root has no translation channels")
+        k = tj.index(int(c))
+        world = rot.rotate(qr, jt[:, k]) + pr
+        jt[:, k] = rot.rotate(q0i, world - p0)
+        q[:, c] = rot.multiply(q0i, rot.multiply(qr, q[:, c]))
+    q[:, 0] = q0
+    root = np.repeat(np.asarray(p0, dtype=np.float64)[None], motion.num_frames, axis=0)
+    return replace(motion, root_positions=root, rotations=q, joint_translations=jt)
+
+
 def apply_floor_transform(
     motion: Motion, theta: Array, shift_m: Array, static: StaticRoot | None = None
 ) -> Motion:
