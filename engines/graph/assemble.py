@@ -41,7 +41,6 @@ from typing import Any
 import numpy as np
 
 from motion import Motion
-from motion import rotations as rot
 from motion.errors import MotionError
 from motion.floorfit import CorrectionLimits, FloorGoal, floor_correction
 from motion.footskate import leg_chains, remove_foot_skate
@@ -130,16 +129,11 @@ def pinned_clips(library: MotionLibrary) -> tuple[StaticRoot | None, tuple[Motio
         got = _PINNED.get(key)
         if got is not None and got[0] is library:
             return got[1], got[2]
-    static = usual_reference_root(library.motions)
+    static, moving = usual_reference_root(library.motions)
     motions = library.motions
-    if static is not None:
-        p0, q0 = static
+    if static is not None and moving.any():
         motions = tuple(
-            m
-            if np.abs(m.root_positions - p0).max() <= 1e-9
-            and np.abs(rot.standardize(m.rotations[:, 0]) - q0).max() <= 1e-9
-            else pin_reference_root(m, static)
-            for m in motions
+            pin_reference_root(m, static) if moving[i] else m for i, m in enumerate(library.motions)
         )
     with _CONTACTS_LOCK:
         _PINNED[key] = (library, static, motions)

@@ -16,6 +16,7 @@ from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
 from ..base import Arrays, BuildWork, Emitter, Engine, ShouldStop, Solution, Stopped
 from ..library import MotionLibrary, with_mirrors
+from .assemble import pinned_clips
 from .build import build_graph, build_work
 from .model import EdgeTree, FootContacts, RootTracks
 from .paths import GraphIndex
@@ -35,6 +36,7 @@ class GraphEngine(Engine):
         self.tree = EdgeTree.from_arrays(arrays)
         self.tracks = RootTracks.from_arrays(arrays)
         GraphIndex.of(self.tree, self.tracks)  # built once per loaded database, not on the first search
+        pinned_clips(library)  # likewise (assembly's clips with joint 0 at its usual pose)
         # foot contacts for foot-skate cleanup: stored by the build (older databases: computed here)
         self.contacts = FootContacts.from_arrays(arrays) or foot_contacts(library)
 

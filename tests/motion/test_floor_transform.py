@@ -67,8 +67,8 @@ def test_a_clip_whose_reference_root_moves_is_pinned_to_the_usual_pose() -> None
     walk, back = read_bvh(BANDAI_WALK), read_bvh(BANDAI_BACK)
     assert np.abs(back.root_positions).max() > 1.0  # joint_Root moves in this clip
     assert static_reference_root([walk, back]) is None
-    static = usual_reference_root([walk, back])
-    assert static is not None
+    static, moving = usual_reference_root([walk, back])
+    assert static is not None and moving.tolist() == [False, True]
     np.testing.assert_array_equal(static[0], walk.root_positions[0])
     pinned = pin_reference_root(back, static)
     assert np.all(pinned.root_positions == static[0])
@@ -76,6 +76,7 @@ def test_a_clip_whose_reference_root_moves_is_pinned_to_the_usual_pose() -> None
     np.testing.assert_allclose(pinned.global_positions()[:, 1:], pos[:, 1:], atol=1e-9 * np.abs(pos).max())
     assert static_reference_root([walk, pinned]) is not None
     # most frames must hold the pose, and the clips that hold it must agree
-    assert usual_reference_root([back]) is None
+    assert usual_reference_root([back])[0] is None
     moved = apply_floor_transform(walk, np.full(walk.num_frames, 0.5), np.ones((walk.num_frames, 2)))
-    assert usual_reference_root([walk, moved]) is None
+    assert usual_reference_root([walk, moved])[0] is None
+    assert usual_reference_root([walk, walk])[1].tolist() == [False, False]
