@@ -18,7 +18,7 @@ from ..base import Arrays, BuildWork, Emitter, Engine, ShouldStop, Solution, Sto
 from ..library import MotionLibrary, with_mirrors
 from .assemble import pinned_clips
 from .build import build_graph, build_work
-from .model import EdgeTree, FootContacts, RootTracks
+from .model import EdgeTree, FootContacts, RootTracks, compact_motion
 from .paths import GraphIndex
 from .search import GraphSearch
 from .shared import CoupledSearch
@@ -42,7 +42,9 @@ class GraphEngine(Engine):
 
     @classmethod
     def build(cls, spec: Any, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
-        return build_graph(spec, library, emit, should_stop)
+        arrays = build_graph(spec, library, emit, should_stop)
+        arrays.update(compact_motion(library.motions))  # stored as float32 (engines.graph.model)
+        return arrays
 
     @classmethod
     def library_for(cls, spec: Any, library: MotionLibrary) -> MotionLibrary:
