@@ -5,22 +5,30 @@ Needs ``../shared/data/bandai-namco``. The library of a size is made of every cl
 sequence ``mirrored``, ``x0.9``, ``mirrored x0.9``, ``x1.1``, ``mirrored x1.1``, ``x0.8``, ... (left/right
 mirror image by ``motion.mirror``; time-scaled = played at that speed, resampled to 30 fps), clip by
 clip until the size is reached. Sizes below the data take an evenly spread subset of the clips
-(every k-th clip). Each size runs in a fresh process (so ``peak_rss_mb`` is its own) and does what a
-worker does (``workers.execute.build_database_bytes``: library arrays, the graph build, quality
-reference and foot floor, then the npz), writes the npz to a temporary directory (``disk_mb``), loads
-it back into an engine and searches:
+(every k-th clip). Each size is built in a fresh process (so ``peak_rss_build_mb`` is its own)
+doing what a worker does (``workers.execute.build_database_bytes``: the graph build, the library
+arrays with the engine's replacing them, quality reference and foot floor); ``disk_mb`` is the
+size of ``workers.store.npz_bytes``. Another fresh process loads it into an engine and answers a
+``--seconds`` (20) request from the origin to a body goal ``--goal`` (12) m away (heading 90), once
+per ``--seeds`` seed, bounded by the request's rounds (15), like any request:
 
-* ``first_solution_s``: a 300-frame request from the origin to a body goal 12 m away (heading 90);
-* ``round_s``: that search's wall time over its rounds (``GraphSearch.rounds_``), budget 20 s;
-* ``goal_error_cm`` and ``ok``: its best result's distance to the goal and quality verdict.
+* ``first_solution_s`` / ``_cpu_s``: wall and process-CPU time to the first solution;
+* ``round_s`` / ``round_cpu_s``: the rest of the search (chain seeds and rounds) per round;
+* ``goal_error_cm`` and ``ok``: the best result's distance to the goal and quality verdict (every
+  seed's in ``seeds``).
 
-``build_cpu_s`` is the process CPU time (all threads) of the build, ``build_s`` its wall time. With
-``--recall`` (sizes up to 40k), the all-pairs build runs too and ``edge_recall`` is the fraction of its
-leaf edges the indexed build keeps, ``best_edge_recall`` the fraction of frames whose cheapest
-all-pairs edge it keeps. ``load_avg`` is the 1-minute load average at the start (other work on a
-shared machine slows the figures down).
+``build_cpu_s`` is the build's process CPU time (all threads), ``build_s`` its wall time. With
+``--eighth`` every 8th clip of each size's library is built too and ``cpu_exponent`` is the growth
+exponent of the build CPU between the two. With ``--keep DIR`` the databases stay in ``DIR``
+(``graph-<size>.npz`` and the build figures beside it) and ``--reuse`` searches them again
+without building. With ``--recall`` (sizes up to 40k) the all-pairs build runs too and
+``edge_recall`` is the fraction of its leaf edges the indexed build keeps, ``best_edge_recall``
+the fraction of frames whose cheapest all-pairs edge it keeps. ``build_load_avg`` and
+``search_load_avg`` are the 1-minute load averages at the start (other work on a shared machine
+slows the wall times down: the CPU times move less).
 
-Run the big sizes with ``nice -n 10``: ``nice -n 10 python bench/graph_scale.py --sizes 100000,1000000``.
+Run the big sizes with ``nice -n 10``, one at a time: ``nice -n 10 python bench/graph_scale.py
+--sizes 1000000 --keep /tmp/graphscale``.
 """
 
 from __future__ import annotations
