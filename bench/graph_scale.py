@@ -287,7 +287,13 @@ def search_one(path: Path, seeds: list[int], seconds: float, goal_m: float, budg
         error_cm = round(float(np.linalg.norm(end - [goal_m, 0.0])) * 100, 1)
         ok = None if best.quality is None else best.quality.ok
         verdicts.append(
-            {"seed": seed, "goal_error_cm": error_cm, "ok": ok, "score": round(float(best.score), 3)}
+            {
+                "seed": seed,
+                "goal_error_cm": error_cm,
+                "ok": ok,
+                "score": round(float(best.score), 3),
+                "reasons": [] if best.quality is None else best.quality.reasons,
+            }
         )
         if len(verdicts) == 1:
             first_cpu = round(rec.cpu[0] - c0, 3)
