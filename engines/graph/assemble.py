@@ -54,7 +54,14 @@ from motion.goals import (
     PoseGoal,
     body_pose,
 )
-from motion.ground import apply_floor_transform, body_root, ground_frames, static_reference_root
+from motion.ground import (
+    StaticRoot,
+    apply_floor_transform,
+    body_root,
+    ground_frames,
+    pin_reference_root,
+    usual_reference_root,
+)
 from motion.quality import QualityInputs
 from motion.smoothing import smooth_cuts
 from schemas.graph import GraphRequest
@@ -73,12 +80,12 @@ def body_frames(motion: Motion, positions: FloatArray | None = None) -> tuple[Fl
     return xz * motion.metres_per_unit, yaw
 
 
-def _concatenate(library: MotionLibrary, pieces: Pieces) -> Motion:
+def _concatenate(motions: tuple[Motion, ...], pieces: Pieces) -> Motion:
     """The pieces' frames end to end (the skeleton of the clip that gives the most frames)."""
     counts = pieces.count
-    main = library.motions[int(pieces.clip[int(np.argmax(counts))])]
+    main = motions[int(pieces.clip[int(np.argmax(counts))])]
     spans = [
-        (library.motions[int(c)], slice(int(a), int(b) + 1))
+        (motions[int(c)], slice(int(a), int(b) + 1))
         for c, a, b in zip(pieces.clip, pieces.first, pieces.last, strict=True)
     ]
     return replace(
@@ -110,6 +117,30 @@ FOOT_BLEND_S = 0.1
 
 _CONTACTS: dict[int, tuple[MotionLibrary, FootContacts]] = {}
 _CONTACTS_LOCK = threading.Lock()
+_PINNED: dict[int, tuple[MotionLibrary, StaticRoot | None, tuple[Motion, ...]]] = {}
+
+
+def pinned_clips(library: MotionLibrary) -> tuple[StaticRoot | None, tuple[Motion, ...]]:
+    """The library's usual static reference root (:func:`motion.ground.usual_reference_root`)
+    and its clips with every clip whose joint 0 moves pinned to it
+    (:func:`motion.ground.pin_reference_root`: the same global poses); the clips as they are
+    when there is none. Cached for the last few libraries (by identity)."""
+    key = id(library)
+    with _CONTACTS_LOCK:
+        got = _PINNED.get(key)
+        if got is not None and got[0] is library:
+            return got[1], got[2]
+    static, moving = usual_reference_root(library.motions)
+    motions = library.motions
+    if static is not None and moving.any():
+        motions = tuple(
+            pin_reference_root(m, static) if moving[i] else m for i, m in enumerate(library.motions)
+        )
+    with _CONTACTS_LOCK:
+        _PINNED[key] = (library, static, motions)
+        while len(_PINNED) > 4:
+            _PINNED.pop(next(iter(_PINNED)))
+    return static, motions
 
 
 def library_contacts(library: MotionLibrary) -> FootContacts:
@@ -221,8 +252,9 @@ def assemble(
     for c, a, b in zip(pieces.clip, pieces.first, pieces.last, strict=True):
         if not 0 <= a <= b < tracks.frames(int(c)):
             raise MotionError(f"piece {a}..{b} is outside clip {library.names[int(c)]!r}")
-    static = static_reference_root(library.motions)
-    motion = _concatenate(library, pieces)
+    # joint 0 held at its usual pose in every clip (a few clips of some sets move it too)
+    static, motions = pinned_clips(library)
+    motion = _concatenate(motions, pieces)
     theta, shift = placement.per_frame()
     motion = apply_floor_transform(motion, theta, shift, static)
     placed = motion  # the source frames as they are, before the cuts are smoothed

@@ -34,9 +34,10 @@ from ..base import (
     Stopped,
 )
 from ..library import MotionLibrary, with_mirrors
+from .assemble import pinned_clips
 from .build import build_graph, build_work
 from .coupled import CoupledSearch
-from .model import EdgeTree, FootContacts, RootTracks
+from .model import EdgeTree, FootContacts, RootTracks, compact_motion
 from .paths import GraphIndex
 from .search import GraphSearch
 from .tracks import foot_contacts
@@ -56,6 +57,7 @@ class GraphEngine(Engine[GraphRequest, GraphDatabaseSpec]):
         self.tree = EdgeTree.from_arrays(arrays)
         self.tracks = RootTracks.from_arrays(arrays)
         GraphIndex.of(self.tree, self.tracks)  # built once per loaded database, not on the first search
+        pinned_clips(library)  # likewise (assembly's clips with joint 0 at its usual pose)
         # foot contacts for foot-skate cleanup: stored by the build (older databases: computed here)
         self.contacts = FootContacts.from_arrays(arrays) or foot_contacts(library)
 
@@ -63,7 +65,9 @@ class GraphEngine(Engine[GraphRequest, GraphDatabaseSpec]):
     def build(
         cls, spec: GraphDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
     ) -> Arrays:
-        return build_graph(spec, library, emit, should_stop)
+        arrays = build_graph(spec, library, emit, should_stop)
+        arrays.update(compact_motion(library.motions))  # stored as float32 (engines.graph.model)
+        return arrays
 
     @classmethod
     def library_for(cls, spec: GraphDatabaseSpec, library: MotionLibrary) -> MotionLibrary:

@@ -142,18 +142,20 @@ def _c(v: FloatArray) -> npt.NDArray[np.complex128]:
     return np.asarray(v[..., 0] + 1j * v[..., 1])
 
 
-def _grid_locate(
-    pieces: BatchPieces, theta: FloatArray, shift: FloatArray, frames: IntArray
-) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
-    """Source clip, frame and piece placement ``(B, S)`` (``sh (B, S, 2)``) at output ``frames``."""
+def _grid_locate(pieces: BatchPieces, frames: IntArray) -> tuple[IntArray, IntArray, IntArray]:
+    """Piece index, source clip and frame ``(B, S)`` at output ``frames`` (clamped to each path's
+    last output frame). The piece index counts the pieces starting at or before each frame, one
+    piece column at a time (a batch has a handful of columns and thousands of rows)."""
     total = pieces.count.sum(axis=1)
     tt = np.minimum(frames[None, :], np.maximum(total - 1, 0)[:, None])
-    j = (pieces.start[:, None, :] <= tt[:, :, None]).sum(-1) - 1
+    j = np.full(tt.shape, -1, dtype=np.int64)
+    for k in range(pieces.start.shape[1]):
+        j += pieces.start[:, k, None] <= tt
     j = np.minimum(j, np.maximum((pieces.count > 0).sum(axis=1) - 1, 0)[:, None])
     r = np.arange(pieces.clip.shape[0])[:, None]
     clip = pieces.clip[r, j]
     frame = pieces.first[r, j] + (tt - pieces.start[r, j])
-    return clip, frame, theta[r, j], shift[r, j]
+    return j, clip, frame
 
 
 def batch_fit(
@@ -167,16 +169,25 @@ def batch_fit(
     table: JointTable | None,
     joint_columns: IntArray,
     fps: float,
+    *,
+    with_goal: bool = True,
 ) -> BatchFit:
     """Estimate the correction of every path of a batch (module docstring).
 
     ``body_xz (Kb, 2)`` are the body constraints' floor targets (time order); ``joint_xz (Kj, 2)``
     the joint constraints' floor targets and ``joint_columns (Kj,)`` their columns of ``table``.
+    Without ``with_goal`` the corrected positions (:attr:`BatchFit.goal`, what obstacles are
+    tested at) are left empty ``(B, 0, 2)``: the goals' corrections alone cost less.
     """
-    clip, frame, th, sh = _grid_locate(pieces, theta, shift, grid.frames)
-    yaw_l, xz_l = index.ground(clip, frame)
-    yaw = th + yaw_l
-    xz = rotate_floor(th, xz_l) + sh
+    j, clip, frame = _grid_locate(pieces, grid.frames)
+    r = np.arange(j.shape[0])[:, None]
+    th, sh = theta[r, j], shift[r, j]
+    rows = index.tracks.offsets[clip] + frame
+    yaw = th + index.tracks.root_yaw[rows]
+    # rotate_floor(th, ground xz) + sh, with the cosines and sines taken per piece, not per frame
+    cos, sin = np.cos(theta)[r, j], np.sin(theta)[r, j]
+    x, z = index.root_x[rows], index.root_z[rows]
+    xz = np.stack((cos * x + sin * z + sh[..., 0], -sin * x + cos * z + sh[..., 1]), axis=-1)
     b, s = yaw.shape
     alpha = np.zeros((b, s))
     head_inc = np.zeros((b, grid.head_at.size))
@@ -215,7 +226,7 @@ def batch_fit(
         head_excess[:, 1:] = np.maximum(np.abs(head_inc[:, 1:]) - room, 0.0)
     if grid.floor_at.size:
         i0 = int(grid.floor_at[0])
-        path = path + (rotate_floor(alpha[:, i0], xz[:, i0]) - path[:, i0])[:, None, :]
+        anchor = (rotate_floor(alpha[:, i0], xz[:, i0]) - path[:, i0])[:, None, :]
         targets = np.empty((b, grid.floor_at.size, 2))
         for g, (at_i, kind, ref) in enumerate(
             zip(grid.floor_at, grid.floor_kind, grid.floor_ref, strict=True)
@@ -229,13 +240,16 @@ def batch_fit(
                 world = rotate_floor(th[:, at_i], p) + sh[:, at_i]
                 offset = world - xz[:, at_i]
                 targets[:, g] = joint_xz[ref] - rotate_floor(alpha[:, at_i], offset)
-        residual = targets - path[:, grid.floor_at]  # (B, G, 2)
+        residual = targets - (path[:, grid.floor_at] + anchor)  # (B, G, 2)
         floor_inc[:, 1:] = np.linalg.norm(np.diff(residual, axis=1), axis=-1)
         a, z = grid.floor_at[:-1], grid.floor_at[1:]
         room = limits.speed_fraction * (travelled[:, z] - travelled[:, a])
         room = room + limits.speed_floor * (seconds[z] - seconds[a])
         floor_excess[:, 1:] = np.maximum(floor_inc[:, 1:] - room, 0.0)
-        ramp = residual[:, grid.ramp_lo] * (1.0 - grid.ramp_w)[None, :, None]
-        ramp += residual[:, grid.ramp_hi] * grid.ramp_w[None, :, None]
-        goal = path + ramp
+        if with_goal:
+            ramp = residual[:, grid.ramp_lo] * (1.0 - grid.ramp_w)[None, :, None]
+            ramp += residual[:, grid.ramp_hi] * grid.ramp_w[None, :, None]
+            goal = (path + anchor) + ramp
+    if not with_goal:
+        goal = np.zeros((b, 0, 2))
     return BatchFit(clip, frame, th, sh, xz, alpha, goal, head_inc, floor_inc, head_excess, floor_excess)

@@ -628,7 +628,17 @@ def _fit(
     joint_xz = np.array([j.position[[0, 2]] for j in problem.joints], dtype=np.float64).reshape(-1, 2)
     columns = np.array([j.column for j in problem.joints], dtype=np.int64)
     return batch_fit(
-        index, problem.grid, pieces, theta, shift, body_xz, joint_xz, problem.table, columns, problem.fps
+        index,
+        problem.grid,
+        pieces,
+        theta,
+        shift,
+        body_xz,
+        joint_xz,
+        problem.table,
+        columns,
+        problem.fps,
+        with_goal=bool(problem.obstacles or problem.keepaways),
     )
 
 

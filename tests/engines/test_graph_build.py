@@ -477,3 +477,27 @@ def test_moving_frames_counts_frames_faster_than_the_locomotion_speed() -> None:
     x = np.concatenate((np.arange(10) * 0.05, np.arange(5) * 0.01))  # 1.5 m/s, then 0.3 m/s at 30 fps
     tracks = RootTracks(np.array([0, 10, 15]), np.stack((x, np.zeros(15)), axis=1), np.zeros(15))
     assert moving_frames(tracks, 30.0).tolist() == [9, 0]
+
+
+def test_a_graph_database_stores_its_motion_as_float32(walks: MotionLibrary) -> None:
+    """The engine's build replaces the library's float64 rotations and translations with float32
+    ones (what the store writes: the engine's arrays after the library's); the loaded engine reads
+    the same motion back to float32 rounding."""
+    from engines.graph.engine import GraphEngine
+    from engines.library import library_from_arrays, library_to_arrays
+    from schemas.databases import parse_database_spec
+
+    lib = library(walking_biped(150, seed=0), arms_up(walking_biped(150, seed=1)))
+    db = parse_database_spec({"kind": "graph", "clips": [{"bvh": "x.bvh"}]})
+    arrays = library_to_arrays(lib)
+    arrays.update(GraphEngine.build(db, lib, Collect(), lambda: False))
+    assert arrays["library.rotations"].dtype == np.float32
+    assert arrays["library.joint_translations"].dtype == np.float32
+    assert arrays["library.root_positions"].dtype == np.float64
+    back = GraphEngine(library_from_arrays(arrays), arrays).library
+    for m, b in zip(lib.motions, back.motions, strict=True):
+        assert b.rotations.dtype == np.float64
+        np.testing.assert_allclose(b.rotations, m.rotations, atol=1e-7)
+        np.testing.assert_array_equal(b.root_positions, m.root_positions)
+        pos = m.global_positions()
+        np.testing.assert_allclose(b.global_positions(), pos, atol=1e-6 * max(1.0, np.abs(pos).max()))

@@ -31,6 +31,7 @@ from engines.graph.score import Problem, compile_problem, evaluate, score_batch
 from engines.graph.search import GraphSearch
 from engines.library import MotionLibrary
 from motion import Motion, Skeleton
+from motion import rotations as rot
 from motion.quality import assess
 from schemas.graph import GraphRequest
 from tests.engines.emitters import Collect
@@ -279,12 +280,12 @@ def measured(motion: Motion, prov: list[tuple[str, int]], problem: Problem, libr
     ).constraint_errors
 
 
-def test_assembly_with_a_static_reference_root(graph: Graph) -> None:
-    """Bandai-style skeletons: joint 0 never moves, the hips carry the motion as a translated
-    child. The placement and corrections go to the hips; joint 0 stays put."""
-    library, tree, tracks = graph
+def _with_reference_root(library: MotionLibrary, moving: int = -1) -> MotionLibrary:
+    """The library with a Bandai-style ``joint_Root`` above each clip's root (at the origin, the
+    old root's motion as its translated child); in clip ``moving`` joint 0 drifts and turns
+    instead and the child makes up for it (the same global poses), as in four Bandai clips."""
     wrapped = []
-    for m in library.motions:
+    for i, m in enumerate(library.motions):
         sk = m.skeleton
         new = Skeleton(
             ("joint_Root", *sk.names),
@@ -295,10 +296,24 @@ def test_assembly_with_a_static_reference_root(graph: Graph) -> None:
             sk.end_site_offsets,
         )
         q = np.concatenate((np.tile([0.0, 0.0, 0.0, 1.0], (m.num_frames, 1, 1)), m.rotations), axis=1)
-        wrapped.append(
-            Motion(new, np.zeros((m.num_frames, 3)), q, m.fps, m.root_positions[:, None], "m", m.name)
-        )
-    lib2 = replace(library, motions=tuple(wrapped))
+        root = np.zeros((m.num_frames, 3))
+        child = m.root_positions[:, None].copy()
+        if i == moving:
+            f = np.arange(m.num_frames, dtype=np.float64)
+            root = np.stack((0.03 * f, 0.0 * f, -0.04 * f), axis=1)
+            q[:, 0] = rot.from_yaw(0.01 * f)
+            inv = rot.conjugate(q[:, 0])
+            child[:, 0] = rot.rotate(inv, m.root_positions - root)
+            q[:, 1] = rot.multiply(inv, m.rotations[:, 0])
+        wrapped.append(Motion(new, root, q, m.fps, child, "m", m.name))
+    return replace(library, motions=tuple(wrapped))
+
+
+def test_assembly_with_a_static_reference_root(graph: Graph) -> None:
+    """Bandai-style skeletons: joint 0 never moves, the hips carry the motion as a translated
+    child. The placement and corrections go to the hips; joint 0 stays put."""
+    library, tree, tracks = graph
+    lib2 = _with_reference_root(library)
     req = request()
     gs = GraphSearch(lib2, tree, tracks, 1)
     prime(gs, req)
@@ -314,6 +329,26 @@ def test_assembly_with_a_static_reference_root(graph: Graph) -> None:
     # same output as the plain skeleton, joint for joint
     plain, _ = assemble(library, tracks, ev.pieces, ev.placement, req)
     np.testing.assert_allclose(motion.global_positions()[:, 1:], plain.global_positions(), atol=1e-9)
+
+
+@pytest.mark.parametrize("moving", [0, 1, 2])
+def test_assembly_pins_a_reference_root_that_moves_in_a_few_clips(graph: Graph, moving: int) -> None:
+    """A clip whose joint 0 moves (its child making up for it) among clips where it stays put:
+    assembly pins it to the usual pose, so smoothing never swings a body about the origin and the
+    output is the plain skeleton's, joint for joint (joint 0 never moves)."""
+    library, tree, tracks = graph
+    lib2 = _with_reference_root(library, moving)
+    req = request()
+    gs = GraphSearch(lib2, tree, tracks, 1)
+    prime(gs, req)
+    seeds = gs._random_seeds(np.random.default_rng(4), 64)
+    used = [i for i in range(64) if moving in path_pieces(gs.index_, seeds.path(i), 240).clip[1:]]
+    assert used, "no seed plays the moving clip after a cut"
+    ev = evaluate(gs.index_, gs._problem, seeds.path(used[0]))
+    motion, _ = assemble(lib2, tracks, ev.pieces, ev.placement, req)
+    assert np.abs(motion.root_positions).max() == 0.0
+    fixed, _ = assemble(_with_reference_root(library), tracks, ev.pieces, ev.placement, req)
+    np.testing.assert_allclose(motion.global_positions(), fixed.global_positions(), atol=1e-8)
 
 
 # -- the anytime search --------------------------------------------------------------------------

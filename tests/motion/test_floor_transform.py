@@ -8,11 +8,17 @@ import numpy as np
 import pytest
 
 from motion import read_bvh
-from motion.ground import apply_floor_transform, static_reference_root
+from motion.ground import (
+    apply_floor_transform,
+    pin_reference_root,
+    static_reference_root,
+    usual_reference_root,
+)
 from motion.samples import sample_path
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 BANDAI_WALK = DATA / "bandai-namco" / "dataset-2" / "dataset-2_walk_normal_001.bvh"
+BANDAI_BACK = DATA / "bandai-namco" / "dataset-1" / "dataset-1_walk-back_normal_001.bvh"
 
 
 def _expected(positions: np.ndarray, theta: np.ndarray, shift_u: np.ndarray) -> np.ndarray:
@@ -52,3 +58,25 @@ def test_a_static_reference_root_stays_and_its_children_move() -> None:
     np.testing.assert_allclose(moved.global_positions()[:, 1:], want, atol=1e-9 * np.abs(want).max())
     assert static_reference_root([walk, apply_floor_transform(walk, theta, shift)]) is None
     assert static_reference_root([]) is None
+
+
+@pytest.mark.skipif(not BANDAI_BACK.exists(), reason=f"shared data not found ({BANDAI_BACK})")
+def test_a_clip_whose_reference_root_moves_is_pinned_to_the_usual_pose() -> None:
+    """``dataset-1_walk-back_normal_001`` translates ``joint_Root`` too: the strict rule finds no
+    static root, the usual one does, and pinning keeps every other joint where it was."""
+    walk, back = read_bvh(BANDAI_WALK), read_bvh(BANDAI_BACK)
+    assert np.abs(back.root_positions).max() > 1.0  # joint_Root moves in this clip
+    assert static_reference_root([walk, back]) is None
+    static, moving = usual_reference_root([walk, back])
+    assert static is not None and moving.tolist() == [False, True]
+    np.testing.assert_array_equal(static[0], walk.root_positions[0])
+    pinned = pin_reference_root(back, static)
+    assert np.all(pinned.root_positions == static[0])
+    pos = back.global_positions()
+    np.testing.assert_allclose(pinned.global_positions()[:, 1:], pos[:, 1:], atol=1e-9 * np.abs(pos).max())
+    assert static_reference_root([walk, pinned]) is not None
+    # most frames must hold the pose, and the clips that hold it must agree
+    assert usual_reference_root([back])[0] is None
+    moved = apply_floor_transform(walk, np.full(walk.num_frames, 0.5), np.ones((walk.num_frames, 2)))
+    assert usual_reference_root([walk, moved])[0] is None
+    assert usual_reference_root([walk, walk])[1].tolist() == [False, False]
