@@ -54,6 +54,9 @@ class ChildConfig:
     cache_url: str | None = None
     prefix: str = "segue:"
     chunk_size: int = 4 << 20
+    fence_url: str | None = None
+    """The queue Redis holding the jobs' fencing tokens (:mod:`workers.fencing`): each task's writes
+    are checked against its attempt and its ``should_stop`` polls it; None (embedded): no fence."""
 
 
 @dataclass(slots=True)
@@ -70,6 +73,8 @@ class Task:
     cancel_asked: float | None = None
     best: str | None = None
     terminal: bool = False
+    stale: bool = False
+    """The run lost its job to a later attempt (its events are refused; it is being stopped)."""
     context: Any = None
 
 
@@ -116,20 +121,32 @@ def _watch_parent(parent: int) -> None:
             os._exit(0)  # the worker is gone: nobody will read our events
 
 
+def _fence_client(config: ChildConfig) -> tuple[Any, Any] | None:
+    """The child's client of the queue Redis and its key names (None without ``fence_url``)."""
+    if not config.fence_url:
+        return None
+    import redis
+
+    from .redis_keys import RedisKeys
+
+    return redis.Redis.from_url(config.fence_url, socket_timeout=5), RedisKeys(config.prefix)
+
+
 def _child_main(tasks: Connection, events: Connection, cancel: Any, config: ChildConfig, parent: int) -> None:
     import importlib
 
     from motion.allocator import tune_process
 
     from .execute import EngineCache, execute_job
-    from .store import Store
+    from .fencing import Fence, FencedStore
 
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="segue-parent-watch").start()
     tune_process()
     for module in config.plugins:
         importlib.import_module(module)
-    store = Store(config.store_root)
+    store = FencedStore(config.store_root)
     cache = EngineCache(config.engine_cache)
+    fence_client = _fence_client(config)
     load = save = None
     if config.cache_url:
         import redis
@@ -153,12 +170,17 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
         if message is None:
             return
         seq, job_id, kind, payload, attempt = message
+        fence = None
+        if fence_client is not None:
+            client, keys = fence_client
+            fence = Fence(client, keys.attempt(job_id), job_id, attempt)
+        store.fence = fence
 
         def publish(type_: EventType, data: dict[str, Any], seq: int = seq) -> None:
             events.send(("event", seq, type_.value, data, time.time()))
 
-        def should_stop(seq: int = seq) -> bool:
-            return bool(cancel.value == seq)
+        def should_stop(seq: int = seq, fence: Fence | None = fence) -> bool:
+            return bool(cancel.value == seq) or (fence is not None and fence.lost())
 
         execute_job(
             store,
