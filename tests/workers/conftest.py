@@ -201,8 +201,11 @@ def worker_thread(redis_url: str, store: Store, name: str, **fields: Any) -> Ite
             raise RuntimeError(f"worker thread {name} did not stop")
 
 
-def spawn_worker(redis_url: str, store: Store, name: str, *extra: str) -> subprocess.Popen[bytes]:
-    """A ``python -m workers.redis_worker`` process (heartbeat 0.2 s, TTL 1 s)."""
+def spawn_worker(
+    redis_url: str, store: Store, name: str, *extra: str, log: Path | None = None
+) -> subprocess.Popen[bytes]:
+    """A ``python -m workers.redis_worker`` process (heartbeat 0.2 s, TTL 1 s; its stderr, with
+    ``--log-level`` in ``extra``, appended to ``log`` when given)."""
     env = dict(
         os.environ,
         PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
@@ -228,7 +231,10 @@ def spawn_worker(redis_url: str, store: Store, name: str, *extra: str) -> subpro
         "WARNING",
         *extra,
     ]
-    return subprocess.Popen(cmd, env=env, cwd=REPO)
+    if log is None:
+        return subprocess.Popen(cmd, env=env, cwd=REPO)
+    with log.open("ab") as sink:
+        return subprocess.Popen(cmd, env=env, cwd=REPO, stderr=sink)
 
 
 @contextlib.contextmanager
