@@ -570,9 +570,8 @@ class _events_sink:  # noqa: N801 - a tiny context manager used like a function
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    import uvicorn
-
     from service.app import create_app
+    from service.server import serve
     from workers.settings import get_settings, with_options
 
     settings = with_options(get_settings(), data_dir=args.data, redis_url=args.redis, workers=args.workers)
@@ -588,7 +587,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         import_databases(settings, [Path(d) for d in args.imports])
     if not args.no_warm and not settings.redis_url:
         start_warming()  # the embedded workers run jobs: compile their kernels off the request path
-    uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level)
+    serve(create_app(settings), settings, args.host, args.port, args.log_level)
     return 0
 
 
