@@ -74,6 +74,8 @@ class Fence:
     ) -> None:
         self.client, self.key, self.job_id, self.attempt = client, key, job_id, attempt
         self.poll_s = poll_s
+        self.outage_poll_s = 5.0
+        """How long ``lost`` waits before reading the key again after Redis failed to answer."""
         self.lost_to: int | None = None
         self._next = 0.0
         self._warned = False
@@ -84,6 +86,7 @@ class Fence:
         try:
             raw = self.client.get(self.key)
         except redis.RedisError as exc:
+            self._next = time.monotonic() + self.outage_poll_s  # do not stall the engine on it
             if not self._warned:
                 log.warning("job %s: the fencing token cannot be read (%s)", self.job_id, exc)
                 self._warned = True

@@ -129,7 +129,8 @@ def _fence_client(config: ChildConfig) -> tuple[Any, Any] | None:
 
     from .redis_keys import RedisKeys
 
-    return redis.Redis.from_url(config.fence_url, socket_timeout=5), RedisKeys(config.prefix)
+    client = redis.Redis.from_url(config.fence_url, socket_timeout=2, socket_connect_timeout=2)
+    return client, RedisKeys(config.prefix)
 
 
 def _child_main(tasks: Connection, events: Connection, cancel: Any, config: ChildConfig, parent: int) -> None:
