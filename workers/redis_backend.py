@@ -127,9 +127,11 @@ class RedisBackend:
 
     async def close(self) -> None:
         if self._reconciler is not None:
-            self._reconciler.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._reconciler
+            # cancelled until it ends: a cancel that lands inside a Redis call can be swallowed
+            # there (seen once: the loop went on and close() waited for ever)
+            while not self._reconciler.done():
+                self._reconciler.cancel()
+                await asyncio.wait({self._reconciler}, timeout=1.0)
             self._reconciler = None
         readers = list(self._readers.values())
         for task in readers:
