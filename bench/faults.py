@@ -13,14 +13,19 @@ jobs run, and waits for every job to end. Scenarios:
 * ``redis_restart_aof``: the same with ``--appendonly yes --appendfsync everysec`` (restarted from
   its AOF);
 * ``api_restart``: SIGKILL of ``segue serve`` (embedded; its engine processes exit with it),
-  restarted on the same port and data directory.
+  restarted on the same port and data directory;
+* ``redis_worker_hang``: SIGSTOP of one ``segue worker`` and its engine process (a frozen host) for
+  ``--hang`` seconds, past the reclaim time (its heartbeat expires, the other worker runs its job
+  again as attempt 2), then SIGCONT: the resumed run must publish nothing (fenced attempts).
 
 Per scenario: ``jobs_lost`` (jobs not ``done``), ``events_lost`` (gaps in the event ids the clients
 received), ``duplicate_executions`` (a run of a job still publishing after a later run of the same
-job started: result ids carry the attempt), ``reruns`` (runs after the first) and ``recovery_s`` (from
-the fault to the first event any client received afterwards). Prints one JSON object.
+job started: result ids carry the attempt), ``duplicate_terminals`` (terminal events beyond one per
+job, in each job's whole event log read back at the end), ``stale_events`` (events after a job's
+last ``started`` that carry another attempt), ``reruns`` (runs after the first) and ``recovery_s``
+(from the fault to the first event any client received afterwards). Prints one JSON object.
 
-    python bench/faults.py [--jobs 4] [--budget 2] [--only NAME,...]
+    python bench/faults.py [--jobs 4] [--budget 2] [--hang 8] [--only NAME,...]
 """
 
 from __future__ import annotations
@@ -115,8 +120,11 @@ class Follower(threading.Thread):
 class Topology:
     """The processes of one scenario."""
 
-    def __init__(self, root: Path, redis: str | None, workers: int) -> None:
+    def __init__(
+        self, root: Path, redis: str | None, workers: int, worker_env: dict[str, str] | None = None
+    ) -> None:
         self.root, self.redis_mode, self.workers = root, redis, workers
+        self.worker_env = worker_env or {}
         self.data = root / "data"
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
@@ -158,7 +166,7 @@ class Topology:
     def start_worker(self, k: int) -> None:
         cmd = [*SEGUE, "worker", "--redis", self.redis_url, "--name", f"w{k}"]
         self.procs[f"w{k}"] = subprocess.Popen(
-            cmd, cwd=REPO, env=self.env, stdout=self.log, stderr=subprocess.STDOUT
+            cmd, cwd=REPO, env=self.env | self.worker_env, stdout=self.log, stderr=subprocess.STDOUT
         )
 
     def start(self) -> None:
@@ -200,14 +208,39 @@ def engine_children(pid: int) -> list[int]:
     return out
 
 
-def scenario(name: str, n_jobs: int, budget: float) -> dict[str, Any]:
+def job_log_facts(http: httpx.Client, job: str) -> dict[str, int]:
+    """From a job's whole event log read back at the end: terminal events beyond the first, and
+    events after the last ``started`` that carry another attempt."""
+    events = http.get(f"/v1/jobs/{job}/events").json()
+    terminals = sum(1 for e in events if e["type"] in ("done", "failed", "cancelled"))
+    starts = [i for i, e in enumerate(events) if e["type"] == "started"]
+    stale = 0
+    if starts:
+        attempt = events[starts[-1]].get("attempt")
+        stale = sum(1 for e in events[starts[-1] :] if e.get("attempt") != attempt)
+    return {"duplicate_terminals": max(terminals - 1, 0), "stale_events": stale}
+
+
+def freeze(pid: int, sig: signal.Signals) -> list[int]:
+    """Send ``sig`` (SIGSTOP, SIGCONT) to a worker and its engine processes; returns their pids."""
+    pids = [pid, *engine_children(pid)]
+    for p in pids:
+        os.kill(p, sig)
+    return pids
+
+
+def scenario(name: str, n_jobs: int, budget: float, hang_s: float = 8.0) -> dict[str, Any]:
     redis_mode = {
         "redis_worker_kill": "plain",
         "redis_restart_no_persistence": "plain",
         "redis_restart_aof": "aof",
+        "redis_worker_hang": "plain",
     }
+    # a hung worker: its heartbeat expires after 2 s, entries idle 4 s are taken over
+    hung = {"SEGUE_HEARTBEAT_TTL_S": "2", "SEGUE_RECLAIM_IDLE_S": "4"}
+    worker_env = hung if name == "redis_worker_hang" else None
     root = Path(tempfile.mkdtemp(prefix=f"segue-faults-{name}-"))
-    top = Topology(root, redis_mode.get(name), workers=2)
+    top = Topology(root, redis_mode.get(name), workers=2, worker_env=worker_env)
     try:
         top.start()
         http = httpx.Client(base_url=top.url, timeout=30)
@@ -247,8 +280,16 @@ def scenario(name: str, n_jobs: int, budget: float) -> dict[str, Any]:
             top.procs["api"].kill()
             top.procs["api"].wait()
             top.start_api()
+        elif name == "redis_worker_hang":
+            frozen = freeze(top.procs["w0"].pid, signal.SIGSTOP)
+            time.sleep(hang_s)
+            for pid in frozen:
+                os.kill(pid, signal.SIGCONT)
         for f in followers:
             f.join(240)
+        if name == "redis_worker_hang":
+            time.sleep(2.0)  # the resumed worker's buffered events, had they been published
+        facts = [job_log_facts(http, j) for j in jobs]
         http.close()
         summaries = [f.summary() for f in followers]
         after = [t for f in followers for t, _ in f.events if t > fault_at]
@@ -257,6 +298,8 @@ def scenario(name: str, n_jobs: int, budget: float) -> dict[str, Any]:
             "jobs_lost": sum(1 for s in summaries if s["end"] != "done"),
             "events_lost": sum(s["events_lost"] for s in summaries),
             "duplicate_executions": sum(s["duplicate"] for s in summaries),
+            "duplicate_terminals": sum(f["duplicate_terminals"] for f in facts),
+            "stale_events": sum(f["stale_events"] for f in facts),
             "reruns": sum(s["reruns"] for s in summaries),
             "recovery_s": round(min(after) - fault_at, 2) if after else None,
         }
@@ -271,6 +314,7 @@ SCENARIOS = (
     "redis_restart_no_persistence",
     "redis_restart_aof",
     "api_restart",
+    "redis_worker_hang",
 )
 
 
@@ -278,9 +322,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--jobs", type=int, default=4)
     ap.add_argument("--budget", type=float, default=2.0)
+    ap.add_argument("--hang", type=float, default=8.0, help="seconds a hung worker stays stopped")
     ap.add_argument("--only", default=",".join(SCENARIOS))
     args = ap.parse_args()
-    out = {name: scenario(name, args.jobs, args.budget) for name in args.only.split(",") if name}
+    out = {name: scenario(name, args.jobs, args.budget, args.hang) for name in args.only.split(",") if name}
     print(json.dumps(out))
 
 

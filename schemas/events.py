@@ -35,6 +35,11 @@ class JobEvent(BaseModel):
     ``"budget"`` when the ``budget_s`` cap cut it short (the answer may differ from an unhurried
     run's), ``"cancelled"``, or ``"time_limit"`` when the supervisor stopped a job that overran);
     ``failed`` ``{"error": {"code", "message"}}``.
+
+    ``attempt`` is the run of the job that published the event (its fencing token): 0 before any
+    run started (``queued``, a cancel while queued), then the attempt each ``started`` event opens,
+    1, 2...; a run that lost the job to a later attempt (a worker that hung past the reclaim time)
+    publishes nothing more, so every event after a ``started`` carries that start's attempt.
     """
 
     id: int = Field(ge=1)
@@ -42,3 +47,4 @@ class JobEvent(BaseModel):
     type: EventType
     time: float = Field(description="unix time, seconds")
     data: dict[str, Any] = Field(default_factory=dict)
+    attempt: int = Field(default=0, ge=0, description="the run that published it (0: before any run)")

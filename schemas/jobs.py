@@ -102,6 +102,7 @@ class JobInfo(Strict):
     result: str | None = Field(default=None, description="id of the best result so far")
     error: str | None = None
     last_event: int = Field(default=0, description="id of the newest event")
+    attempt: int = Field(default=0, ge=0, description="the run holding the job (its latest `started`)")
     owner: str | None = Field(default=None, description="the principal that submitted the job")
 
 

@@ -180,7 +180,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 def run(
     host: str = "127.0.0.1", port: int = 8000, settings: Settings | None = None, log_level: str = "info"
 ) -> None:
-    """Serve the API with uvicorn in this process (the embedded backend spawns its own workers)."""
-    import uvicorn
+    """Serve the API with uvicorn in this process (the embedded backend spawns its own workers),
+    with the request timeout and connection limit of :mod:`service.server`."""
+    from .server import serve
 
-    uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level)
+    settings = settings or get_settings()
+    serve(create_app(settings), settings, host, port, log_level)

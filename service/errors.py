@@ -12,10 +12,14 @@ exception                                  status  code
 ``schemas.jobs.RequestError``              422     ``invalid_request``
 ``engines.registry.UnavailableError``      422     ``unavailable``
 ``workers.backend.BackendUnavailable``     503     ``backend_unavailable`` (+ ``Retry-After``)
+``OSError``: a full disk or quota            507     ``storage_full`` (``ENOSPC``, ``EDQUOT``, ``EFBIG``)
+``OSError``: a read-only store              507     ``storage_read_only`` (``EROFS``)
+``OSError``: an unreachable store           507     ``storage_unavailable`` (``EIO``, ``ESTALE``,
+                                                    ``workers.storage_errors.StoreUnavailable``...)
 :class:`ApiError`                          its own (413 ``too_large``, 409 ``database_not_ready``...)
 ``HTTPException`` (routing: 404)           its own ``http_<status>``
 ``HTTPException`` (routing: 405)           405     ``method_not_allowed`` (+ ``Allow``: every method)
-anything else                              500     ``internal`` (a bug; logged)
+anything else (any other ``OSError`` too) 500     ``internal`` (a bug; logged)
 =========================================  ======  =====================
 """
 
@@ -36,6 +40,7 @@ from motion import MotionError
 from schemas import ErrorBody, ErrorResponse
 from schemas.jobs import RequestError
 from workers.backend import BackendUnavailable
+from workers.storage_errors import storage_problem
 from workers.store import NotFoundError
 
 log = logging.getLogger("segue.service")
@@ -177,7 +182,21 @@ async def _backend_unavailable(request: Request, exc: Exception) -> JSONResponse
     )
 
 
+async def _storage(request: Request, exc: Exception) -> JSONResponse:
+    """507 for a storage failure (:func:`workers.storage_errors.storage_problem`), else 500."""
+    problem = storage_problem(exc)
+    if problem is None:
+        return await _internal(request, exc)
+    code, message = problem
+    log.error("%s %s: %s (%s)", request.method, request.url.path, message, exc)
+    return error_response(507, code, message, headers={"Retry-After": "60"})
+
+
 async def _internal(request: Request, exc: Exception) -> JSONResponse:
+    problem = storage_problem(exc)  # raised from within another error (e.g. an ExceptionGroup)
+    if problem is not None:
+        log.error("%s %s: %s (%s)", request.method, request.url.path, problem[1], exc)
+        return error_response(507, *problem, headers={"Retry-After": "60"})
     log.exception("unhandled error on %s %s", request.method, request.url.path, exc_info=exc)
     return error_response(500, "internal", f"internal error ({type(exc).__name__}); see the server log")
 
@@ -193,6 +212,7 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(UnavailableError, _unavailable)
     app.add_exception_handler(BackendUnavailable, _backend_unavailable)
     app.add_exception_handler(StarletteHTTPException, _http_error)
+    app.add_exception_handler(OSError, _storage)
     app.add_exception_handler(Exception, _internal)
 
 
@@ -209,6 +229,7 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
         422: "the request is invalid (details lists each problem)",
         429: "too many unfinished jobs or live sessions for this principal (see Retry-After)",
         503: "the job backend cannot take jobs now (see Retry-After); nothing was stored",
+        507: "the server's storage is full, read-only or unreachable; nothing was stored",
     }.items()
 }
 """OpenAPI error responses (all :class:`~schemas.ErrorResponse`), picked per route."""
@@ -217,7 +238,8 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
 def responses(
     *statuses: int, extra: dict[int, dict[str, Any]] | None = None
 ) -> dict[int | str, dict[str, Any]]:
-    """The OpenAPI ``responses`` entry for the given error statuses (plus ``extra`` entries)."""
+    """The OpenAPI ``responses`` entry for the given error statuses (plus ``extra`` entries); every
+    route may answer 507 (its storage failed)."""
     out: dict[int | str, dict[str, Any]] = {k: v for k, v in (extra or {}).items()}
-    out.update({s: ERROR_RESPONSES[s] for s in statuses})
+    out.update({s: ERROR_RESPONSES[s] for s in (*statuses, 507)})
     return out

@@ -136,11 +136,16 @@ class EventHub:
         return True
 
     def make_event(
-        self, job_id: str, type_: EventType, data: dict[str, Any], when: float | None = None
+        self, job_id: str, type_: EventType, data: dict[str, Any], when: float | None = None, attempt: int = 0
     ) -> JobEvent:
-        """The next event of a job (id = last id + 1)."""
+        """The next event of a job (id = last id + 1), published by run ``attempt``."""
         return JobEvent(
-            id=self.log(job_id).last_id + 1, job=job_id, type=type_, time=when or time.time(), data=data
+            id=self.log(job_id).last_id + 1,
+            job=job_id,
+            type=type_,
+            time=when or time.time(),
+            data=data,
+            attempt=attempt,
         )
 
     async def set_exhausted(self, job_id: str, exhausted: bool = True) -> None:

@@ -9,6 +9,11 @@ Recovery (the store's job records are the source of truth):
 * a child that dies (SIGKILL, the OOM killer) is replaced at once and its job re-run, with a new
   ``started`` event (``attempt`` n) and the same event ids, up to ``max_attempts`` runs
   (then ``failed`` with code ``worker_lost``); the other processes and jobs are not touched;
+* every event carries the attempt of the run that published it (0 before any run), and only the
+  job's current run is recorded (the supervisor also drops a replaced child's late messages), as
+  the Redis backend's fence does across hosts (:mod:`workers.fencing`);
+* a build's terminal event leaves its database ``ready`` or ``failed`` with the reason
+  (:func:`workers.records.settle_database`);
 * at start-up, jobs a previous server process left ``queued`` or ``running`` are queued again, their
   events replayed from ``events.jsonl`` so clients resume with ``after=`` where they were;
 * the supervisor kills a job that ignores its cancel for ``cancel_grace_s``, runs past its time limit
@@ -35,6 +40,7 @@ from schemas.jobs import JobKind
 from .backend import BackendUnavailable, EventHub, JobNotFinished
 from .budget import shortfall
 from .execute import apply_event
+from .records import settle_database
 from .settings import Settings
 from .store import NotFoundError, Store
 from .supervisor import (
@@ -94,6 +100,8 @@ class EmbeddedBackend:
         self._processes: list[EngineProcess] = []
         self._queue: deque[Task] = deque()
         self._running: dict[str, Task] = {}
+        self._attempts: dict[str, int] = {}
+        """The current run of each job (its latest dispatched attempt): only its events are recorded."""
         self._closing = False
         self.reruns = 0
 
@@ -147,6 +155,7 @@ class EmbeddedBackend:
                 await self._fail(info.id, "lost", "the job's request is missing from the store")
                 continue
             attempts = sum(1 for e in self.hub.log(info.id).events if e.type == EventType.started)
+            self._attempts[info.id] = attempts
             if attempts >= self.max_attempts:
                 await self._fail(
                     info.id, "worker_lost", f"the job was started {attempts} times and never ended"
@@ -183,6 +192,7 @@ class EmbeddedBackend:
                 task = self._queue.popleft()
                 if process.run(task):
                     self._running[task.job_id] = task
+                    self._attempts[task.job_id] = task.attempt
                 else:
                     self._queue.appendleft(task)
 
@@ -194,7 +204,7 @@ class EmbeddedBackend:
             short = shortfall(self.store, task.job_id, task.payload, data.get("result"))
             if short is not None:
                 data = {**data, "short": short}
-        self._call(self._record(task.job_id, type_, data, when))
+        self._call(self._record(task.job_id, type_, data, when, attempt=task.attempt))
 
     def _on_loop(self, start: Any) -> None:
         """Watch thread: start a child from the event loop's thread (the server's main thread)."""
@@ -260,27 +270,28 @@ class EmbeddedBackend:
         await self._record(
             job_id, EventType.failed, {"error": {"code": code, "message": message}}, time.time()
         )
-        info = self.store.job_info(job_id)
-        if info.kind == JobKind.build and info.database:
-            try:
-                db = self.store.database_info(info.database)
-            except NotFoundError:
-                return
-            if db.status in (DatabaseStatus.queued, DatabaseStatus.building):
-                self.store.put_database_info(
-                    db.model_copy(update={"status": DatabaseStatus.failed, "error": message})
-                )
 
     async def _record(
-        self, job_id: str, type_: EventType, data: dict[str, Any], when: float
+        self, job_id: str, type_: EventType, data: dict[str, Any], when: float, attempt: int | None = None
     ) -> JobEvent | None:
+        """Record an event of run ``attempt`` (None: the backend's own, for the current run);
+        refused when the job already ended or another run holds it."""
         if self.hub.log(job_id).terminal:
             return None  # exactly one terminal event, nothing after it
-        event = self.hub.make_event(job_id, type_, data, when)
+        current = self._attempts.get(job_id, 0)
+        if attempt is not None and attempt != current:
+            log.warning(
+                "job %s: %s of attempt %d refused (%d holds it)", job_id, type_.value, attempt, current
+            )
+            return None
+        event = self.hub.make_event(job_id, type_, data, when, attempt=current)
         await self.hub.append(event)
         self.store.append_event(job_id, event.model_dump_json())
         info = apply_event(self.store.job_info(job_id), type_, data, event.id)
         self.store.put_job(info)
+        if type_.terminal:
+            self._attempts.pop(job_id, None)
+            settle_database(self.store, info, event)
         return event
 
     # -- the backend protocol ---------------------------------------------------------------------

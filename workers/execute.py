@@ -331,6 +331,8 @@ def apply_event(info: JobInfo, event_type: EventType, data: dict[str, Any], even
     update: dict[str, Any] = {"last_event": event_id}
     if event_type == EventType.started:
         update.update(status=JobStatus.running, started_at=now())
+        if isinstance(data.get("attempt"), int):
+            update["attempt"] = data["attempt"]
     elif event_type == EventType.solution:
         update["result"] = data.get("result")
     elif event_type in (EventType.done, EventType.cancelled):

@@ -44,11 +44,17 @@ class EventWriter:
     ):
         self.job_id, self.sink, self.echo = job_id, sink, echo
         self.count = 0
+        self.attempt = 0
+        """The run publishing (1 from its ``started`` on: a local job runs once), as in the service."""
         self.events: list[JobEvent] = []
 
     def __call__(self, type_: EventType, data: dict[str, Any]) -> None:
         self.count += 1
-        event = JobEvent(id=self.count, job=self.job_id, type=type_, time=time.time(), data=data)
+        if type_ == EventType.started:
+            self.attempt += 1
+        event = JobEvent(
+            id=self.count, job=self.job_id, type=type_, time=time.time(), data=data, attempt=self.attempt
+        )
         self.events.append(event)
         if self.sink is not None:
             self.sink.write(event.model_dump_json() + "\n")

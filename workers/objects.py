@@ -45,16 +45,14 @@ from pathlib import Path
 from typing import Any, BinaryIO, Protocol, cast
 from urllib.parse import urlparse
 
+from .storage_errors import StoreUnavailable as StoreUnavailable  # the API answers it with 507
+
 KEY_RE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9._\-]*(/[A-Za-z0-9_\-][A-Za-z0-9._\-]*)*$")
 """Object keys: relative, ``/``-separated, no empty, dot-led or ``..`` parts."""
 
 
 class ObjectNotFound(LookupError):
     """No object under that key."""
-
-
-class StoreUnavailable(OSError):
-    """The object store cannot be reached or refused the request (not a missing object)."""
 
 
 def check_key(key: str) -> str:

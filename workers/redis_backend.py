@@ -10,7 +10,8 @@ best result, every job ends with exactly one of ``done``/``failed``/``cancelled`
 - **status**: the JobInfo in Redis, else the store's ``info.json`` (kept in step by every publisher).
 - **cancel**: ``SET segue:cancel:<job> 1 EX``; the worker's ``should_stop`` sees it within ~50 ms and
   the job ends ``cancelled`` with its best result. A job still queued ends ``cancelled`` at once (the
-  worker that later receives it finds the terminal marker and skips it).
+  worker that later receives it finds the terminal marker and skips it); the API's ``cancelled`` is
+  published with attempt 0, so it is refused if a run started meanwhile (that run ends it).
 - **events**: one reader task per job per API process ``XRANGE``\\ s the job's stream after the hub's
   last event id (entry ids are ``<event id>-0``), then follows it until the terminal event, appending
   to the :class:`~workers.backend.EventHub`; any number of sockets follow the hub. The blocking part
@@ -47,6 +48,7 @@ import redis.asyncio as aredis
 from schemas import EventType, JobEvent, JobInfo, JobStatus
 
 from .backend import BackendUnavailable, EventHub, JobLog, JobNotFinished
+from .fencing import StaleAttempt
 from .redis_events import (
     RETENTION_S,
     AsyncEventPublisher,
@@ -125,9 +127,11 @@ class RedisBackend:
 
     async def close(self) -> None:
         if self._reconciler is not None:
-            self._reconciler.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._reconciler
+            # cancelled until it ends: a cancel that lands inside a Redis call can be swallowed
+            # there (seen once: the loop went on and close() waited for ever)
+            while not self._reconciler.done():
+                self._reconciler.cancel()
+                await asyncio.wait({self._reconciler}, timeout=1.0)
             self._reconciler = None
         readers = list(self._readers.values())
         for task in readers:
@@ -292,8 +296,10 @@ class RedisBackend:
         await client.set(self.keys.cancel(job_id), "1", ex=self.cancel_ttl_s)
         if info.status == JobStatus.queued:
             # no worker has it yet: end it now; a worker receiving it later finds the terminal marker
+            # (attempt 0: refused once a run started; that run sees the cancel flag and ends itself)
             floor = self.hub.log(job_id).last_id if self.hub.has(job_id) else 0
-            await publisher.publish(job_id, EventType.cancelled, {"result": info.result}, floor=floor)
+            with contextlib.suppress(StaleAttempt):
+                await publisher.publish(job_id, EventType.cancelled, {"result": info.result}, floor=floor)
         return await self.status(job_id)
 
     async def delete(self, job_id: str) -> None:

@@ -1,25 +1,30 @@
 """Publishing job events through Redis: one protocol for the API (asyncio) and the workers (threads).
 
-Publishing one event is one optimistic transaction (``WATCH`` the job's counter, status and terminal
-marker; ``MULTI``/``EXEC``; retried if another process published in between):
+Publishing one event is one optimistic transaction (``WATCH`` the job's counter, status, terminal
+marker and attempt; ``MULTI``/``EXEC``; retried if another process published in between):
 
 1. if the terminal marker ``segue:job:<job>:terminal`` exists, the event is dropped: nothing follows
    a terminal event, and a job's terminal event is published exactly once;
-2. the id is ``INCR segue:events:<job>:seq``: contiguous 1, 2, 3... whichever process publishes (a
+2. the fence (:mod:`workers.fencing`): a run publishes only while ``segue:job:<job>:attempt`` holds
+   its attempt, else :class:`~workers.fencing.StaleAttempt` is raised and nothing is written (the
+   key is watched, so a run taking the job between the check and ``EXEC`` makes the transaction
+   fail and the check run again); the event carries the attempt;
+3. the id is ``INCR segue:events:<job>:seq``: contiguous 1, 2, 3... whichever process publishes (a
    lost counter restarts after the stream's last entry or the last id the publisher saw, so a flushed
    Redis never reuses ids clients already have);
-3. a terminal event sets the marker (``SET NX``) in the same transaction;
-4. ``XADD segue:events:<job> MAXLEN ~ 10000 <id>-0 event <JobEvent JSON>``: the entry id *is* the
+4. a terminal event sets the marker (``SET NX``) in the same transaction;
+5. ``XADD segue:events:<job> MAXLEN ~ 10000 <id>-0 event <JobEvent JSON>``: the entry id *is* the
    event id, so resuming after event ``N`` is ``XRANGE N+1-0 +`` then ``XREAD`` from ``N-0``;
-5. the job's JobInfo, folded with :func:`workers.execute.apply_event`, is written in the same
+6. the job's JobInfo, folded with :func:`workers.execute.apply_event`, is written in the same
    transaction, so a client that sees an event also sees the status after it;
-6. once terminal, the stream, counter, marker and status expire after the retention period.
+7. once terminal, the stream, counter, marker, attempt and status expire after the retention period.
 
 After the transaction the JobInfo is also written to the store's ``info.json`` when the status
 changes (``queued``, ``started``, the terminal event; not for every progress or solution event, which
-would cost a file write each), and the process that published the terminal event archives the whole
-stream to the store's ``events.jsonl`` (the file the embedded backend writes), so finished jobs
-replay after Redis forgot them.
+would cost a file write each; never backwards, :func:`workers.records.put_job_record`), and the
+process that published the terminal event archives the whole stream to the store's ``events.jsonl``
+(the file the embedded backend writes), so finished jobs replay after Redis forgot them, and settles
+a build's database record (:func:`workers.records.settle_database`).
 """
 
 from __future__ import annotations
@@ -36,6 +41,8 @@ import redis.asyncio as aredis
 from schemas import EventType, JobEvent, JobInfo
 
 from .execute import apply_event
+from .fencing import StaleAttempt
+from .records import put_job_record, settle_database
 from .redis_keys import EVENTS_MAXLEN, RedisKeys
 from .store import NotFoundError, Store
 
@@ -94,6 +101,26 @@ class _Plan:
     event: JobEvent
     info: JobInfo | None
     recovered: bool  # the counter was lost: SET it instead of INCR
+    restore_attempt: bool = False  # the attempt key was lost: SET it back to the event's attempt
+
+
+def fenced_attempt(job_id: str, attempt: int | None, current: str | None) -> tuple[int, bool]:
+    """The attempt an event carries and whether the attempt key must be restored, given the key's
+    ``current`` value; raises :class:`StaleAttempt` when the publisher's ``attempt`` is not the
+    job's. ``attempt``: a run's token; 0 only before any run started; None for whichever run holds
+    the job (a dead letter)."""
+    held = int(current) if current is not None else None
+    if attempt is None:
+        return held or 0, False
+    if attempt == 0:
+        if held:
+            raise StaleAttempt(job_id, 0, held)
+        return 0, False
+    if held is None:
+        return attempt, True  # Redis lost the key: a run still publishing puts it back
+    if held != attempt:
+        raise StaleAttempt(job_id, attempt, held)
+    return attempt, False
 
 
 def _plan(
@@ -106,12 +133,13 @@ def _plan(
     job: str | None,
     last_entry: str | None,
     floor: int,
+    attempt: int = 0,
 ) -> _Plan:
     if seq is None:
         event_id = max(int(last_entry.split("-")[0]) if last_entry else 0, floor) + 1
     else:
         event_id = int(seq) + 1
-    event = JobEvent(id=event_id, job=job_id, type=type_, time=when, data=data)
+    event = JobEvent(id=event_id, job=job_id, type=type_, time=when, data=data, attempt=attempt)
     try:
         current = JobInfo.model_validate_json(job) if job else store.job_info(job_id)
     except NotFoundError:
@@ -123,6 +151,8 @@ def _plan(
 def _queue(pipe: Any, keys: RedisKeys, plan: _Plan, maxlen: int, retention_s: int) -> None:
     """Queue the writes of one event in a MULTI block (sync or asyncio pipeline)."""
     event, job_id = plan.event, plan.event.job
+    if plan.restore_attempt:
+        pipe.set(keys.attempt(job_id), event.attempt)
     if plan.recovered:
         pipe.set(keys.event_seq(job_id), event.id)
     else:
@@ -143,7 +173,7 @@ def _queue(pipe: Any, keys: RedisKeys, plan: _Plan, maxlen: int, retention_s: in
             ex=retention_s if plan.info.status.finished else None,
         )
     if event.type.terminal:
-        for key in (keys.event_seq(job_id), keys.events(job_id), keys.terminal(job_id)):
+        for key in (keys.event_seq(job_id), keys.events(job_id), keys.terminal(job_id), keys.attempt(job_id)):
             pipe.expire(key, retention_s)
 
 
@@ -163,16 +193,20 @@ class _Publisher(Generic[Client]):
         self.maxlen, self.retention_s = maxlen, retention_s
 
     def _watched(self, job_id: str) -> list[str]:
-        """The job's event counter, status and terminal marker (a publish is optimistic on them)."""
-        return [self.keys.event_seq(job_id), self.keys.job(job_id), self.keys.terminal(job_id)]
+        """The job's event counter, status, terminal marker and attempt (a publish is optimistic
+        on them)."""
+        keys = self.keys
+        return [keys.event_seq(job_id), keys.job(job_id), keys.terminal(job_id), keys.attempt(job_id)]
 
     def _recorded(self, plan: _Plan, entries: Entries | None) -> None:
-        """After the transaction: the store's status when it changed, and the archive of a
-        finished job's events (``entries``, read when the event is terminal)."""
+        """After the transaction: the store's status when it changed, the archive of a finished
+        job's events (``entries``, read when the event is terminal) and its database's record."""
         if plan.info is not None and plan.event.type in DISK_STATUS_EVENTS:
-            self.store.put_job(plan.info)
+            put_job_record(self.store, plan.info)
         if entries is not None:
             archive_events(self.store, plan.event.job, entries)
+            if plan.info is not None:
+                settle_database(self.store, plan.info, plan.event)
 
 
 class EventPublisher(_Publisher[redis.Redis]):
@@ -190,27 +224,35 @@ class EventPublisher(_Publisher[redis.Redis]):
         self._last: dict[str, int] = {}  # last event id published per running job (survives a flush)
 
     def publish(
-        self, job_id: str, type_: EventType, data: dict[str, Any], when: float | None = None
+        self,
+        job_id: str,
+        type_: EventType,
+        data: dict[str, Any],
+        when: float | None = None,
+        attempt: int | None = None,
     ) -> JobEvent | None:
-        """Publish one event; returns it, or None when dropped (the job already has its terminal event)."""
+        """Publish one event of run ``attempt`` (see :func:`fenced_attempt`); returns it, or None
+        when dropped (the job already has its terminal event). Raises
+        :class:`~workers.fencing.StaleAttempt` when another run holds the job."""
         keys, when = self.keys, when or time.time()
         watched = self._watched(job_id)
         with self.client.pipeline() as pipe:
             while True:
                 try:
                     pipe.watch(*watched)  # type: ignore[no-untyped-call]
-                    seq, job, terminal = cast(list[str | None], pipe.mget(watched))
+                    seq, job, terminal, current = cast(list[str | None], pipe.mget(watched))
                     if terminal is not None:
                         self._last.pop(job_id, None)
                         log.info("job %s: %s dropped, the job already ended", job_id, type_.value)
                         return None
+                    stamp, restore = fenced_attempt(job_id, attempt, current)
                     last = None
                     if seq is None:
                         tail = cast(list[tuple[str, Any]], pipe.xrevrange(keys.events(job_id), count=1))
                         last = tail[0][0] if tail else None
-                    plan = _plan(
-                        self.store, job_id, type_, data, when, seq, job, last, self._last.get(job_id, 0)
-                    )
+                    floor = self._last.get(job_id, 0)
+                    plan = _plan(self.store, job_id, type_, data, when, seq, job, last, floor, stamp)
+                    plan.restore_attempt = restore
                     pipe.multi()
                     _queue(pipe, keys, plan, self.maxlen, self.retention_s)
                     pipe.execute()
@@ -234,11 +276,19 @@ class AsyncEventPublisher(_Publisher[aredis.Redis]):
     """Publishes events from the API process (``redis.asyncio`` client, ``decode_responses=True``)."""
 
     async def publish(
-        self, job_id: str, type_: EventType, data: dict[str, Any], when: float | None = None, floor: int = 0
+        self,
+        job_id: str,
+        type_: EventType,
+        data: dict[str, Any],
+        when: float | None = None,
+        floor: int = 0,
+        attempt: int | None = 0,
     ) -> JobEvent | None:
         """Publish one event; returns it, or None when dropped (the job already has its terminal event).
 
         ``floor``: the last event id this process knows of (used only if Redis lost the counter).
+        ``attempt``: 0 (the API's events: ``queued``, a cancel while queued) raises
+        :class:`~workers.fencing.StaleAttempt` once a run started.
         """
         keys, when = self.keys, when or time.time()
         watched = self._watched(job_id)
@@ -246,14 +296,16 @@ class AsyncEventPublisher(_Publisher[aredis.Redis]):
             while True:
                 try:
                     await pipe.watch(*watched)
-                    seq, job, terminal = cast(list[str | None], await pipe.mget(watched))
+                    seq, job, terminal, current = cast(list[str | None], await pipe.mget(watched))
                     if terminal is not None:
                         return None
+                    stamp, restore = fenced_attempt(job_id, attempt, current)
                     last = None
                     if seq is None:
                         tail = cast(Entries, await pipe.xrevrange(keys.events(job_id), count=1))
                         last = tail[0][0] if tail else None
-                    plan = _plan(self.store, job_id, type_, data, when, seq, job, last, floor)
+                    plan = _plan(self.store, job_id, type_, data, when, seq, job, last, floor, stamp)
+                    plan.restore_attempt = restore
                     pipe.multi()  # type: ignore[no-untyped-call]
                     _queue(pipe, keys, plan, self.maxlen, self.retention_s)
                     await pipe.execute()

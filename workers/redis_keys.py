@@ -6,6 +6,7 @@ Queue (a Redis with ``maxmemory-policy noeviction``)::
     segue:jobs:dead              dead letters: jobs delivered more than ``max_deliveries`` times
     segue:job:<job>              JobInfo JSON (status is a fold over the job's events)
     segue:job:<job>:terminal     SET NX by whoever publishes the job's terminal event (exactly once)
+    segue:job:<job>:attempt      the run holding the job, its fencing token (:mod:`workers.fencing`)
     segue:events:<job>           the job's events, entry id ``<event id>-0``, field ``event`` = JobEvent JSON
     segue:events:<job>:seq       INCR gives the next event id: 1 (``queued``, by the API), 2, 3...
     segue:cancel:<job>           cancel flag (SET EX), polled by the worker through ``should_stop``
@@ -59,6 +60,9 @@ class RedisKeys:
 
     def terminal(self, job_id: str) -> str:
         return f"{self.prefix}job:{job_id}:terminal"
+
+    def attempt(self, job_id: str) -> str:
+        return f"{self.prefix}job:{job_id}:attempt"
 
     def cancel(self, job_id: str) -> str:
         return f"{self.prefix}cancel:{job_id}"

@@ -21,6 +21,11 @@ Protocol (key names in :mod:`workers.redis_keys`):
   event, :mod:`workers.redis_events`); a delivered job that already ended (terminal marker in Redis or
   a finished status on disk) is acked and skipped. A job re-run after its worker died publishes a
   second ``started`` (its data names the worker and the attempt) and continues the same event ids.
+- **Fencing.** Each run takes the job's next attempt (:mod:`workers.fencing`) before it starts; its
+  events are published only while it holds it, its engine process checks it before every write and
+  stops its search once it is lost. A worker that hung past ``reclaim_idle_s`` (SIGSTOP, a frozen
+  VM) and resumes finds its events refused: it cancels its run, publishes nothing and acks nothing
+  (acks only ever remove an entry this worker still owns).
 - **Cancel.** ``should_stop`` checks ``segue:cancel:<job>`` (and the terminal marker) at most every
   50 ms; :func:`workers.execute.execute_job` then publishes ``cancelled`` with the best result so far.
 - **Databases.** Memory-mapped from the worker's local copy (:meth:`~workers.store.Store.database_dir`:
@@ -57,6 +62,7 @@ from engines.registry import warm_compiled
 from schemas import DatabaseStatus, EventType
 
 from .budget import shortfall
+from .fencing import ACQUIRE_LUA, StaleAttempt
 from .redis_events import EventPublisher
 from .redis_keys import DEAD_MAXLEN, RedisKeys
 from .settings import Settings
@@ -89,6 +95,15 @@ return 0
 _RELEASE_LUA = """
 if redis.call('GET', KEYS[1]) == ARGV[1] then return redis.call('DEL', KEYS[1]) end
 return 0
+"""
+# Ack and delete an entry only while it is pending for us (a worker that hung and lost the entry to
+# another worker must not remove it from under that worker).
+_ACK_LUA = """
+local p = redis.call('XPENDING', KEYS[1], ARGV[1], ARGV[3], ARGV[3], 1)
+if #p == 0 or p[1][2] ~= ARGV[2] then return 0 end
+redis.call('XACK', KEYS[1], ARGV[1], ARGV[3])
+redis.call('XDEL', KEYS[1], ARGV[3])
+return 1
 """
 
 Entry = tuple[str, dict[str, str], int]
@@ -139,6 +154,7 @@ class Worker:
             cache_dir=str(self.store.root),
             disk_cache_bytes=s.disk_cache_mb << 20,
             cache_max_object_bytes=s.cache_max_object_mb << 20,
+            fence_url=redis_url,
         )
         self.engine = EngineProcess(
             self.name,
@@ -152,6 +168,8 @@ class Worker:
         self._touch = self.client.register_script(_TOUCH_LUA)
         self._extend = self.client.register_script(_EXTEND_LUA)
         self._release = self.client.register_script(_RELEASE_LUA)
+        self._ack_owned = self.client.register_script(_ACK_LUA)
+        self._acquire_lua = self.client.register_script(ACQUIRE_LUA)
         self._running: _Running | None = None
         self._stop = threading.Event()
         self._next_reclaim = 0.0
@@ -362,10 +380,17 @@ class Worker:
         self._ack(entry_id)
 
     def _ack(self, entry_id: str) -> None:
-        with self.client.pipeline(transaction=True) as pipe:
-            pipe.xack(self.keys.jobs, self.keys.group, entry_id)
-            pipe.xdel(self.keys.jobs, entry_id)
-            pipe.execute()
+        """Ack and delete an entry if it is still pending for this worker."""
+        if not self._ack_owned(keys=[self.keys.jobs], args=[self.keys.group, self.name, entry_id]):
+            log.info("entry %s is no longer ours; not acknowledging it", entry_id)
+
+    def _acquire(self, job_id: str, floor: int, held: int | None = None) -> int:
+        """The job's next attempt (at least ``floor`` + 1 and above the store's record of it); 0 when
+        the job has ended, -1 when ``held`` is given and another run holds the job now."""
+        with contextlib.suppress(NotFoundError):
+            floor = max(floor, self.store.job_info(job_id).attempt)
+        keys = [self.keys.attempt(job_id), self.keys.terminal(job_id)]
+        return int(self._acquire_lua(keys=keys, args=[floor, "" if held is None else held]))
 
     # -- one job ---------------------------------------------------------------------------------
     def _finished(self, job_id: str) -> bool:
@@ -400,14 +425,21 @@ class Worker:
                 "its workers kept dying",
             )
             return
+        attempt = self._acquire(job_id, deliveries - 1)
+        if attempt <= 0:
+            log.info("job %s already ended; dropping its entry %s", job_id, entry_id)
+            self._ack(entry_id)
+            return
         self._running = _Running(entry_id, job_id, time.monotonic() + self._time_limit(kind, payload))
         try:
-            publish = self._publisher_for(job_id, deliveries)
-            should_stop = self._stop_check(job_id)
+            publish = self._publisher_for(job_id, attempt)
+            should_stop = self._stop_check(job_id, attempt)
             if kind == "build" and isinstance(payload.get("database"), str):
-                self._build(job_id, payload, publish, should_stop, deliveries)
+                self._build(job_id, payload, publish, should_stop, attempt)
             else:
-                self._supervised(job_id, kind, payload, deliveries)
+                self._supervised(job_id, kind, payload, attempt)
+        except StaleAttempt as exc:
+            log.warning("%s; this worker publishes nothing more of it", exc.message)
         finally:
             self._running = None
             self.publisher.forget(job_id)
@@ -420,6 +452,8 @@ class Worker:
         ``max_deliveries`` runs), a killed one gets its terminal event here."""
         while True:
             task, outcome, detail = self._run_once(job_id, kind, payload, attempt)
+            if task.stale:
+                return  # another run holds the job: nothing of this one is published
             if outcome == "finished":
                 if not task.terminal:
                     self._publish_safely(
@@ -431,7 +465,7 @@ class Worker:
             if task.terminal:
                 return
             if outcome == "crashed":
-                if self._stop_check(job_id)():
+                if self._stop_check(job_id, attempt)():
                     self._publish_safely(task, EventType.cancelled, {"result": task.best})
                     return
                 if attempt >= self.settings.max_deliveries:
@@ -440,7 +474,9 @@ class Worker:
                         task, EventType.failed, {"error": {"code": "worker_lost", "message": message}}
                     )
                     return
-                attempt += 1
+                attempt = self._acquire(job_id, attempt, held=attempt)
+                if attempt <= 0:
+                    return  # the job ended, or another run holds it
                 log.warning("job %s: %s; running it again (attempt %d)", job_id, detail, attempt)
                 continue
             type_, data = terminal_after_kill(outcome, task, detail)
@@ -457,7 +493,7 @@ class Worker:
         task.context = (self._publisher_for(job_id, attempt), done, ending)
         while not self.engine.run(task):  # the engine process is (re)starting
             self.engine.ready.wait(0.2)
-        stop = self._stop_check(job_id)
+        stop = self._stop_check(job_id, attempt)
         while not done.wait(self.settings.cancel_poll_s):
             if stop():
                 self.engine.cancel(job_id)
@@ -477,11 +513,20 @@ class Worker:
         done.set()
 
     def _publish_safely(self, task: Task, type_: EventType, data: dict[str, Any]) -> None:
+        """Publish an event of a run (retrying while Redis is away); a run that lost its job is
+        marked stale and stopped, and publishes nothing more."""
+        if task.stale:
+            return
         publish = task.context[0]
         deadline, backoff = time.monotonic() + self.settings.publish_retry_s, 0.1
         while True:
             try:
                 publish(type_, data)
+                return
+            except StaleAttempt as exc:
+                task.stale = True
+                log.warning("%s; stopping this run, it publishes nothing more", exc.message)
+                self.engine.cancel(task.job_id)
                 return
             except (redis.ConnectionError, redis.TimeoutError) as exc:
                 if time.monotonic() > deadline:
@@ -506,12 +551,14 @@ class Worker:
         def publish(type_: EventType, data: dict[str, Any]) -> None:
             if type_ == EventType.started:
                 data = {**data, "worker": self.name, "attempt": attempt}
-            self.publisher.publish(job_id, type_, data)
+            self.publisher.publish(job_id, type_, data, attempt=attempt)
 
         return publish
 
-    def _stop_check(self, job_id: str) -> Callable[[], bool]:
+    def _stop_check(self, job_id: str, attempt: int) -> Callable[[], bool]:
+        """True once the job is cancelled, has ended, or another run took it (polled)."""
         keys = (self.keys.cancel(job_id), self.keys.terminal(job_id))
+        attempt_key = self.keys.attempt(job_id)
         poll = self.settings.cancel_poll_s
         state = {"next": 0.0, "stop": False, "warned": False}
 
@@ -522,7 +569,11 @@ class Worker:
             if now >= state["next"]:
                 state["next"] = now + poll
                 try:
-                    state["stop"] = bool(self.client.exists(*keys))
+                    with self.client.pipeline(transaction=False) as pipe:
+                        pipe.exists(*keys)
+                        pipe.get(attempt_key)
+                        ended, held = pipe.execute()
+                    state["stop"] = bool(ended) or (held is not None and int(held) != attempt)
                     state["warned"] = False
                 except redis.RedisError as exc:
                     if not state["warned"]:  # once per outage, not every poll

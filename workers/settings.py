@@ -162,6 +162,19 @@ class Settings(BaseSettings):
         default=300.0, gt=0, description="how long a worker retries an event while Redis is away"
     )
     log_level: str = Field(default="INFO", description="log level of segue worker")
+    request_timeout_s: float = Field(
+        default=30.0,
+        gt=0,
+        description="segue serve: a client must send a request's headers within this many seconds "
+        "(of connecting, or of its previous response) and may not pause longer while sending a body; "
+        "its connection is closed otherwise",
+    )
+    max_connections: int = Field(
+        default=4096,
+        ge=1,
+        description="segue serve: open HTTP and WebSocket connections kept at once; one more is "
+        "answered 503 and closed at once (the open-files limit is raised to fit, when allowed)",
+    )
 
     @field_validator("api_tokens", "admins", "allowed_hosts", "cors_origins", mode="before")
     @classmethod

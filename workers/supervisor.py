@@ -62,6 +62,9 @@ class ChildConfig:
     store's directory when local, else ``./segue-data``."""
     disk_cache_bytes: int = 8 << 30
     cache_max_object_bytes: int = 64 << 20
+    fence_url: str | None = None
+    """The queue Redis holding the jobs' fencing tokens (:mod:`workers.fencing`): each task's writes
+    are checked against its attempt and its ``should_stop`` polls it; None (embedded): no fence."""
 
 
 @dataclass(slots=True)
@@ -80,6 +83,8 @@ class Task:
     """When the child started loading the job's database (timed apart from the job's limit)."""
     best: str | None = None
     terminal: bool = False
+    stale: bool = False
+    """The run lost its job to a later attempt (its events are refused; it is being stopped)."""
     context: Any = None
 
 
@@ -126,6 +131,18 @@ def _watch_parent(parent: int) -> None:
             os._exit(0)  # the worker is gone: nobody will read our events
 
 
+def _fence_client(config: ChildConfig) -> tuple[Any, Any] | None:
+    """The child's client of the queue Redis and its key names (None without ``fence_url``)."""
+    if not config.fence_url:
+        return None
+    import redis
+
+    from .redis_keys import RedisKeys
+
+    client = redis.Redis.from_url(config.fence_url, socket_timeout=2, socket_connect_timeout=2)
+    return client, RedisKeys(config.prefix)
+
+
 def _child_main(tasks: Connection, events: Connection, cancel: Any, config: ChildConfig, parent: int) -> None:
     import importlib
 
@@ -133,12 +150,13 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
 
     from .engine_cache import EngineCache
     from .execute import execute_job
-    from .store import Store
+    from .fencing import Fence, FencedStore
 
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="segue-parent-watch").start()
     tune_process()
     for module in config.plugins:
         importlib.import_module(module)
+    fence_client = _fence_client(config)
     object_cache = None
     if config.cache_url and config.cache_max_object_bytes > 0:
         import redis
@@ -152,7 +170,7 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
             chunk_size=config.chunk_size,
             max_object_bytes=config.cache_max_object_bytes,
         )
-    store = Store(
+    store = FencedStore(
         config.store_root,
         config.cache_dir,
         disk_cache_bytes=config.disk_cache_bytes,
@@ -168,12 +186,17 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
         if message is None:
             return
         seq, job_id, kind, payload, attempt = message
+        fence = None
+        if fence_client is not None:
+            client, keys = fence_client
+            fence = Fence(client, keys.attempt(job_id), job_id, attempt)
+        store.fence = fence
 
         def publish(type_: EventType, data: dict[str, Any], seq: int = seq) -> None:
             events.send(("event", seq, type_.value, data, time.time()))
 
-        def should_stop(seq: int = seq) -> bool:
-            return bool(cancel.value == seq)
+        def should_stop(seq: int = seq, fence: Fence | None = fence) -> bool:
+            return bool(cancel.value == seq) or (fence is not None and fence.lost())
 
         def on_load(loading: bool, seq: int = seq) -> None:
             events.send(("load", seq, loading, time.monotonic()))

@@ -12,9 +12,8 @@ from typing import Any
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    import uvicorn
-
     from service.app import create_app
+    from service.server import serve
     from workers.settings import get_settings, with_options
 
     settings = with_options(get_settings(), data_dir=args.data, redis_url=args.redis, workers=args.workers)
@@ -30,7 +29,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         import_databases(settings, [Path(d) for d in args.imports])
     if not args.no_warm and not settings.redis_url:
         start_warming()  # the embedded workers run jobs: compile their kernels off the request path
-    uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level)
+    serve(create_app(settings), settings, args.host, args.port, args.log_level)
     return 0
 
 
@@ -42,7 +41,7 @@ def import_databases(settings: Any, folders: list[Path]) -> None:
     from workers.imports import import_database_dir
     from workers.store import Store
 
-    store = Store(settings.data_dir)
+    store = Store.from_settings(settings)
     owners = [LOCAL, *(name for name, _ in token_table(settings))]
     for folder in folders:
         info, new = import_database_dir(store, folder, owners)

@@ -208,7 +208,8 @@ async def _ending(backend: JobBackend, job_id: str, after: int) -> tuple[JobEven
     if type_ == EventType.failed:
         data = {"error": {"code": "failed", "message": info.error or "the job failed"}}
     when = (info.finished_at or info.created_at).timestamp()
-    return JobEvent(id=info.last_event, job=job_id, type=type_, time=when, data=data), 1000, "finished"
+    event = JobEvent(id=info.last_event, job=job_id, type=type_, time=when, data=data, attempt=info.attempt)
+    return event, 1000, "finished"
 
 
 @router.websocket("/{job_id}/events")

@@ -208,10 +208,12 @@ def worker_thread(redis_url: str, store: Store, name: str, **fields: Any) -> Ite
             raise RuntimeError(f"worker thread {name} did not stop")
 
 
-def spawn_worker(redis_url: str, store: Store, name: str, **settings: str) -> subprocess.Popen[bytes]:
+def spawn_worker(
+    redis_url: str, store: Store, name: str, log: Path | None = None, **settings: str
+) -> subprocess.Popen[bytes]:
     """A ``segue worker`` process (heartbeat 0.2 s, TTL 1 s, 100-ms blocking reads; ``settings``:
     more :class:`workers.settings.Settings` fields as their ``SEGUE_*`` variables, e.g.
-    ``heartbeat_ttl_s="600"``)."""
+    ``heartbeat_ttl_s="600"``; its stderr appended to ``log`` when given)."""
     own = {"heartbeat_s": "0.2", "heartbeat_ttl_s": "1.0", "block_ms": "100", "log_level": "WARNING"}
     env = dict(
         os.environ,
@@ -221,7 +223,10 @@ def spawn_worker(redis_url: str, store: Store, name: str, **settings: str) -> su
     )
     env.update({f"SEGUE_{key.upper()}": value for key, value in {**own, **settings}.items()})
     cmd = [sys.executable, "-m", "service.cli", "worker", "--redis", redis_url, "--data", str(store.root)]
-    return subprocess.Popen([*cmd, "--name", name], env=env, cwd=REPO)
+    if log is None:
+        return subprocess.Popen([*cmd, "--name", name], env=env, cwd=REPO)
+    with log.open("ab") as sink:
+        return subprocess.Popen([*cmd, "--name", name], env=env, cwd=REPO, stderr=sink)
 
 
 @contextlib.contextmanager

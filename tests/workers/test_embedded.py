@@ -205,6 +205,11 @@ def test_a_killed_engine_process_is_replaced_and_its_job_run_again(tmp_path: Pat
     assert first_events[-1].type == EventType.done
     assert [e.data.get("attempt") for e in first_events if e.type == EventType.started] == [1, 2]
     assert [e.id for e in first_events] == list(range(1, len(first_events) + 1))
+    # every event carries the run that published it: 0 for queued, then each start's attempt
+    starts = [i for i, e in enumerate(first_events) if e.type == EventType.started]
+    assert first_events[0].attempt == 0
+    assert {e.attempt for e in first_events[starts[0] : starts[1]]} == {1}
+    assert {e.attempt for e in first_events[starts[1] :]} == {2}
     assert later_events[-1].type == EventType.done
     assert health["restarts"] == 1 and health["workers_ready"] == 1 and "error" not in health
 
