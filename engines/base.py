@@ -48,7 +48,7 @@ from schemas.bases import DatabaseSpecBase, JobRequestBase
 from schemas.databases import GraphKept
 from schemas.movement_graph import DerivedFrom, GraphEdits, MovementGraph, ResolvedEdit
 
-from . import container
+from . import container as container  # the database file format, for the store
 from .library import ClipInput as ClipInput  # a clip as read, for the runtime that reads them
 from .library import MotionLibrary as MotionLibrary  # what a database is built from
 from .library import build_library, library_from_arrays, library_to_arrays

@@ -26,7 +26,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
 
-from engines import container
+from engines.base import container
 
 
 class ObjectCache(Protocol):

@@ -45,7 +45,7 @@ from typing import Any, BinaryIO, Literal
 
 import numpy as np
 
-from engines import container
+from engines.base import container
 from motion import Motion, MotionError
 from motion.bvh import BvhLimits, detect_units, parse_bvh
 from motion.serialize import motion_from_arrays, motion_to_arrays
