@@ -1,4 +1,6 @@
-# One image for the API and the workers (docker-compose.yml runs it with different commands).
+# One image for the API and the workers (docker-compose.yml runs it with different commands). Its
+# /data is a cache only when SEGUE_STORE_URL names an object store (docker-compose.yml: MinIO, no
+# shared volume); without SEGUE_STORE_URL it is the store itself (mount a volume to keep it).
 FROM python:3.11-slim
 WORKDIR /app
 COPY pyproject.toml README.md ./

@@ -1,5 +1,7 @@
-"""The docker-compose topology as plain processes: redis-server, `segue serve --redis`, two
-`segue worker` processes sharing one data directory, driven through the public API client."""
+"""The shared-directory topology as plain processes: redis-server, `segue serve --redis`, two
+`segue worker` processes on one host sharing one data directory (the local store, no
+``SEGUE_STORE_URL``), driven through the public API client. The docker-compose topology (no shared
+volume: every process on an S3-compatible store, its own disk a cache) is test_topology_s3.py."""
 
 from __future__ import annotations
 
