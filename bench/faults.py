@@ -18,6 +18,21 @@ jobs run, and waits for every job to end. Scenarios:
   ``--hang`` seconds, past the reclaim time (its heartbeat expires, the other worker runs its job
   again as attempt 2), then SIGCONT: the resumed run must publish nothing (fenced attempts).
 
+Two more run as separate hosts would: the API and the workers each with its own empty data
+directory (a cache only), sharing only the ``redis-server`` and an S3-protocol server (``moto_server``
+on a free port, ``SEGUE_STORE_URL=s3://<bucket>/segue``, ``AWS_ENDPOINT_URL``):
+
+* ``s3_worker_kill``: workers without a shared directory; SIGKILL of one ``segue worker`` once its
+  heartbeat names one of the jobs (that job runs again on the other host, from the store);
+* ``s3_store_outage``: the object store stops answering for ``--hang`` seconds (SIGSTOP of
+  ``moto_server``, then SIGCONT) while the jobs run. Not a kill and restart: moto keeps its objects in
+  memory only (no persistence option in moto 5; its request recorder's replay would race the live
+  writes), so a restarted moto is an empty store, which no real deployment has (MinIO and S3 keep
+  their objects across a restart). What a restart looks like to Segue's clients is an outage: calls
+  hang or fail, boto3 retries them (5 attempts), and what still fails after that is a
+  ``StoreUnavailable`` (a 507 to API clients). This row shows that an outage shorter than the
+  retries loses nothing; it cannot show a restart that loses objects.
+
 Per scenario: ``jobs_lost`` (jobs not ``done``), ``events_lost`` (gaps in the event ids the clients
 received), ``duplicate_executions`` (a run of a job still publishing after a later run of the same
 job started: result ids carry the attempt), ``duplicate_terminals`` (terminal events beyond one per
@@ -26,6 +41,8 @@ last ``started`` that carry another attempt), ``reruns`` (runs after the first) 
 (from the fault to the first event any client received afterwards). Prints one JSON object.
 
     python bench/faults.py [--jobs 4] [--budget 2] [--hang 8] [--only NAME,...]
+
+(the s3 rows need ``pip install -e '.[dev]'``: boto3 and ``moto[server]``)
 """
 
 from __future__ import annotations
@@ -121,9 +138,14 @@ class Topology:
     """The processes of one scenario."""
 
     def __init__(
-        self, root: Path, redis: str | None, workers: int, worker_env: dict[str, str] | None = None
+        self,
+        root: Path,
+        redis: str | None,
+        workers: int,
+        worker_env: dict[str, str] | None = None,
+        s3: bool = False,
     ) -> None:
-        self.root, self.redis_mode, self.workers = root, redis, workers
+        self.root, self.redis_mode, self.workers, self.s3 = root, redis, workers, s3
         self.worker_env = worker_env or {}
         self.data = root / "data"
         self.port = free_port()
@@ -135,6 +157,46 @@ class Topology:
             self.env.pop(var, None)
         self.redis_port = free_port()
         self.redis_url = f"redis://127.0.0.1:{self.redis_port}/0"
+        self.s3_port = free_port()
+
+    def own_disk(self, name: str) -> dict[str, str]:
+        """A process's environment: on the S3 store, its own data directory (a host's disk)."""
+        return self.env | {"SEGUE_DATA_DIR": str(self.root / name)} if self.s3 else self.env
+
+    def start_s3(self) -> None:
+        """``moto_server`` on a free port, a fresh bucket, the store settings in every process's env."""
+        import boto3
+
+        binary = shutil.which("moto_server")
+        if binary is None:
+            raise RuntimeError("moto_server is not installed (pip install 'moto[server]')")
+        self.procs["s3"] = subprocess.Popen(
+            [binary, "-H", "127.0.0.1", "-p", str(self.s3_port)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        endpoint = f"http://127.0.0.1:{self.s3_port}"
+        creds = {
+            "AWS_ACCESS_KEY_ID": "bench",
+            "AWS_SECRET_ACCESS_KEY": "bench",
+            "AWS_DEFAULT_REGION": "us-east-1",
+        }
+        self.env |= creds | {"AWS_ENDPOINT_URL": endpoint, "SEGUE_STORE_URL": "s3://segue-faults/segue"}
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                httpx.get(endpoint, timeout=1)
+                break
+            except httpx.TransportError:
+                if time.monotonic() > deadline:
+                    raise RuntimeError("moto_server did not start") from None
+                time.sleep(0.1)
+        boto3.client(
+            "s3",
+            endpoint_url=endpoint,
+            aws_access_key_id="bench",
+            aws_secret_access_key="bench",
+            region_name="us-east-1",
+        ).create_bucket(Bucket="segue-faults")
 
     def start_redis(self) -> None:
         binary = shutil.which("redis-server")
@@ -159,17 +221,23 @@ class Topology:
         if self.redis_mode:
             cmd += ["--redis", self.redis_url]
         self.procs["api"] = subprocess.Popen(
-            cmd, cwd=REPO, env=self.env, stdout=self.log, stderr=subprocess.STDOUT
+            cmd, cwd=REPO, env=self.own_disk("api"), stdout=self.log, stderr=subprocess.STDOUT
         )
         wait_http(self.url)
 
     def start_worker(self, k: int) -> None:
         cmd = [*SEGUE, "worker", "--redis", self.redis_url, "--name", f"w{k}"]
         self.procs[f"w{k}"] = subprocess.Popen(
-            cmd, cwd=REPO, env=self.env | self.worker_env, stdout=self.log, stderr=subprocess.STDOUT
+            cmd,
+            cwd=REPO,
+            env=self.own_disk(f"w{k}") | self.worker_env,
+            stdout=self.log,
+            stderr=subprocess.STDOUT,
         )
 
     def start(self) -> None:
+        if self.s3:
+            self.start_s3()
         if self.redis_mode:
             self.start_redis()
         self.start_api()
@@ -180,6 +248,8 @@ class Topology:
     def stop(self) -> None:
         for name, proc in reversed(list(self.procs.items())):
             if proc.poll() is None:
+                if name == "s3":
+                    os.kill(proc.pid, signal.SIGCONT)
                 proc.send_signal(signal.SIGINT if name != "redis" else signal.SIGTERM)
         for proc in self.procs.values():
             try:
@@ -221,6 +291,26 @@ def job_log_facts(http: httpx.Client, job: str) -> dict[str, int]:
     return {"duplicate_terminals": max(terminals - 1, 0), "stale_events": stale}
 
 
+def wait_running(redis_url: str, worker: str, jobs: set[str], seconds: float = 60.0) -> None:
+    """Wait until ``worker``'s heartbeat names one of ``jobs`` (its run started)."""
+    import redis
+
+    from workers.redis_keys import RedisKeys
+
+    client = redis.Redis.from_url(redis_url, decode_responses=True)
+    key = RedisKeys().worker(worker)
+    deadline = time.monotonic() + seconds
+    try:
+        while time.monotonic() < deadline:
+            raw = client.get(key)
+            if raw and json.loads(raw).get("job") in jobs:
+                return
+            time.sleep(0.01)
+    finally:
+        client.close()
+    raise RuntimeError(f"{worker} ran none of the jobs within {seconds} s")
+
+
 def freeze(pid: int, sig: signal.Signals) -> list[int]:
     """Send ``sig`` (SIGSTOP, SIGCONT) to a worker and its engine processes; returns their pids."""
     pids = [pid, *engine_children(pid)]
@@ -235,12 +325,14 @@ def scenario(name: str, n_jobs: int, budget: float, hang_s: float = 8.0) -> dict
         "redis_restart_no_persistence": "plain",
         "redis_restart_aof": "aof",
         "redis_worker_hang": "plain",
+        "s3_worker_kill": "plain",
+        "s3_store_outage": "plain",
     }
     # a hung worker: its heartbeat expires after 2 s, entries idle 4 s are taken over
     hung = {"SEGUE_HEARTBEAT_TTL_S": "2", "SEGUE_RECLAIM_IDLE_S": "4"}
     worker_env = hung if name == "redis_worker_hang" else None
     root = Path(tempfile.mkdtemp(prefix=f"segue-faults-{name}-"))
-    top = Topology(root, redis_mode.get(name), workers=2, worker_env=worker_env)
+    top = Topology(root, redis_mode.get(name), workers=2, worker_env=worker_env, s3=name.startswith("s3_"))
     try:
         top.start()
         http = httpx.Client(base_url=top.url, timeout=30)
@@ -269,6 +361,10 @@ def scenario(name: str, n_jobs: int, budget: float, hang_s: float = 8.0) -> dict
         if name == "embedded_worker_kill":
             kids = engine_children(top.procs["api"].pid)
             os.kill(kids[0], signal.SIGKILL)
+        elif name == "s3_worker_kill":
+            wait_running(top.redis_url, "w0", set(jobs))  # a worker with a job of its own
+            fault_at = time.time()
+            top.procs["w0"].kill()
         elif name == "redis_worker_kill":
             top.procs["w0"].kill()
         elif name in ("redis_restart_no_persistence", "redis_restart_aof"):
@@ -280,6 +376,10 @@ def scenario(name: str, n_jobs: int, budget: float, hang_s: float = 8.0) -> dict
             top.procs["api"].kill()
             top.procs["api"].wait()
             top.start_api()
+        elif name == "s3_store_outage":
+            os.kill(top.procs["s3"].pid, signal.SIGSTOP)
+            time.sleep(hang_s)
+            os.kill(top.procs["s3"].pid, signal.SIGCONT)
         elif name == "redis_worker_hang":
             frozen = freeze(top.procs["w0"].pid, signal.SIGSTOP)
             time.sleep(hang_s)
@@ -315,6 +415,8 @@ SCENARIOS = (
     "redis_restart_aof",
     "api_restart",
     "redis_worker_hang",
+    "s3_worker_kill",
+    "s3_store_outage",
 )
 
 
