@@ -27,6 +27,7 @@ from schemas.databases import parse_database_spec
 from .engine_cache import EngineCache as EngineCache  # re-exported: where it lived before
 from .engine_cache import OpenArrays
 from .prepare import PrepareError, prepare
+from .storage_errors import storage_problem
 from .store import NotFoundError, Store, now, npz_bytes
 
 log = logging.getLogger("segue.worker")
@@ -194,7 +195,12 @@ def execute_job(
         publish(EventType.failed, {"error": {"code": exc.code, "message": exc.message}})
     except (EngineError, MotionError, UnavailableError, NotFoundError, ValidationError) as exc:
         publish(EventType.failed, {"error": {"code": "invalid_request", "message": str(exc)}})
-    except Exception as exc:  # a bug: report it, keep the worker alive
+    except Exception as exc:  # a storage failure names itself; anything else is a bug: report it
+        problem = storage_problem(exc)
+        if problem is not None:  # full, read-only or unreachable store (the API's 507 codes)
+            log.warning("job %s: %s", job_id, problem[1])
+            publish(EventType.failed, {"error": {"code": problem[0], "message": problem[1]}})
+            return
         log.exception("job %s crashed", job_id)
         publish(EventType.failed, {"error": {"code": "internal", "message": f"{type(exc).__name__}: {exc}"}})
 

@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import gzip
 import io
+from pathlib import Path
 from typing import Any
 
 import pytest
 
 from motion import write_bvh
+from schemas import EventType
 from service.errors import ApiError
 from service.metrics import Metrics
 from service.tasks import TaskRunner
@@ -88,3 +90,26 @@ def test_redis_workers_run_small_jobs(redis_url: str, store: Store) -> None:
     for key in ("up1", "up2"):
         with pytest.raises(NotFoundError):
             store.staged_bytes(key)
+
+
+class _UnreachableResults(Store):
+    """A store whose object service stops answering when a result is written."""
+
+    def put_result(self, *args: Any, **kwargs: Any) -> None:
+        from workers.objects import StoreUnavailable
+
+        raise StoreUnavailable("object store http://s3.invalid unreachable: connect timeout")
+
+
+def test_a_store_failure_during_a_run_is_named_not_internal(tmp_path: Path) -> None:
+    store = _UnreachableResults(tmp_path / "data")
+    db = add_database(store)
+    job, payload = synth(store, db, steps=1, step_s=0.01)
+    events: list[tuple[Any, dict[str, Any]]] = []
+    execute_job(
+        store, job.id, "synth", payload, lambda t, d: events.append((t, d)), lambda: False, EngineCache()
+    )
+    kind, data = events[-1]
+    assert kind == EventType.failed
+    assert data["error"]["code"] == "storage_unavailable"
+    assert "cannot be reached" in data["error"]["message"]
