@@ -112,6 +112,35 @@ def test_every_mutation_is_a_valid_path(graph: Graph) -> None:
     assert not batch_valid(gs.index_, PathBatch.from_paths([bad]))[0] or python_valid(tree, frames, bad)
 
 
+def test_one_edge_replacements_are_capped_and_only_above_the_cap(graph: Graph) -> None:
+    """``max_one`` bounds the 1-edge replacements per step (0-edge ones kept); below it the batch
+    is the same and no random number is drawn (smaller databases' searches do not change)."""
+    req = request()
+    free, capped = searcher(graph, max_one=10**9), searcher(graph, max_one=5)
+    prime(free, req)
+    prime(capped, req)
+    path = trim(free.index_, free._random_seeds(np.random.default_rng(0), 1).path(0), req.frames or 0)
+
+    def one_edge(batch: PathBatch) -> set[tuple[int, ...]]:
+        """Rows that differ from the path by a splice with one new edge (keyed by their edges)."""
+        rows = {tuple(int(e) for e in r if e >= 0) for r in batch.edges}
+        return {r for r in rows if len(set(r) - set(path.edges)) == 1}
+
+    r1, r2 = np.random.default_rng(7), np.random.default_rng(7)
+    full = free.mutations(path, r1, 1)
+    cut = capped.mutations(path, r2, 1)
+    assert cut.size < full.size
+    assert batch_valid(capped.index_, cut).all()
+    assert one_edge(cut) <= one_edge(full)
+    assert r1.random() != r2.random()  # the cap drew its subset from the search's generator
+    same = searcher(graph, max_one=10**9)
+    prime(same, req)
+    r3, r4 = np.random.default_rng(7), np.random.default_rng(7)
+    again = same.mutations(path, r3, 1)
+    assert np.array_equal(again.edges, free.mutations(path, r4, 1).edges)
+    assert r3.random() == r4.random() == np.random.default_rng(7).random()
+
+
 def test_pieces_truncate_to_the_length_and_flag_short_paths(graph: Graph) -> None:
     _, tree, tracks = graph
     index = GraphIndex(tree, tracks)
