@@ -141,6 +141,29 @@ def test_one_edge_replacements_are_capped_and_only_above_the_cap(graph: Graph) -
     assert r3.random() == r4.random() == np.random.default_rng(7).random()
 
 
+def test_two_hops_are_every_valid_root_pair_in_table_order(graph: Graph) -> None:
+    """``two_hops(a, -1)``: every ``(h1, h2)`` with ``h1`` leaving ``a``, ``h2`` leaving where it
+    lands at or after its landing frame, ordered by middle clip, then ``h1`` (from frame), then
+    ``h2`` (from frame), as the per-clip tables gave them (the 2-edge mutations' random subset
+    depends on this order)."""
+    _, tree, _ = graph
+    idx = searcher(graph).index_
+    roots = idx.roots
+    seen = 0
+    for a in range(idx.n_clips):
+        out_a = roots[tree.from_clip[roots] == a]
+        want: list[tuple[int, int]] = []
+        for mid in sorted({int(c) for c in tree.to_clip[out_a]}):
+            for h1 in out_a[tree.to_clip[out_a] == mid]:
+                for h2 in roots[tree.from_clip[roots] == mid]:
+                    if tree.to_frame[h1] <= tree.from_frame[h2]:
+                        want.append((int(h1), int(h2)))
+        h1s, h2s = idx.two_hops(a, -1)
+        assert list(zip(h1s.tolist(), h2s.tolist(), strict=True)) == want
+        seen += len(want)
+    assert seen > 100
+
+
 def test_pieces_truncate_to_the_length_and_flag_short_paths(graph: Graph) -> None:
     _, tree, tracks = graph
     index = GraphIndex(tree, tracks)
