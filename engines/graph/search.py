@@ -43,7 +43,13 @@ The loop (paper Sec. 4.2, steps 1-6):
    With ``staged`` (default) the cheap mutations ((a) with 0 or 1 edge, (b), (c)) are tried
    first and the 2-edge ones only when none of them improves (a variable-neighbourhood descent:
    each step costs a few hundred candidates instead of thousands); at most ``max_candidates``
-   2-edge mutations are scored per path and step, a random subset when there are more.
+   2-edge mutations are scored per path and step, a random subset when there are more. The
+   1-edge replacements are bounded the same way (at most ``max_one`` per path and step, the
+   0-edge ones always kept): they grow with the root edges out of a path's clips, which a large
+   library's copies multiply (~2,500 per step at 1M frames, ~1,800 at 400k, ~800 at 100k, ~150
+   on ``bench/graph.py``'s database); below the bound nothing is drawn, so the outputs of smaller
+   databases do not change (1,500: a bound of 1,000 made the 400k far goal fail its join check
+   on one seed more).
 3. **Keep** the ``keep`` best improving mutations of each path (distinct paths; a path that plays
    the full length keeps only children that do too); a path with no
    improving mutation is a **local minimum**: it is recorded (best per clip sequence) and leaves
@@ -171,6 +177,8 @@ class GraphSearch:
     population, fresh, keep, seed_batch, max_candidates:
         Paths mutated per round, fresh seeds added per round, improving mutations kept per path,
         random seeds drawn per kept seed batch, and candidates scored per path and round.
+    max_one:
+        Most 1-edge sub-path replacements scored per path and step (a random subset beyond).
     contacts:
         The database's foot contacts, for foot-skate cleanup of the assembled motions (computed
         from the library when not given).
@@ -204,6 +212,7 @@ class GraphSearch:
         keep: int = 2,
         seed_batch: int = 256,
         max_candidates: int = 2000,
+        max_one: int = 1500,
         start_shifts: tuple[int, ...] = START_SHIFTS,
         staged: bool = True,
         contacts: FootContacts | None = None,
@@ -222,6 +231,7 @@ class GraphSearch:
         self.keep = keep
         self.seed_batch = seed_batch
         self.max_candidates = max_candidates
+        self.max_one = max_one
         self.start_shifts = start_shifts
         self.staged = staged
         self.contacts = contacts
@@ -667,8 +677,9 @@ class GraphSearch:
     # -- mutations ---------------------------------------------------------------------------
     def mutations(self, path: Path, rng: np.random.Generator, stage: int | None = None) -> PathBatch:
         """The mutations of a path (module docstring), as one batch: ``stage`` 1 the cheap ones
-        ((a) with 0 or 1 edge, (b), (c)), 2 the (a) 2-edge ones (at most ``max_candidates``),
-        ``None`` all of them (2-edge ones filling up to ``max_candidates``).
+        ((a) with 0 or 1 edge, (b), (c); at most ``max_one`` 1-edge ones), 2 the (a) 2-edge ones
+        (at most ``max_candidates``), ``None`` all of them (2-edge ones filling up to
+        ``max_candidates``).
 
         For each kept head ``edges[:i]`` (reaching clip ``A`` at frame ``x``), the replacements
         leading to every later edge ``edges[j]`` (leaving clip ``B`` at frame ``y``) are found at
@@ -720,6 +731,13 @@ class GraphSearch:
         batches: list[PathBatch] = []
         if one:
             a1, b1, r1 = (np.concatenate(v) for v in zip(*one, strict=True))
+            hops = np.flatnonzero(r1[:, 0] >= 0)  # the 1-edge ones (the rest play on: 0 edges)
+            if hops.size > self.max_one:
+                pick = rng.choice(hops.size, size=self.max_one, replace=False)
+                keep = np.ones(a1.size, dtype=bool)
+                keep[hops] = False
+                keep[hops[pick]] = True
+                a1, b1, r1 = a1[keep], b1[keep], r1[keep]
             batches.append(self._splice(path, a1, b1, r1))
         if stage != 2:
             batches.append(self._demotions(path))

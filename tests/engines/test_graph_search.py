@@ -112,6 +112,58 @@ def test_every_mutation_is_a_valid_path(graph: Graph) -> None:
     assert not batch_valid(gs.index_, PathBatch.from_paths([bad]))[0] or python_valid(tree, frames, bad)
 
 
+def test_one_edge_replacements_are_capped_and_only_above_the_cap(graph: Graph) -> None:
+    """``max_one`` bounds the 1-edge replacements per step (0-edge ones kept); below it the batch
+    is the same and no random number is drawn (smaller databases' searches do not change)."""
+    req = request()
+    free, capped = searcher(graph, max_one=10**9), searcher(graph, max_one=5)
+    prime(free, req)
+    prime(capped, req)
+    path = trim(free.index_, free._random_seeds(np.random.default_rng(0), 1).path(0), req.frames or 0)
+
+    def one_edge(batch: PathBatch) -> set[tuple[int, ...]]:
+        """Rows that differ from the path by a splice with one new edge (keyed by their edges)."""
+        rows = {tuple(int(e) for e in r if e >= 0) for r in batch.edges}
+        return {r for r in rows if len(set(r) - set(path.edges)) == 1}
+
+    r1, r2 = np.random.default_rng(7), np.random.default_rng(7)
+    full = free.mutations(path, r1, 1)
+    cut = capped.mutations(path, r2, 1)
+    assert cut.size < full.size
+    assert batch_valid(capped.index_, cut).all()
+    assert one_edge(cut) <= one_edge(full)
+    assert r1.random() != r2.random()  # the cap drew its subset from the search's generator
+    same = searcher(graph, max_one=10**9)
+    prime(same, req)
+    r3, r4 = np.random.default_rng(7), np.random.default_rng(7)
+    again = same.mutations(path, r3, 1)
+    assert np.array_equal(again.edges, free.mutations(path, r4, 1).edges)
+    assert r3.random() == r4.random() == np.random.default_rng(7).random()
+
+
+def test_two_hops_are_every_valid_root_pair_in_table_order(graph: Graph) -> None:
+    """``two_hops(a, -1)``: every ``(h1, h2)`` with ``h1`` leaving ``a``, ``h2`` leaving where it
+    lands at or after its landing frame, ordered by middle clip, then ``h1`` (from frame), then
+    ``h2`` (from frame), as the per-clip tables gave them (the 2-edge mutations' random subset
+    depends on this order)."""
+    _, tree, _ = graph
+    idx = searcher(graph).index_
+    roots = idx.roots
+    seen = 0
+    for a in range(idx.n_clips):
+        out_a = roots[tree.from_clip[roots] == a]
+        want: list[tuple[int, int]] = []
+        for mid in sorted({int(c) for c in tree.to_clip[out_a]}):
+            for h1 in out_a[tree.to_clip[out_a] == mid]:
+                for h2 in roots[tree.from_clip[roots] == mid]:
+                    if tree.to_frame[h1] <= tree.from_frame[h2]:
+                        want.append((int(h1), int(h2)))
+        h1s, h2s = idx.two_hops(a, -1)
+        assert list(zip(h1s.tolist(), h2s.tolist(), strict=True)) == want
+        seen += len(want)
+    assert seen > 100
+
+
 def test_pieces_truncate_to_the_length_and_flag_short_paths(graph: Graph) -> None:
     _, tree, tracks = graph
     index = GraphIndex(tree, tracks)
