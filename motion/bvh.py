@@ -228,23 +228,29 @@ def _subsample(motion: Motion, step: int) -> Motion:
     )
 
 
-def _maybe_gunzip(data: bytes, lim: BvhLimits, source: str) -> bytes:
-    """Decompress gzip content (all members, as ``gzip`` does), within the byte limit."""
-    if not data.startswith(b"\x1f\x8b"):
-        return data
-    out: list[bytes] = []
-    size = 0
-    rest = data
+INFLATE_CHUNK_BYTES = 1 << 20
+"""Largest piece :func:`inflate_chunks` inflates at a time (bounds its memory beside the input)."""
+
+
+def inflate_chunks(data: bytes, limit: int, source: str, chunk: int = INFLATE_CHUNK_BYTES) -> Iterator[bytes]:
+    """The inflated pieces of gzip ``data`` (all members, as ``gzip`` does), each at most ``chunk``
+    bytes; :class:`BvhError` past ``limit`` inflated bytes, for a truncated or corrupt stream, or for
+    trailing garbage (the header check streams them; :func:`parse_bvh` joins them)."""
+    size, rest = 0, data
     try:
         while rest:
             d = zlib.decompressobj(16 + zlib.MAX_WBITS)
-            chunk = d.decompress(rest, lim.max_bytes + 1 - size)
-            size += len(chunk)
-            out.append(chunk)
-            if size > lim.max_bytes or d.unconsumed_tail:
-                raise BvhError(
-                    f"decompressed file is larger than the {lim.max_bytes}-byte limit", source=source
-                )
+            pending = rest
+            while True:
+                piece = d.decompress(pending, chunk)
+                size += len(piece)
+                if size > limit:
+                    raise BvhError(f"decompressed file is larger than the {limit}-byte limit", source=source)
+                if piece:
+                    yield piece
+                pending = d.unconsumed_tail
+                if not pending and (d.eof or not piece):
+                    break
             if not d.eof:
                 raise BvhError("gzip stream is truncated", source=source)
             rest = d.unused_data
@@ -254,7 +260,13 @@ def _maybe_gunzip(data: bytes, lim: BvhLimits, source: str) -> bytes:
                 break
     except zlib.error as exc:
         raise BvhError(f"corrupt gzip data ({exc})", source=source) from None
-    return b"".join(out)
+
+
+def _maybe_gunzip(data: bytes, lim: BvhLimits, source: str) -> bytes:
+    """Decompress gzip content (all members, as ``gzip`` does), within the byte limit."""
+    if not data.startswith(b"\x1f\x8b"):
+        return data
+    return b"".join(inflate_chunks(data, lim.max_bytes, source))
 
 
 def _decode(raw: bytes, source: str) -> str:

@@ -14,11 +14,10 @@ table) runs in a worker.
 from __future__ import annotations
 
 import re
-import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from .bvh import _FPS_SNAP, BvhLimits, _decode, _parse_hierarchy, _parse_motion_header
+from .bvh import _FPS_SNAP, BvhLimits, _decode, _parse_hierarchy, _parse_motion_header, inflate_chunks
 from .errors import BvhError
 
 MAX_HEADER_BYTES = 4 << 20
@@ -54,32 +53,9 @@ class BvhHeader:
 
 
 def _inflated(data: bytes, limit: int, source: str) -> Iterator[bytes]:
-    """The inflated chunks of gzip ``data`` (all members), :class:`BvhError` past ``limit`` bytes
-    or for corrupt data (the messages of :func:`motion.bvh.parse_bvh`)."""
-    size, rest = 0, data
-    try:
-        while rest:
-            d = zlib.decompressobj(16 + zlib.MAX_WBITS)
-            pending = rest
-            while True:
-                chunk = d.decompress(pending, CHUNK_BYTES)
-                size += len(chunk)
-                if size > limit:
-                    raise BvhError(f"decompressed file is larger than the {limit}-byte limit", source=source)
-                if chunk:
-                    yield chunk
-                pending = d.unconsumed_tail
-                if not pending and (d.eof or not chunk):
-                    break
-            if not d.eof:
-                raise BvhError("gzip stream is truncated", source=source)
-            rest = d.unused_data
-            if rest and not rest.startswith(b"\x1f\x8b"):
-                if rest.strip(b"\x00"):
-                    raise BvhError("trailing garbage after the gzip data", source=source)
-                break
-    except zlib.error as exc:
-        raise BvhError(f"corrupt gzip data ({exc})", source=source) from None
+    """The inflated chunks of gzip ``data`` (:func:`motion.bvh.inflate_chunks`, at most
+    :data:`CHUNK_BYTES` each)."""
+    return inflate_chunks(data, limit, source, CHUNK_BYTES)
 
 
 def bvh_header(data: bytes, limits: BvhLimits | None = None, source: str = "<bytes>") -> BvhHeader:
