@@ -21,13 +21,14 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from engines.base import ClipInput
+from engines.registry import parse_database_spec
 from motion import Motion, MotionError
 from motion.export.events import result_events, sorted_events
 from motion.io import save_motion
 from motion.samples import declared_units, resolve_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobEvent, Report
 from schemas.bases import DatabaseSpecBase
-from schemas.databases import database_id, parse_database_spec
+from schemas.databases import database_id
 
 from .execute import JobFailure, build_database_bytes, run_search
 from .prepare import PrepareError, parse, prepare_in_dir

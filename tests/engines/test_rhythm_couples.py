@@ -13,10 +13,10 @@ import pytest
 
 from engines.base import CollectingEmitter, Run
 from engines.library import ClipInput
+from engines.registry import parse_database_spec
 from engines.rhythm.engine import RhythmEngine, music_beats
 from engines.rhythm.synth import partner_fade_frames
 from motion.samples import sample_path
-from schemas.databases import parse_database_spec
 from schemas.rhythm import RhythmRequest
 from tests.engines.rhythm_salsa import COUPLES_SPEC
 from workers.execute import build_database_bytes
