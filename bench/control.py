@@ -66,11 +66,10 @@ from engines.control.engine import ControlEngine  # noqa: E402
 from engines.control.points import resample_cloud  # noqa: E402
 from engines.control.schedule import BEAM_CELLS, BEAM_WIDTH, QUICK_CELLS, QUICK_WIDTH  # noqa: E402
 from engines.library import ClipInput, build_library, library_to_arrays  # noqa: E402
+from engines.registry import parse_database_spec, parse_job_request  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.bvh import parse_bvh  # noqa: E402
 from motion.ground import ground_frames  # noqa: E402
-from schemas.databases import parse_database_spec  # noqa: E402
-from schemas.jobs import parse_job_request  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data"
 

@@ -42,11 +42,11 @@ from control_salsa import POINTS, SALSA, engine_for, follower_errors, held_dance
 from engines.base import CollectingEmitter, Run  # noqa: E402
 from engines.control.engine import ControlEngine  # noqa: E402
 from engines.control.session import LiveControl  # noqa: E402
+from engines.registry import parse_job_request  # noqa: E402
 from motion import Motion  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.bvh import bvh_text, parse_bvh  # noqa: E402
 from motion.resample import resample  # noqa: E402
-from schemas.jobs import parse_job_request  # noqa: E402
 
 
 def log(msg: str) -> None:

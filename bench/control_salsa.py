@@ -78,14 +78,13 @@ from engines.library import (  # noqa: E402
     library_from_arrays,
     library_to_arrays,
 )
+from engines.registry import parse_database_spec, parse_job_request  # noqa: E402
 from motion import Motion  # noqa: E402
 from motion import rotations as rot  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.bvh import bvh_text, parse_bvh  # noqa: E402
 from motion.ground import from_ground_frame, ground_frames, to_ground_frame  # noqa: E402
 from motion.metrics import foot_slip, points_jerk  # noqa: E402
-from schemas.databases import parse_database_spec  # noqa: E402
-from schemas.jobs import parse_job_request  # noqa: E402
 from workers.store import load_npz, npz_bytes  # noqa: E402
 
 SALSA = ROOT.parent / "shared" / "data" / "cmu-salsa"

@@ -45,6 +45,7 @@ sys.path.insert(0, str(ROOT))
 from engines.base import CollectingEmitter, Run  # noqa: E402
 from engines.control.engine import ControlEngine  # noqa: E402
 from engines.library import ClipInput, build_library, library_to_arrays  # noqa: E402
+from engines.registry import parse_database_spec, parse_job_request  # noqa: E402
 from motion import Motion  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.bvh import parse_bvh  # noqa: E402
@@ -52,8 +53,6 @@ from motion.ground import ground_frames  # noqa: E402
 from motion.metrics import foot_slip  # noqa: E402
 from motion.resample import resample  # noqa: E402
 from motion.units import standing_height  # noqa: E402
-from schemas.databases import parse_database_spec  # noqa: E402
-from schemas.jobs import parse_job_request  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data"
 

@@ -33,11 +33,9 @@ sys.path.insert(0, str(ROOT))
 
 from engines.base import CollectingEmitter, Engine, Run, foot_floor_arrays  # noqa: E402
 from engines.library import ClipInput, build_library, library_to_arrays  # noqa: E402
-from engines.registry import kind_class  # noqa: E402
+from engines.registry import kind_class, parse_database_spec, parse_job_request  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.samples import resolve_path  # noqa: E402
-from schemas.databases import parse_database_spec  # noqa: E402
-from schemas.jobs import parse_job_request  # noqa: E402
 
 BANDAI = ROOT.parent / "shared" / "data" / "bandai-namco" / "dataset-2"
 

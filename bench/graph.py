@@ -37,11 +37,10 @@ from engines.base import CollectingEmitter, Run, foot_floor_arrays  # noqa: E402
 from engines.graph.build import build_graph  # noqa: E402
 from engines.graph.engine import GraphEngine  # noqa: E402
 from engines.library import ClipInput, build_library  # noqa: E402
+from engines.registry import parse_database_spec, parse_job_request  # noqa: E402
 from motion.allocator import tune_process  # noqa: E402
 from motion.ground import body_root, heading  # noqa: E402
 from motion.metrics import foot_slip  # noqa: E402
-from schemas.databases import parse_database_spec  # noqa: E402
-from schemas.jobs import parse_job_request  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data" / "bandai-namco" / "dataset-2"
 

@@ -38,10 +38,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from engines.library import ClipInput  # noqa: E402
+from engines.registry import parse_database_spec  # noqa: E402
 from engines.rhythm.choreography import GraphEditError, apply_edits, edited_arrays  # noqa: E402
 from engines.rhythm.engine import RhythmEngine, music_beats  # noqa: E402
 from engines.rhythm.synth import draw_probabilities  # noqa: E402
-from schemas.databases import parse_database_spec  # noqa: E402
 from schemas.movement_graph import ResolvedEdit  # noqa: E402
 from schemas.rhythm import RhythmRequest  # noqa: E402
 from workers.execute import build_database_bytes  # noqa: E402

@@ -109,7 +109,7 @@ def recall(library: Any, arrays: dict[str, Any]) -> dict[str, float]:
     from engines.base import CollectingEmitter
     from engines.graph.build import build_graph
     from engines.graph.model import EdgeTree
-    from schemas.databases import parse_database_spec
+    from engines.registry import parse_database_spec
 
     spec = parse_database_spec({"kind": "graph", "clips": [{"bvh": "x.bvh"}], "candidates": "all_pairs"})
     exact = build_graph(spec, library, CollectingEmitter(), lambda: False)
@@ -141,7 +141,7 @@ def build_arrays(library: Any, candidates: str) -> tuple[dict[str, Any], dict[st
     from engines.base import CollectingEmitter, foot_floor_arrays
     from engines.graph.engine import GraphEngine
     from engines.library import library_to_arrays
-    from schemas.databases import parse_database_spec
+    from engines.registry import parse_database_spec
 
     spec = parse_database_spec({"kind": "graph", "clips": [{"bvh": "x.bvh"}], "candidates": candidates})
     c0, t0 = time.process_time(), time.perf_counter()
@@ -247,9 +247,9 @@ def search_one(path: Path, seeds: list[int], seconds: float, goal_m: float, budg
 
     from engines.graph.engine import GraphEngine
     from engines.library import library_from_arrays
+    from engines.registry import parse_job_request
     from motion.allocator import tune_process
     from motion.ground import body_root
-    from schemas.jobs import parse_job_request
 
     tune_process()
     out: dict[str, Any] = {"search_load_avg": round(os.getloadavg()[0], 2)}

@@ -38,9 +38,8 @@ from engines.graph import shared as shared_module
 from engines.graph.build import build_graph
 from engines.graph.engine import GraphEngine
 from engines.library import ClipInput, build_library
+from engines.registry import parse_database_spec, parse_job_request
 from motion.samples import sample_path
-from schemas.databases import parse_database_spec
-from schemas.jobs import parse_job_request
 
 CLIPS = ("walk-05-01", "walk-10-04", "walk-12-02", "walk")
 

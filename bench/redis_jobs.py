@@ -31,9 +31,10 @@ import redis
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from engines.registry import parse_database_spec  # noqa: E402
 from motion.samples import sample_path  # noqa: E402
 from schemas import DatabaseInfo, DatabaseStatus, JobInfo, JobStatus  # noqa: E402
-from schemas.databases import database_id, parse_database_spec  # noqa: E402
+from schemas.databases import database_id  # noqa: E402
 from schemas.jobs import JobKind  # noqa: E402
 from workers.execute import EngineCache, execute_job  # noqa: E402
 from workers.redis_backend import RedisBackend  # noqa: E402

@@ -71,7 +71,7 @@ def build(frames: int) -> Path:
     from engines.base import CollectingEmitter, foot_floor_arrays
     from engines.graph.engine import GraphEngine
     from engines.library import library_to_arrays
-    from schemas.databases import parse_database_spec
+    from engines.registry import parse_database_spec
     from workers.store import npz_bytes
 
     library, made_of = library_of(frames)

@@ -1,27 +1,34 @@
 """Which engines and database kinds this installation has: the one table of them.
 
 Each engine is one line of :data:`_BUILT_IN` (its module, class, database kind and the request
-and spec models of :mod:`schemas`); the request and spec unions of the OpenAPI document and of
-validation are built from it (:func:`request_union`, :func:`spec_union`), and engine modules are
+and spec models of :mod:`schemas`); the request and spec unions of the OpenAPI document
+(:func:`request_union`, :func:`spec_union`) and the validation of requests and specs
+(:func:`parse_job_request`, :func:`parse_database_spec`) are built from it, and engine modules are
 imported only on first use (keeps the CLI quick to start). Plugins add engines with
 :func:`register`. Adding an engine touches its own package, its schema module and one line here.
+
+Validation lives here rather than in :mod:`schemas` because the table of engines is here:
+:mod:`schemas` (the layer below the engines) holds the models and cannot import this table, and a
+second table there would have to be kept equal to this one.
 """
 
 from __future__ import annotations
 
 import importlib
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Annotated, Any, Union
 
-from pydantic import Field
+from pydantic import Field, TypeAdapter
 
 from schemas.annotations import AnnotatedDatabaseSpec, AnnotationRequest
 from schemas.bases import DatabaseSpecBase, JobRequestBase
 from schemas.control import ControlDatabaseSpec, ControlRequest
 from schemas.databases import ClipsDatabaseSpec, GraphDatabaseSpec
 from schemas.graph import GraphRequest
-from schemas.jobs import ClipRequest, register_request_model
+from schemas.jobs import ClipRequest, RequestError
 from schemas.rhythm import RhythmDatabaseSpec, RhythmRequest
 
 from .base import AnyEngine, EngineError
@@ -67,6 +74,24 @@ ENGINES: dict[str, EngineClass] = {}
 KIND_ENGINES: dict[str, EngineClass] = {}
 
 
+def _request_models() -> dict[str, type[JobRequestBase]]:
+    """Request model by engine name: the built-in engines', then the plugins'."""
+    models = {name: b.request_model for name, b in _BUILT_IN.items()}
+    for name, engine in ENGINES.items():
+        models.setdefault(name, engine.request_model)
+    return models
+
+
+def _spec_models() -> tuple[type[DatabaseSpecBase], ...]:
+    """The spec model of every database kind, built-in kinds in :data:`_SPEC_ORDER`, then the
+    plugins' kinds."""
+    by_kind: dict[str, type[DatabaseSpecBase]] = {b.kind: b.spec_model for b in _BUILT_IN.values()}
+    for engine in KIND_ENGINES.values():
+        by_kind.setdefault(engine.kind, engine.spec_model)
+    kinds = [k for k in _SPEC_ORDER if k in by_kind] + [k for k in by_kind if k not in _SPEC_ORDER]
+    return tuple(by_kind[k] for k in kinds)
+
+
 def request_union() -> Any:
     """The discriminated union (on ``engine``) of the built-in engines' request models, for the
     OpenAPI document."""
@@ -76,11 +101,47 @@ def request_union() -> Any:
 
 def spec_union() -> Any:
     """The discriminated union (on ``kind``) of the built-in database spec models, for the OpenAPI
-    document and validation."""
+    document."""
     by_kind = {b.kind: b.spec_model for b in _BUILT_IN.values()}
     kinds = [k for k in _SPEC_ORDER if k in by_kind] + [k for k in by_kind if k not in _SPEC_ORDER]
     models = tuple(by_kind[k] for k in kinds)
     return Annotated[Union[models], Field(discriminator="kind")]  # noqa: UP007 (a runtime tuple)
+
+
+def parse_job_request(data: Any) -> JobRequestBase:
+    """Validate a job request (dict or JSON text) with its engine's model (plugins' included).
+
+    Raises :class:`schemas.jobs.RequestError` for a non-object or an unknown engine and pydantic's
+    ``ValidationError`` for invalid fields.
+    """
+    if isinstance(data, str | bytes):
+        try:
+            data = json.loads(data)
+        except ValueError as exc:
+            raise RequestError(f"the request is not valid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise RequestError("a job request must be a JSON object")
+    engine = data.get("engine")
+    models = _request_models()
+    model = models.get(engine) if isinstance(engine, str) else None
+    if model is None:
+        raise RequestError(f"unknown engine {engine!r}; available: {', '.join(sorted(models))}")
+    return model.model_validate(data)
+
+
+@lru_cache(maxsize=8)
+def _spec_adapter(models: tuple[type[DatabaseSpecBase], ...]) -> TypeAdapter[Any]:
+    union: Any = Annotated[Union[models], Field(discriminator="kind")]  # noqa: UP007 (a runtime tuple)
+    return TypeAdapter(union)
+
+
+def parse_database_spec(data: Any) -> DatabaseSpecBase:
+    """Validate a database spec (dict or JSON text) against the union of the kinds' spec models
+    (plugins' included); raises pydantic's ``ValidationError``."""
+    adapter = _spec_adapter(_spec_models())
+    if isinstance(data, str | bytes):
+        return adapter.validate_json(data)  # type: ignore[no-any-return]
+    return adapter.validate_python(data)  # type: ignore[no-any-return]
 
 
 def _load_built_in(name: str) -> None:
@@ -101,12 +162,10 @@ def _engine_of_kind(kind: str) -> str:
 
 
 def register(engine: EngineClass) -> EngineClass:
-    """Add an engine (usable as a class decorator); a plugin's request model becomes one that
-    :func:`schemas.parse_job_request` validates."""
+    """Add an engine (usable as a class decorator); a plugin's request and spec models become ones
+    that :func:`parse_job_request` and :func:`parse_database_spec` validate."""
     ENGINES[engine.name] = engine
     KIND_ENGINES.setdefault(engine.kind, engine)
-    if engine.name not in _BUILT_IN:
-        register_request_model(engine.name, engine.request_model)
     return engine
 
 
@@ -207,6 +266,8 @@ __all__ = [
     "engine_kind",
     "kind_class",
     "load_plugins",
+    "parse_database_spec",
+    "parse_job_request",
     "recording_beats",
     "recording_media_type",
     "register",

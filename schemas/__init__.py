@@ -6,9 +6,9 @@ One source of truth: the OpenAPI document is generated from these models, and ``
 
 from .clips import ClipInfo, ClipSource, LabelRange
 from .common import SCHEMA_VERSION, ErrorBody, ErrorResponse
-from .databases import DatabaseInfo, DatabaseSpec, DatabaseStatus, parse_database_spec
+from .databases import DatabaseInfo, DatabaseStatus
 from .events import EventType, JobEvent
-from .jobs import JobInfo, JobRequest, JobStatus, parse_job_request
+from .jobs import JobInfo, JobStatus
 from .reports import ProvenanceEntry, Report
 
 __all__ = [
@@ -16,18 +16,14 @@ __all__ = [
     "ClipInfo",
     "ClipSource",
     "DatabaseInfo",
-    "DatabaseSpec",
     "DatabaseStatus",
     "ErrorBody",
     "ErrorResponse",
     "EventType",
     "JobEvent",
     "JobInfo",
-    "JobRequest",
     "JobStatus",
     "LabelRange",
     "ProvenanceEntry",
     "Report",
-    "parse_database_spec",
-    "parse_job_request",
 ]

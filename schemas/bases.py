@@ -3,6 +3,8 @@ import them without cycles)."""
 
 from __future__ import annotations
 
+from typing import Self
+
 from pydantic import Field, PrivateAttr
 
 from .clips import ClipSource
@@ -52,6 +54,14 @@ class JobRequestBase(Strict):
         (API). Engines with file inputs override this; the runtime resolves every reference and
         attaches the bytes (:meth:`attach_inputs`) before the engine runs."""
         return []
+
+    def with_budget(self, budget_s: float) -> Self:
+        """A copy of this request with ``budget_s`` (seconds) replaced, validated as the field is when
+        a request is parsed (pydantic's ``ValidationError`` naming ``budget_s`` otherwise): the CLI's
+        ``--budget`` overrides the request's cap this way."""
+        copy = self.model_copy()
+        self.__pydantic_validator__.validate_assignment(copy, "budget_s", budget_s)
+        return copy
 
     def audio_inputs(self) -> list[str]:
         """The input files that must be music recordings (checked at submission by their first

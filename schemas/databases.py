@@ -6,9 +6,9 @@ import hashlib
 import json
 from datetime import datetime
 from enum import StrEnum
-from typing import Annotated, Any, Literal
+from typing import Literal
 
-from pydantic import Field, TypeAdapter
+from pydantic import Field
 
 from .bases import DatabaseSpecBase
 from .clips import LabelRange
@@ -56,24 +56,9 @@ class GraphDatabaseSpec(DatabaseSpecBase):
     )
 
 
-# Kind-specific specs defined in their engine's schema module (they import DatabaseSpecBase from here).
-from .annotations import AnnotatedDatabaseSpec  # noqa: E402
-from .control import ControlDatabaseSpec  # noqa: E402
+# The spec union and its validation are built from the engine registry
+# (engines.registry.spec_union / parse_database_spec), which names every kind's model.
 from .movement_graph import DerivedFrom  # noqa: E402
-from .rhythm import RhythmDatabaseSpec  # noqa: E402
-
-DatabaseSpec = Annotated[
-    ClipsDatabaseSpec | ControlDatabaseSpec | GraphDatabaseSpec | AnnotatedDatabaseSpec | RhythmDatabaseSpec,
-    Field(discriminator="kind"),
-]
-_SPEC_ADAPTER: TypeAdapter[Any] = TypeAdapter(DatabaseSpec)
-
-
-def parse_database_spec(data: Any) -> DatabaseSpecBase:
-    """Validate a database spec (dict or JSON text); raises pydantic's ValidationError."""
-    if isinstance(data, str | bytes):
-        return _SPEC_ADAPTER.validate_json(data)  # type: ignore[no-any-return]
-    return _SPEC_ADAPTER.validate_python(data)  # type: ignore[no-any-return]
 
 
 def database_id(spec: DatabaseSpecBase, clip_hashes: list[str]) -> str:

@@ -1,11 +1,11 @@
-"""Job requests (a discriminated union on ``engine``) and job status."""
+"""The clip engine's request, job status and info (every engine's request model, and the union of
+them, are named by :mod:`engines.registry`)."""
 
 from __future__ import annotations
 
-import json
 from datetime import datetime
 from enum import StrEnum
-from typing import Annotated, Any, Literal
+from typing import Literal
 
 from pydantic import Field, model_validator
 
@@ -36,39 +36,9 @@ class ClipRequest(JobRequestBase):
         return self
 
 
-JobRequest = Annotated[ClipRequest, Field(discriminator="engine")]
-"""The request union of the built-in engines (documented in the OpenAPI schema)."""
-
-REQUEST_MODELS: dict[str, type[JobRequestBase]] = {"clip": ClipRequest}
-"""Request model by engine name; engine plugins add theirs with :func:`register_request_model`."""
-
-
 class RequestError(ValueError):
-    """A job request that is not an object or names no known engine."""
-
-
-def register_request_model(engine: str, model: type[JobRequestBase]) -> None:
-    REQUEST_MODELS[engine] = model
-
-
-def parse_job_request(data: Any) -> JobRequestBase:
-    """Validate a job request (dict or JSON text) with its engine's model.
-
-    Raises :class:`RequestError` for a non-object or an unknown engine and pydantic's
-    ``ValidationError`` for invalid fields.
-    """
-    if isinstance(data, str | bytes):
-        try:
-            data = json.loads(data)
-        except ValueError as exc:
-            raise RequestError(f"the request is not valid JSON: {exc}") from None
-    if not isinstance(data, dict):
-        raise RequestError("a job request must be a JSON object")
-    engine = data.get("engine")
-    model = REQUEST_MODELS.get(engine) if isinstance(engine, str) else None
-    if model is None:
-        raise RequestError(f"unknown engine {engine!r}; available: {', '.join(sorted(REQUEST_MODELS))}")
-    return model.model_validate(data)
+    """A job request that is not an object or names no known engine
+    (:func:`engines.registry.parse_job_request`, which validates requests with their engine's model)."""
 
 
 class JobKind(StrEnum):
@@ -104,18 +74,3 @@ class JobInfo(Strict):
     last_event: int = Field(default=0, description="id of the newest event")
     attempt: int = Field(default=0, ge=0, description="the run holding the job (its latest `started`)")
     owner: str | None = Field(default=None, description="the principal that submitted the job")
-
-
-# Engine request models defined in their own modules (they import JobRequestBase from schemas.bases).
-from .annotations import AnnotationRequest  # noqa: E402
-from .control import ControlRequest  # noqa: E402
-from .graph import GraphRequest  # noqa: E402
-from .rhythm import RhythmRequest  # noqa: E402
-
-JobRequest = Annotated[  # type: ignore[misc,assignment]
-    ClipRequest | GraphRequest | ControlRequest | AnnotationRequest | RhythmRequest,
-    Field(discriminator="engine"),
-]
-REQUEST_MODELS.update(
-    graph=GraphRequest, control=ControlRequest, annotations=AnnotationRequest, rhythm=RhythmRequest
-)

@@ -29,9 +29,8 @@ from typing import Any
 from cachetools import LRUCache, cached
 
 from engines.base import DatabaseFacts
-from engines.registry import engine_class
+from engines.registry import engine_class, parse_job_request
 from schemas.bases import JobRequestBase
-from schemas.jobs import parse_job_request
 
 BASE_MEMORY_BYTES = 300 * 1024 * 1024
 """A worker process with the engines loaded (numpy, scipy, scikit-learn) and a database."""

@@ -16,13 +16,12 @@ from typing import Any
 from pydantic import ValidationError
 
 from engines.base import AnyEngine, ClipInput, EngineError, MotionLibrary, Run, Solution, Stopped
-from engines.registry import UnavailableError, kind_class
+from engines.registry import UnavailableError, kind_class, parse_database_spec
 from motion import Motion, MotionError
 from motion.plausibility import Reference
 from motion.quality import assess
 from schemas import DatabaseStatus, EventType, JobInfo, JobStatus, ProvenanceEntry, Report
 from schemas.bases import DatabaseSpecBase, JobRequestBase
-from schemas.databases import parse_database_spec
 
 from .engine_cache import EngineCache as EngineCache  # re-exported: where it lived before
 from .engine_cache import OpenArrays

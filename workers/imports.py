@@ -24,10 +24,11 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from engines.registry import parse_database_spec
 from motion import MotionError
 from motion.samples import is_clip_sample, sample_name, sample_path
 from schemas import DatabaseInfo, DatabaseStatus
-from schemas.databases import database_id, parse_database_spec
+from schemas.databases import database_id
 
 from .movement_graphs import derived_database_id
 from .store import NotFoundError, Store

@@ -21,16 +21,17 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from engines.base import ClipInput
+from engines.registry import parse_database_spec
 from motion import Motion, MotionError
 from motion.export.events import result_events, sorted_events
 from motion.io import save_motion
 from motion.samples import declared_units, resolve_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobEvent, Report
 from schemas.bases import DatabaseSpecBase
-from schemas.databases import database_id, parse_database_spec
+from schemas.databases import database_id
 
 from .execute import JobFailure, build_database_bytes, run_search
-from .prepare import PrepareError, prepare_in_dir
+from .prepare import PrepareError, parse, prepare_in_dir
 from .store import load_npz, now
 
 Publish = Callable[[EventType, dict[str, Any]], None]
@@ -121,11 +122,11 @@ def synth_from_dir(
     """Run a request file against a database directory; returns the best motion and its report
     (``None`` if the engine found nothing, after a ``failed`` event)."""
     publish(EventType.started, {})
-    request_data = json.loads(request_path.read_bytes())
-    if budget_s is not None and isinstance(request_data, dict):
-        request_data["budget_s"] = budget_s
+    request = parse(json.loads(request_path.read_bytes()))
+    if budget_s is not None:
+        request = request.with_budget(budget_s)
     try:
-        prepared = prepare_in_dir(request_data, request_path.resolve().parent, db_dir)
+        prepared = prepare_in_dir(request, request_path.resolve().parent, db_dir)
         arrays = load_npz((db_dir / "data.npz").read_bytes())
     except PrepareError as exc:
         raise JobFailure(exc.code, exc.message) from None

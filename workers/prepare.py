@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from engines.registry import EngineClass, engine_class
-from schemas import DatabaseInfo, DatabaseStatus, parse_job_request
+from engines.registry import EngineClass, engine_class, parse_job_request
+from schemas import DatabaseInfo, DatabaseStatus
 from schemas.bases import JobRequestBase
 
 from .inputs import InputError, attach_from_dir, attach_resolved, resolve_inputs

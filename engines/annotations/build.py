@@ -29,6 +29,7 @@ from schemas.annotations import AnnotatedDatabaseSpec
 from ..base import Arrays, Emitter, ShouldStop
 from ..library import MotionLibrary
 from .blocks import cluster_blocks, pca_features, principal_axes
+from .database import AnnotatedDatabase
 from .features import (
     body_joints,
     clip_frames,
@@ -174,20 +175,18 @@ def _build(
         progress=cluster_progress,
     )
     refs = [c.name or c.bvh or name for c, name in zip(spec.clips, library.names, strict=True)]
-    arrays: Arrays = {
-        "ann.clip_refs": np.array(refs, dtype=str),
-        "ann.vocab": np.array(prop.vocab, dtype=str),
-        "ann.labels": prop.labels,
-        "ann.known": prop.known,
-        "ann.decision": prop.decision,
-        "ann.report": np.array(prop.report_json()),
-        "ann.features": feats,
-        "ann.pca_mean": mean,
-        "ann.pca_components": comp,
-        "ann.ground_xz": xz,
-        "ann.ground_yaw": yaw,
-        "ann.block_sizes": np.array(spec.block_sizes, dtype=np.int64),
-    }
-    for size, cl in clusters.items():
-        arrays[f"ann.clusters.{size}"] = cl
-    return arrays
+    return AnnotatedDatabase(
+        clip_refs=np.array(refs, dtype=str),
+        vocab=np.array(prop.vocab, dtype=str),
+        labels=prop.labels,
+        known=prop.known,
+        decision=prop.decision,
+        report=prop.report_json(),
+        features=feats,
+        pca_mean=mean,
+        pca_components=comp,
+        ground_xz=xz,
+        ground_yaw=yaw,
+        block_sizes=np.array(spec.block_sizes, dtype=np.int64),
+        clusters=clusters,
+    ).to_arrays()

@@ -60,6 +60,7 @@ from schemas.annotations import AnnotationRequest
 from ..base import Arrays, EngineError
 from ..library import MotionLibrary
 from .blocks import next_features
+from .database import AnnotatedDatabase
 from .dp import solve_chain
 from .labels import LabelTable, clip_refs, clip_starts
 
@@ -131,9 +132,10 @@ class Database(LabelTable):
         counts = np.array([m.num_frames for m in library.motions], dtype=np.intp)
         starts = clip_starts(counts)
         clip_of = np.repeat(np.arange(counts.size, dtype=np.intp), counts)
-        feats = np.asarray(arrays["ann.features"], dtype=np.float32)
-        xz = np.asarray(arrays["ann.ground_xz"], dtype=np.float64)
-        yaw = np.asarray(arrays["ann.ground_yaw"], dtype=np.float64)
+        stored = AnnotatedDatabase.from_arrays(arrays)
+        feats = np.asarray(stored.features, dtype=np.float32)
+        xz = np.asarray(stored.ground_xz, dtype=np.float64)
+        yaw = np.asarray(stored.ground_yaw, dtype=np.float64)
         xz_next = np.empty_like(xz)
         yaw_next = np.empty_like(yaw)
         xz_next[:-1], yaw_next[:-1] = xz[1:], yaw[1:]
@@ -141,18 +143,17 @@ class Database(LabelTable):
         prev = np.maximum(last - 1, starts)
         xz_next[last] = 2 * xz[last] - xz[prev]
         yaw_next[last] = 2 * yaw[last] - yaw[prev]
-        sizes = [int(s) for s in np.asarray(arrays["ann.block_sizes"])]
-        labels = np.asarray(arrays["ann.labels"], dtype=np.int8)
-        known = np.asarray(arrays["ann.known"], dtype=bool)
-        decision = np.asarray(arrays["ann.decision"], dtype=np.float32)
-        levels = [Clustering.of(s, np.asarray(arrays[f"ann.clusters.{s}"], dtype=np.int32)) for s in sizes]
+        labels = np.asarray(stored.labels, dtype=np.int8)
+        known = np.asarray(stored.known, dtype=bool)
+        decision = np.asarray(stored.decision, dtype=np.float32)
+        levels = [Clustering.of(s, np.asarray(cl, dtype=np.int32)) for s, cl in stored.clusters.items()]
         return cls(
             names=library.names,
             refs=clip_refs(arrays, library.names),
             counts=counts,
             clip_start=starts,
             clip_of=clip_of,
-            vocab=[str(v) for v in np.asarray(arrays["ann.vocab"]).reshape(-1)],
+            vocab=[str(v) for v in stored.vocab.reshape(-1)],
             labels=labels,
             confidence=np.where(known, labels, np.clip(decision, -1.0, 1.0)).astype(np.float32),
             features=feats,

@@ -3,8 +3,8 @@
 :func:`build_rhythm` is the engine's ``build``: it analyses the motion beats of every example
 (:func:`motion.beats.detect_beats`, or the spec's ``clip_beats``), cuts and normalizes the basic
 movements (:mod:`engines.rhythm.movements`), groups them (:mod:`engines.rhythm.movement_graph`), builds the
-movement transition graph and stores everything as ``rhythm.*`` arrays. :func:`tables_from_arrays`
-loads them for synthesis.
+movement transition graph and stores everything as ``rhythm.*`` arrays
+(:class:`engines.rhythm.database.RhythmDatabase`, which also loads them for synthesis).
 
 Two choices the paper leaves open:
 
@@ -20,9 +20,6 @@ Two choices the paper leaves open:
 
 from __future__ import annotations
 
-import json
-from typing import Any
-
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import gaussian_filter1d
@@ -35,11 +32,10 @@ from schemas.rhythm import RhythmDatabaseSpec
 from ..base import Arrays, Emitter, EngineError, ShouldStop
 from ..library import MotionLibrary
 from .beatkeys import beat_keys, movement_speed
-from .blend import fit_blender
+from .database import RhythmDatabase
 from .movement_graph import k_medoids, medoids, subtractive_clustering, transition_graph
 from .movements import Example, Movements, extract_movements, movement_differences, transition_differences
 from .reach import describe as describe_graph
-from .synth import Tables
 
 Array = npt.NDArray[np.float64]
 
@@ -234,35 +230,36 @@ def build_rhythm(
         "beats_s": {e.name: [round(float(x), 4) for x in e.beats_s] for e in examples},
         "groups": int(labels.max()) + 1,
     }
-    arrays: Arrays = {
-        "rhythm.meta": np.array(json.dumps(meta)),
-        "rhythm.root": mv.root.astype(np.float32),
-        "rhythm.rot": q.astype(np.float32),
-        "rhythm.jt": mv.jt.astype(np.float32),
-        "rhythm.src_clip": mv.src_clip,
-        "rhythm.src_frames": mv.src_frames.astype(np.float32),
-        "rhythm.index_in_clip": mv.index_in_clip,
-        "rhythm.end_xz": mv.end_xz,
-        "rhythm.end_yaw": mv.end_yaw,
-        "rhythm.params": mv.params,
-        "rhythm.labels": labels,
-        "rhythm.medoids": centre,
-        "rhythm.p": graph.p,
-        "rhythm.start": graph.start,
-        "rhythm.kinematic": graph.kinematic,
-        "rhythm.behavioural": graph.behavioural,
-        "rhythm.group_distance": graph.group_distance,
-        "rhythm.beat_keys": keys,
-        "rhythm.clarity": clarity,
-    }
+    partner_root = partner_rot = None
     if mv.partner_root is not None and mv.partner_rot is not None:
         ref = mv.partner_rot[centre[labels]]
-        pq = np.where(
+        partner_root = mv.partner_root
+        partner_rot = np.where(
             np.sum(mv.partner_rot * ref, axis=-1, keepdims=True) < 0, -mv.partner_rot, mv.partner_rot
         )
-        arrays["rhythm.partner_root"] = mv.partner_root.astype(np.float32)
-        arrays["rhythm.partner_rot"] = pq.astype(np.float32)
-    return arrays
+    return RhythmDatabase(
+        meta=meta,
+        root=mv.root,
+        rot=q,
+        jt=mv.jt,
+        src_clip=mv.src_clip,
+        src_frames=mv.src_frames,
+        index_in_clip=mv.index_in_clip,
+        end_xz=mv.end_xz,
+        end_yaw=mv.end_yaw,
+        params=mv.params,
+        labels=labels,
+        medoids=centre,
+        p=graph.p,
+        start=graph.start,
+        kinematic=graph.kinematic,
+        behavioural=graph.behavioural,
+        group_distance=graph.group_distance,
+        beat_keys=keys,
+        clarity=clarity,
+        partner_root=partner_root,
+        partner_rot=partner_rot,
+    ).to_arrays()
 
 
 def _beat_keys(mv: Movements, example: Motion) -> tuple[Array, Array]:
@@ -278,41 +275,3 @@ def _beat_keys(mv: Movements, example: Motion) -> tuple[Array, Array]:
         ]
     )
     return beat_keys(speed, mv.frames_per_beat, mv.beats_per_movement)
-
-
-def tables_from_arrays(arrays: Any) -> tuple[Tables, dict[str, Any]]:
-    """Synthesis tables and metadata of a stored rhythm database."""
-    meta = json.loads(str(arrays["rhythm.meta"]))
-    labels = np.asarray(arrays["rhythm.labels"], dtype=np.intp)
-    params = np.asarray(arrays["rhythm.params"], dtype=np.float64)
-    has_partner = "rhythm.partner_rot" in arrays
-    p, b = int(meta["frames_per_beat"]), int(meta["beats_per_movement"])
-    if "rhythm.beat_keys" in arrays:  # databases built before beat keys: the nominal beat frames
-        keys = np.asarray(arrays["rhythm.beat_keys"], dtype=np.float64)
-        clarity = np.asarray(arrays["rhythm.clarity"], dtype=np.float64)
-    else:
-        keys = np.broadcast_to(np.arange(b + 1, dtype=np.float64) * p, (labels.size, b + 1)).copy()
-        clarity = np.ones(labels.size)
-    t = Tables(
-        root=np.asarray(arrays["rhythm.root"], dtype=np.float32),
-        rot=np.asarray(arrays["rhythm.rot"], dtype=np.float32),
-        jt=np.asarray(arrays["rhythm.jt"], dtype=np.float64),
-        partner_root=np.asarray(arrays["rhythm.partner_root"], dtype=np.float64) if has_partner else None,
-        partner_rot=np.asarray(arrays["rhythm.partner_rot"], dtype=np.float64) if has_partner else None,
-        end_xz=np.asarray(arrays["rhythm.end_xz"], dtype=np.float64),
-        end_yaw=np.asarray(arrays["rhythm.end_yaw"], dtype=np.float64),
-        params=params,
-        labels=labels,
-        p=np.asarray(arrays["rhythm.p"], dtype=np.float64),
-        start=np.asarray(arrays["rhythm.start"], dtype=np.float64),
-        blender=fit_blender(params, labels),
-        frames_per_beat=int(meta["frames_per_beat"]),
-        beats_per_movement=int(meta["beats_per_movement"]),
-        fps=float(meta["fps"]),
-        period_s=float(meta["period_s"]),
-        src_clip=np.asarray(arrays["rhythm.src_clip"], dtype=np.intp),
-        src_frames=np.asarray(arrays["rhythm.src_frames"], dtype=np.float64),
-        beat_keys=keys,
-        clarity=clarity,
-    )
-    return t, meta

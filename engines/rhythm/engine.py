@@ -52,8 +52,9 @@ from ..base import (
 )
 from ..combine import combine_motions, combined_characters
 from ..library import MotionLibrary
-from .build import build_rhythm, tables_from_arrays
+from .build import build_rhythm
 from .choreography import edited_arrays, movement_graph, resolve_edits
+from .database import RhythmDatabase
 from .music import MusicError, bpm_beats, parse_midi
 from .music_facts import audio_facts, midi_facts
 from .session import LiveDancer
@@ -324,7 +325,8 @@ class RhythmEngine(Engine[RhythmRequest, RhythmDatabaseSpec]):
         super().__init__(library, arrays)
         self.tables: Tables
         self.meta: dict[str, Any]
-        self.tables, self.meta = tables_from_arrays(arrays)
+        stored = RhythmDatabase.from_arrays(arrays)
+        self.tables, self.meta = stored.tables(), stored.meta
         leaders = self.meta["leaders"]
         followers = self.meta["followers"]
         self.leader_skeleton = library.clip(leaders[0]).skeleton

@@ -20,8 +20,8 @@ from pydantic import Field, TypeAdapter
 from starlette.concurrency import run_in_threadpool
 
 from engines.base import EngineError, UnknownClipError
-from engines.registry import kind_class
-from schemas import DatabaseInfo, DatabaseStatus, parse_database_spec
+from engines.registry import kind_class, parse_database_spec
+from schemas import DatabaseInfo, DatabaseStatus
 from schemas.annotations import ClipLabels, LabelCorrection
 from schemas.bases import DatabaseSpecBase
 from workers.store import Store

@@ -12,13 +12,13 @@ from fastapi import APIRouter, Depends, Request, Response, status
 from pydantic import TypeAdapter
 from starlette.concurrency import run_in_threadpool
 
-from engines.registry import kind_class, require_kind, spec_union
+from engines.registry import kind_class, parse_database_spec, require_kind, spec_union
 from motion import MotionError
 from motion.resample import resampled_frames
 from schemas import ClipSource, DatabaseInfo, DatabaseStatus
 from schemas.bases import DatabaseSpecBase
 from schemas.clips import labels_past_clip_end
-from schemas.databases import DatabaseSummary, database_id, parse_database_spec
+from schemas.databases import DatabaseSummary, database_id
 from schemas.jobs import JobKind
 from workers.backend import JobBackend
 from workers.budget import database_frames

@@ -8,7 +8,8 @@ import anyio
 from fastapi import APIRouter, Depends, Query, Response, status
 from starlette.concurrency import run_in_threadpool
 
-from schemas import JobInfo, Report, parse_job_request
+from engines.registry import parse_job_request
+from schemas import JobInfo, Report
 from schemas.bases import JobRequestBase
 from schemas.jobs import JobKind, JobStatus
 from workers.backend import JobBackend, JobNotFinished
@@ -42,7 +43,7 @@ JOB_REQUEST_BODY = json_body_doc(
     "JobRequest", "A job request: the built-in engines' requests are shown; engine plugins add theirs."
 )
 """The request body as documented (the schema is added by :func:`service.app.create_app`); the
-route parses the body itself with :func:`schemas.parse_job_request` so plugin engines work."""
+route parses the body itself with :func:`engines.registry.parse_job_request` so plugin engines work."""
 
 JobRequestBody = Annotated[JobRequestBase, Depends(json_body(parse_job_request))]
 ResultQuery = Annotated[str | None, Query(description="result id (default: the job's best result so far)")]

@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 
 from engines.library import ClipInput
+from engines.registry import parse_database_spec
 from engines.rhythm.engine import RhythmEngine
 from motion.samples import sample_path
-from schemas.databases import parse_database_spec
 from workers.execute import build_database_bytes
 from workers.store import load_npz
 

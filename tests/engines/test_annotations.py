@@ -294,3 +294,14 @@ def test_loop_option_closes_the_clip_and_is_reported(engine: AnnotationEngine) -
     best = rec.solutions[-1]
     loop = best.constraint_errors["loop"]
     assert loop["satisfied"] and loop["pose_cm"] < 1.0 and loop["last_frame"] == 119, loop
+
+
+def test_the_database_dataclass_writes_back_the_stored_arrays(engine: AnnotationEngine) -> None:
+    """:class:`engines.annotations.database.AnnotatedDatabase`: ``to_arrays`` of what
+    ``from_arrays`` read is the stored ``ann.*`` arrays (order, dtypes, bytes)."""
+    from engines.annotations.database import AnnotatedDatabase
+    from tests.engines.database_arrays import assert_same_arrays
+
+    stored = AnnotatedDatabase.from_arrays(engine.arrays)
+    assert list(stored.clusters) == [int(s) for s in SPEC.block_sizes]
+    assert_same_arrays(engine.arrays, stored.to_arrays(), "ann.")

@@ -8,11 +8,11 @@ import pytest
 from engines.base import EngineError, Run
 from engines.clip import ClipEngine
 from engines.library import ClipInput, build_library, library_from_arrays, library_to_arrays
+from engines.registry import parse_job_request
 from motion import MotionError
 from motion.ground import heading
 from motion.mirror import mirror_map
 from motion.samples import sample_path
-from schemas.jobs import parse_job_request
 from tests.engines.emitters import Collect
 
 

@@ -25,10 +25,9 @@ from engines.control.dp import (
 from engines.control.engine import ControlEngine
 from engines.control.points import trajectory_control
 from engines.library import ClipInput, build_library, library_to_arrays
+from engines.registry import parse_database_spec, parse_job_request
 from motion.bvh import bvh_text
 from motion.ground import ground_frames
-from schemas.databases import parse_database_spec
-from schemas.jobs import parse_job_request
 from tests.engines.emitters import Collect
 from tests.motion.synthetic import walking_biped
 
@@ -449,3 +448,13 @@ def test_rigid_alignment_option_end_to_end() -> None:
     assert errors["rigid"] < 0.02 < errors["floor"]
     with pytest.raises(ValidationError, match="alignment"):
         parse_job_request({"engine": "control", "control": {"bvh": "c.bvh"}, "alignment": "affine"})
+
+
+def test_the_database_dataclass_writes_back_the_stored_arrays() -> None:
+    """:class:`engines.control.build.ControlDatabase`: ``to_arrays`` of what ``from_arrays`` read
+    is the stored ``control.*`` arrays (order, dtypes, bytes; the meta JSON key for key)."""
+    from engines.control.build import PREFIX, ControlDatabase
+    from tests.engines.database_arrays import assert_same_arrays
+
+    arrays = walk_engine().arrays
+    assert_same_arrays(arrays, ControlDatabase.from_arrays(arrays).to_arrays(), PREFIX)

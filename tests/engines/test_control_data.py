@@ -12,12 +12,11 @@ import pytest
 from engines.base import EngineError, Run
 from engines.control.engine import ControlEngine
 from engines.library import ClipInput, build_library, library_to_arrays
+from engines.registry import parse_database_spec, parse_job_request
 from motion import Motion
 from motion import rotations as rot
 from motion.bvh import bvh_text, parse_bvh
 from motion.samples import sample_path
-from schemas.databases import parse_database_spec
-from schemas.jobs import parse_job_request
 from tests.engines.emitters import Collect
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"

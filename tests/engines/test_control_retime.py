@@ -359,7 +359,7 @@ def test_retime_equals_the_reference_on_salsa(held: str, monkeypatch: pytest.Mon
         return got
 
     monkeypatch.setattr(control_engine, "retime", checked)
-    from schemas.jobs import parse_job_request
+    from engines.registry import parse_job_request
 
     lead = (s / f"60_{held}_scaled.bvh").read_bytes()
     for extra in ({}, {"alignment": "rigid"}):

@@ -8,9 +8,9 @@ import pytest
 from engines.base import EngineError
 from engines.control.engine import ControlEngine
 from engines.library import ClipInput, build_library, library_to_arrays
+from engines.registry import parse_database_spec
 from motion.bvh import bvh_text
 from motion.ground import ground_frames
-from schemas.databases import parse_database_spec
 from tests.engines.emitters import Collect
 from tests.engines.test_control import walk_engine
 from tests.motion.synthetic import walking_biped

@@ -485,7 +485,7 @@ def test_a_graph_database_stores_its_motion_as_float32(walks: MotionLibrary) -> 
     the same motion back to float32 rounding."""
     from engines.graph.engine import GraphEngine
     from engines.library import library_from_arrays, library_to_arrays
-    from schemas.databases import parse_database_spec
+    from engines.registry import parse_database_spec
 
     lib = library(walking_biped(150, seed=0), arms_up(walking_biped(150, seed=1)))
     db = parse_database_spec({"kind": "graph", "clips": [{"bvh": "x.bvh"}]})

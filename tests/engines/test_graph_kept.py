@@ -5,7 +5,7 @@ from __future__ import annotations
 from engines.base import Run
 from engines.graph.build import build_graph
 from engines.graph.engine import GraphEngine, left_out_note
-from schemas.jobs import parse_job_request
+from engines.registry import parse_job_request
 from tests.engines.emitters import Collect
 from tests.engines.test_graph_build import arms_up, library, spec
 from tests.motion.synthetic import walking_biped

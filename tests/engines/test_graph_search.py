@@ -589,8 +589,7 @@ def test_bandai_end_to_end() -> None:
     build = pytest.importorskip("engines.graph.build")
     from engines.graph.engine import GraphEngine
     from engines.library import ClipInput, build_library, library_to_arrays
-    from schemas.databases import parse_database_spec
-    from schemas.jobs import parse_job_request
+    from engines.registry import parse_database_spec, parse_job_request
 
     files: list[str] = []
     for kind in ("walk", "walk-turn-left", "walk-turn-right"):

@@ -13,13 +13,13 @@ from engines.annotations.engine import AnnotationEngine
 from engines.base import Run, Solution
 from engines.graph.search import GraphSearch
 from engines.library import library_to_arrays
+from engines.registry import parse_job_request
 from engines.rhythm.engine import RhythmEngine
 from motion.goals import body_track
 from motion.plausibility import reference_from_positions
 from schemas.annotations import AnnotationRequest
-from schemas.databases import RhythmDatabaseSpec
 from schemas.graph import GraphRequest
-from schemas.jobs import parse_job_request
+from schemas.rhythm import RhythmDatabaseSpec
 from tests.engines.emitters import Collect
 from tests.engines.graph_synthetic import synthetic_graph
 from tests.engines.rhythm_synthetic import library as rhythm_library

@@ -37,20 +37,26 @@ def test_unknown_names_list_what_is_available() -> None:
         engine_class("nope")
 
 
-def test_the_registry_and_the_schemas_name_the_same_models() -> None:
-    """The unions of the OpenAPI document come from the registry; the schemas' own parsers
-    (``parse_job_request``, ``parse_database_spec``) must accept exactly the same models."""
+def test_requests_and_specs_are_validated_with_the_registrys_models() -> None:
+    """One table: each built-in engine's request is validated with the request model its registry
+    line names, each kind's spec with its spec model, and the OpenAPI unions list the same models
+    (built-in kinds in the order the document has always listed them)."""
     from typing import get_args
 
-    from schemas.databases import DatabaseSpec
-    from schemas.jobs import REQUEST_MODELS, JobRequest
+    from engines.registry import parse_database_spec, parse_job_request
+    from schemas.jobs import RequestError
 
     built_in = registry._BUILT_IN
     for name, entry in built_in.items():
-        assert REQUEST_MODELS[name] is entry.request_model
         assert engine_class(name).request_model is entry.request_model
         assert engine_class(name).spec_model is entry.spec_model
     requests = get_args(get_args(registry.request_union())[0])
     specs = get_args(get_args(registry.spec_union())[0])
-    assert requests == get_args(get_args(JobRequest)[0])
-    assert specs == get_args(get_args(DatabaseSpec)[0])
+    assert requests == tuple(b.request_model for b in built_in.values())
+    assert specs == registry._spec_models()[: len(specs)]
+    for kind in ("clips", "graph", "rhythm"):
+        spec = parse_database_spec({"kind": kind, "clips": [{"bvh": "a.bvh"}]})
+        assert type(spec) is registry.kind_class(kind).spec_model
+    assert type(parse_job_request({"engine": "graph", "frames": 10})) is built_in["graph"].request_model
+    with pytest.raises(RequestError, match="unknown engine 'nope'; available: annotations, clip, control"):
+        parse_job_request({"engine": "nope"})

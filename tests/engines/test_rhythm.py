@@ -359,3 +359,20 @@ def test_path_in_formation_keeps_rows(synthetic: Any) -> None:
     assert np.all(end[:, 1] - start[:, 1] > 1.5)  # marched along the path
     # the rows keep their order across the path (offset curves do not cross)
     assert np.all(np.diff(end[:, 0]) > 0.3)
+
+
+def test_the_database_dataclass_writes_back_the_stored_arrays(synthetic: Any) -> None:
+    """:class:`engines.rhythm.database.RhythmDatabase`: ``to_arrays`` of what ``from_arrays`` read
+    is the stored arrays; without beat keys (older databases) synthesis gets the nominal beats."""
+    from engines.rhythm.database import RhythmDatabase
+    from tests.engines.database_arrays import assert_same_arrays
+
+    _, _, engine = synthetic
+    stored = RhythmDatabase.from_arrays(engine.arrays)
+    assert stored.beat_keys is not None and stored.partner_root is None
+    assert_same_arrays(engine.arrays, stored.to_arrays(), "rhythm.")
+    older = {k: v for k, v in engine.arrays.items() if k not in ("rhythm.beat_keys", "rhythm.clarity")}
+    tables = RhythmDatabase.from_arrays(older).tables()
+    p, b = tables.frames_per_beat, tables.beats_per_movement
+    assert np.array_equal(tables.beat_keys[0], np.arange(b + 1) * p)
+    assert np.array_equal(tables.clarity, np.ones(tables.labels.size))

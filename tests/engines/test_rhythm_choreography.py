@@ -383,7 +383,7 @@ OTHER_LEADERS = ("03", "09", "11", "13", "15")
 @pytest.fixture(scope="module")
 def other_leaders() -> dict[str, Any]:
     from engines.library import ClipInput
-    from schemas.databases import parse_database_spec
+    from engines.registry import parse_database_spec
     from workers.execute import build_database_bytes
     from workers.store import load_npz
 

@@ -13,10 +13,10 @@ import pytest
 
 from engines.base import CollectingEmitter, Run
 from engines.library import ClipInput
+from engines.registry import parse_database_spec
 from engines.rhythm.engine import RhythmEngine, music_beats
 from engines.rhythm.synth import partner_fade_frames
 from motion.samples import sample_path
-from schemas.databases import parse_database_spec
 from schemas.rhythm import RhythmRequest
 from tests.engines.rhythm_salsa import COUPLES_SPEC
 from workers.execute import build_database_bytes
@@ -88,3 +88,23 @@ def test_the_follower_is_not_carried_across_the_floor_at_joins() -> None:
     step = np.linalg.norm(np.diff(root, axis=0), axis=1) * partners[0].fps  # m/s
     table = np.linalg.norm(np.diff(t.partner_root[..., [0, 2]], axis=1), axis=-1).max() * t.fps
     assert step.max() < 1.25 * table * t.period_s * bpm / 60.0
+
+
+def test_the_database_dataclass_writes_back_the_stored_arrays() -> None:
+    """:class:`engines.rhythm.database.RhythmDatabase` round-trips a couples database (partner
+    arrays included) and, once edited, its learned graph too."""
+    from engines.rhythm.choreography import edited_arrays
+    from engines.rhythm.database import RhythmDatabase
+    from schemas.movement_graph import ResolvedEdit
+    from tests.engines.database_arrays import assert_same_arrays
+
+    arrays = couples_engine().arrays
+    stored = RhythmDatabase.from_arrays(arrays)
+    assert stored.partner_root is not None and stored.learned_p is None
+    assert_same_arrays(arrays, stored.to_arrays(), "rhythm.")
+    p = np.asarray(arrays["rhythm.p"])
+    a, b = np.argwhere(p > 0)[0]
+    edited = edited_arrays(arrays, [ResolvedEdit(op="weight", source=int(a), target=int(b), weight=5.0)])
+    again = RhythmDatabase.from_arrays(edited)
+    assert again.learned_p is not None and not np.array_equal(again.p, again.learned_p)
+    assert_same_arrays(edited, again.to_arrays(), "rhythm.")

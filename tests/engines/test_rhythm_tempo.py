@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from engines.base import Run
+from engines.registry import parse_job_request
 from engines.rhythm.engine import RhythmEngine
 from engines.rhythm.synth import beat_rates, too_fast
-from schemas import parse_job_request
 from tests.engines.rhythm_salsa import salsa_arrays
 from tests.engines.test_quality_engines import Collect, best
 

@@ -17,12 +17,12 @@ from engines.base import Engine, Run, Stopped
 from engines.control.engine import ControlEngine
 from engines.graph.search import GraphSearch
 from engines.library import library_to_arrays
+from engines.registry import parse_job_request
 from engines.rhythm.engine import RhythmEngine
 from motion.bvh import bvh_text
 from schemas import EventType, Report
 from schemas.annotations import AnnotationRequest
 from schemas.graph import GraphRequest
-from schemas.jobs import parse_job_request
 from schemas.rhythm import RhythmDatabaseSpec
 from tests.engines.emitters import Collect
 from workers.execute import run_search

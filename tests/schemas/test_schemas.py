@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from pydantic import ValidationError
 
-from schemas import parse_database_spec, parse_job_request
+from engines.registry import parse_database_spec, parse_job_request
 from schemas.databases import database_id
 from schemas.jobs import RequestError
 

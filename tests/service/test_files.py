@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
-from schemas.jobs import parse_job_request
+from engines.registry import parse_job_request
 from workers.inputs import InputError, attach_from_dir, attach_resolved, resolve_inputs
 from workers.store import Store
 

@@ -123,7 +123,7 @@ def test_work_budget_is_checked_at_submission(
 
 def test_work_estimate_counts_characters_frames_and_joints() -> None:
     from engines.base import DatabaseFacts
-    from schemas.jobs import parse_job_request
+    from engines.registry import parse_job_request
     from workers.budget import WorkLimits, check_work, estimate_work
 
     crowd = parse_job_request(

@@ -26,9 +26,10 @@ import pytest
 import redis
 
 import tests.workers.scripted_engine  # noqa: F401  (registers the scripted engine in this process)
+from engines.registry import parse_database_spec
 from motion.samples import sample_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobInfo, JobStatus
-from schemas.databases import database_id, parse_database_spec
+from schemas.databases import database_id
 from schemas.jobs import JobKind
 from workers.execute import EngineCache, execute_job
 from workers.redis_worker import run_worker

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from engines.registry import load_plugins
+from engines.registry import load_plugins, parse_database_spec
 from motion.samples import sample_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobEvent, JobStatus
-from schemas.databases import database_id, parse_database_spec
+from schemas.databases import database_id
 from workers.embedded import EmbeddedBackend
 from workers.redis_backend import RedisBackend
 from workers.store import Store, now

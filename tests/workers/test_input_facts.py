@@ -14,10 +14,10 @@ import pytest
 import soundfile as sf
 
 from engines.base import DatabaseFacts
+from engines.registry import parse_job_request
 from engines.rhythm.music import parse_midi
 from engines.rhythm.music_facts import MAX_BEATS, audio_facts, midi_facts
 from motion.samples import sample_path
-from schemas import parse_job_request
 from workers.budget import WorkLimits, check_work, estimate_work
 
 
