@@ -149,7 +149,7 @@ def release(
     objects: Objects, key: str, principal: str, delete: Callable[[], None], force: bool = False
 ) -> bool:
     """Drop ``principal``'s hold; when no other principal holds the thing (or ``force``: an admin),
-    ``delete()`` it (which removes the owners object too). True when it was deleted. Locally
+    ``delete()`` it (which must remove the owners object, last). True when it was deleted. Locally
     nothing is written before the delete (it works on a full disk)."""
     if isinstance(objects, S3Objects):
         return _release_s3(objects, key, principal, delete, force)
@@ -181,6 +181,5 @@ def _release_s3(
         if objects.put(key, current.to_bytes(), if_absent=etag is None, if_match=etag):
             break
     if last:
-        delete()
-        objects.delete(key)
+        delete()  # removes the marker last: a waiting upload then records its hold and restores
     return last

@@ -294,14 +294,14 @@ class Store:
         is kept unless ``replace``); False when it held it already. ``restore`` writes the bytes
         back when another holder's delete removed them meanwhile (an upload has them in hand);
         atomic against :meth:`release`."""
-        info_key = self._owners_key(kind, item_id).removesuffix(".owners").removesuffix("/owners")
-        info_key += "/info.json" if kind == "databases" else ".json"
+        base = self._owners_key(kind, item_id).removesuffix(".owners").removesuffix("/owners")
+        stored = {"clips": (".json", ".bvh"), "files": (".json", ".bin"), "databases": ("/info.json",)}
         return holding.hold(
             self.objects,
             self._owners_key(kind, item_id),
             principal,
             dict(record or {}),
-            lambda: self.objects.exists(info_key),
+            lambda: all(self.objects.exists(base + suffix) for suffix in stored[kind]),
             restore,
             replace,
         )
