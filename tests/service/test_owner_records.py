@@ -5,6 +5,7 @@ written before records were (owners as a plain list) still read, with the shared
 from __future__ import annotations
 
 import json
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -106,3 +107,43 @@ def test_owners_stored_as_a_plain_list_still_read(
     assert client.get(f"/v1/clips/{clip['id']}", headers=alice).json()["name"] == "legacy.bvh"
     assert client.delete(f"/v1/clips/{clip['id']}", headers=alice | JSON).status_code == 204
     assert client.get(f"/v1/clips/{clip['id']}", headers=bob).json()["name"] == "bob-legacy.bvh"
+
+
+def test_a_delete_racing_another_principals_upload_over_http_keeps_its_clip(
+    client: TestClient, override_settings: Callable[..., Settings]
+) -> None:
+    """The measured failure: alice's DELETE racing bob's upload of the same bytes lost bob's clip."""
+    alice, bob = _principals(override_settings)
+    data = _bvh(1.4567)
+    for trial in range(25):
+        clip = _upload(client, "/v1/clips", "a.bvh", data, alice).json()
+        answers = _delete_racing_upload(client, clip["id"], data, alice, bob)
+        assert answers == {"delete": 204, "upload": 201}, (trial, answers)
+        got = client.get(f"/v1/clips/{clip['id']}/bvh", headers=bob)
+        assert got.status_code == 200 and got.content == data, trial
+        assert client.get(f"/v1/clips/{clip['id']}", headers=bob).json()["name"] == "b.bvh"
+        assert client.get(f"/v1/clips/{clip['id']}", headers=alice).status_code == 404
+        assert client.delete(f"/v1/clips/{clip['id']}", headers=bob | JSON).status_code == 204
+
+
+def _delete_racing_upload(
+    client: TestClient, clip_id: str, data: bytes, alice: dict[str, str], bob: dict[str, str]
+) -> dict[str, int]:
+    """Alice's DELETE and bob's upload of the same bytes, released together; their status codes."""
+    barrier = threading.Barrier(2)
+    answers: dict[str, int] = {}
+
+    def delete() -> None:
+        barrier.wait(120)
+        answers["delete"] = client.delete(f"/v1/clips/{clip_id}", headers=alice | JSON).status_code
+
+    def upload() -> None:
+        barrier.wait(120)
+        answers["upload"] = client.post("/v1/clips", files={"file": ("b.bvh", data)}, headers=bob).status_code
+
+    threads = [threading.Thread(target=delete), threading.Thread(target=upload)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    return answers
