@@ -481,9 +481,11 @@ class Store:
         except NotFoundError:
             return self.file_bytes(upload_id)
 
-    def find_input(self, ref: str, visible: Visible | None = None) -> str:
+    def find_input(self, ref: str, visible: Visible | None = None, holder: str | None = None) -> str:
         """Resolve a request's input reference to an upload id: a clip or file id, or the name of an
-        uploaded clip or file (the newest upload of that name), among those ``visible`` accepts."""
+        uploaded clip or file (the newest upload of that name), among those ``visible`` accepts.
+        With ``holder``, names and upload times are that principal's own (its holder records),
+        the shared ones where it has none."""
         ok = visible or (lambda _id: True)
         for lookup in (self.clip_info, self.file_info):
             try:
@@ -493,12 +495,22 @@ class Store:
             if ok(found):
                 return found
         base = ref.replace("\\", "/").rsplit("/", 1)[-1]
-        named: list[tuple[datetime, str]] = [
-            (c.created_at, c.id)
-            for c in self.list_clips()
-            if (c.name in (ref, base) or c.name.removesuffix(".gz") in (ref, base)) and ok(c.id)
-        ]
-        named += [(f.created_at, f.id) for f in self.list_files() if f.name in (ref, base) and ok(f.id)]
+        named: list[tuple[datetime, str]] = []
+        kinds: tuple[tuple[Owned, list[ClipInfo] | list[FileInfo]], ...] = (
+            ("clips", self.list_clips()),
+            ("files", self.list_files()),
+        )
+        for kind, infos in kinds:
+            for info in infos:
+                if not ok(info.id):
+                    continue
+                own = self.holders(kind, info.id).get(holder, {}) if holder is not None else {}
+                name = str(own.get("name") or info.name)
+                created = (
+                    datetime.fromisoformat(own["created_at"]) if own.get("created_at") else info.created_at
+                )
+                if name in (ref, base) or (kind == "clips" and name.removesuffix(".gz") in (ref, base)):
+                    named.append((created, info.id))
         if not named:
             raise NotFoundError(
                 f"no uploaded clip or file named {ref!r}; upload it first (POST /v1/clips for BVH, "

@@ -126,3 +126,14 @@ def test_a_stale_deleting_marker_is_taken_over(s3_store: Store, monkeypatch: pyt
     assert s3_store.owners("clips", info.id) == set()  # being deleted: nobody holds it
     s3_store.add_owner("clips", info.id, "bob", {"name": "b"}, lambda: s3_store.restore_clip(info, data))
     assert s3_store.owners("clips", info.id) == {"bob"} and s3_store.clip_bytes(info.id) == data
+
+
+def test_inputs_resolve_by_the_holders_own_name(store: Store) -> None:
+    info = store.put_file("alice.mid", b"MThd shared bytes")
+    store.add_owner("files", info.id, "alice", {"name": "alice.mid"})
+    store.add_owner("files", info.id, "bob", {"name": "bob.mid"})
+    assert store.find_input("bob.mid", holder="bob") == info.id
+    assert store.find_input("alice.mid", holder="alice") == info.id
+    with pytest.raises(NotFoundError):
+        store.find_input("bob.mid", holder="alice")
+    assert store.find_input("alice.mid") == info.id  # no holder: the shared name
