@@ -36,7 +36,10 @@ def seen(store: Store, principal: Principal, kind: Owned, info: Info) -> Info:
     """``info`` as the principal sees it: the shared facts with its own record (name, upload time,
     build job) over them; the shared info itself when it has no record (holds recorded before
     records were, or an admin looking at another's)."""
-    record = store.holders(kind, info.id).get(principal.name)
+    return _with_record(info, store.holders(kind, info.id).get(principal.name))
+
+
+def _with_record(info: Info, record: dict[str, Any] | None) -> Info:
     if not record:
         return info
     fields = type(info).model_fields
@@ -47,9 +50,9 @@ def only_visible(store: Store, principal: Principal, kind: Owned, items: Sequenc
     """The ``items`` of ``kind`` the principal holds, as it sees them, oldest (its time) first."""
     out: list[Info] = []
     for item in items:
-        if not principal.admin and principal.name not in store.owners(kind, item.id):
-            continue
-        out.append(seen(store, principal, kind, item))
+        held = store.holders(kind, item.id)
+        if principal.admin or principal.name in held:
+            out.append(_with_record(item, held.get(principal.name)))
     return sorted(out, key=lambda i: i.created_at)
 
 
