@@ -21,8 +21,9 @@ JSON = {"Content-Type": "application/json"}
 
 
 def _principals(override_settings: Callable[..., Settings]) -> tuple[dict[str, str], dict[str, str]]:
-    override_settings(api_tokens=("alice:ta", "bob:tb", "root:tr"), admins=("root",))
-    return {"Authorization": "Bearer ta"}, {"Authorization": "Bearer tb"}
+    # principals of their own: other tests' alice and bob must not hold what these leave behind
+    override_settings(api_tokens=("carol:tc", "dave:td", "root:tr"), admins=("root",))
+    return {"Authorization": "Bearer tc"}, {"Authorization": "Bearer td"}
 
 
 def _upload(client: TestClient, route: str, name: str, data: bytes, who: dict[str, str]) -> Any:
@@ -74,7 +75,10 @@ def test_a_spec_posted_by_another_principal_gets_its_own_name_and_no_foreign_bui
     client: TestClient, override_settings: Callable[..., Settings]
 ) -> None:
     alice, bob = _principals(override_settings)
-    clips = [{"bvh": "sample:walk", "name": "owners-test-walk"}]
+    data = _bvh(1.5678)  # its own bytes: other tests' principals hold the bundled samples
+    clip = _upload(client, "/v1/clips", "db-clip.bvh", data, alice).json()
+    _upload(client, "/v1/clips", "db-clip.bvh", data, bob)
+    clips = [{"clip": clip["id"], "name": "owners-test-clip"}]
     first = client.post(
         "/v1/databases", json={"kind": "graph", "name": "alice-db", "clips": clips}, headers=alice
     )
@@ -99,7 +103,7 @@ def test_owners_stored_as_a_plain_list_still_read(
     data = _bvh(1.3456)
     clip = _upload(client, "/v1/clips", "legacy.bvh", data, alice).json()
     owners = Path(api_settings.data_dir) / "clips" / f"{clip['id']}.owners"
-    owners.write_text(json.dumps(["alice"]))  # as written before per-principal records
+    owners.write_text(json.dumps(["carol"]))  # as written before per-principal records
     got = client.get(f"/v1/clips/{clip['id']}", headers=alice).json()
     assert got["name"] == "legacy.bvh"  # the shared info
     theirs = _upload(client, "/v1/clips", "bob-legacy.bvh", data, bob).json()
