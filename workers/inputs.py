@@ -29,10 +29,12 @@ class InputError(ValueError):
         self.code = code
 
 
-def resolve_inputs(store: Store, request: JobRequestBase, visible: Visible | None = None) -> dict[str, str]:
+def resolve_inputs(
+    store: Store, request: JobRequestBase, visible: Visible | None = None, holder: str | None = None
+) -> dict[str, str]:
     """Reference -> upload id for every input file of ``request`` (ids given in ``inputs`` are
     checked, ``sample:NAME`` stores the bundled sample, the others are looked up by id or name
-    among the uploads ``visible`` accepts). Raises
+    among the uploads ``visible`` accepts, by ``holder``'s own names when given). Raises
     :class:`InputError` naming a missing one."""
     from .samples import store_sample
 
@@ -47,7 +49,7 @@ def resolve_inputs(store: Store, request: JobRequestBase, visible: Visible | Non
             resolved[ref] = sample[0]
             continue
         try:
-            resolved[ref] = store.find_input(given, visible)
+            resolved[ref] = store.find_input(given, visible, holder)
         except NotFoundError as exc:
             raise InputError(f"input file {ref!r}: {exc}") from None
     _check_audio(store, request, resolved)

@@ -276,11 +276,22 @@ class S3Objects:
         response = self._call("get_object", key, Key=self._key(key))
         return bytes(response["Body"].read())
 
-    def put(self, key: str, data: bytes, *, if_absent: bool = False) -> bool:
-        extra = {"IfNoneMatch": "*"} if if_absent else {}
+    def get_tagged(self, key: str) -> tuple[bytes, str]:
+        """The object's bytes and its ETag (for :meth:`put` ``if_match``: a compare-and-swap)."""
+        response = self._call("get_object", key, Key=self._key(key))
+        return bytes(response["Body"].read()), str(response["ETag"])
+
+    def put(self, key: str, data: bytes, *, if_absent: bool = False, if_match: str | None = None) -> bool:
+        """As :meth:`Objects.put`; with ``if_match``, only when the object's ETag is still that one
+        (``If-Match``: False when another write came first)."""
+        extra = {"IfNoneMatch": "*"} if if_absent else {"IfMatch": if_match} if if_match else {}
         try:
             self._call("put_object", key, Key=self._key(key), Body=data, **extra)
         except FileExistsError:
+            return False
+        except ObjectNotFound:  # If-Match on an object deleted meanwhile
+            if if_match is None:
+                raise
             return False
         return True
 

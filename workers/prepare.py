@@ -76,18 +76,20 @@ def prepare(
     *,
     visible: Visible | None = None,
     database: Callable[[str], DatabaseInfo] | None = None,
+    holder: str | None = None,
 ) -> Prepared:
     """Parse, find the database (``database``: how to look an id up, default the store's; the API
     checks ownership there), check it and resolve and attach the inputs among the uploads
-    ``visible`` accepts (module doc). Raises :class:`PrepareError`, the lookup's
-    ``NotFoundError``, pydantic's ``ValidationError`` and ``UnavailableError``."""
+    ``visible`` accepts, by ``holder``'s own upload names when given (module doc). Raises
+    :class:`PrepareError`, the lookup's ``NotFoundError``, pydantic's ``ValidationError`` and
+    ``UnavailableError``."""
     parsed = parse(request)
     if parsed.database is None:
         raise PrepareError("invalid_request", "the request names no database ('database': <database id>)")
     info = (database or store.database_info)(parsed.database)
     engine = check_database(parsed, info)
     try:
-        parsed.inputs = resolve_inputs(store, parsed, visible)
+        parsed.inputs = resolve_inputs(store, parsed, visible, holder)
         attach_resolved(store, parsed)
     except InputError as exc:
         raise PrepareError(exc.code, str(exc), 422, {"inputs": parsed.input_files()}) from None

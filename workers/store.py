@@ -6,9 +6,10 @@ Keys::
 
     clips/<sha256>.bvh            uploaded bytes (as uploaded, possibly gzip)
     clips/<sha256>.json           ClipInfo
-    clips/<sha256>.owners         JSON list of the principals holding the clip (likewise files/,
+    clips/<sha256>.owners         the principals holding the clip, each with its own record (name,
+                                  upload time, build job; :mod:`workers.holders`; likewise files/,
                                   databases/<id>/owners): content-addressed things are shared, each
-                                  holder sees and deletes only its own hold
+                                  holder sees its own name and deletes only its own hold
     files/<sha256>.bin|.json      other uploads (MIDI, audio) and their FileInfo
     databases/<id>/spec.json      the validated spec (clip references resolved to ids)
     databases/<id>/info.json      DatabaseInfo
@@ -52,6 +53,7 @@ from motion.serialize import motion_from_arrays, motion_to_arrays
 from schemas import ClipInfo, DatabaseInfo, JobInfo, Report
 from schemas.files import FileInfo
 
+from . import holders as holding
 from .dbcache import DiskCache, ObjectCache
 from .objects import LocalObjects, ObjectNotFound, Objects, atomic_write, open_objects
 
@@ -211,6 +213,11 @@ class Store:
             return ClipInfo.model_validate_json(self.objects.get(key))  # a concurrent upload won
         return info
 
+    def restore_clip(self, info: ClipInfo, data: bytes) -> None:
+        """Write a clip's bytes and info back (an upload whose bytes another holder deleted)."""
+        self.objects.put(f"clips/{info.id}.bvh", data)
+        self.objects.put(f"clips/{info.id}.json", info.model_dump_json().encode())
+
     def clip_info(self, clip_id: str) -> ClipInfo:
         key = f"clips/{_safe_id(clip_id)}.json"
         return ClipInfo.model_validate_json(self._immutable(key, f"no clip {clip_id!r}"))
@@ -264,25 +271,49 @@ class Store:
         return f"{kind}/{_safe_id(item_id)}.owners"
 
     def owners(self, kind: Owned, item_id: str) -> set[str]:
-        """The principals holding a clip, file or database (empty: recorded before owners were)."""
-        try:
-            return set(json.loads(self.objects.get(self._owners_key(kind, item_id))))
-        except (ObjectNotFound, ValueError):
-            return set()
+        """The principals holding a clip, file or database (empty: recorded before owners were, or
+        being deleted)."""
+        return set(self.holders(kind, item_id))
 
-    def add_owner(self, kind: Owned, item_id: str, principal: str) -> bool:
-        """Record ``principal`` as a holder; False when it held it already."""
-        held = self.owners(kind, item_id)
-        if principal in held:
-            return False
-        self.objects.put(self._owners_key(kind, item_id), json.dumps(sorted(held | {principal})).encode())
-        return True
+    def holders(self, kind: Owned, item_id: str) -> dict[str, holding.Record]:
+        """Each holder's own record (:mod:`workers.holders`: ``name``, ``created_at``,
+        ``build_job``; empty for holds recorded before records were)."""
+        current = holding.read(self.objects, self._owners_key(kind, item_id))
+        return {} if current.deleting else current.holders
 
-    def remove_owner(self, kind: Owned, item_id: str, principal: str) -> set[str]:
-        """Drop ``principal``'s hold; returns the holders left."""
-        held = self.owners(kind, item_id) - {principal}
-        self.objects.put(self._owners_key(kind, item_id), json.dumps(sorted(held)).encode())
-        return held
+    def add_owner(
+        self,
+        kind: Owned,
+        item_id: str,
+        principal: str,
+        record: Mapping[str, Any] | None = None,
+        restore: Callable[[], None] | None = None,
+        replace: bool = False,
+    ) -> bool:
+        """Record ``principal`` as a holder with its own ``record`` (JSON values; an earlier record
+        is kept unless ``replace``); False when it held it already. ``restore`` writes the bytes
+        back when another holder's delete removed them meanwhile (an upload has them in hand);
+        atomic against :meth:`release`."""
+        base = self._owners_key(kind, item_id).removesuffix(".owners").removesuffix("/owners")
+        stored = {"clips": (".json", ".bvh"), "files": (".json", ".bin"), "databases": ("/info.json",)}
+        return holding.hold(
+            self.objects,
+            self._owners_key(kind, item_id),
+            principal,
+            dict(record or {}),
+            lambda: all(self.objects.exists(base + suffix) for suffix in stored[kind]),
+            restore,
+            replace,
+        )
+
+    def release(
+        self, kind: Owned, item_id: str, principal: str, delete: Callable[[str], None], force: bool = False
+    ) -> bool:
+        """Drop ``principal``'s hold and ``delete(item_id)`` the thing when no other principal
+        holds it (or ``force``), atomically against :meth:`add_owner`. True when deleted."""
+        return holding.release(
+            self.objects, self._owners_key(kind, item_id), principal, lambda: delete(item_id), force
+        )
 
     # -- databases ----------------------------------------------------------------------------
     def _db(self, db_id: str) -> str:
@@ -427,6 +458,11 @@ class Store:
             self.objects.delete(f"files/{info.id}{suffix}")
         self._forget(f"files/{info.id}.json")
 
+    def restore_file(self, info: FileInfo, data: bytes) -> None:
+        """Write a file's bytes and info back (an upload whose bytes another holder deleted)."""
+        self.objects.put(f"files/{info.id}.bin", data)
+        self.objects.put(f"files/{info.id}.json", info.model_dump_json().encode())
+
     def file_info(self, file_id: str) -> FileInfo:
         key = f"files/{_safe_id(file_id)}.json"
         return FileInfo.model_validate_json(self._immutable(key, f"no file {file_id!r}"))
@@ -445,9 +481,11 @@ class Store:
         except NotFoundError:
             return self.file_bytes(upload_id)
 
-    def find_input(self, ref: str, visible: Visible | None = None) -> str:
+    def find_input(self, ref: str, visible: Visible | None = None, holder: str | None = None) -> str:
         """Resolve a request's input reference to an upload id: a clip or file id, or the name of an
-        uploaded clip or file (the newest upload of that name), among those ``visible`` accepts."""
+        uploaded clip or file (the newest upload of that name), among those ``visible`` accepts.
+        With ``holder``, names and upload times are that principal's own (its holder records),
+        the shared ones where it has none."""
         ok = visible or (lambda _id: True)
         for lookup in (self.clip_info, self.file_info):
             try:
@@ -457,12 +495,22 @@ class Store:
             if ok(found):
                 return found
         base = ref.replace("\\", "/").rsplit("/", 1)[-1]
-        named: list[tuple[datetime, str]] = [
-            (c.created_at, c.id)
-            for c in self.list_clips()
-            if (c.name in (ref, base) or c.name.removesuffix(".gz") in (ref, base)) and ok(c.id)
-        ]
-        named += [(f.created_at, f.id) for f in self.list_files() if f.name in (ref, base) and ok(f.id)]
+        named: list[tuple[datetime, str]] = []
+        kinds: tuple[tuple[Owned, list[ClipInfo] | list[FileInfo]], ...] = (
+            ("clips", self.list_clips()),
+            ("files", self.list_files()),
+        )
+        for kind, infos in kinds:
+            for info in infos:
+                if not ok(info.id):
+                    continue
+                own = self.holders(kind, info.id).get(holder, {}) if holder is not None else {}
+                name = str(own.get("name") or info.name)
+                created = (
+                    datetime.fromisoformat(own["created_at"]) if own.get("created_at") else info.created_at
+                )
+                if name in (ref, base) or (kind == "clips" and name.removesuffix(".gz") in (ref, base)):
+                    named.append((created, info.id))
         if not named:
             raise NotFoundError(
                 f"no uploaded clip or file named {ref!r}; upload it first (POST /v1/clips for BVH, "

@@ -15,7 +15,7 @@ from schemas import ClipInfo
 from ..deps import BackendDep, MetricsDep, ParseLimiterDep, PrincipalDep, SettingsDep, StoreDep
 from ..errors import ApiError, responses
 from ..jsonbody import delete_route
-from ..owners import clip_for, hold, only_visible, release
+from ..owners import clip_for, hold, only_visible, release, seen
 from ..tasks import TaskRunnerDep
 from ..uploads import parse_upload, read_upload, stored, upload_body
 
@@ -81,13 +81,16 @@ async def upload_clip(
             f"units cannot change (delete it first to upload it again with units={units.value!r})",
             {"clip": existing.id, "units": existing.units},
         )
-    await run_in_threadpool(hold, store, principal, "clips", existing.id, response)
-    return existing
+    clip = existing
+    await run_in_threadpool(
+        hold, store, principal, "clips", clip.id, response, file_name, lambda: store.restore_clip(clip, data)
+    )
+    return await run_in_threadpool(seen, store, principal, "clips", clip)
 
 
 @router.get("", response_model=list[ClipInfo], responses=responses(401))
 def list_clips(store: StoreDep, principal: PrincipalDep) -> list[ClipInfo]:
-    """Your uploaded clips, oldest first."""
+    """Your uploaded clips (under the names you gave them), oldest first."""
     return only_visible(store, principal, "clips", store.list_clips())
 
 

@@ -31,7 +31,7 @@ from ..errors import ApiError, conflict, responses
 from ..jobs_common import new_job_id, submit_job
 from ..jsonbody import delete_route, json_body, json_body_doc
 from ..metrics import Metrics
-from ..owners import database_for, release, visible
+from ..owners import database_for, find_clip, only_visible, record, release, seen
 
 SPEC_ADAPTER: TypeAdapter[Any] = TypeAdapter(spec_union())
 SPEC_BODY = json_body_doc("DatabaseSpec", "A database spec: the clips (uploaded) and the kind's settings.")
@@ -59,11 +59,6 @@ def resolve_clips(
     Raises :class:`~service.errors.ApiError`: 404 naming a missing clip, 422 for repeated names.
     """
     resolved: list[ClipSource] = []
-    mine = visible(store, principal, "clips")
-
-    def allowed(clip_id: str) -> bool:
-        return clip_id in shared or mine(clip_id)
-
     for i, source in enumerate(spec.clips):
         ref = source.clip or source.bvh or ""  # ClipSource guarantees exactly one of them
         try:
@@ -73,9 +68,9 @@ def resolve_clips(
         try:
             if sample is not None and sample[1] is not None:
                 info = sample[1]
-                store.add_owner("clips", info.id, principal.name)
+                store.add_owner("clips", info.id, principal.name, record(info.name))
             else:
-                info = store.find_clip(ref, allowed)
+                info = find_clip(store, principal, ref, shared)
         except NotFoundError:
             field = "clip" if source.clip is not None else "bvh"
             raise ApiError(
@@ -241,9 +236,9 @@ async def create_from_spec(
     except NotFoundError:
         existing = None
     if existing is not None and _usable(store, existing):
-        store.add_owner("databases", db_id, principal.name)
+        store.add_owner("databases", db_id, principal.name, record(resolved.name, build_job=None))
         response.status_code = status.HTTP_200_OK
-        return existing
+        return seen(store, principal, "databases", existing)
     job_id = new_job_id()
     info = DatabaseInfo(
         id=db_id,
@@ -273,8 +268,8 @@ async def create_from_spec(
         else:
             store.delete_database(db_id)
         raise
-    store.add_owner("databases", db_id, principal.name)
-    return store.database_info(db_id)
+    store.add_owner("databases", db_id, principal.name, record(resolved.name, build_job=job_id), replace=True)
+    return seen(store, principal, "databases", store.database_info(db_id))
 
 
 def with_summary(state: Any, store: Store, info: DatabaseInfo) -> DatabaseInfo:
@@ -299,8 +294,7 @@ def with_summary(state: Any, store: Store, info: DatabaseInfo) -> DatabaseInfo:
 @router.get("", response_model=list[DatabaseInfo], responses=responses(401))
 async def list_databases(request: Request, store: StoreDep, principal: PrincipalDep) -> list[DatabaseInfo]:
     """Your databases, oldest first (ready ones with their ``summary``)."""
-    mine = visible(store, principal, "databases")
-    found = [d for d in store.list_databases() if mine(d.id)]
+    found = await run_in_threadpool(only_visible, store, principal, "databases", store.list_databases())
     return await run_in_threadpool(lambda: [with_summary(request.app.state, store, d) for d in found])
 
 
@@ -319,7 +313,7 @@ async def get_database(
 def delete_database(db_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
     """Delete your database (409 while it is being built, or while unfinished jobs use it). The data
     goes when no other principal holds the same database."""
-    info = database_for(store, principal, db_id)
+    info = store.database_info(database_for(store, principal, db_id).id)  # the shared record: the build
     if info.status in (DatabaseStatus.queued, DatabaseStatus.building) and _usable(store, info):
         raise conflict("database_building", f"database {db_id} is {info.status.value}; delete it once built")
     users = [

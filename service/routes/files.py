@@ -16,7 +16,7 @@ from schemas.files import FileInfo
 from ..deps import PrincipalDep, SettingsDep, StoreDep
 from ..errors import responses
 from ..jsonbody import delete_route
-from ..owners import file_for, hold, only_visible, release
+from ..owners import file_for, hold, only_visible, release, seen
 from ..uploads import read_upload, stored, upload_body
 
 router = APIRouter(prefix="/v1/files", tags=["files"])
@@ -54,8 +54,11 @@ async def upload_file(
     existing = await run_in_threadpool(stored, store.file_info, data)
     if existing is None:
         existing = await run_in_threadpool(store.put_file, file_name, data)
-    await run_in_threadpool(hold, store, principal, "files", existing.id, response)
-    return existing
+    file = existing
+    await run_in_threadpool(
+        hold, store, principal, "files", file.id, response, file_name, lambda: store.restore_file(file, data)
+    )
+    return await run_in_threadpool(seen, store, principal, "files", file)
 
 
 @router.get("", response_model=list[FileInfo], responses=responses(401))

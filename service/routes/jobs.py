@@ -74,7 +74,11 @@ async def submit(
 
     def prepared() -> Prepared:
         return prepare(
-            job_request, store, visible=mine, database=lambda db_id: database_for(store, principal, db_id)
+            job_request,
+            store,
+            visible=mine,
+            database=lambda db_id: database_for(store, principal, db_id),
+            holder=principal.name,
         )
 
     try:
