@@ -429,10 +429,21 @@ class Store:
             return npz_bytes({name: arrays[name] for name in arrays})
 
     def delete_database(self, db_id: str) -> None:
+        """Remove a database's objects, its owners object last (:func:`workers.holders.release`: on
+        an object store that object holds the delete's marker, which a concurrent re-post of the
+        spec waits on; a local directory is removed at once under the holders' lock)."""
         d = self._db(db_id)
-        if not self.objects.list(d):
+        keys = self.objects.list(d)
+        if not keys:
             raise NotFoundError(f"no database {db_id!r}")
-        self.objects.delete_prefix(d)
+        if self.objects.local_path(d) is not None:
+            self.objects.delete_prefix(d)
+        else:
+            owners = self._owners_key("databases", db_id)
+            for key in keys:
+                if key != owners:
+                    self.objects.delete(key)
+            self.objects.delete(owners)
         self.cache.evict(db_id)
 
     # -- other input files (MIDI...) ------------------------------------------------------------

@@ -137,3 +137,25 @@ def test_inputs_resolve_by_the_holders_own_name(store: Store) -> None:
     with pytest.raises(NotFoundError):
         store.find_input("bob.mid", holder="alice")
     assert store.find_input("alice.mid") == info.id  # no holder: the shared name
+
+
+def test_a_database_delete_on_s3_removes_its_owners_object_last(
+    s3_store: Store, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The owners object holds the delete's marker that a concurrent re-post of the spec waits on,
+    so it must outlive every other object of the database (not go in one batch with them)."""
+    from tests.workers.conftest import add_database
+
+    db_id = add_database(s3_store)
+    s3_store.add_owner("databases", db_id, "alice", {"name": "walks"})
+    deleted: list[str] = []
+    real_delete = s3_store.objects.delete
+
+    def recording(key: str) -> None:
+        deleted.append(key)
+        real_delete(key)
+
+    monkeypatch.setattr(s3_store.objects, "delete", recording)
+    assert s3_store.release("databases", db_id, "alice", s3_store.delete_database)
+    assert len(deleted) > 2 and deleted[-1] == f"databases/{db_id}/owners"
+    assert not s3_store.objects.list(f"databases/{db_id}")
