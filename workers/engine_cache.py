@@ -21,7 +21,7 @@ from typing import Any
 
 from cachetools import LRUCache
 
-from engines.base import Engine
+from engines.base import AnyEngine
 
 OpenArrays = Callable[[str], Mapping[str, Any]]
 """``open_arrays(db_id)``: a database's arrays by name (e.g. ``Store.database_arrays``)."""
@@ -44,12 +44,12 @@ class EngineCache:
     def __init__(self, max_bytes: int = 2048 * MiB) -> None:
         self.max_bytes = max_bytes
         self._sizes: dict[tuple[str, str], int] = {}
-        self._engines: LRUCache[tuple[str, str], Engine] = LRUCache(
+        self._engines: LRUCache[tuple[str, str], AnyEngine] = LRUCache(
             maxsize=max(max_bytes, 1), getsizeof=lambda _e: 0
         )
         self._lock = threading.Lock()
 
-    def get(self, db_id: str, engine_cls: type[Engine], open_arrays: OpenArrays) -> Engine:
+    def get(self, db_id: str, engine_cls: type[AnyEngine], open_arrays: OpenArrays) -> AnyEngine:
         key = (db_id, engine_cls.name)
         with self._lock:
             engine = self._engines.get(key)
@@ -61,7 +61,7 @@ class EngineCache:
         self._put(key, engine, size)
         return engine
 
-    def _put(self, key: tuple[str, str], engine: Engine, size: int) -> None:
+    def _put(self, key: tuple[str, str], engine: AnyEngine, size: int) -> None:
         with self._lock:
             if size > self.max_bytes:
                 return
