@@ -68,14 +68,19 @@ def moto_server() -> Iterator[str]:
         try:
             yield endpoint
         finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=GUARD_S)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            stop_server(proc)
         return
     pytest.fail("could not start moto_server")
+
+
+def stop_server(proc: subprocess.Popen[bytes]) -> None:
+    """Terminate a test server process and wait for it (killed after the hang guard)."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=GUARD_S)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
 
 
 @contextlib.contextmanager

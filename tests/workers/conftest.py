@@ -31,6 +31,7 @@ from motion.samples import sample_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobInfo, JobStatus
 from schemas.databases import database_id
 from schemas.jobs import JobKind
+from tests.s3server import stop_server
 from workers.execute import EngineCache, execute_job
 from workers.redis_worker import run_worker
 from workers.settings import Settings
@@ -105,12 +106,7 @@ def redis_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         try:
             yield url
         finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=GUARD_S)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            stop_server(proc)
         return
     pytest.fail("could not start redis-server")
 
