@@ -265,9 +265,13 @@ def rotate_floor(theta: Array | float, xz: Array) -> Array:
     """Floor vectors ``xz (..., 2)`` ``[x, z]`` rotated by ``theta (...)`` radians about +Y (+Z
     turns towards +X at ``pi / 2``; the yaw convention of :func:`yaw`)."""
     th = np.asarray(theta, dtype=np.float64)
-    c, s = np.cos(th), np.sin(th)
-    x, z = xz[..., 0], xz[..., 1]
-    return np.stack((c * x + s * z, -s * x + c * z), axis=-1)
+    return rotate_floor_by(np.cos(th), np.sin(th), xz[..., 0], xz[..., 1])
+
+
+def rotate_floor_by(cos: Array, sin: Array, x: Array, z: Array) -> Array:
+    """:func:`rotate_floor` with the angle's cosine and sine given (broadcast against ``x``, ``z``):
+    for callers that take them once per piece of motion rather than once per frame."""
+    return np.stack((cos * x + sin * z, -sin * x + cos * z), axis=-1)
 
 
 def _wrap_deg(a: Array) -> Array:

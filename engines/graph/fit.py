@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from motion.floorfit import CorrectionLimits
-from motion.rotations import rotate_floor, wrap_angle
+from motion.rotations import rotate_floor, rotate_floor_by, wrap_angle
 
 from .model import FloatArray, IntArray
 from .paths import BatchPieces, GraphIndex, JointTable
@@ -184,10 +184,9 @@ def batch_fit(
     th, sh = theta[r, j], shift[r, j]
     rows = index.tracks.offsets[clip] + frame
     yaw = th + index.tracks.root_yaw[rows]
-    # rotate_floor(th, ground xz) + sh, with the cosines and sines taken per piece, not per frame
+    # the ground positions turned by each piece's angle (cosines and sines per piece, not per frame)
     cos, sin = np.cos(theta)[r, j], np.sin(theta)[r, j]
-    x, z = index.root_x[rows], index.root_z[rows]
-    xz = np.stack((cos * x + sin * z + sh[..., 0], -sin * x + cos * z + sh[..., 1]), axis=-1)
+    xz = rotate_floor_by(cos, sin, index.root_x[rows], index.root_z[rows]) + sh
     b, s = yaw.shape
     alpha = np.zeros((b, s))
     head_inc = np.zeros((b, grid.head_at.size))
