@@ -48,7 +48,7 @@ from schemas.databases import GraphDatabaseSpec
 
 from ..base import Arrays, BuildWork, Emitter, EngineError, ShouldStop
 from ..library import MotionLibrary
-from .candidates import IndexStats, indexed_minima
+from .candidates import FrameIndex, IndexStats, frame_index, indexed_minima
 from .features import TransitionFeatures, exact_costs, reduce_features, transition_features
 from .hierarchy import LeafEdges, build_hierarchy
 from .model import RootTracks
@@ -304,15 +304,16 @@ def candidate_edges(
     tile: int = TILE,
     pca_min_dims: int = PCA_MIN_DIMS,
     screen: npt.NDArray[np.float32] | None = None,
+    index: FrameIndex | None = None,
     workers: int | None = None,
     progress: Progress = _no_progress,
     should_stop: ShouldStop = _never,
 ) -> tuple[LeafEdges, ScanStats | IndexStats]:
     """The edges of G: local minima of the transition cost below ``tau`` (module docstring, step 2),
     both directions of every minimum, sorted by (from clip, to clip, from frame, to frame), found by
-    the all-pairs scan or the index (:func:`use_index` of ``method``) on ``screen`` (default
-    :func:`screen_rows`). Costs are recomputed from differences of the full feature rows
-    (:func:`~.features.exact_costs`)."""
+    the all-pairs scan or the index (:func:`use_index` of ``method``; ``index`` when given, built
+    over ``screen``) on ``screen`` (default :func:`screen_rows`). Costs are recomputed from
+    differences of the full feature rows (:func:`~.features.exact_costs`)."""
     if screen is None:
         screen = screen_rows(features, pca_min_dims)
     stats: ScanStats | IndexStats
@@ -322,6 +323,7 @@ def candidate_edges(
             features.offsets,
             tau,
             min_jump_frames,
+            index=index,
             workers=max(1, workers or _cpu_count()),
             progress=progress,
             should_stop=should_stop,
@@ -351,13 +353,16 @@ def bridge_edges(
     tau: float,
     min_jump_frames: int,
     *,
+    index: FrameIndex | None = None,
     workers: int | None = None,
     should_stop: ShouldStop = _never,
 ) -> LeafEdges:
     """Edges below ``tau`` touching ``clips`` (the clips outside the kept component) that the first
-    indexed search may have missed: every frame of those clips asks an index of every frame
-    (stride 1) for :data:`BRIDGE_NEIGHBOURS` seeds. The edges are the all-pairs scan's (local
-    minima below ``tau``), so they connect a clip back where the data allows it."""
+    indexed search may have missed: every frame of those clips (not only the held ones) asks the
+    build's index (``index``, over ``screen``; built here when not given) for
+    :data:`BRIDGE_NEIGHBOURS` seeds. The edges are the all-pairs scan's (local minima below
+    ``tau``), so they connect a clip back where the data allows it. Work: the asking frames' only
+    (the index is the first search's, not a second one over every frame)."""
     inside = np.zeros(features.offsets.size - 1, dtype=bool)
     inside[clips] = True
     rows = np.flatnonzero(inside[features.clip_of_row]).astype(np.int64)
@@ -369,8 +374,8 @@ def bridge_edges(
         tau,
         min_jump_frames,
         neighbours=BRIDGE_NEIGHBOURS,
-        stride=1,
         queries=rows,
+        index=index,
         workers=max(1, workers or _cpu_count()),
         should_stop=should_stop,
     )
@@ -526,6 +531,11 @@ def build_graph(
         raise InterruptedError("build cancelled")
 
     screen = screen_rows(features)
+    index = (
+        frame_index(screen, workers=max(1, workers or _cpu_count()))
+        if use_index(spec.candidates, int(frames.sum()))
+        else None
+    )
     leaves, stats = candidate_edges(
         features,
         spec.tau,
@@ -533,6 +543,7 @@ def build_graph(
         method=spec.candidates,
         tile=tile,
         screen=screen,
+        index=index,
         workers=workers,
         progress=lambda f, m: progress(0.05 + 0.8 * f, m),
         should_stop=should_stop,
@@ -556,14 +567,21 @@ def build_graph(
         out = np.array([position[c] for c in one_way], dtype=np.int64)
         progress(0.86, f"graph: looking again for transitions of {out.size} clips left out")
         extra = bridge_edges(
-            features, screen, out, spec.tau, spec.min_jump_frames, workers=workers, should_stop=should_stop
+            features,
+            screen,
+            out,
+            spec.tau,
+            spec.min_jump_frames,
+            index=index,
+            workers=workers,
+            should_stop=should_stop,
         )
         if extra.size:
             leaves = merge_edges(leaves, extra)
             keep, again = largest_component(leaves, frames, library.names, moving)
             bridged = len(dropped) - len(again)
             dropped = again
-    del screen
+    del screen, index
     kept = leaves.take(keep)
     if kept.size == 0:
         raise EngineError(

@@ -59,6 +59,8 @@ NPROBE = 16
 """Cells probed per query."""
 TRAIN_PER_CELL = 64
 """Training rows per cell for the index's k-means (an evenly strided sample)."""
+TRAIN_MAX = 262_144
+"""Training rows of the k-means at most (keeps training linear in the frames past 4,096 cells)."""
 MAX_STEPS = 256
 """Moves of one descent at most (a seed that has not settled by then is dropped)."""
 SEED = 1234
@@ -87,24 +89,48 @@ def _no_progress(fraction: float, message: str) -> None:
     pass
 
 
-def _index(rows: Float32Array, threads: int) -> tuple[Any, int, int]:
-    """A trained and filled ``faiss.IndexIVFFlat`` over ``rows``; returns it, ``nlist``, ``nprobe``."""
+@dataclass(frozen=True, slots=True)
+class FrameIndex:
+    """The inverted-file index of a build: ``held (H,)`` the row indices it holds (every
+    ``stride``-th row), ``ivf`` the trained and filled ``faiss.IndexIVFFlat`` over those rows,
+    ``cells`` its cells and ``probed`` the cells a query probes. Built once per build
+    (:func:`frame_index`) and asked twice: by every held frame for seeds, and by the frames of the
+    clips the first pass left out (:func:`engines.graph.build.bridge_edges`)."""
+
+    held: IntArray
+    stride: int
+    ivf: Any
+    cells: int
+    probed: int
+
+
+def frame_index(rows: Float32Array, stride: int = STRIDE, workers: int = 1) -> FrameIndex:
+    """The index over every ``stride``-th of ``rows (N, D)`` float32.
+
+    Cells: ``H / CELL_FRAMES`` (at most 65,536); the k-means is trained on an evenly strided sample of
+    ``TRAIN_PER_CELL`` rows a cell, at most :data:`TRAIN_MAX` rows, so training is linear in ``N``
+    past ``TRAIN_MAX / TRAIN_PER_CELL`` cells. Time ``O(N)`` besides the quantizer's
+    ``cells``-wide comparisons (``O(N^2 / CELL_FRAMES)``, a few seconds at 1M frames)."""
     import faiss  # a heavy import: only for builds
 
-    faiss.omp_set_num_threads(threads)
-    n, d = rows.shape
+    if stride < 1:
+        raise EngineError(f"stride must be >= 1, got {stride}")
+    held = np.arange(0, int(rows.shape[0]), stride, dtype=np.int64)
+    data = np.ascontiguousarray(rows[held], dtype=np.float32)
+    faiss.omp_set_num_threads(max(1, workers))
+    n, d = data.shape
     nlist = max(1, min(n // CELL_FRAMES, 65536))
     quantizer = faiss.IndexFlatL2(d)
-    index = faiss.IndexIVFFlat(quantizer, d, nlist, faiss.METRIC_L2)
-    index.cp.seed = SEED
-    index.cp.niter = 10
-    index.cp.max_points_per_centroid = TRAIN_PER_CELL * 4
-    step = max(1, n // (nlist * TRAIN_PER_CELL))
-    index.train(np.ascontiguousarray(rows[::step]))
-    index.add(rows)
-    nprobe = min(NPROBE, nlist)
-    index.nprobe = nprobe
-    return index, nlist, nprobe
+    ivf = faiss.IndexIVFFlat(quantizer, d, nlist, faiss.METRIC_L2)
+    ivf.cp.seed = SEED
+    ivf.cp.niter = 10
+    ivf.cp.max_points_per_centroid = TRAIN_PER_CELL * 4
+    step = max(1, n // min(nlist * TRAIN_PER_CELL, TRAIN_MAX))
+    ivf.train(np.ascontiguousarray(data[::step]))
+    ivf.add(data)
+    probed = min(NPROBE, nlist)
+    ivf.nprobe = probed
+    return FrameIndex(held, stride, ivf, nlist, probed)
 
 
 def indexed_minima(
@@ -116,6 +142,7 @@ def indexed_minima(
     neighbours: int = NEIGHBOURS,
     stride: int = STRIDE,
     queries: IntArray | None = None,
+    index: FrameIndex | None = None,
     workers: int = 1,
     progress: Progress = _no_progress,
     should_stop: ShouldStop = _never,
@@ -123,9 +150,10 @@ def indexed_minima(
     """Local minima below ``tau`` of ``M[x, y] = ||rows[x] - rows[y]||^2``, ``x < y``, reached by
     descent from the index's seeds (module docstring).
 
-    ``rows (N, D)`` float32; ``offsets (C + 1,)`` each clip's first row. The index holds every
-    ``stride``-th row; ``queries`` (sorted row indices) ask it for seeds, by default the held rows.
-    Entries of one clip with
+    ``rows (N, D)`` float32; ``offsets (C + 1,)`` each clip's first row. The index (``index``, built
+    over ``rows`` by :func:`frame_index`, or built here) holds every ``stride``-th row (the index's
+    own stride when given); ``queries`` (sorted row indices) ask it for seeds, by default the held
+    rows. Entries of one clip with
     ``|y - x| < min_jump_frames`` are never kept (they still count as neighbours). ``workers``
     threads search the index and descend. Returns ``(x, y, cost, stats)``: row indices sorted by
     ``(x, y)`` and float32-accurate costs. Raises :class:`InterruptedError` when ``should_stop()``
@@ -138,12 +166,18 @@ def indexed_minima(
     n, dims = int(rows.shape[0]), int(rows.shape[1])
     counts = np.diff(offsets)
     clip = np.repeat(np.arange(counts.size, dtype=np.int64), counts)
+    if index is not None:
+        stride = index.stride
     held = np.arange(0, n, stride, dtype=np.int64)
     if held.size < 2:
         z = np.zeros(0, dtype=np.int64)
         return z, z.copy(), np.zeros(0), IndexStats(0, 0, neighbours, 0, 0, 0, dims)
     threads = max(1, workers)
-    index, nlist, nprobe = _index(np.ascontiguousarray(rows[held]), threads)
+    if index is None:
+        index = frame_index(rows, stride, threads)
+    elif index.held.size != held.size:
+        raise EngineError(f"the index holds {index.held.size} rows, not every {stride}th of {n}")
+    ivf, nlist, nprobe = index.ivf, index.cells, index.probed
     window = (2 * max(min_jump_frames - 1, 0)) // stride + 1  # held frames of the query's own window
     k = int(min(held.size, neighbours + window))
     tau32 = np.float32(tau)
@@ -183,7 +217,7 @@ def indexed_minima(
             if should_stop():
                 raise InterruptedError("build cancelled")
             a = queries[q0 : q0 + CHUNK]
-            _, found = index.search(rows[a], k)
+            _, found = ivf.search(rows[a], k)
             x, y = seeds(a, found)
             parts = np.array_split(np.arange(x.size), threads)
             futures: list[Future[tuple[IntArray, Float32Array, npt.NDArray[np.bool_], int]]] = [

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from engines.base import EngineError
+from engines.graph import candidates
 from engines.graph.build import (
     bridge_edges,
     build_graph,
@@ -18,7 +19,7 @@ from engines.graph.build import (
     screen_rows,
     use_index,
 )
-from engines.graph.candidates import indexed_minima
+from engines.graph.candidates import frame_index, indexed_minima
 from engines.graph.features import transition_features
 from engines.graph.hierarchy import LeafEdges
 from engines.graph.model import EdgeTree
@@ -123,6 +124,30 @@ def test_bridge_edges_are_all_pairs_edges_of_the_clips_asked(walks: MotionLibrar
     assert all(1 in (a, c) for a, _, c, _ in got)  # every edge touches the clip asked
     assert {(a, c) for a, _, c, _ in got} >= {(0, 1), (1, 0)}
     assert bridge_edges(tf, screen, np.zeros(0, dtype=np.int64), 1.0, 10).size == 0
+
+
+def test_bridge_asks_the_builds_own_index(walks: MotionLibrary, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The second search reuses the first one's index (no second training over every frame) and
+    finds the same edges as with an index of its own."""
+    tf = transition_features(walks)
+    screen = screen_rows(tf)
+    own = bridge_edges(tf, screen, np.array([1]), 1.0, 10)
+    index = frame_index(screen, workers=2)
+
+    def no_second_index(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the bridge built a second index")
+
+    monkeypatch.setattr(candidates, "frame_index", no_second_index)
+    shared = bridge_edges(tf, screen, np.array([1]), 1.0, 10, index=index)
+    for name in ("from_clip", "from_frame", "to_clip", "to_frame", "cost"):
+        np.testing.assert_array_equal(getattr(shared, name), getattr(own, name))
+
+
+def test_an_index_of_other_rows_is_refused() -> None:
+    rows, offsets = smooth_rows(2, [40, 30])
+    index = frame_index(rows[:50], stride=2)
+    with pytest.raises(EngineError, match="holds 25 rows"):
+        indexed_minima(rows, offsets, 1.0, 4, index=index)
 
 
 def test_merge_edges_is_a_sorted_union() -> None:
