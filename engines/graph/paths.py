@@ -176,12 +176,14 @@ class GraphIndex:
         self.n_clips = n_clips
         self.root_x = np.ascontiguousarray(tracks.root_xz[:, 0])
         self.root_z = np.ascontiguousarray(tracks.root_xz[:, 1])
-        self.edge_theta, self.edge_shift = self._edge_transforms()
-        # padded copies (one identity transform at index E, for -1 pads) as 1-D arrays: gathers
-        # from 1-D arrays are several times faster than from (E, 2) ones
-        self.pad_theta = np.append(self.edge_theta, 0.0)
+        # the edge transforms, padded (one identity transform at index E, for -1 pads), as 1-D
+        # arrays: gathers from 1-D arrays are several times faster than from (E, 2) ones. Only
+        # these are kept (40 bytes an edge): edge_theta / edge_shift are read from them
+        theta, shift = self._edge_transforms()
+        self.pad_theta = np.append(theta, 0.0)
         self.pad_turn = np.exp(-1j * self.pad_theta)
-        self.pad_shift = np.append(self.edge_shift[:, 0] + 1j * self.edge_shift[:, 1], 0.0)
+        self.pad_shift = np.append(shift[:, 0] + 1j * shift[:, 1], 0.0)
+        del theta, shift
         roots = tree.roots
         order = np.lexsort((tree.from_frame[roots], tree.from_clip[roots]))
         self.roots = roots[order]
@@ -191,6 +193,16 @@ class GraphIndex:
         self._two: dict[tuple[int, int], tuple[IntArray, IntArray]] = {}
         self._span = int(tree.from_frame.max(initial=0)) + int(tree.to_frame.max(initial=0)) + 2
         self._root_keys: IntArray | None = None  # clip * _span + from frame of roots, built on first use
+
+    @property
+    def edge_theta(self) -> FloatArray:
+        """``(E,)`` the rotation of every edge transform ``D(e)`` (radians; a view)."""
+        return self.pad_theta[:-1]
+
+    @property
+    def edge_shift(self) -> FloatArray:
+        """``(E, 2)`` the shift of every edge transform ``D(e)`` (metres; a new array)."""
+        return np.stack((self.pad_shift.real[:-1], self.pad_shift.imag[:-1]), axis=-1)
 
     @staticmethod
     @cached(LRUCache(maxsize=4), key=lambda tree, tracks: (id(tree), id(tracks)), lock=threading.Lock())

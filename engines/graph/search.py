@@ -369,8 +369,9 @@ class GraphSearch:
         random subset beyond)."""
         idx, t = self.index_, self.tree
         roots = idx.roots
-        fc, ff = t.from_clip[roots], t.from_frame[roots]
-        tc, tf = t.to_clip[roots], t.to_frame[roots]
+        # int64: keys below are clip * span + frame (the stored tree is int32)
+        fc, ff = t.from_clip[roots].astype(np.int64), t.from_frame[roots].astype(np.int64)
+        tc, tf = t.to_clip[roots].astype(np.int64), t.to_frame[roots].astype(np.int64)
         span = int(idx.frames.max()) + 2
         keys = fc * span + ff
         out: list[tuple[IntArray, IntArray, IntArray]] = []
@@ -421,7 +422,7 @@ class GraphSearch:
         bounds: list[FloatArray] = []
         for edges, lo, hi in self._chains(T, rng):
             first = edges[:, 0]
-            bound = w_c * t.cost[edges].sum(axis=1) if w_c > 0 else np.zeros(edges.shape[0])
+            bound = w_c * t.costs(edges).sum(axis=1) if w_c > 0 else np.zeros(edges.shape[0])
             for q in CHAIN_STARTS:
                 n0 = np.round(lo + q * (hi - lo)).astype(np.int64)
                 parts.append(PathBatch(t.from_clip[first], t.from_frame[first] - n0 + 1, edges))
@@ -878,7 +879,8 @@ class GraphSearch:
         if self._cum_weights is None:
             t, roots = self.tree, self.index_.roots
             play = (self.index_.frames[t.to_clip[roots]] - t.to_frame[roots]).astype(np.float64)
-            w = np.maximum(play, 1.0) * np.exp(-t.cost[roots] / max(float(np.median(t.cost[roots])), 1e-9))
+            cost = t.costs(roots)
+            w = np.maximum(play, 1.0) * np.exp(-cost / max(float(np.median(cost)), 1e-9))
             self._cum_weights = np.concatenate(([0.0], np.cumsum(w)))
         return self._cum_weights
 
@@ -905,7 +907,7 @@ class GraphSearch:
         start_clip, start_frame = clip.copy(), frame.copy()
         roots = idx.roots
         span = int(idx.frames.max()) + 2
-        keys = t.from_clip[roots] * span + t.from_frame[roots]
+        keys = t.from_clip[roots].astype(np.int64) * span + t.from_frame[roots]
         now = np.zeros(count, dtype=np.int64)
         active = np.ones(count, dtype=bool)
         bias = np.arange(count) < round(biased * count)
