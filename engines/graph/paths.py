@@ -189,6 +189,7 @@ class GraphIndex:
         self.roots = roots[order]
         rc = tree.from_clip[self.roots]
         self._root_start = np.searchsorted(rc, np.arange(n_clips + 1))
+        self._root_frames = tree.from_frame[self.roots]  # stored dtype: int32 when loaded
         self._pair: dict[tuple[int, int], IntArray] = {}
         self._two: dict[tuple[int, int], tuple[IntArray, IntArray]] = {}
         self._span = int(tree.from_frame.max(initial=0)) + int(tree.to_frame.max(initial=0)) + 2
@@ -263,9 +264,12 @@ class GraphIndex:
     def root_out(self, clip: int, min_from_frame: int = 0) -> IntArray:
         """Root edges leaving ``clip`` at ``from_frame >= min_from_frame``, by from frame."""
         lo, hi = int(self._root_start[clip]), int(self._root_start[clip + 1])
-        edges = self.roots[lo:hi]
-        k = int(np.searchsorted(self.tree.from_frame[edges], min_from_frame, side="left"))
-        return edges[k:]
+        # a key of the frames' own dtype (clamped into its range: the same answer), so that
+        # searchsorted does not cast the frames to int64
+        info = np.iinfo(self._root_frames.dtype)
+        key = self._root_frames.dtype.type(min(max(min_from_frame, info.min), info.max))
+        k = int(np.searchsorted(self._root_frames[lo:hi], key, side="left"))
+        return self.roots[lo + k : hi]
 
     def root_pair(self, a: int, b: int) -> IntArray:
         """Root edges from clip ``a`` to clip ``b`` (cached)."""

@@ -248,7 +248,7 @@ class GraphSearch:
             raise EngineError("the graph and the motion library disagree on the clips")
         if self.index_.roots.size == 0:
             raise EngineError("the motion graph has no edges: no transitions to search")
-        self._ins: dict[bool, IntArray] = {}
+        self._ins: dict[bool, tuple[IntArray, IntArray]] = {}
         self._layer_cache: dict[tuple[int, int, int, bool], list[list[npt.NDArray[np.bool_]]] | None] = {}
         self._useful: IntArray | None = None
         self._cum_weights: FloatArray | None = None
@@ -965,12 +965,17 @@ class GraphSearch:
             clip, frame = int(t.to_clip[e]), int(t.to_frame[e])
         return out
 
-    def _in_edges(self, every: bool) -> IntArray:
-        """Root edges (or every edge of the tree) sorted by (to clip, to frame)."""
+    def _in_edges(self, every: bool) -> tuple[IntArray, IntArray]:
+        """Root edges (or every edge of the tree) sorted by (to clip, to frame), and ``(C + 1,)``
+        where each clip's run of them starts."""
         got = self._ins.get(every)
         if got is None:
             r = np.arange(self.tree.size, dtype=np.int64) if every else self.index_.roots
-            got = r[np.lexsort((self.tree.to_frame[r], self.tree.to_clip[r]))]
+            edges = r[np.lexsort((self.tree.to_frame[r], self.tree.to_clip[r]))]
+            starts = np.searchsorted(
+                self.tree.to_clip[edges], np.arange(self.index_.n_clips + 1), side="left"
+            )
+            got = (edges, starts.astype(np.int64))
             self._ins[every] = got
         return got
 
@@ -978,10 +983,8 @@ class GraphSearch:
         """Edges into ``clip`` at a frame ``<= frame`` that leave at least one output frame before
         (``frame - to_frame < now``)."""
         t = self.tree
-        ins = self._in_edges(every)
-        lo = np.searchsorted(t.to_clip[ins], clip, side="left")
-        hi = np.searchsorted(t.to_clip[ins], clip, side="right")
-        cand = ins[lo:hi]
+        ins, starts = self._in_edges(every)
+        cand = ins[int(starts[clip]) : int(starts[clip + 1])]
         return cand[(t.to_frame[cand] <= frame) & (t.to_frame[cand] >= frame - now + 1)]
 
     def _pose_seed(self, rng: np.random.Generator) -> Path | None:
