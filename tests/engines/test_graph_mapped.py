@@ -176,3 +176,23 @@ def test_stored_motion_reads_as_the_widened_motion() -> None:
     with pytest.raises(MotionError, match="fps"):
         StoredMotion(s.skeleton, s.root_positions, *s.stored_arrays[:1], 0.0, s.stored_arrays[1])
     assert lib.motions[1].rotations.shape == s.rotations.shape
+
+
+def test_edge_transforms_by_blocks_are_those_computed_at_once(
+    database: tuple[dict[str, Any], Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The index computes its edge transforms a block of edges at a time (small temporaries at
+    load): the same bits as one block of every edge."""
+    from engines.graph import paths
+    from engines.graph.model import EdgeTree, RootTracks
+
+    arrays, _ = database
+    tree, tracks = EdgeTree.from_arrays(arrays), RootTracks.from_arrays(arrays)
+    whole = paths.GraphIndex(tree, tracks)
+    monkeypatch.setattr(paths, "EDGE_BLOCK", 7)
+    blocks = paths.GraphIndex(tree, tracks)
+    assert tree.size > 10 * 7
+    for f in ("pad_theta", "pad_turn", "pad_shift"):
+        a, b = getattr(whole, f), getattr(blocks, f)
+        assert a.shape == (tree.size + 1,) and a.tobytes() == b.tobytes(), f
+    assert whole.pad_theta[-1] == 0.0 and whole.pad_shift[-1] == 0.0 and whole.pad_turn[-1] == 1.0
