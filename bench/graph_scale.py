@@ -117,7 +117,9 @@ def recall(library: Any, arrays: dict[str, Any]) -> dict[str, float]:
     def leaves(a: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
         t = EdgeTree.from_arrays(a)
         m = t.is_leaf
-        key = ((t.from_clip[m] * 100000 + t.from_frame[m]) * 10000 + t.to_clip[m]) * 100000 + t.to_frame[m]
+        # int64: the stored tree is int32
+        fc, ff, tc, tf = (x[m].astype(np.int64) for x in (t.from_clip, t.from_frame, t.to_clip, t.to_frame))
+        key = ((fc * 100000 + ff) * 10000 + tc) * 100000 + tf
         return key, t.cost[m]
 
     got, _ = leaves(arrays)
@@ -125,7 +127,7 @@ def recall(library: Any, arrays: dict[str, Any]) -> dict[str, float]:
     hit = np.isin(want, got)
     t = EdgeTree.from_arrays(exact)
     m = t.is_leaf
-    frame = t.from_clip[m] * 100000 + t.from_frame[m]
+    frame = t.from_clip[m].astype(np.int64) * 100000 + t.from_frame[m]
     order = np.lexsort((cost, frame))
     first = np.concatenate(([True], np.diff(frame[order]) != 0))
     return {

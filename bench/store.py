@@ -5,15 +5,18 @@ Prints one JSON object per line:
 * ``{"bench": "build", ...}`` — a graph database of about ``--frames`` frames (default 100,000) built
   once as ``bench/graph_scale.py`` builds it (Bandai-Namco clips + copies) and kept as an ``.npz`` in
   ``~/.cache/segue/bench-store/`` (later runs reuse it: run the build niced, once).
-* ``{"bench": "load", "layout": "npz" | "npy-mmap", ...}`` — in a fresh process each: the seconds to
-  turn the stored database into a loaded ``GraphEngine`` (``load_s``: the npz is read and inflated
-  into memory; the npy files are memory-mapped, so the engine's own derivations are what is left),
-  and the process's memory after the load, from ``/proc/self/smaps_rollup``: ``rss_mb`` (resident),
-  ``pss_mb`` (resident with shared pages split between their users), ``private_mb`` (pages only
-  this process maps: for the first mapper this includes the file's pages) and ``shared_mb``
-  (pages another process maps too: the database's file pages, one copy in the page cache).
-  ``second_process`` repeats the npy load while another process holds the same database mapped
-  (its ``private_mb`` is what a second engine process costs).
+* ``{"bench": "load", "layout": "npz" | "npy-mmap", ...}``: in a fresh process each: the seconds to
+  turn the stored database into a loaded ``GraphEngine`` (``load_s``, and ``load_cpu_s`` of process
+  CPU: the npz is read and inflated into memory; the npy files are memory-mapped, so the engine's
+  own derivations are what is left), and the process's memory after the load, from
+  ``/proc/PID/smaps_rollup``: ``rss_mb`` (resident), ``pss_mb`` (resident with shared pages split
+  between their users), ``private_mb`` (pages only this process maps: for the only mapper this
+  includes the database file's pages it touched, and the heap it keeps for reuse, see
+  :mod:`motion.allocator`) and ``shared_mb`` (pages another process maps too: the database's file
+  pages, one copy in the page cache, and the interpreter's libraries). ``processes: 1`` is one
+  engine process alone; ``processes: 2`` are two engine processes holding the same database, each
+  measured while both hold it (``process`` 1 and 2): a second engine costs its ``private_mb``.
+  ``frames`` and ``tree_nodes`` give the database's size.
 * ``{"bench": "s3", ...}`` — against a ``moto_server`` this script starts (an S3-protocol server on
   localhost, so the figures are the protocol's and boto3's overhead, not a network's): median
   milliseconds of a 1 KiB put and get, the upload of the database (``put_database_arrays``, MB/s),
@@ -21,7 +24,9 @@ Prints one JSON object per line:
   reading the budget facts lazily (a few small arrays, as the API does).
 
 ``load_avg`` is the 1-minute load average at the start (a shared machine slows everything down).
-Usage: ``nice -n 10 python bench/store.py [--frames 100000]``.
+Usage: ``nice -n 10 python bench/store.py [--frames 100000]``; ``--npz FILE`` loads a database kept by
+``bench/graph_scale.py --keep`` instead of building one, ``--code DIR`` loads it with the Segue checkout
+in ``DIR`` (e.g. the main checkout, to compare the engine's load before and after a change).
 """
 
 from __future__ import annotations
@@ -44,10 +49,10 @@ sys.path.insert(0, str(ROOT / "bench"))
 CACHE = Path.home() / ".cache" / "segue" / "bench-store"
 
 
-def memory_mb() -> dict[str, float]:
-    """Resident, private and shared-file memory of this process (MiB, smaps_rollup)."""
+def memory_mb(pid: int | str = "self") -> dict[str, float]:
+    """Resident, proportional, private and shared memory of a process (MiB, smaps_rollup)."""
     fields: dict[str, float] = {}
-    with open("/proc/self/smaps_rollup", encoding="ascii") as fh:
+    with open(f"/proc/{pid}/smaps_rollup", encoding="ascii") as fh:
         for line in fh:
             parts = line.split()
             if len(parts) >= 2 and parts[0].endswith(":") and parts[1].isdigit():
@@ -90,33 +95,77 @@ def build(frames: int) -> Path:
     return path
 
 
-def load_one(layout: str, source: str, hold: float) -> dict[str, Any]:
-    """Load the database into a GraphEngine in this process (``--load`` mode)."""
+def load_one(layout: str, source: str, hold: bool) -> dict[str, Any]:
+    """Load the database into a GraphEngine in this process (``--load`` mode); with ``hold``, print
+    the figures and keep the engine until a line comes on stdin."""
     from engines.graph.engine import GraphEngine
     from motion.allocator import tune_process
     from workers.store import Store, load_npz
 
     tune_process()
     before = memory_mb()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     if layout == "npz":
         arrays = load_npz(Path(source).read_bytes())
     else:
         arrays = Store(source).database_arrays("bench")
     engine = GraphEngine.load(arrays)
-    load_s = time.perf_counter() - t0
-    after = memory_mb()
+    assert isinstance(engine, GraphEngine)
+    load_s, load_cpu_s = time.perf_counter() - t0, time.process_time() - c0
+    figures = {
+        "load_s": round(load_s, 2),
+        "load_cpu_s": round(load_cpu_s, 2),
+        **memory_mb(),
+        "rss_before_mb": before["rss_mb"],
+        "frames": engine.library.total_frames,
+        "tree_nodes": engine.tree.size,
+    }
     if hold:
-        print("loaded", flush=True)
-        time.sleep(hold)
+        print(json.dumps(figures), flush=True)
+        sys.stdin.readline()
     del engine
-    return {"load_s": round(load_s, 2), **after, "rss_before_mb": before["rss_mb"]}
+    return figures
 
 
-def run_load(layout: str, source: str, hold: float = 0.0) -> dict[str, Any]:
-    cmd = [sys.executable, __file__, "--load", layout, "--source", source, "--hold", str(hold)]
-    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+def _child(layout: str, source: str, code: str | None, hold: bool) -> list[str]:
+    cmd = [sys.executable, __file__, "--load", layout, "--source", source]
+    return cmd + (["--code", code] if code else []) + (["--hold"] if hold else [])
+
+
+def run_load(layout: str, source: str, code: str | None = None) -> dict[str, Any]:
+    out = subprocess.run(
+        _child(layout, source, code, False), check=True, capture_output=True, text=True
+    ).stdout
     return dict(json.loads(out.strip().splitlines()[-1]))
+
+
+def mapped_loads(source: str, code: str | None = None) -> list[dict[str, Any]]:
+    """One engine process loading the memory-mapped database, then a second one while the first
+    holds it: the figures of the one, then of both measured while both hold it (from outside)."""
+    procs: list[subprocess.Popen[str]] = []
+    loads: list[dict[str, Any]] = []
+    rows: list[dict[str, Any]] = []
+    try:
+        for n in (1, 2):
+            p = subprocess.Popen(
+                _child("npy", source, code, True), stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+            )
+            procs.append(p)
+            assert p.stdout is not None
+            loaded = json.loads(p.stdout.readline())  # it holds the engine now
+            loads.append({k: loaded[k] for k in ("load_s", "load_cpu_s", "frames", "tree_nodes")})
+            for i, q in enumerate(procs):
+                rows.append({"processes": n, "process": i + 1, **loads[i], **memory_mb(q.pid)})
+    finally:
+        for p in procs:
+            if p.stdin is not None:
+                p.stdin.write("\n")
+                p.stdin.close()
+            p.wait()
+    for r in rows:
+        if r["processes"] == 1:
+            del r["process"]
+    return rows
 
 
 def s3_figures(npz: Path) -> dict[str, Any]:
@@ -170,37 +219,32 @@ def s3_figures(npz: Path) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=100_000)
+    ap.add_argument("--npz", type=Path, help="a database kept by bench/graph_scale.py --keep (no build)")
+    ap.add_argument("--code", help="the Segue checkout the engine processes load with (default: this one)")
     ap.add_argument("--no-s3", action="store_true")
     ap.add_argument("--load", choices=("npz", "npy"), help=argparse.SUPPRESS)
     ap.add_argument("--source", help=argparse.SUPPRESS)
-    ap.add_argument("--hold", type=float, default=0.0, help=argparse.SUPPRESS)
+    ap.add_argument("--hold", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.load:
-        print(json.dumps(load_one(args.load, args.source, args.hold)), flush=True)
+        if args.code:
+            sys.path.insert(0, str(Path(args.code).resolve()))
+        figures = load_one(args.load, args.source, args.hold)
+        if not args.hold:
+            print(json.dumps(figures), flush=True)
         return 0
     load_avg = round(os.getloadavg()[0], 2)
-    npz = build(args.frames)
+    npz = args.npz if args.npz is not None else build(args.frames)
     from workers.store import Store, load_npz
 
+    code = str(Path(args.code).resolve()) if args.code else None
     with tempfile.TemporaryDirectory() as tmp:
         Store(tmp).put_database_arrays("bench", load_npz(npz.read_bytes()))
+        info = {"bench": "load", "code": code or str(ROOT), "load_avg": load_avg}
         disk = {"npz_mb": round(npz.stat().st_size / 1e6, 1)}
-        print(json.dumps({"bench": "load", "layout": "npz", **disk, **run_load("npz", str(npz))}), flush=True)
-        first = run_load("npy", tmp)
-        print(json.dumps({"bench": "load", "layout": "npy-mmap", **first}), flush=True)
-        holder = subprocess.Popen(
-            [sys.executable, __file__, "--load", "npy", "--source", tmp, "--hold", "120"],
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-        try:
-            assert holder.stdout is not None
-            holder.stdout.readline()  # "loaded": the first process holds the database mapped
-            second = run_load("npy", tmp)
-        finally:
-            holder.terminate()
-            holder.wait()
-        print(json.dumps({"bench": "load", "layout": "npy-mmap", "second_process": True, **second}))
+        print(json.dumps({**info, "layout": "npz", **disk, **run_load("npz", str(npz), code)}), flush=True)
+        for row in mapped_loads(tmp, code):
+            print(json.dumps({**info, "layout": "npy-mmap", **row}), flush=True)
     if not args.no_s3:
         print(json.dumps({"bench": "s3", **s3_figures(npz), "load_avg": load_avg}), flush=True)
     return 0

@@ -132,6 +132,15 @@ def load_npy(path: Path, size: int | None = None) -> npt.NDArray[Any]:
     return np.asarray(np.load(path, allow_pickle=False))
 
 
+def read_only(array: npt.ArrayLike) -> npt.NDArray[Any]:
+    """A read-only view of an array (no copy): what an engine keeps of a loaded database's arrays,
+    so that its memory-mapped pages are never written (a write would give the process a private
+    copy of the page, and change what every reader of that array in the process sees)."""
+    view = np.asarray(array).view()
+    view.flags.writeable = False
+    return view
+
+
 class LazyArrays(Mapping[str, npt.NDArray[Any]]):
     """A database's arrays by name, each fetched by ``load(name)`` when first indexed (then kept)."""
 

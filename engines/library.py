@@ -16,9 +16,13 @@ import numpy.typing as npt
 
 from motion import Motion, MotionError
 from motion.bvh import BvhLimits, parse_bvh
+from motion.motion import check_rate_and_units, checked_arrays
 from motion.resample import resample
 from motion.serialize import skeleton_from_arrays, skeleton_to_arrays
+from motion.skeleton import Skeleton
 from schemas.clips import ClipSource, labels_past_clip_end
+
+from .container import read_only
 
 Arrays = dict[str, npt.NDArray[Any]]
 
@@ -137,20 +141,80 @@ def library_to_arrays(lib: MotionLibrary) -> Arrays:
     return arrays
 
 
+class StoredMotion(Motion):
+    """A clip read from a database whose rotations and joint translations are stored narrower than
+    float64 (a graph database stores them as float32: :func:`engines.graph.model.compact_motion`).
+
+    It keeps them as stored, normally read-only views of the database's memory-mapped arrays
+    (pages every engine process on the host shares), and widens them to float64 on every access
+    of :attr:`rotations` / :attr:`joint_translations`: a copy of the clip's arrays per access, the
+    same float64 numbers a :class:`~motion.Motion` widened at load would hold, without a private
+    float64 copy of the library in each process (12 bytes a joint-frame). Everything else is a
+    :class:`~motion.Motion`; :func:`dataclasses.replace` gives a ``StoredMotion`` holding the
+    (float64) arrays it was given."""
+
+    _stored_rotations: npt.NDArray[Any]
+    _stored_joint_translations: npt.NDArray[Any]
+
+    def __init__(
+        self,
+        skeleton: Skeleton,
+        root_positions: npt.NDArray[Any],
+        rotations: npt.NDArray[Any],
+        fps: float,
+        joint_translations: npt.NDArray[Any] | None = None,
+        units: str = "unknown",
+        name: str = "",
+    ) -> None:
+        rp = np.asarray(root_positions, dtype=np.float64)
+        q = np.asarray(rotations)
+        jt = np.zeros((0, 0, 3)) if joint_translations is None else np.asarray(joint_translations)
+        jt = checked_arrays(skeleton, rp, q, jt)
+        check_rate_and_units(fps, units)
+        for key, value in (
+            ("skeleton", skeleton),
+            ("root_positions", rp),
+            ("_stored_rotations", q),
+            ("fps", float(fps)),
+            ("_stored_joint_translations", jt),
+            ("units", units),
+            ("name", name),
+        ):
+            object.__setattr__(self, key, value)
+
+    @property
+    def rotations(self) -> npt.NDArray[np.float64]:
+        """``(F, J, 4)`` local joint rotations, widened to float64 (a new array each access)."""
+        return np.asarray(self._stored_rotations, dtype=np.float64)
+
+    @property
+    def joint_translations(self) -> npt.NDArray[np.float64]:
+        """``(F, K, 3)`` animated joint translations, widened to float64 (a new array each access)."""
+        return np.asarray(self._stored_joint_translations, dtype=np.float64)
+
+    @property
+    def stored_arrays(self) -> tuple[npt.NDArray[Any], npt.NDArray[Any]]:
+        """The rotations and joint translations as stored (not widened, not to be written)."""
+        return self._stored_rotations, self._stored_joint_translations
+
+
 def library_from_arrays(arrays: Any) -> MotionLibrary:
-    """Inverse of :func:`library_to_arrays`."""
+    """Inverse of :func:`library_to_arrays`, over the stored arrays without copying them: each clip
+    is a read-only view of its rows; float32 rotations and joint translations stay float32
+    (:class:`StoredMotion`, widened where they are read)."""
     base = skeleton_from_arrays(arrays, "library.skeleton.")
     names = tuple(str(n) for n in arrays["library.names"])
     counts = np.asarray(arrays["library.frame_counts"])
     ends = np.cumsum(counts)
     fps = float(arrays["library.fps"])
-    rp, q = np.asarray(arrays["library.root_positions"]), np.asarray(arrays["library.rotations"])
-    jt = np.asarray(arrays["library.joint_translations"])
+    rp, q = read_only(arrays["library.root_positions"]), read_only(arrays["library.rotations"])
+    jt = read_only(arrays["library.joint_translations"])
     offsets, es = np.asarray(arrays["library.offsets"]), np.asarray(arrays["library.end_site_offsets"])
-    motions = []
+    kind = Motion if q.dtype == np.float64 and jt.dtype == np.float64 else StoredMotion
+    motions: list[Motion] = []
     for i, name in enumerate(names):
         s = slice(int(ends[i] - counts[i]), int(ends[i]))
         sk = replace(base, offsets=offsets[i], end_site_offsets=es[i])
-        motions.append(Motion(sk, rp[s], q[s], fps, jt[s], "m", name))
+        motions.append(kind(sk, rp[s], q[s], fps, jt[s], "m", name))
     labels = tuple(tuple(lb) for lb in json.loads(str(arrays["library.labels"])))
     return MotionLibrary(names, tuple(motions), labels)

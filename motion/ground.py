@@ -270,7 +270,8 @@ def usual_reference_root(motions: Sequence[Motion]) -> tuple[StaticRoot | None, 
     if not live:
         return None, moving
     p = np.concatenate([motions[i].root_positions for i in live])
-    q = rot.standardize(np.concatenate([motions[i].rotations[:, 0] for i in live]))
+    # joint 0's column copied clip by clip (not views holding every clip's whole rotations at once)
+    q = rot.standardize(np.concatenate([motions[i].rotations[:, 0].copy() for i in live]))
     starts = np.concatenate(([0], np.cumsum(counts[live])[:-1]))
     first = np.repeat(starts, counts[live])
     dev = np.maximum(np.abs(p - p[first]).max(axis=1), np.abs(q - q[first]).max(axis=1))

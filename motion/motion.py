@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -49,25 +50,10 @@ class Motion:
     name: str = ""
 
     def __post_init__(self) -> None:
-        j = self.skeleton.num_joints
         rp = np.asarray(self.root_positions, dtype=np.float64)
         q = np.asarray(self.rotations, dtype=np.float64)
-        f = rp.shape[0] if rp.ndim == 2 else -1
-        if rp.shape != (f, 3) or q.shape != (f, j, 4):
-            raise MotionError(
-                f"motion arrays disagree with the skeleton ({j} joints): root_positions {rp.shape}, "
-                f"rotations {q.shape}; expected (F, 3) and (F, {j}, 4)"
-            )
-        k = self.skeleton.translated_joints.size
-        jt = np.asarray(self.joint_translations, dtype=np.float64)
-        if jt.size == 0 and k == 0:
-            jt = np.zeros((f, 0, 3))
-        if jt.shape != (f, k, 3):
-            raise MotionError(f"joint_translations must be (F, {k}, 3) for this skeleton, got {jt.shape}")
-        if not (np.isfinite(self.fps) and self.fps > 0):
-            raise MotionError(f"fps must be a positive number, got {self.fps}")
-        if self.units not in METRES_PER_UNIT and self.units != "unknown":
-            raise MotionError(f"unknown units {self.units!r}; use one of {', '.join(METRES_PER_UNIT)}")
+        jt = checked_arrays(self.skeleton, rp, q, np.asarray(self.joint_translations, dtype=np.float64))
+        check_rate_and_units(self.fps, self.units)
         object.__setattr__(self, "root_positions", rp)
         object.__setattr__(self, "rotations", q)
         object.__setattr__(self, "joint_translations", jt)
@@ -170,3 +156,36 @@ class Motion:
     def with_units(self, units: str) -> Motion:
         """Declare the units without changing any number."""
         return replace(self, units=units)
+
+
+def checked_arrays(
+    skeleton: Skeleton,
+    root_positions: npt.NDArray[Any],
+    rotations: npt.NDArray[Any],
+    joint_translations: npt.NDArray[Any],
+) -> npt.NDArray[Any]:
+    """``joint_translations`` (an ``(F, 0, 3)`` array when empty and the skeleton has no translated
+    joints) after checking the shapes of a motion's arrays (:class:`Motion`) against ``skeleton``
+    (any dtype: nothing is converted); :class:`MotionError` when they disagree."""
+    j = skeleton.num_joints
+    rp, q, jt = root_positions, rotations, joint_translations
+    f = rp.shape[0] if rp.ndim == 2 else -1
+    if rp.shape != (f, 3) or q.shape != (f, j, 4):
+        raise MotionError(
+            f"motion arrays disagree with the skeleton ({j} joints): root_positions {rp.shape}, "
+            f"rotations {q.shape}; expected (F, 3) and (F, {j}, 4)"
+        )
+    k = skeleton.translated_joints.size
+    if jt.size == 0 and k == 0:
+        jt = np.zeros((f, 0, 3), dtype=jt.dtype)
+    if jt.shape != (f, k, 3):
+        raise MotionError(f"joint_translations must be (F, {k}, 3) for this skeleton, got {jt.shape}")
+    return jt
+
+
+def check_rate_and_units(fps: float, units: str) -> None:
+    """:class:`MotionError` unless ``fps`` is a positive number and ``units`` known (or ``"unknown"``)."""
+    if not (np.isfinite(fps) and fps > 0):
+        raise MotionError(f"fps must be a positive number, got {fps}")
+    if units not in METRES_PER_UNIT and units != "unknown":
+        raise MotionError(f"unknown units {units!r}; use one of {', '.join(METRES_PER_UNIT)}")

@@ -27,13 +27,21 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from ..container import read_only
+
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True)
 class EdgeTree:
-    """Edges of G and their hierarchy, ``(E,)`` arrays (see the module docstring)."""
+    """Edges of G and their hierarchy, ``(E,)`` arrays (see the module docstring).
+
+    A built tree holds int64 / float64 arrays; a loaded one (:meth:`from_arrays`) the stored int32
+    / float32 ones as they are (read-only views of the database's memory-mapped pages, shared by
+    the engine processes of a host). Readers therefore widen what they compute with: index
+    arithmetic that can pass 2^31 (``clip * span + frame``) in int64, costs through :meth:`costs`
+    (float64, the numbers widening at load gave)."""
 
     from_clip: IntArray
     from_frame: IntArray
@@ -56,10 +64,14 @@ class EdgeTree:
     def is_leaf(self) -> npt.NDArray[np.bool_]:
         return self.left < 0
 
+    def costs(self, edges: npt.NDArray[np.integer[Any]]) -> FloatArray:
+        """The costs of edges ``edges`` (any shape), float64."""
+        return np.asarray(self.cost[edges], dtype=np.float64)
+
     def to_arrays(self, prefix: str = "graph.edges.") -> dict[str, Any]:
         """Stored compactly: int32 indices (clips, frames and node ids stay below 2^31) and float32
         costs (7 digits; costs are compared, never accumulated over many edges); 28 bytes an edge.
-        :meth:`from_arrays` widens them back to int64 / float64."""
+        :meth:`from_arrays` keeps them so."""
         out: dict[str, Any] = {}
         for k in _EDGE_FIELDS:
             a = getattr(self, k)
@@ -73,18 +85,24 @@ class EdgeTree:
 
     @classmethod
     def from_arrays(cls, arrays: Any, prefix: str = "graph.edges.") -> EdgeTree:
-        def ints(name: str) -> IntArray:
-            return np.asarray(arrays[f"{prefix}{name}"], dtype=np.int64)
+        """The stored tree, its arrays as stored (read-only views, not copies; see the class)."""
+
+        def field(name: str, floating: bool = False) -> Any:
+            a = np.asarray(arrays[f"{prefix}{name}"])
+            want = np.floating if floating else np.integer
+            if not np.issubdtype(a.dtype, want):
+                raise ValueError(f"{prefix}{name} is {a.dtype}, not {want.__name__}")
+            return read_only(a)
 
         return cls(
-            ints("from_clip"),
-            ints("from_frame"),
-            ints("to_clip"),
-            ints("to_frame"),
-            np.asarray(arrays[f"{prefix}cost"], dtype=np.float64),
-            ints("parent"),
-            ints("left"),
-            ints("right"),
+            field("from_clip"),
+            field("from_frame"),
+            field("to_clip"),
+            field("to_frame"),
+            field("cost", floating=True),
+            field("parent"),
+            field("left"),
+            field("right"),
         )
 
 
@@ -111,10 +129,11 @@ class RootTracks:
 
     @classmethod
     def from_arrays(cls, arrays: Any, prefix: str = "graph.tracks.") -> RootTracks:
+        """The stored tracks (float64 as built and stored: read-only views, not copies)."""
         return cls(
-            np.asarray(arrays[f"{prefix}offsets"], dtype=np.int64),
-            np.asarray(arrays[f"{prefix}root_xz"], dtype=np.float64),
-            np.asarray(arrays[f"{prefix}root_yaw"], dtype=np.float64),
+            read_only(np.asarray(arrays[f"{prefix}offsets"], dtype=np.int64)),
+            read_only(np.asarray(arrays[f"{prefix}root_xz"], dtype=np.float64)),
+            read_only(np.asarray(arrays[f"{prefix}root_yaw"], dtype=np.float64)),
         )
 
 
@@ -138,7 +157,7 @@ class FootContacts:
             return None
         return cls(
             np.asarray(arrays[f"{prefix}joints"], dtype=np.int64),
-            np.asarray(arrays[f"{prefix}flags"], dtype=bool),
+            read_only(np.asarray(arrays[f"{prefix}flags"], dtype=bool)),
         )
 
 

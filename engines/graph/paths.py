@@ -143,6 +143,11 @@ class Placement:
         return np.repeat(self.theta, counts), np.repeat(self.shift, counts, axis=0)
 
 
+EDGE_BLOCK = 1 << 18
+"""Edges whose transforms :class:`GraphIndex` computes at once (about 130 bytes of temporaries an
+edge: 34 MB a block, where all at once took 1 GB at 1M frames)."""
+
+
 class GraphIndex:
     """What the search precomputes from an edge tree and the root tracks.
 
@@ -176,21 +181,30 @@ class GraphIndex:
         self.n_clips = n_clips
         self.root_x = np.ascontiguousarray(tracks.root_xz[:, 0])
         self.root_z = np.ascontiguousarray(tracks.root_xz[:, 1])
-        self.edge_theta, self.edge_shift = self._edge_transforms()
-        # padded copies (one identity transform at index E, for -1 pads) as 1-D arrays: gathers
-        # from 1-D arrays are several times faster than from (E, 2) ones
-        self.pad_theta = np.append(self.edge_theta, 0.0)
-        self.pad_turn = np.exp(-1j * self.pad_theta)
-        self.pad_shift = np.append(self.edge_shift[:, 0] + 1j * self.edge_shift[:, 1], 0.0)
+        # the edge transforms, padded (one identity transform at index E, for -1 pads), as 1-D
+        # arrays: gathers from 1-D arrays are several times faster than from (E, 2) ones. Only
+        # these are kept (40 bytes an edge): edge_theta / edge_shift are read from them
+        self.pad_theta, self.pad_turn, self.pad_shift = self._edge_transforms()
         roots = tree.roots
         order = np.lexsort((tree.from_frame[roots], tree.from_clip[roots]))
         self.roots = roots[order]
         rc = tree.from_clip[self.roots]
         self._root_start = np.searchsorted(rc, np.arange(n_clips + 1))
+        self._root_frames = tree.from_frame[self.roots]  # stored dtype: int32 when loaded
         self._pair: dict[tuple[int, int], IntArray] = {}
         self._two: dict[tuple[int, int], tuple[IntArray, IntArray]] = {}
         self._span = int(tree.from_frame.max(initial=0)) + int(tree.to_frame.max(initial=0)) + 2
         self._root_keys: IntArray | None = None  # clip * _span + from frame of roots, built on first use
+
+    @property
+    def edge_theta(self) -> FloatArray:
+        """``(E,)`` the rotation of every edge transform ``D(e)`` (radians; a view)."""
+        return self.pad_theta[:-1]
+
+    @property
+    def edge_shift(self) -> FloatArray:
+        """``(E, 2)`` the shift of every edge transform ``D(e)`` (metres; a new array)."""
+        return np.stack((self.pad_shift.real[:-1], self.pad_shift.imag[:-1]), axis=-1)
 
     @staticmethod
     @cached(LRUCache(maxsize=4), key=lambda tree, tracks: (id(tree), id(tracks)), lock=threading.Lock())
@@ -230,30 +244,41 @@ class GraphIndex:
             pos[g] = np.exp(-1j * yaw[g]) * step_pos + z[g]
         return ang, np.exp(-1j * ang), pos
 
-    def _edge_transforms(self) -> tuple[FloatArray, FloatArray]:
-        """``D(e) = G(from_clip, from_frame + 1) o G(to_clip, to_frame)^-1`` for every edge."""
+    def _edge_transforms(self) -> tuple[FloatArray, npt.NDArray[np.complex128], npt.NDArray[np.complex128]]:
+        """``D(e) = G(from_clip, from_frame + 1) o G(to_clip, to_frame)^-1`` for every edge, padded
+        with the identity at index E: ``(E + 1,)`` angle, rotation ``exp(-i angle)`` and shift
+        ``x + i z``. Computed :data:`EDGE_BLOCK` edges at a time (element by element the same
+        numbers as all at once), so the load's temporaries stay small."""
         t = self.tree
-        if t.size == 0:
-            return np.zeros(0), np.zeros((0, 2))
-        ang, turn, pos = self._frame_transforms()
-        off = self.tracks.offsets
-        gf = off[t.from_clip] + t.from_frame
-        gt = off[t.to_clip] + t.to_frame
-        yaw_t = self.tracks.root_yaw[gt]
-        z_t = self.root_x[gt] + 1j * self.root_z[gt]
-        # G^-1 = (-yaw, -R(-yaw) z); a o b = (a + b, R(a) b_shift + a_shift)
-        inv_shift = -np.exp(1j * yaw_t) * z_t
-        theta = ang[gf] - yaw_t
-        shift = turn[gf] * inv_shift + pos[gf]
-        return theta, np.stack((shift.real, shift.imag), axis=-1)
+        theta = np.zeros(t.size + 1)
+        shift = np.zeros(t.size + 1, dtype=np.complex128)
+        if t.size:
+            ang, turn, pos = self._frame_transforms()
+            off = self.tracks.offsets
+            for lo in range(0, t.size, EDGE_BLOCK):
+                s = slice(lo, min(lo + EDGE_BLOCK, t.size))
+                gf = off[t.from_clip[s]] + t.from_frame[s]
+                gt = off[t.to_clip[s]] + t.to_frame[s]
+                yaw_t = self.tracks.root_yaw[gt]
+                z_t = self.root_x[gt] + 1j * self.root_z[gt]
+                # G^-1 = (-yaw, -R(-yaw) z); a o b = (a + b, R(a) b_shift + a_shift)
+                inv_shift = -np.exp(1j * yaw_t) * z_t
+                theta[s] = ang[gf] - yaw_t
+                z_e = turn[gf] * inv_shift + pos[gf]
+                # x + i z from the parts, as the (E, 2) shifts were joined (the same signed zeros)
+                shift[s] = z_e.real + 1j * z_e.imag
+        return theta, np.exp(-1j * theta), shift
 
     # edge lookups
     def root_out(self, clip: int, min_from_frame: int = 0) -> IntArray:
         """Root edges leaving ``clip`` at ``from_frame >= min_from_frame``, by from frame."""
         lo, hi = int(self._root_start[clip]), int(self._root_start[clip + 1])
-        edges = self.roots[lo:hi]
-        k = int(np.searchsorted(self.tree.from_frame[edges], min_from_frame, side="left"))
-        return edges[k:]
+        # a key of the frames' own dtype (clamped into its range: the same answer), so that
+        # searchsorted does not cast the frames to int64
+        info = np.iinfo(self._root_frames.dtype)
+        key = self._root_frames.dtype.type(min(max(min_from_frame, info.min), info.max))
+        k = int(np.searchsorted(self._root_frames[lo:hi], key, side="left"))
+        return self.roots[lo + k : hi]
 
     def root_pair(self, a: int, b: int) -> IntArray:
         """Root edges from clip ``a`` to clip ``b`` (cached)."""

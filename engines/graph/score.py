@@ -537,7 +537,7 @@ def score_batch(index: GraphIndex, problem: Problem, batch: PathBatch, *, rough:
     # continuity: edges whose next piece starts inside the output
     e = batch.edges
     cut = (e >= 0) & (pieces.start[:, 1:] < T)
-    continuity = np.where(cut, index.tree.cost[np.maximum(e, 0)], 0.0).sum(axis=1)
+    continuity = np.where(cut, index.tree.costs(np.maximum(e, 0)), 0.0).sum(axis=1)
     continuity += _short_pieces(pieces, T, problem.fps)
     length = (np.maximum(T - pieces.total, 0) / FRAMES_UNIT) ** 2
     fit = None if rough else _fit(index, problem, pieces, theta, shift)

@@ -248,7 +248,7 @@ class GraphSearch:
             raise EngineError("the graph and the motion library disagree on the clips")
         if self.index_.roots.size == 0:
             raise EngineError("the motion graph has no edges: no transitions to search")
-        self._ins: dict[bool, IntArray] = {}
+        self._ins: dict[bool, tuple[IntArray, IntArray]] = {}
         self._layer_cache: dict[tuple[int, int, int, bool], list[list[npt.NDArray[np.bool_]]] | None] = {}
         self._useful: IntArray | None = None
         self._cum_weights: FloatArray | None = None
@@ -369,8 +369,9 @@ class GraphSearch:
         random subset beyond)."""
         idx, t = self.index_, self.tree
         roots = idx.roots
-        fc, ff = t.from_clip[roots], t.from_frame[roots]
-        tc, tf = t.to_clip[roots], t.to_frame[roots]
+        # int64: keys below are clip * span + frame (the stored tree is int32)
+        fc, ff = t.from_clip[roots].astype(np.int64), t.from_frame[roots].astype(np.int64)
+        tc, tf = t.to_clip[roots].astype(np.int64), t.to_frame[roots].astype(np.int64)
         span = int(idx.frames.max()) + 2
         keys = fc * span + ff
         out: list[tuple[IntArray, IntArray, IntArray]] = []
@@ -421,7 +422,7 @@ class GraphSearch:
         bounds: list[FloatArray] = []
         for edges, lo, hi in self._chains(T, rng):
             first = edges[:, 0]
-            bound = w_c * t.cost[edges].sum(axis=1) if w_c > 0 else np.zeros(edges.shape[0])
+            bound = w_c * t.costs(edges).sum(axis=1) if w_c > 0 else np.zeros(edges.shape[0])
             for q in CHAIN_STARTS:
                 n0 = np.round(lo + q * (hi - lo)).astype(np.int64)
                 parts.append(PathBatch(t.from_clip[first], t.from_frame[first] - n0 + 1, edges))
@@ -878,7 +879,8 @@ class GraphSearch:
         if self._cum_weights is None:
             t, roots = self.tree, self.index_.roots
             play = (self.index_.frames[t.to_clip[roots]] - t.to_frame[roots]).astype(np.float64)
-            w = np.maximum(play, 1.0) * np.exp(-t.cost[roots] / max(float(np.median(t.cost[roots])), 1e-9))
+            cost = t.costs(roots)
+            w = np.maximum(play, 1.0) * np.exp(-cost / max(float(np.median(cost)), 1e-9))
             self._cum_weights = np.concatenate(([0.0], np.cumsum(w)))
         return self._cum_weights
 
@@ -905,7 +907,7 @@ class GraphSearch:
         start_clip, start_frame = clip.copy(), frame.copy()
         roots = idx.roots
         span = int(idx.frames.max()) + 2
-        keys = t.from_clip[roots] * span + t.from_frame[roots]
+        keys = t.from_clip[roots].astype(np.int64) * span + t.from_frame[roots]
         now = np.zeros(count, dtype=np.int64)
         active = np.ones(count, dtype=bool)
         bias = np.arange(count) < round(biased * count)
@@ -963,12 +965,17 @@ class GraphSearch:
             clip, frame = int(t.to_clip[e]), int(t.to_frame[e])
         return out
 
-    def _in_edges(self, every: bool) -> IntArray:
-        """Root edges (or every edge of the tree) sorted by (to clip, to frame)."""
+    def _in_edges(self, every: bool) -> tuple[IntArray, IntArray]:
+        """Root edges (or every edge of the tree) sorted by (to clip, to frame), and ``(C + 1,)``
+        where each clip's run of them starts."""
         got = self._ins.get(every)
         if got is None:
             r = np.arange(self.tree.size, dtype=np.int64) if every else self.index_.roots
-            got = r[np.lexsort((self.tree.to_frame[r], self.tree.to_clip[r]))]
+            edges = r[np.lexsort((self.tree.to_frame[r], self.tree.to_clip[r]))]
+            starts = np.searchsorted(
+                self.tree.to_clip[edges], np.arange(self.index_.n_clips + 1), side="left"
+            )
+            got = (edges, starts.astype(np.int64))
             self._ins[every] = got
         return got
 
@@ -976,10 +983,8 @@ class GraphSearch:
         """Edges into ``clip`` at a frame ``<= frame`` that leave at least one output frame before
         (``frame - to_frame < now``)."""
         t = self.tree
-        ins = self._in_edges(every)
-        lo = np.searchsorted(t.to_clip[ins], clip, side="left")
-        hi = np.searchsorted(t.to_clip[ins], clip, side="right")
-        cand = ins[lo:hi]
+        ins, starts = self._in_edges(every)
+        cand = ins[int(starts[clip]) : int(starts[clip + 1])]
         return cand[(t.to_frame[cand] <= frame) & (t.to_frame[cand] >= frame - now + 1)]
 
     def _pose_seed(self, rng: np.random.Generator) -> Path | None:
