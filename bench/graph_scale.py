@@ -63,7 +63,7 @@ def variants() -> list[tuple[bool, float]]:
 def library_of(frames: int) -> tuple[Any, str]:
     """A library of about ``frames`` frames (module docstring) and a description of it."""
     from engines.library import ClipInput, MotionLibrary, build_library
-    from motion.mirror import mirror
+    from motion.mirror import joint_frames, mirror
     from motion.resample import resample
 
     files = sorted(glob.glob(str(DATA / "dataset-1" / "*.bvh"))) + sorted(
@@ -81,6 +81,7 @@ def library_of(frames: int) -> tuple[Any, str]:
             labels.append(base.labels[i])
         return MotionLibrary(tuple(names), tuple(motions), tuple(labels)), f"every {k}th Bandai-Namco clip"
     names, motions = list(base.names), list(base.motions)
+    conventions = joint_frames(base.motions)  # one convention for every mirror image
     count = total
     used: list[str] = []
     for mirrored, speed in variants()[1:]:
@@ -91,7 +92,7 @@ def library_of(frames: int) -> tuple[Any, str]:
         for name, m in zip(base.names, base.motions, strict=True):
             if count >= frames:
                 break
-            c = mirror(m) if mirrored else m
+            c = mirror(m, conventions) if mirrored else m
             if speed != 1.0:
                 c = resample(replace(c, fps=c.fps * speed), 30.0)
             names.append(f"{name} ({tag.strip()})")

@@ -20,10 +20,11 @@ frames, the leg is solved in closed form:
    thigh's frame (:func:`hinge_axes`), with a smooth blend between the two (:func:`knee_axes`),
    so a target that bends a straight knee bends it forwards in every frame (bending it in the
    plane of a knee hyperextended by a fraction of a degree bent it backwards for a frame: a
-   joint-acceleration spike of 200-400 m/s^2 in graph outputs near cuts). Beyond the leg's own extension in that frame, the distance is
-   eased towards full extension ("soft IK": ``base + room * (1 - exp(-excess / room))``), so a
-   target just out of reach bends the knee a little less instead of snapping it straight for a
-   frame (a visible pop); the unreached part is left as residual;
+   joint-acceleration spike of 200-400 m/s^2 in graph outputs near cuts). Beyond the leg's own
+   extension in that frame, the distance is eased towards full extension ("soft IK":
+   ``base + room * (1 - exp(-excess / room))``), so a target just out of reach bends the knee a
+   little less instead of snapping it straight for a frame (a visible pop); the unreached part
+   is left as residual;
 2. the hip swings by the shortest arc that takes the ankle onto the target direction;
 3. the ankle keeps its original global orientation (the foot does not rotate with the leg), and
    when a toe joint of that foot is pinned too, the foot turns by the shortest arc that brings
