@@ -1,14 +1,16 @@
 """Benchmark: graph databases from 10k to 1M frames (build, memory, disk, search), one JSON line per size.
 
-Needs ``../shared/data/bandai-namco``. The library of a size is made of every clip of both sets
-(639 clips, 85,981 frames at 30 fps, one skeleton) and, past that, copies: variant ``v`` of the
-sequence ``mirrored``, ``x0.9``, ``mirrored x0.9``, ``x1.1``, ``mirrored x1.1``, ``x0.8``, ... (left/right
-mirror image by ``motion.mirror``; time-scaled = played at that speed, resampled to 30 fps), clip by
-clip until the size is reached. Sizes below the data take an evenly spread subset of the clips
-(every k-th clip). Each size is built in a fresh process (so ``peak_rss_build_mb`` is its own)
-doing what a worker does (``workers.execute.build_database_bytes``: the graph build, the library
-arrays with the engine's replacing them, quality reference and foot floor); ``disk_mb`` is the
-size of ``workers.store.npz_bytes``. Another fresh process loads it into an engine and answers a
+Needs ``../shared/data/bandai-namco``. The library of a size is made of every clip of both sets (639
+clips, 85,981 frames at 30 fps, one skeleton) and, past that, copies: variant ``v`` of the sequence
+``mirrored``, ``x0.9``, ``mirrored x0.9``, ``x1.1``, ``mirrored x1.1``, ``x0.8``, ... (left/right
+mirror image by ``motion.mirror``, every copy with the joint frames of
+``motion.mirror.joint_frames`` over all the clips, as a graph spec's ``mirror`` does; time-scaled =
+played at that speed, resampled to 30 fps), clip by clip until the size is reached. Sizes below the
+data take an evenly spread subset of the clips (every k-th clip). Each size is built in a fresh
+process (so ``peak_rss_build_mb`` is its own) doing what a worker does
+(``workers.execute.build_database_bytes``: the graph build, the library arrays with the engine's
+replacing them, quality reference and foot floor); ``disk_mb`` is the size of
+``workers.store.npz_bytes``. Another fresh process loads it into an engine and answers a
 ``--seconds`` (20) request from the origin to a body goal ``--goal`` (12) m away (heading 90), once
 per ``--seeds`` seed, bounded by the request's rounds (15), like any request:
 
