@@ -1,14 +1,16 @@
 """Benchmark: graph databases from 10k to 1M frames (build, memory, disk, search), one JSON line per size.
 
-Needs ``../shared/data/bandai-namco``. The library of a size is made of every clip of both sets
-(639 clips, 85,981 frames at 30 fps, one skeleton) and, past that, copies: variant ``v`` of the
-sequence ``mirrored``, ``x0.9``, ``mirrored x0.9``, ``x1.1``, ``mirrored x1.1``, ``x0.8``, ... (left/right
-mirror image by ``motion.mirror``; time-scaled = played at that speed, resampled to 30 fps), clip by
-clip until the size is reached. Sizes below the data take an evenly spread subset of the clips
-(every k-th clip). Each size is built in a fresh process (so ``peak_rss_build_mb`` is its own)
-doing what a worker does (``workers.execute.build_database_bytes``: the graph build, the library
-arrays with the engine's replacing them, quality reference and foot floor); ``disk_mb`` is the
-size of ``workers.store.npz_bytes``. Another fresh process loads it into an engine and answers a
+Needs ``../shared/data/bandai-namco``. The library of a size is made of every clip of both sets (639
+clips, 85,981 frames at 30 fps, one skeleton) and, past that, copies: variant ``v`` of the sequence
+``mirrored``, ``x0.9``, ``mirrored x0.9``, ``x1.1``, ``mirrored x1.1``, ``x0.8``, ... (left/right
+mirror image by ``motion.mirror``, every copy with the joint frames of
+``motion.mirror.joint_frames`` over all the clips, as a graph spec's ``mirror`` does; time-scaled =
+played at that speed, resampled to 30 fps), clip by clip until the size is reached. Sizes below the
+data take an evenly spread subset of the clips (every k-th clip). Each size is built in a fresh
+process (so ``peak_rss_build_mb`` is its own) doing what a worker does
+(``workers.execute.build_database_bytes``: the graph build, the library arrays with the engine's
+replacing them, quality reference and foot floor); ``disk_mb`` is the size of
+``workers.store.npz_bytes``. Another fresh process loads it into an engine and answers a
 ``--seconds`` (20) request from the origin to a body goal ``--goal`` (12) m away (heading 90), once
 per ``--seeds`` seed, bounded by the request's rounds (15), like any request:
 
@@ -63,7 +65,7 @@ def variants() -> list[tuple[bool, float]]:
 def library_of(frames: int) -> tuple[Any, str]:
     """A library of about ``frames`` frames (module docstring) and a description of it."""
     from engines.library import ClipInput, MotionLibrary, build_library
-    from motion.mirror import mirror
+    from motion.mirror import joint_frames, mirror
     from motion.resample import resample
 
     files = sorted(glob.glob(str(DATA / "dataset-1" / "*.bvh"))) + sorted(
@@ -81,6 +83,7 @@ def library_of(frames: int) -> tuple[Any, str]:
             labels.append(base.labels[i])
         return MotionLibrary(tuple(names), tuple(motions), tuple(labels)), f"every {k}th Bandai-Namco clip"
     names, motions = list(base.names), list(base.motions)
+    conventions = joint_frames(base.motions)  # one convention for every mirror image
     count = total
     used: list[str] = []
     for mirrored, speed in variants()[1:]:
@@ -91,7 +94,7 @@ def library_of(frames: int) -> tuple[Any, str]:
         for name, m in zip(base.names, base.motions, strict=True):
             if count >= frames:
                 break
-            c = mirror(m) if mirrored else m
+            c = mirror(m, conventions) if mirrored else m
             if speed != 1.0:
                 c = resample(replace(c, fps=c.fps * speed), 30.0)
             names.append(f"{name} ({tag.strip()})")

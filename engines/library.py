@@ -110,16 +110,18 @@ MIRROR_SUFFIX = " (mirror)"
 
 def with_mirrors(lib: MotionLibrary) -> MotionLibrary:
     """The library followed by the mirror image of each of its clips (:func:`motion.mirror.mirror`:
-    reflected across the YZ plane, left and right exchanged), named ``<name> (mirror)``, with the
-    same labels. Raises :class:`MotionError` when the skeleton's left/right joints are not
-    symmetric or a mirror's name is taken."""
-    from motion.mirror import mirror
+    reflected across the YZ plane, left and right exchanged, in the skeleton's own conventions,
+    with the joint frames of :func:`motion.mirror.joint_frames` over all the clips), named
+    ``<name> (mirror)``, with the same labels. Raises :class:`MotionError` when the skeleton's
+    left/right joints are not symmetric or a mirror's name is taken."""
+    from motion.mirror import joint_frames, mirror
 
     names = [n + MIRROR_SUFFIX for n in lib.names]
     taken = sorted(set(names) & set(lib.names))
     if taken:
         raise MotionError(f"cannot name the mirror images: clip names {', '.join(taken)} are taken")
-    mirrored = tuple(replace(mirror(m), name=n) for m, n in zip(lib.motions, names, strict=True))
+    frames = joint_frames(lib.motions)  # one convention for every image (they are cut together)
+    mirrored = tuple(replace(mirror(m, frames), name=n) for m, n in zip(lib.motions, names, strict=True))
     return MotionLibrary(lib.names + tuple(names), lib.motions + mirrored, lib.labels + lib.labels)
 
 

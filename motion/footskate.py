@@ -14,10 +14,17 @@ frames, the leg is solved in closed form:
 
 1. the knee rotates about the normal of the hip-knee-ankle plane (so it keeps bending in its
    original plane, towards its original pole) until the hip-ankle distance is the target's
-   distance (law of cosines). Beyond the leg's own extension in that frame, the distance is
-   eased towards full extension ("soft IK": ``base + room * (1 - exp(-excess / room))``), so a
-   target just out of reach bends the knee a little less instead of snapping it straight for a
-   frame (a visible pop); the unreached part is left as residual;
+   distance (law of cosines). A knee that is nearly straight (bent less than 10 degrees) or bent
+   backwards has no such plane (it turns arbitrarily from frame to frame as the knee passes
+   through straight): it bends about the leg's hinge axis, measured over the motion in the
+   thigh's frame (:func:`hinge_axes`), with a smooth blend between the two (:func:`knee_axes`),
+   so a target that bends a straight knee bends it forwards in every frame (bending it in the
+   plane of a knee hyperextended by a fraction of a degree bent it backwards for a frame: a
+   joint-acceleration spike of 200-400 m/s^2 in graph outputs near cuts). Beyond the leg's own
+   extension in that frame, the distance is eased towards full extension ("soft IK":
+   ``base + room * (1 - exp(-excess / room))``), so a target just out of reach bends the knee a
+   little less instead of snapping it straight for a frame (a visible pop); the unreached part
+   is left as residual;
 2. the hip swings by the shortest arc that takes the ankle onto the target direction;
 3. the ankle keeps its original global orientation (the foot does not rotate with the leg), and
    when a toe joint of that foot is pinned too, the foot turns by the shortest arc that brings
@@ -53,9 +60,15 @@ Array = npt.NDArray[np.float64]
 _TOE = re.compile(r"toe", re.IGNORECASE)
 _SAME_PLACE = 1e-6  # bones shorter than this fraction of the leg's longest offset are skipped
 SOFT_IK_START = 0.97
+"""Fraction of a leg's full reach beyond which a stretching target is eased (soft IK)."""
 PIN_TRAVEL_M_S = 1.5
 """A foot moves between two pinned places no faster than this on average (``widen_jumps``)."""
-"""Fraction of a leg's full reach beyond which a stretching target is eased (soft IK)."""
+KNEE_PLANE_SIN = float(np.sin(np.radians(10.0)))
+"""A knee bent forward less than this (sine of its angle) bends partly about its hinge axis
+rather than in its own plane (:func:`knee_axes`)."""
+HINGE_MIN_SIN = 0.02
+"""A knee whose bend averages less than this (sine) over the motion has no measurable hinge axis
+(:func:`hinge_axes`): it bends towards the body's forward direction."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -313,6 +326,46 @@ def _scaled_rotation(q: Array, w: Array) -> Array:
     return rot.exp(rot.log(q) * w[:, None])
 
 
+def hinge_axes(leg: Leg, pos: Array, grot: Array, forward: Array) -> Array:
+    """``(F, 3)`` unit world directions of one leg's knee hinge axis in each frame: the direction
+    of ``thigh x shin`` (the axis a bent knee turns about, shin swinging back) averaged over the
+    motion in the thigh's own frame (the hip joint's global rotation ``grot (F, J, 4)``), weighted
+    by how much the knee bends (the sine of its angle), and turned with the thigh. When the knee
+    hardly ever bends (average sine below :data:`HINGE_MIN_SIN`), the axis that bends it towards
+    the body's ``forward (F, 3)`` instead (shin swinging back). ``pos (F, J, 3)`` global
+    positions."""
+    thigh = pos[:, leg.knee] - pos[:, leg.hip]
+    shin = pos[:, leg.ankle] - pos[:, leg.knee]
+    scale = norms(thigh) * norms(shin)
+    hip = grot[:, leg.hip]
+    mean = rot.rotate(rot.inverse(hip), cross(thigh, shin)).sum(axis=0)
+    size = float(np.linalg.norm(mean))
+    if size > HINGE_MIN_SIN * float(scale.sum()):
+        return np.asarray(rot.rotate(hip, np.broadcast_to(mean / size, thigh.shape)))
+    axis = cross(thigh, -forward)
+    return np.asarray(axis / np.maximum(norms(axis), 1e-300)[:, None])
+
+
+def knee_axes(thigh: Array, shin: Array, hinge: Array) -> Array:
+    """``(N, 3)`` unit axes to bend knees about, perpendicular to the thighs: the plane the knee
+    bends in (``thigh x shin``) where it clearly bends forward (the sine of its angle, signed by
+    the ``hinge`` axis of :func:`hinge_axes`, at least :data:`KNEE_PLANE_SIN`), the hinge axis
+    where it is straight or bent backwards, and in between a smoothstep blend of both. Unlike the
+    plane alone, which turns arbitrarily as the knee passes through straight (a target that
+    bends a straight knee would bend it sideways or backwards in one frame and forwards in the
+    next: a joint-acceleration spike), this is continuous in the pose. ``thigh``, ``shin``
+    ``(N, 3)`` hip-to-knee and knee-to-ankle vectors."""
+    t_hat = thigh / np.maximum(norms(thigh), 1e-300)[:, None]
+    bent = cross(t_hat, shin / np.maximum(norms(shin), 1e-300)[:, None])  # |bent| = sin(angle)
+    pole = hinge - np.einsum("ij,ij->i", hinge, t_hat)[:, None] * t_hat
+    pole /= np.maximum(norms(pole), 1e-300)[:, None]
+    size = norms(bent)
+    plane = bent / np.maximum(size, 1e-300)[:, None]
+    b = _smoothstep(np.einsum("ij,ij->i", bent, pole) / KNEE_PLANE_SIN)[:, None]
+    axis = b * plane + (1.0 - b) * pole  # b > 0 only where plane . pole > 0: never zero
+    return np.asarray(axis / np.maximum(norms(axis), 1e-300)[:, None])
+
+
 def _solve_leg(
     leg: Leg,
     skeleton: Skeleton,
@@ -323,10 +376,11 @@ def _solve_leg(
     ankle_target: Array,
     toe_target: Array | None,
     toe_weight: Array | None,
-    forward: Array,
+    hinge: Array,
 ) -> tuple[Array, Array | None]:
     """Solve one leg on ``frames``: write new local rotations into ``local``; return the ankle
-    positions reached ``(N, 3)`` and, with a toe, the toe positions reached."""
+    positions reached ``(N, 3)`` and, with a toe, the toe positions reached. ``hinge (N, 3)``: the
+    knee's hinge axis in those frames (:func:`hinge_axes`)."""
     par = skeleton.parents
     h = pos[frames, leg.hip]
     k = pos[frames, leg.knee]
@@ -345,19 +399,15 @@ def _solve_leg(
     over = dist > base
     dist = np.where(over, base + room * (1.0 - np.exp(-np.maximum(dist - base, 0.0) / room)), dist)
     dist = np.clip(dist, lo, hi)
-    # 1. knee: angle between thigh and shin directions (0 = straight) from the law of cosines.
-    cos_cur = np.einsum("ij,ij->i", thigh, shin) / np.maximum(l1 * l2, 1e-300)
-    phi_cur = np.arccos(np.clip(cos_cur, -1.0, 1.0))
+    # 1. knee: angle between thigh and shin directions (0 = straight) from the law of cosines,
+    # bent about the knee's bending axis (knee_axes: continuous through a straight knee).
     cos_des = (dist**2 - l1**2 - l2**2) / np.maximum(2.0 * l1 * l2, 1e-300)
     phi_des = np.arccos(np.clip(cos_des, -1.0, 1.0))
-    axis = cross(thigh, shin)
-    an = norms(axis)
-    straight = an <= 1e-4 * np.maximum(l1 * l2, 1e-300)
-    if straight.any():  # no bending plane: bend the knee forward (shin swings back)
-        axis[straight] = cross(thigh[straight], -forward[frames][straight])
-        an[straight] = norms(axis[straight])
-    axis = axis / np.maximum(an, 1e-300)[:, None]
-    q_knee = rot.from_axis_angle(axis, phi_des - phi_cur)
+    axis = knee_axes(thigh, shin, hinge)
+    t_hat = thigh / np.maximum(l1, 1e-300)[:, None]
+    side = cross(axis, t_hat)  # unit, perpendicular to the thigh, towards where the shin bends
+    shin_new = l2[:, None] * (np.cos(phi_des)[:, None] * t_hat + np.sin(phi_des)[:, None] * side)
+    q_knee = _arc(shin, shin_new)
     a1 = k + rot.rotate(q_knee, shin)
     # 2. hip: shortest arc from the bent leg's ankle direction to the target direction.
     q_hip = _arc(a1 - h, to_target)
@@ -402,7 +452,7 @@ def _toe_direction(to_target: Array, foot: Array) -> Array:
 
 
 def _forward(motion: Motion, pos: Array) -> Array:
-    """``(F, 3)`` the body's forward direction on the floor (for straight-leg bending)."""
+    """``(F, 3)`` the body's forward direction on the floor (knees that never bend bend towards it)."""
     from .ground import heading  # local import: ground imports contacts-free modules only
 
     hd = heading(motion, pos)
@@ -438,6 +488,7 @@ def _solve_all(
             shift += (1.0 - wa[frames])[:, None] * corr[frames, leg.toe_slot]
         target = pos[frames, leg.ankle] + shift
         toe_target = pos[frames, leg.toe] + corr[frames, leg.toe_slot] if has_t else None
+        hinge = hinge_axes(leg, pos, grot, forward)[frames]
         reached, toe_reached = _solve_leg(
             leg,
             motion.skeleton,
@@ -448,7 +499,7 @@ def _solve_all(
             target,
             toe_target,
             wt[frames] if has_t else None,
-            forward,
+            hinge,
         )
         errors[frames, li] = target - reached
         if has_a:

@@ -2,7 +2,8 @@
 
 For a hand, the chain is shoulder -> elbow -> hand (the nearest distinct ancestors, as the legs of
 :mod:`motion.footskate`, whose closed-form two-bone solver this reuses: the elbow bends in its own
-plane to the wanted shoulder-hand distance, with soft IK near full extension; the shoulder swings
+plane to the wanted shoulder-hand distance (a nearly straight elbow about the arm's hinge axis,
+:func:`motion.footskate.knee_axes`), with soft IK near full extension; the shoulder swings
 by the shortest arc; the hand keeps its global orientation). Each target is blended in by a
 per-frame weight in ``[0, 1]``: the joint moves to ``position + weight (target - position)``, so a
 caller fades corrections in and out. Only the local rotations of the chain's joints change; bone
@@ -22,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .errors import MotionError
-from .footskate import Leg, _distinct_ancestor, _forward, _rest_positions, _solve_leg
+from .footskate import Leg, _distinct_ancestor, _forward, _rest_positions, _solve_leg, hinge_axes
 from .motion import Motion
 
 Array = npt.NDArray[np.float64]
@@ -86,7 +87,8 @@ def reach(
             continue
         w = weights[frames, k, None]
         target = pos[frames, chain.ankle] + w * (targets[frames, k] - pos[frames, chain.ankle])
-        _solve_leg(chain, sk, pos, grot, local, frames, target, None, None, backward)
+        hinge = hinge_axes(chain, pos, grot, backward)[frames]
+        _solve_leg(chain, sk, pos, grot, local, frames, target, None, None, hinge)
     return replace(motion, rotations=local)
 
 

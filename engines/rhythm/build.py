@@ -26,7 +26,7 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.signal import argrelextrema
 
 from motion import Motion, MotionError
-from motion.mirror import mirror
+from motion.mirror import joint_frames, mirror
 from schemas.rhythm import RhythmDatabaseSpec
 
 from ..base import Arrays, Emitter, EngineError, ShouldStop
@@ -141,6 +141,9 @@ def _examples(
         leads, follows, lead_names, follow_names = list(library.motions), [], names, [None] * len(names)
     beats = example_beats(leads, lead_names, spec)
     examples = []
+    # one convention for every mirror image (motion.mirror.joint_frames over all the clips)
+    lead_frames = joint_frames(leads) if spec.mirror and leads else None
+    follow_frames = joint_frames(follows) if spec.mirror and follows else None
     for i, (name, m, b) in enumerate(zip(lead_names, leads, beats, strict=True)):
         partner = follows[i] if follows else None
         if partner is not None and partner.num_frames != m.num_frames:
@@ -148,7 +151,8 @@ def _examples(
             m, partner = m.slice(0, n), partner.slice(0, n)
         examples.append(Example(name, m, b, partner))
         if spec.mirror:
-            examples.append(Example(name, mirror(m), b, mirror(partner) if partner is not None else None))
+            image = mirror(partner, follow_frames) if partner is not None else None
+            examples.append(Example(name, mirror(m, lead_frames), b, image))
     return examples, lead_names, follow_names
 
 

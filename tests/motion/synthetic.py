@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from motion import Motion, Skeleton
@@ -63,3 +65,20 @@ def walking_biped(
     noise = rot.exp(rng.normal(scale=noise, size=(frames, len(BIPED_NAMES) - 7, 3)))
     q[:, 7:] = rot.multiply(q[:, 7:], noise)
     return Motion(biped_skeleton(), root, q, fps, units="m", name="walking-biped")
+
+
+def rerigged(m: Motion, frame: np.ndarray) -> Motion:
+    """The same motion on a rig whose every joint frame is turned by ``frame`` (a quaternion):
+    local rotations ``F^-1 L F`` (the root's ``L F``), offsets ``F^-1 o``, the same positions. With
+    a quarter turn about z the legs' bones run along a local x axis, as Bandai-Namco's do."""
+    sk = m.skeleton
+    f = np.broadcast_to(frame, m.rotations.shape)
+    q = rot.multiply(rot.conjugate(f), rot.multiply(m.rotations, f))
+    q[:, 0] = rot.multiply(m.rotations[:, 0], f[:, 0])
+    offsets = sk.offsets.copy()
+    offsets[1:] = rot.rotate(rot.conjugate(np.broadcast_to(frame, (sk.num_joints - 1, 4))), sk.offsets[1:])
+    es = rot.rotate(
+        rot.conjugate(np.broadcast_to(frame, sk.end_site_offsets.shape[:-1] + (4,))), sk.end_site_offsets
+    )
+    new_sk = replace(sk, offsets=offsets, end_site_offsets=es)
+    return replace(m, skeleton=new_sk, rotations=q)

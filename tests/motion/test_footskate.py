@@ -121,6 +121,45 @@ def test_toe_contacts_move_or_turn_the_foot() -> None:
     assert np.allclose(bone_lengths(res.motion), bone_lengths(m), atol=1e-12)
 
 
+def straightening_biped(frames: int = 60, bent_frames: int = 20) -> Motion:
+    """Standing on straight legs (the ankles on the floor, y = 0) after ``bent_frames`` frames of
+    knees bent 35 degrees: the left knee then wavers through straight (+-0.9 degrees, forward and
+    backward), as a nearly straight mocap knee does."""
+    sk = Skeleton(NAMES, PARENTS, OFFSETS, default_channels(len(NAMES)))
+    t = np.arange(frames) / FPS
+    root = np.zeros((frames, 3))
+    root[:, 1] = 0.87
+    q = rot.identity((frames, len(NAMES)))
+    x = np.array([1.0, 0.0, 0.0])
+    knee = 0.015 * np.sin(2 * np.pi * 3.0 * t)
+    knee[:bent_frames] = 0.6
+    q[:, 2] = rot.from_axis_angle(x, knee)
+    q[:, 1] = rot.from_axis_angle(x, np.where(knee > 0.3, -0.3, 0.0))
+    q[:, 6] = rot.from_axis_angle(x, knee[::-1])
+    return Motion(sk, root, q, FPS, units="m", name="straightening")
+
+
+@pytest.mark.parametrize("bent_frames", [20, 0], ids=["hinge from the bent frames", "no bent frames"])
+def test_straight_knee_bends_forward_every_frame(bent_frames: int) -> None:
+    # a floor above the ankles makes the IK bend the straight knee: it must bend forward (the shin
+    # swinging back) in every frame, however the knee's own plane turns as it passes straight
+    # (bending it backwards in the frames where it was hyperextended by 0.01 radian was a 200 m/s^2
+    # spike in graph outputs at a cut)
+    m = straightening_biped(bent_frames=bent_frames)
+    joints = np.array([3])
+    flags = np.zeros((m.num_frames, 1), dtype=bool)
+    res = solve_foot_skate(m, (joints, flags), floor=np.array([0.05]))
+    pos = res.motion.global_positions()
+    lifted = slice(bent_frames, None)
+    assert np.all(pos[lifted, 3, 1] > 0.045)  # the ankle lifted to the floor
+    hip, knee, ankle = pos[lifted, 1], pos[lifted, 2], pos[lifted, 3]
+    ahead = knee[:, 2] - 0.5 * (hip[:, 2] + ankle[:, 2])
+    assert np.all(ahead > 0.05)  # metres in front of the hip-ankle line (facing +Z)
+    accel = np.linalg.norm(np.diff(knee, 2, axis=0), axis=-1) * FPS**2
+    assert accel.max() < 5.0  # m/s^2: the knee moves smoothly
+    assert np.allclose(bone_lengths(res.motion), bone_lengths(m), atol=1e-12)
+
+
 def test_out_of_reach_targets_report_residual_and_root_adjust_helps() -> None:
     m = sliding_biped(speed=1.5)  # 30 frames at 1.5 m/s: the foot cannot stay put
     joints = np.array([3])

@@ -13,7 +13,7 @@ from motion.ground import add_ground_root, from_ground_frame, ground_frames, hea
 from motion.mirror import mirror, mirror_map
 from motion.resample import resample, sample_at
 
-from .synthetic import walking_biped
+from .synthetic import rerigged, walking_biped
 
 
 @pytest.mark.parametrize("heading_deg", [0.0, 90.0, -135.0])
@@ -54,6 +54,44 @@ def test_mirror_pairs_and_exact_reflection() -> None:
     expected = m.global_positions()[:, partner] * np.array([-1.0, 1, 1])
     np.testing.assert_allclose(mm.global_positions(), expected, atol=1e-12)
     np.testing.assert_allclose(mirror(mm).global_positions(), m.global_positions(), atol=1e-12)
+
+
+def mean_angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per joint, the angle (degrees) between the mean rotations of ``a`` and ``b`` ``(F, J, 4)``."""
+
+    def mean(q: np.ndarray) -> np.ndarray:
+        signs = np.sign(np.einsum("fjk,jk->fj", q, q[0]))
+        total = (q * signs[..., None]).sum(axis=0)
+        return total / np.linalg.norm(total, axis=-1, keepdims=True)
+
+    dots = np.abs((mean(a) * mean(b)).sum(axis=-1))
+    return np.degrees(2 * np.arccos(np.clip(dots, 0.0, 1.0)))
+
+
+def test_mirror_keeps_the_skeletons_conventions() -> None:
+    # a T-pose rig: the plain reflection (M L M, M o) everywhere, bit for bit
+    m = walking_biped()
+    partner, _ = mirror_map(m.skeleton.names)
+    mm = mirror(m)
+    np.testing.assert_array_equal(mm.rotations, m.rotations[:, partner] * np.array([1.0, -1, -1, 1]))
+    np.testing.assert_array_equal(mm.skeleton.offsets, m.skeleton.offsets[partner] * np.array([-1.0, 1, 1]))
+    # the same motion on a rig whose bones run along local axes: the mirror image keeps the rig
+    # (same offsets, rotations like the clip's own), so a clip and its mirror image can be cut
+    # together and blended; the plain reflection reversed every bone and turned every frame
+    # half way round (blending across such a cut spread 180-degree jumps over the window)
+    quarter = rot.from_axis_angle(np.array([0.0, 0.0, 1.0]), np.pi / 2)
+    r = rerigged(m, quarter)
+    np.testing.assert_allclose(r.global_positions(), m.global_positions(), atol=1e-12)
+    rm = mirror(r)
+    np.testing.assert_allclose(rm.global_positions(), mm.global_positions(), atol=1e-12)
+    np.testing.assert_allclose(mirror(rm).global_positions(), r.global_positions(), atol=1e-12)
+    np.testing.assert_allclose(rm.skeleton.offsets, r.skeleton.offsets, atol=1e-12)
+    np.testing.assert_allclose(rm.skeleton.end_site_offsets, r.skeleton.end_site_offsets, atol=1e-12)
+    assert mean_angles_deg(rm.rotations, r.rotations).max() < 10.0
+    # the mirror image of the T-pose rig, re-rigged, is the mirror image of the re-rigged motion
+    np.testing.assert_allclose(
+        np.abs((rerigged(mm, quarter).rotations * rm.rotations).sum(-1)), 1.0, atol=1e-9
+    )
 
 
 @pytest.mark.parametrize(
