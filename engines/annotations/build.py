@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
+from motion.ground import body_joints
 from schemas.annotations import AnnotatedDatabaseSpec
 
 from ..base import Arrays, Emitter, ShouldStop
@@ -31,7 +32,6 @@ from ..library import MotionLibrary
 from .blocks import cluster_blocks, pca_features, principal_axes
 from .database import AnnotatedDatabase
 from .features import (
-    body_joints,
     clip_frames,
     continuity_raw,
     embedding_offsets,
