@@ -31,6 +31,9 @@ CUT_SCALE = 30.0
 GROUP_WEIGHTS = (1.0, 1.0, 0.5)
 """Weights of positions, velocities and accelerations in the continuity features."""
 
+PROJECT_ROWS = 16_384
+"""Frames :func:`pca_features` projects at a time (bounds its working memory)."""
+
 
 def pca_features(
     raw: FloatArray, dims: int, seed: int = 0, sample: int = 20_000
@@ -50,7 +53,8 @@ def pca_features(
     """
     n = raw.shape[0]
     centred = raw - raw.mean(axis=0, keepdims=True)
-    rms = np.sqrt((centred**2).mean(axis=(0, 2)))  # per group
+    rms = np.sqrt(np.multiply(centred, centred, out=centred).mean(axis=(0, 2)))  # per group
+    del centred
     weights = np.asarray(GROUP_WEIGHTS) / np.maximum(rms, 1e-12)
     x = (raw * weights[None, :, None]).reshape(n, -1)
     mean = x.mean(axis=0)
@@ -59,7 +63,9 @@ def pca_features(
     xs = x[pick] - mean
     k = max(1, min(dims, xs.shape[0], xs.shape[1]))
     comp = principal_axes(xs, k)
-    feats = (x - mean) @ comp.T
+    feats = np.empty((n, k), dtype=np.float64)
+    for a in range(0, n, PROJECT_ROWS):  # a chunk at a time: no (F, 3 D) temporary
+        feats[a : a + PROJECT_ROWS] = (x[a : a + PROJECT_ROWS] - mean) @ comp.T
     a = rng.integers(0, n, size=4000)
     b = rng.integers(0, n, size=4000)
     med = float(np.median(np.linalg.norm(feats[a] - feats[b], axis=1)))
