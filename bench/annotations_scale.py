@@ -59,9 +59,7 @@ def labelled(library: Any, per_label: int, seed: int = 0) -> Any:
         if m is not None:
             by_label.setdefault(m.group("label"), []).append(i)
     rng = np.random.default_rng(seed)
-    chosen = {
-        int(i): lab for lab, idx in sorted(by_label.items()) for i in rng.permutation(idx)[:per_label]
-    }
+    chosen = {int(i): lab for lab, idx in sorted(by_label.items()) for i in rng.permutation(idx)[:per_label]}
     labels = tuple(
         ({"label": chosen[i], "start": 0, "end": m.num_frames, "value": 1},) if i in chosen else ()
         for i, m in enumerate(library.motions)
@@ -187,7 +185,9 @@ def main(argv: list[str] | None = None) -> int:
         out = dict(json.loads(done.strip().splitlines()[-1]))
         if previous is not None:
             ratio = np.log(out["frames"] / previous["frames"])
-            out["cpu_exponent"] = round(float(np.log(out["build_cpu_s"] / previous["build_cpu_s"]) / ratio), 3)
+            out["cpu_exponent"] = round(
+                float(np.log(out["build_cpu_s"] / previous["build_cpu_s"]) / ratio), 3
+            )
             out["rss_exponent"] = round(
                 float(np.log(out["peak_rss_build_mb"] / previous["peak_rss_build_mb"]) / ratio), 3
             )

@@ -90,7 +90,8 @@ class PoseGoal:
     """A whole pose at output ``frame``: ``pose (J, 3)`` joint positions (metres) of the
     character's skeleton in the body's ground frame (:func:`body_pose`), e.g. a clip's frame;
     the body's joints are compared (:func:`motion.ground.body_joints`: not a static reference
-    joint above the hips, which stays put wherever the body goes). ``extra`` entries (how the engine placed it) are copied into the report."""
+    joint above the hips, which stays put wherever the body goes). ``extra`` entries (how the
+    engine placed it) are copied into the report."""
 
     name: str
     frame: int

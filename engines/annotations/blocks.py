@@ -64,8 +64,8 @@ def pca_features(
     k = max(1, min(dims, xs.shape[0], xs.shape[1]))
     comp = principal_axes(xs, k)
     feats = np.empty((n, k), dtype=np.float64)
-    for a in range(0, n, PROJECT_ROWS):  # a chunk at a time: no (F, 3 D) temporary
-        feats[a : a + PROJECT_ROWS] = (x[a : a + PROJECT_ROWS] - mean) @ comp.T
+    for r0 in range(0, n, PROJECT_ROWS):  # a chunk at a time: no (F, 3 D) temporary
+        feats[r0 : r0 + PROJECT_ROWS] = (x[r0 : r0 + PROJECT_ROWS] - mean) @ comp.T
     a = rng.integers(0, n, size=4000)
     b = rng.integers(0, n, size=4000)
     med = float(np.median(np.linalg.norm(feats[a] - feats[b], axis=1)))
