@@ -29,7 +29,7 @@ from motion.ground import body_joints
 from schemas.annotations import AnnotatedDatabaseSpec
 
 from ..base import Arrays, Emitter, ShouldStop
-from ..library import MotionLibrary
+from ..library import MIRROR_SUFFIX, MotionLibrary
 from .blocks import cluster_blocks, pca_features, principal_axes
 from .database import AnnotatedDatabase
 from .features import (
@@ -58,7 +58,9 @@ def _check(should_stop: ShouldStop) -> None:
         raise InterruptedError("build stopped")
 
 
-def _plan(library: MotionLibrary, spec: AnnotatedDatabaseSpec) -> tuple[IntArray, IntArray, IntArray | None, int]:
+def _plan(
+    library: MotionLibrary, spec: AnnotatedDatabaseSpec
+) -> tuple[IntArray, IntArray, IntArray | None, int]:
     """The SVM joints ``(K,)``, the embedding's frame offsets ``(S,)``, the columns of the fine
     window within it (``None`` unless ``spec.refine_changes`` applies) and ``reach`` (half the
     context window, frames; 0 without refining)."""
@@ -180,8 +182,9 @@ def column_stats(x: FloatArray) -> tuple[FloatArray, FloatArray]:
     mean = row_sum(lambda s: x[s]) / n
 
     def squared(s: slice) -> FloatArray:
-        d = x[s] - mean
-        return np.multiply(d, d, out=d)
+        d: FloatArray = x[s] - mean
+        np.multiply(d, d, out=d)
+        return d
 
     return mean, np.sqrt(row_sum(squared) / n)
 
@@ -215,6 +218,18 @@ def standardize(
         b = a + STANDARDIZE_ROWS
         out[a:b] = ((x[a:b] - mean) / scale) @ axes
     return out
+
+
+def clip_refs(spec: AnnotatedDatabaseSpec, library: MotionLibrary) -> list[str]:
+    """Each library clip as the spec names it (its ``name``, else its ``bvh`` reference as
+    written); a mirror image (spec ``mirror``, after the clips) as its clip's name plus
+    :data:`~engines.library.MIRROR_SUFFIX`."""
+    refs = [c.name or c.bvh or name for c, name in zip(spec.clips, library.names, strict=False)]
+    if len(library.names) == 2 * len(spec.clips) and spec.mirror:
+        refs += [r + MIRROR_SUFFIX for r in refs]
+    if len(refs) != len(library.names):
+        raise ValueError(f"the spec has {len(spec.clips)} clips, the library {len(library.names)}")
+    return refs
 
 
 def build_annotated(
@@ -282,7 +297,7 @@ def _build(
         spec.seed,
         progress=cluster_progress,
     )
-    refs = [c.name or c.bvh or name for c, name in zip(spec.clips, library.names, strict=True)]
+    refs = clip_refs(spec, library)
     return AnnotatedDatabase(
         clip_refs=np.array(refs, dtype=str),
         vocab=np.array(prop.vocab, dtype=str),

@@ -10,7 +10,7 @@ import pytest
 from motion import Motion, MotionError
 from motion import rotations as rot
 from motion.ground import add_ground_root, from_ground_frame, ground_frames, heading, to_ground_frame
-from motion.mirror import mirror, mirror_map
+from motion.mirror import mirror, mirror_label, mirror_map
 from motion.resample import resample, sample_at
 
 from .synthetic import walking_biped
@@ -54,6 +54,26 @@ def test_mirror_pairs_and_exact_reflection() -> None:
     expected = m.global_positions()[:, partner] * np.array([-1.0, 1, 1])
     np.testing.assert_allclose(mm.global_positions(), expected, atol=1e-12)
     np.testing.assert_allclose(mirror(mm).global_positions(), m.global_positions(), atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("label", "mirrored"),
+    [
+        ("wave-left-hand", "wave-right-hand"),
+        ("walk-turn-right", "walk-turn-left"),
+        ("raiseLeftHand", "raiseRightHand"),
+        ("Walk Left", "Walk Right"),
+        ("LEFT_HAND", "RIGHT_HAND"),
+        ("left", "right"),
+        ("walk", "walk"),
+        ("bright", "bright"),
+        ("leftover", "leftover"),
+        ("Leftover", "Leftover"),
+    ],
+)
+def test_mirror_label_exchanges_the_side_a_label_names(label: str, mirrored: str) -> None:
+    assert mirror_label(label) == mirrored
+    assert mirror_label(mirrored) == label
 
 
 @pytest.mark.parametrize(
