@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from motion import read_bvh
+from motion.goals import LoopGoal, PoseGoal, body_pose
 from motion.ground import (
     apply_floor_transform,
     body_joints,
@@ -16,7 +17,6 @@ from motion.ground import (
     static_reference_root,
     usual_reference_root,
 )
-from motion.goals import LoopGoal, PoseGoal, body_pose
 from motion.quality import QualityInputs, assess
 from motion.samples import sample_path
 
