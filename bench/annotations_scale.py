@@ -13,7 +13,8 @@ process (so ``peak_rss_build_mb`` is its own) doing what a worker does for an an
 * ``peak_rss_build_mb``: the process's peak resident memory (library included: ``rss_library_mb``);
 * ``disk_mb``: the stored database (``workers.store.npz_bytes``); ``bytes_per_frame``.
 
-With ``--kind rhythm`` a rhythm database of the same library is built instead (``RhythmEngine.build``).
+With ``--kind rhythm`` a rhythm database of the same library's clips of 3 s or more is built
+instead (``RhythmEngine.build``; beat analysis needs two beats).
 ``cpu_exponent`` / ``rss_exponent`` compare consecutive sizes. ``load_avg`` is the 1-minute load
 average at the start (wall times carry others' load; CPU times move less).
 
@@ -67,6 +68,18 @@ def labelled(library: Any, per_label: int, seed: int = 0) -> Any:
     return MotionLibrary(library.names, library.motions, labels)
 
 
+def long_clips(library: Any, seconds: float) -> Any:
+    """The clips of ``library`` of at least ``seconds``."""
+    from engines.library import MotionLibrary
+
+    keep = [i for i, m in enumerate(library.motions) if m.num_frames >= seconds * m.fps]
+    return MotionLibrary(
+        tuple(library.names[i] for i in keep),
+        tuple(library.motions[i] for i in keep),
+        tuple(library.labels[i] for i in keep),
+    )
+
+
 class StageEmitter:
     """Records the process CPU time at every progress message (the build's stages)."""
 
@@ -115,6 +128,8 @@ def build_one(frames: int, kind: str, per_label: int, spec_extra: dict[str, Any]
     tune_process()  # as every Segue process does
     load_avg = os.getloadavg()[0]
     library, made_of = library_of(frames)
+    if kind == "rhythm":  # beat analysis needs two beats: clips of 3 s or more
+        library, made_of = long_clips(library, 3.0), f"clips of 3 s or more of: {made_of}"
     library = labelled(library, per_label)
     rss_library = rss_mb()
     engine = kind_class(kind)
