@@ -465,8 +465,15 @@ class Engine(ABC, Generic[RequestT, SpecT]):
     @classmethod
     def library_for(cls, spec: SpecT, library: MotionLibrary) -> MotionLibrary:
         """The library a database of ``spec`` is built from and stores, given its clips as read
-        (default: as read; graph databases add mirror images with ``mirror``)."""
+        (default: as read; graph and annotated databases add mirror images with ``mirror``)."""
         return library
+
+    @classmethod
+    def library_frames(cls, spec: SpecT, frames: int) -> int:
+        """Frames of the library a database of ``spec`` stores and builds on (:meth:`library_for`),
+        given its clips' ``frames`` at the database rate (default: the same; ``mirror`` doubles
+        them), for the service's size limits before a build."""
+        return frames
 
     @classmethod
     def build_work(cls, spec: SpecT, frames: int) -> BuildWork | None:

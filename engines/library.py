@@ -8,6 +8,7 @@ offsets may differ per clip (different performers).
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -108,12 +109,22 @@ MIRROR_SUFFIX = " (mirror)"
 """Appended to a clip's name to name its mirror image (:func:`with_mirrors`)."""
 
 
+def mirrored_labels(labels: Sequence[Mapping[str, Any]]) -> tuple[dict[str, Any], ...]:
+    """A clip's label ranges as its mirror image carries them: the same frames and values, each
+    label's named side exchanged (:func:`motion.mirror.mirror_label`: ``wave-left-hand`` ->
+    ``wave-right-hand``; ``walk`` stays ``walk``)."""
+    from motion.mirror import mirror_label
+
+    return tuple({**lb, "label": mirror_label(str(lb["label"]))} for lb in labels)
+
+
 def with_mirrors(lib: MotionLibrary) -> MotionLibrary:
     """The library followed by the mirror image of each of its clips (:func:`motion.mirror.mirror`:
     reflected across the YZ plane, left and right exchanged, in the skeleton's own conventions,
     with the joint frames of :func:`motion.mirror.joint_frames` over all the clips), named
-    ``<name> (mirror)``, with the same labels. Raises :class:`MotionError` when the skeleton's
-    left/right joints are not symmetric or a mirror's name is taken."""
+    ``<name> (mirror)``, with its source's labels, sides exchanged (:func:`mirrored_labels`).
+    Raises :class:`MotionError` when the skeleton's left/right joints are not symmetric or a
+    mirror's name is taken."""
     from motion.mirror import joint_frames, mirror
 
     names = [n + MIRROR_SUFFIX for n in lib.names]
@@ -122,7 +133,8 @@ def with_mirrors(lib: MotionLibrary) -> MotionLibrary:
         raise MotionError(f"cannot name the mirror images: clip names {', '.join(taken)} are taken")
     frames = joint_frames(lib.motions)  # one convention for every image (they are cut together)
     mirrored = tuple(replace(mirror(m, frames), name=n) for m, n in zip(lib.motions, names, strict=True))
-    return MotionLibrary(lib.names + tuple(names), lib.motions + mirrored, lib.labels + lib.labels)
+    labels = tuple(mirrored_labels(lb) for lb in lib.labels)
+    return MotionLibrary(lib.names + tuple(names), lib.motions + mirrored, lib.labels + labels)
 
 
 def library_to_arrays(lib: MotionLibrary) -> Arrays:

@@ -23,7 +23,7 @@ import numpy.typing as npt
 
 from .contacts import foot_joints
 from .errors import MotionError
-from .ground import body_root, facing_from_positions, to_ground_frame
+from .ground import body_joints, body_root, facing_from_positions, to_ground_frame
 from .metrics import beat_align_scores
 from .regions import FloorRegion
 from .skeleton import Skeleton
@@ -88,8 +88,10 @@ class JointGoal:
 @dataclass(frozen=True, slots=True)
 class PoseGoal:
     """A whole pose at output ``frame``: ``pose (J, 3)`` joint positions (metres) of the
-    character's skeleton in the body's ground frame (:func:`body_pose`), e.g. a clip's frame.
-    ``extra`` entries (how the engine placed it) are copied into the report."""
+    character's skeleton in the body's ground frame (:func:`body_pose`), e.g. a clip's frame;
+    the body's joints are compared (:func:`motion.ground.body_joints`: not a static reference
+    joint above the hips, which stays put wherever the body goes). ``extra`` entries (how the
+    engine placed it) are copied into the report."""
 
     name: str
     frame: int
@@ -153,7 +155,7 @@ class BeatGoal:
 class LoopGoal:
     """The clip should loop: its last frame's pose equal to its first frame's, root-relative (in
     the body's ground frame, :func:`body_pose`, so root travel and heading may continue), every
-    joint of every character within ``tolerance_cm``."""
+    body joint (:func:`motion.ground.body_joints`) of every character within ``tolerance_cm``."""
 
     name: str = "loop"
     tolerance_cm: float = POSITION_TOLERANCE_CM
@@ -412,7 +414,8 @@ def _measure_pose(goal: PoseGoal, positions: Array, fps: float, characters: Sequ
     """The largest joint distance (cm) from a wanted pose, in the body's ground frame."""
     pos, sk = _character(goal, positions, characters)
     got = body_pose(pos[goal.frame : goal.frame + 1], sk)[0]
-    err = 100 * float(np.linalg.norm(got - goal.pose, axis=-1).max())
+    body = body_joints(sk)  # not a static reference joint above the hips: it stays where it is
+    err = 100 * float(np.linalg.norm(got[body] - goal.pose[body], axis=-1).max())
     ok = err <= goal.tolerance_cm
     e = {"frame": goal.frame, **dict(goal.extra), "pose_cm": _r(err), "tolerance_cm": goal.tolerance_cm}
     e["satisfied"] = ok
@@ -429,7 +432,8 @@ def _measure_loop(goal: LoopGoal, positions: Array, fps: float, characters: Sequ
     err, mean, rise = 0.0, 0.0, 0.0
     for c in characters:
         pose = body_pose(positions[[0, n - 1]][:, c.joints], c.skeleton)
-        gap = np.linalg.norm(pose[1] - pose[0], axis=-1)
+        body = body_joints(c.skeleton)  # not a static reference joint above the hips
+        gap = np.linalg.norm(pose[1, body] - pose[0, body], axis=-1)
         err = max(err, 100 * float(gap.max()))
         mean = max(mean, 100 * float(gap.mean()))
         hips = body_root(c.skeleton)

@@ -78,6 +78,18 @@ def body_root(skeleton: Skeleton) -> int:
     return j
 
 
+def body_joints(skeleton: Skeleton) -> npt.NDArray[np.intp]:
+    """``(K,)`` the joints of the body: :func:`body_root` and its descendants, so a static
+    reference joint above the hips (Bandai-Namco's ``joint_Root``) is not one."""
+    root = body_root(skeleton)
+    inside = np.zeros(skeleton.num_joints, dtype=bool)
+    inside[root] = True
+    for j in range(root + 1, skeleton.num_joints):  # parents precede children
+        p = int(skeleton.parents[j])
+        inside[j] = p >= 0 and bool(inside[p])
+    return np.flatnonzero(inside).astype(np.intp)
+
+
 def heading(motion: Motion, positions: Array | None = None) -> Array:
     """``(F,)`` facing direction (radians about +Y; 0 = +Z, pi/2 = +X), unwrapped over time.
 
@@ -310,6 +322,18 @@ def pin_reference_root(motion: Motion, static: StaticRoot) -> Motion:
     q[:, 0] = q0
     root = np.repeat(np.asarray(p0, dtype=np.float64)[None], motion.num_frames, axis=0)
     return replace(motion, root_positions=root, rotations=q, joint_translations=jt)
+
+
+def pin_reference_roots(motions: Sequence[Motion]) -> tuple[StaticRoot | None, tuple[Motion, ...]]:
+    """The motions' usual static reference root (:func:`usual_reference_root`) and the motions
+    with every one whose joint 0 leaves it pinned to it (:func:`pin_reference_root`: the same
+    global poses; the others are the very objects given); the motions as they are when there is
+    none. Assembly places and smooths such pinned clips without swinging joint 0 (and the body
+    hung from it) about the origin."""
+    static, moving = usual_reference_root(motions)
+    if static is None or not moving.any():
+        return static, tuple(motions)
+    return static, tuple(pin_reference_root(m, static) if moving[i] else m for i, m in enumerate(motions))
 
 
 def apply_floor_transform(

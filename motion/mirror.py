@@ -80,6 +80,19 @@ def _mirror_map(names: tuple[str, ...]) -> tuple[npt.NDArray[np.intp], npt.NDArr
     return partner, side
 
 
+_SIDE_WORD = re.compile(r"(?<![A-Za-z])(?:left|right|LEFT|RIGHT)(?![A-Za-z])|(?:Left|Right)(?![a-z])")
+"""A side named in a label: ``left``/``right`` (any case) as a word of its own (``wave-left-hand``,
+``turn_right``, ``Walk Left``) or a capitalised part of a camel-case name (``raiseLeftHand``)."""
+
+
+def mirror_label(label: str) -> str:
+    """The label of a motion's mirror image: every side the label names exchanged (``left`` <->
+    ``right``, case kept; see :data:`_SIDE_WORD`), so ``wave-left-hand`` becomes ``wave-right-hand``
+    and ``walk-turn-right`` becomes ``walk-turn-left``; a label that names no side is returned as is
+    (``walk``, ``bright``, ``leftover``)."""
+    return _SIDE_WORD.sub(lambda m: _SWAP[m.group(0)], label)
+
+
 def reflect_vectors(v: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """Reflect vectors ``(..., 3)`` across the YZ plane (x -> -x)."""
     out = np.array(v, dtype=np.float64, copy=True)

@@ -96,6 +96,12 @@ class AnnotatedDatabaseSpec(DatabaseSpecBase):
         default=1.0, ge=0, le=100, description="weight of the labels in the block clustering embedding"
     )
     seed: int = Field(default=0, ge=0, le=2**32 - 1, description="random state of the build")
+    mirror: bool = Field(
+        default=False,
+        description="add the mirror image of every clip (left and right exchanged), named "
+        "'<clip> (mirror)', with its clip's labels, a side a label names exchanged "
+        "('wave-left-hand' -> 'wave-right-hand')",
+    )
 
     @model_validator(mode="after")
     def _levels(self) -> AnnotatedDatabaseSpec:

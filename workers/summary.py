@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from engines.library import mirrored_labels
 from engines.registry import kind_class
 from motion.ground import body_root
 from motion.serialize import skeleton_from_arrays
@@ -71,7 +72,10 @@ def summarize(
         hips = next((j for j, p in enumerate(skeleton.parents) if p == 0), 0)
     roles = own.roles
     clips = []
-    entries = list(spec["clips"]) + [{}] * (len(names) - len(spec["clips"]))  # mirror images follow
+    entries = list(spec["clips"])
+    if spec.get("mirror") and len(names) == 2 * len(entries):  # mirror images follow their clips
+        entries += [{**e, "labels": list(mirrored_labels(e.get("labels") or []))} for e in entries]
+    entries += [{}] * (len(names) - len(entries))
     for entry, name, count in zip(entries, names, counts, strict=True):
         units = entry.get("units") or source_units.get(entry.get("clip") or "")
         labels = [LabelRange.model_validate(lb) for lb in entry.get("labels") or []]

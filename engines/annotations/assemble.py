@@ -28,7 +28,7 @@ from motion.contacts import detect_contacts
 from motion.floorfit import CorrectionLimits, FloorGoal, floor_correction
 from motion.footskate import remove_foot_skate
 from motion.goals import BodyGoal, Goal, LabelGoal, LengthGoal, PoseGoal, body_pose
-from motion.ground import apply_floor_transform, ground_frames, static_reference_root
+from motion.ground import apply_floor_transform, ground_frames, pin_reference_roots
 from motion.metrics import cut_discontinuity
 from motion.quality import QualityInputs
 from motion.smoothing import smooth_cuts
@@ -44,14 +44,29 @@ FloatArray = npt.NDArray[np.float64]
 
 
 class Frames:
-    """The library's frames end to end (from the stored arrays), for quick concatenation."""
+    """The library's frames end to end (from the stored arrays), for quick concatenation.
+
+    ``static`` is the library's usual static reference root
+    (:func:`motion.ground.pin_reference_roots`); the frames of the few clips whose joint 0 leaves
+    it (four Bandai-Namco ``dataset-1`` clips move ``joint_Root`` with ``Hips``) are those clips
+    pinned to it, the same global poses, so placing and smoothing pieces never moves joint 0."""
 
     def __init__(self, library: MotionLibrary, arrays: Arrays) -> None:
         self.library = library
         self.root = np.asarray(arrays["library.root_positions"], dtype=np.float64)
         self.rotations = np.asarray(arrays["library.rotations"], dtype=np.float64)
         self.translations = np.asarray(arrays["library.joint_translations"], dtype=np.float64)
-        self.static = static_reference_root(library.motions)
+        self.static, pinned = pin_reference_roots(library.motions)
+        moved = [i for i, (a, b) in enumerate(zip(pinned, library.motions, strict=True)) if a is not b]
+        if moved:  # copies: stored arrays may be read-only maps
+            self.root, self.rotations = self.root.copy(), self.rotations.copy()
+            self.translations = self.translations.copy()
+            starts = np.concatenate(([0], np.cumsum([m.num_frames for m in library.motions])))
+            for i in moved:
+                rows = slice(int(starts[i]), int(starts[i + 1]))
+                self.root[rows] = pinned[i].root_positions
+                self.rotations[rows] = pinned[i].rotations
+                self.translations[rows] = pinned[i].joint_translations
 
 
 def assemble(

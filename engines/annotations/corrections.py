@@ -37,9 +37,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from motion.mirror import mirror_label
 from schemas.annotations import AnnotatedDatabaseSpec, LabelCorrection
 
 from ..base import EngineError, open_database
+from ..library import MIRROR_SUFFIX
 from .labels import LabelTable
 
 
@@ -84,33 +86,47 @@ def _set_range(
     return out
 
 
+def _spec_clip(clip: str, names: list[str], refs: list[str], mirror: bool) -> tuple[int, bool]:
+    """The spec clip a correction on ``clip`` changes and whether ``clip`` is its mirror image
+    (with ``mirror``, ``'<clip> (mirror)'``: its labels are its clip's, sides exchanged, so a
+    correction on it is its clip's correction mirrored)."""
+    for candidates in (names, refs):
+        if clip in candidates:
+            return candidates.index(clip), False
+    source = clip.removesuffix(MIRROR_SUFFIX)
+    if mirror and source != clip:
+        for candidates in (names, refs):
+            if source in candidates:
+                return candidates.index(source), True
+    raise EngineError(f"no clip named {clip!r} in the spec")
+
+
 def apply_corrections(
     spec: AnnotatedDatabaseSpec, corrections: list[LabelCorrection], db: LabelTable | None = None
 ) -> AnnotatedDatabaseSpec:
     """A new spec whose clips carry the corrected label ranges (build it to retrain).
 
     ``accept`` corrections need the built database's label table ``db`` (its propagated labels);
-    clips are named as in the database (library name or the spec's reference)."""
+    clips are named as in the database (library name or the spec's reference). With the spec's
+    ``mirror``, a correction on a mirror image ``'<clip> (mirror)'`` corrects ``<clip>``, the sides
+    its labels name exchanged (:func:`motion.mirror.mirror_label`): the same frames, since a mirror
+    image keeps its clip's timing."""
     names = [c.display_name() for c in spec.clips]
     refs = [c.name or c.bvh or c.clip or n for c, n in zip(spec.clips, names, strict=True)]
     clips = [c.model_dump(mode="json", exclude_none=True) for c in spec.clips]
     for fix in corrections:
-        if fix.clip in names:
-            i = names.index(fix.clip)
-        elif fix.clip in refs:
-            i = refs.index(fix.clip)
-        else:
-            raise EngineError(f"no clip named {fix.clip!r} in the spec")
+        i, mirrored = _spec_clip(fix.clip, names, refs, spec.mirror)
+        side = mirror_label if mirrored else str
         labels = list(clips[i].get("labels", []))
         if fix.action == "accept":
             if db is None:
                 raise EngineError("accepting propagated labels needs the built database")
             for r in propagated_ranges(db, fix.clip, fix.start, fix.end):
-                labels = _set_range(labels, r["label"], r["start"], r["end"], r["value"])
+                labels = _set_range(labels, side(r["label"]), r["start"], r["end"], r["value"])
         elif fix.label is None:
             raise EngineError(f"the 'set' correction on {fix.clip!r} names no label")
         else:
-            labels = _set_range(labels, fix.label, fix.start, fix.end, fix.value)
+            labels = _set_range(labels, side(fix.label), fix.start, fix.end, fix.value)
         clips[i]["labels"] = sorted(labels, key=lambda lb: (lb["start"], lb["label"]))
     data = spec.model_dump(mode="json", exclude_none=True)
     data["clips"] = clips

@@ -44,7 +44,7 @@ from ..base import (
     Solution,
     Stopped,
 )
-from ..library import MotionLibrary
+from ..library import MotionLibrary, with_mirrors
 from .assemble import Frames, assemble, discontinuity, label_report, quality_inputs
 from .build import BLAS_THREADS, build_annotated
 from .corrections import apply_corrections, propagated_ranges
@@ -137,6 +137,17 @@ class AnnotationEngine(Engine[AnnotationRequest, AnnotatedDatabaseSpec]):
         cls, spec: AnnotatedDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
     ) -> Arrays:
         return build_annotated(spec, library, emit, should_stop)
+
+    @classmethod
+    def library_for(cls, spec: AnnotatedDatabaseSpec, library: MotionLibrary) -> MotionLibrary:
+        """With ``mirror``, the clips followed by their mirror images (labels' sides exchanged:
+        :func:`engines.library.with_mirrors`)."""
+        return with_mirrors(library) if spec.mirror else library
+
+    @classmethod
+    def library_frames(cls, spec: AnnotatedDatabaseSpec, frames: int) -> int:
+        """Twice the clips' frames with ``mirror``."""
+        return 2 * frames if spec.mirror else frames
 
     @classmethod
     def estimate(cls, request: AnnotationRequest, facts: DatabaseFacts) -> OutputEstimate:

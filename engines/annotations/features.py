@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from motion import Motion
-from motion.ground import body_root, ground_frames, to_ground_frame
+from motion.ground import body_joints, ground_frames, to_ground_frame
 from motion.skeleton import Skeleton
 
 from ..base import EngineError
@@ -37,19 +37,6 @@ _SVM_JOINTS = re.compile(
     r"head|hand|wrist|forearm|lowerarm|elbow|foot|ankle|shin|lowerleg|knee|chest|spine2?$",
     re.IGNORECASE,
 )
-
-
-def body_joints(skeleton: Skeleton) -> IntArray:
-    """``(K,)`` the body root (:func:`motion.ground.body_root`) and its descendants, so a static
-    reference joint above the hips (Bandai-Namco's ``joint_Root``) is left out."""
-    root = body_root(skeleton)
-    keep = np.zeros(skeleton.num_joints, dtype=bool)
-    keep[root] = True
-    for j in range(skeleton.num_joints):  # parents precede children
-        p = int(skeleton.parents[j])
-        if p >= 0 and keep[p]:
-            keep[j] = True
-    return np.flatnonzero(keep).astype(np.intp)
 
 
 def svm_joint_indices(skeleton: Skeleton, names: Sequence[str] | None = None) -> IntArray:

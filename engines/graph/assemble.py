@@ -59,8 +59,7 @@ from motion.ground import (
     apply_floor_transform,
     body_root,
     ground_frames,
-    pin_reference_root,
-    usual_reference_root,
+    pin_reference_roots,
 )
 from motion.quality import QualityInputs
 from motion.smoothing import smooth_cuts
@@ -121,21 +120,15 @@ _PINNED: dict[int, tuple[MotionLibrary, StaticRoot | None, tuple[Motion, ...]]] 
 
 
 def pinned_clips(library: MotionLibrary) -> tuple[StaticRoot | None, tuple[Motion, ...]]:
-    """The library's usual static reference root (:func:`motion.ground.usual_reference_root`)
-    and its clips with every clip whose joint 0 moves pinned to it
-    (:func:`motion.ground.pin_reference_root`: the same global poses); the clips as they are
-    when there is none. Cached for the last few libraries (by identity)."""
+    """The library's usual static reference root and its clips with every clip whose joint 0
+    moves pinned to it (:func:`motion.ground.pin_reference_roots`); the clips as they are when
+    there is none. Cached for the last few libraries (by identity)."""
     key = id(library)
     with _CONTACTS_LOCK:
         got = _PINNED.get(key)
         if got is not None and got[0] is library:
             return got[1], got[2]
-    static, moving = usual_reference_root(library.motions)
-    motions = library.motions
-    if static is not None and moving.any():
-        motions = tuple(
-            pin_reference_root(m, static) if moving[i] else m for i, m in enumerate(library.motions)
-        )
+    static, motions = pin_reference_roots(library.motions)
     with _CONTACTS_LOCK:
         _PINNED[key] = (library, static, motions)
         while len(_PINNED) > 4:

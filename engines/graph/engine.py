@@ -74,6 +74,11 @@ class GraphEngine(Engine[GraphRequest, GraphDatabaseSpec]):
         return with_mirrors(library) if spec.mirror else library
 
     @classmethod
+    def library_frames(cls, spec: GraphDatabaseSpec, frames: int) -> int:
+        """Twice the clips' frames with ``mirror``."""
+        return 2 * frames if spec.mirror else frames
+
+    @classmethod
     def build_work(cls, spec: GraphDatabaseSpec, frames: int) -> BuildWork:
         return build_work(frames, spec.candidates)
 

@@ -62,7 +62,7 @@ import numpy.typing as npt
 
 from motion import Motion
 from motion.features import torso_features
-from motion.ground import body_root
+from motion.ground import body_joints
 from motion.skeleton import Skeleton
 
 from ..base import EngineError
@@ -113,18 +113,6 @@ class TransitionFeatures:
         """``(N,)`` clip index of each row."""
         counts = np.diff(self.offsets)
         return np.repeat(np.arange(counts.size, dtype=np.int64), counts)
-
-
-def body_joints(skeleton: Skeleton) -> npt.NDArray[np.intp]:
-    """Indices of the joints that belong to the body: :func:`motion.ground.body_root` and its
-    descendants (a static joint above the hips, as Bandai-Namco's ``joint_Root``, is not one)."""
-    root = body_root(skeleton)
-    inside = np.zeros(skeleton.num_joints, dtype=bool)
-    inside[root] = True
-    for j in range(root + 1, skeleton.num_joints):  # parents precede children
-        p = int(skeleton.parents[j])
-        inside[j] = p >= 0 and bool(inside[p])
-    return np.flatnonzero(inside).astype(np.intp)
 
 
 def default_joint_weight(name: str) -> float:

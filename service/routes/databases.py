@@ -167,8 +167,9 @@ def check_database_size(
     its build (``Engine.build_work``: the graph) are bounded by ``work_limits`` (CPU seconds, MiB
     of memory; 0 = no limit); others hold at most ``limit`` frames at their rate."""
     clips = [(info.frames, info.fps) for info in (store.clip_info(h) for h in hashes)]
-    total = database_frames(clips, spec.fps)
-    work = kind_class(spec.kind).build_work(spec, total) if work_limits is not None else None
+    engine = kind_class(spec.kind)
+    total = engine.library_frames(spec, database_frames(clips, spec.fps))  # mirror images count
+    work = engine.build_work(spec, total) if work_limits is not None else None
     if work is not None and work_limits is not None:
         max_cpu, max_mb = work_limits
         if (max_cpu and work.cpu_s > max_cpu) or (max_mb and work.memory_mb > max_mb):

@@ -8,12 +8,16 @@ import numpy as np
 import pytest
 
 from motion import read_bvh
+from motion.goals import LoopGoal, PoseGoal, body_pose
 from motion.ground import (
     apply_floor_transform,
+    body_joints,
     pin_reference_root,
+    pin_reference_roots,
     static_reference_root,
     usual_reference_root,
 )
+from motion.quality import QualityInputs, assess
 from motion.samples import sample_path
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
@@ -80,3 +84,30 @@ def test_a_clip_whose_reference_root_moves_is_pinned_to_the_usual_pose() -> None
     moved = apply_floor_transform(walk, np.full(walk.num_frames, 0.5), np.ones((walk.num_frames, 2)))
     assert usual_reference_root([walk, moved])[0] is None
     assert usual_reference_root([walk, walk])[1].tolist() == [False, False]
+
+
+@pytest.mark.skipif(not BANDAI_BACK.exists(), reason=f"shared data not found ({BANDAI_BACK})")
+def test_pin_reference_roots_pins_only_the_clips_that_move_it() -> None:
+    walk, back = read_bvh(BANDAI_WALK), read_bvh(BANDAI_BACK)
+    static, motions = pin_reference_roots([walk, back])
+    assert static is not None and motions[0] is walk and motions[1] is not back
+    np.testing.assert_array_equal(motions[1].root_positions, pin_reference_root(back, static).root_positions)
+    static, motions = pin_reference_roots([walk, walk])
+    assert static is not None and all(m is walk for m in motions)  # nothing to pin: the same objects
+    assert pin_reference_roots([back]) == (None, (back,))
+
+
+@pytest.mark.skipif(not BANDAI_WALK.exists(), reason=f"shared data not found ({BANDAI_WALK})")
+def test_a_pose_goal_compares_the_body_not_a_static_reference_joint() -> None:
+    """Placing a Bandai-Namco body elsewhere leaves ``joint_Root`` at the origin: the pose of the
+    placed frame is the source frame's pose (the body's joints), whatever joint 0 does."""
+    walk = read_bvh(BANDAI_WALK).to_units("m")
+    static = static_reference_root([walk])
+    n = walk.num_frames
+    moved = apply_floor_transform(walk, np.full(n, 1.0), np.full((n, 2), 4.0), static)
+    pose = body_pose(walk.global_positions()[40:41], walk.skeleton)[0]
+    report = assess(moved, QualityInputs(goals=(PoseGoal("frame[0]", 40, pose),)))
+    assert report.constraint_errors["frame[0]"]["pose_cm"] < 1e-6
+    assert body_joints(walk.skeleton).tolist() == list(range(1, walk.num_joints))
+    looped = assess(moved.slice(40, 41 + n // 2), QualityInputs(goals=(LoopGoal(),)))
+    assert looped.constraint_errors["loop"]["pose_cm"] > 1.0  # a real pose change is still measured

@@ -10,7 +10,7 @@ import pytest
 from motion import Motion, MotionError
 from motion import rotations as rot
 from motion.ground import add_ground_root, from_ground_frame, ground_frames, heading, to_ground_frame
-from motion.mirror import mirror, mirror_map
+from motion.mirror import mirror, mirror_label, mirror_map
 from motion.resample import resample, sample_at
 
 from .synthetic import rerigged, walking_biped
@@ -92,6 +92,26 @@ def test_mirror_keeps_the_skeletons_conventions() -> None:
     np.testing.assert_allclose(
         np.abs((rerigged(mm, quarter).rotations * rm.rotations).sum(-1)), 1.0, atol=1e-9
     )
+
+
+@pytest.mark.parametrize(
+    ("label", "mirrored"),
+    [
+        ("wave-left-hand", "wave-right-hand"),
+        ("walk-turn-right", "walk-turn-left"),
+        ("raiseLeftHand", "raiseRightHand"),
+        ("Walk Left", "Walk Right"),
+        ("LEFT_HAND", "RIGHT_HAND"),
+        ("left", "right"),
+        ("walk", "walk"),
+        ("bright", "bright"),
+        ("leftover", "leftover"),
+        ("Leftover", "Leftover"),
+    ],
+)
+def test_mirror_label_exchanges_the_side_a_label_names(label: str, mirrored: str) -> None:
+    assert mirror_label(label) == mirrored
+    assert mirror_label(mirrored) == label
 
 
 @pytest.mark.parametrize(

@@ -52,6 +52,16 @@ def test_content_address_ignores_file_names_but_not_settings() -> None:
     assert database_id(e, ["h1"]) == database_id(a, ["h1"])
 
 
+def test_graph_and_annotated_specs_may_add_mirror_images() -> None:
+    for kind in ("graph", "annotated"):
+        plain = parse_database_spec({"kind": kind, "clips": [{"bvh": "a.bvh"}]})
+        both = parse_database_spec({"kind": kind, "clips": [{"bvh": "a.bvh"}], "mirror": True})
+        assert plain.mirror is False and both.mirror is True  # type: ignore[attr-defined]
+        assert database_id(plain, ["h1"]) != database_id(both, ["h1"])
+        with pytest.raises(ValidationError, match="mirror"):
+            parse_database_spec({"kind": kind, "clips": [{"bvh": "a.bvh"}], "mirror": "sideways"})
+
+
 def test_job_requests() -> None:
     r = parse_job_request({"engine": "clip", "clip": "walk", "start": 2, "end": 9})
     assert r.engine == "clip" and r.budget_s == 10.0  # type: ignore[attr-defined]

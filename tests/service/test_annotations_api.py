@@ -100,3 +100,35 @@ def test_corrections_count_against_the_job_quota(
     assert built.status_code == 202, built.text
     assert built.json()["build_job"] in set().union(*quota._open.values())
     _ready(client, built)
+
+
+def test_a_mirrored_database_names_and_labels_its_mirror_images(client: TestClient) -> None:
+    names = []
+    for sample in ("salsa-leader", "salsa-follower"):
+        path = sample_path(sample)
+        r = client.post("/v1/clips", files={"file": (path.name, path.read_bytes())})
+        assert r.status_code in (200, 201), r.text
+        names.append(r.json()["name"])
+    spec = {
+        "kind": "annotated",
+        "gammas": [1.0],
+        "mirror": True,
+        "clips": [
+            {"bvh": names[0], "name": "lead", "labels": [{"label": "spin-left", "start": 0, "end": 60}]},
+            {"bvh": names[1], "name": "follower"},
+        ],
+    }
+    db = _ready(client, client.post("/v1/databases", json=spec))
+    summary = db["summary"]
+    assert [c["name"] for c in summary["clips"]] == ["lead", "follower", "lead (mirror)", "follower (mirror)"]
+    assert summary["clips"][2]["labels"] == [{"label": "spin-right", "start": 0, "end": 60, "value": 1}]
+    assert summary["labels"] == ["spin-left", "spin-right"]
+    r = client.get(f"/v1/databases/{db['id']}/labels", params={"clip": "lead (mirror)", "end": 60})
+    assert r.status_code == 200, r.text
+    assert {(x["label"], x["value"]) for x in r.json()["labels"]} == {("spin-right", 1), ("spin-left", -1)}
+    fixes = [{"clip": "follower (mirror)", "start": 0, "end": 30, "label": "spin-right", "value": 1}]
+    new = _ready(client, client.post(f"/v1/databases/{db['id']}/corrections", json=fixes))
+    follower = next(c for c in new["summary"]["clips"] if c["name"] == "follower")
+    assert follower["labels"] == [{"label": "spin-left", "start": 0, "end": 30, "value": 1}]
+    r = client.get(f"/v1/databases/{new['id']}/labels", params={"clip": "follower (mirror)", "end": 30})
+    assert ("spin-right", 1) in {(x["label"], x["value"]) for x in r.json()["labels"]}

@@ -44,3 +44,15 @@ def test_build_estimates_grow_linearly_with_the_index_and_quadratically_without(
     assert (pairs_big.memory_mb - 400) / (pairs_small.memory_mb - 400) > 90
     # the default job memory (4 GiB) allows an indexed graph of ~400k frames, not the all-pairs one
     assert build_work(400_000, "auto").memory_mb < 4096 < build_work(400_000, "all_pairs").memory_mb
+
+
+def test_mirror_images_count_against_the_frame_limit(
+    client: TestClient, walk_clip: dict[str, Any], override_settings: Callable[..., Settings]
+) -> None:
+    # 79 frames at 30 fps; with 'mirror' the database holds 158
+    override_settings(max_database_frames=100)
+    spec = {"kind": "annotated", "clips": [{"clip": walk_clip["id"]}], "fps": 30, "mirror": True}
+    err = error_of(client.post("/v1/databases", json=spec), 413, "over_budget")
+    assert err["details"] == {"frames": 158, "limit": 100}
+    spec["mirror"] = False
+    assert client.post("/v1/databases", json=spec).status_code in (200, 202)

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from engines.annotations.blocks import block_embedding, block_starts, cluster_blocks, two_stage_kmeans
 from engines.annotations.build import embed_library, standardize
 from engines.annotations.features import (
     clip_frames,
@@ -51,3 +53,26 @@ def test_no_fine_window_without_refining_or_context() -> None:
     for spec in (_spec(refine_changes=False), _spec(context_s=0.0)):
         emb, _, _, _ = embed_library(lib, spec)
         assert emb.fine is None and emb.reach == 0
+
+
+def test_large_finer_levels_cluster_in_two_stages_of_similar_blocks() -> None:
+    rng = np.random.default_rng(0)
+    # two far-apart kinds of motion, 1500 frames each, in one clip
+    feats = np.concatenate((rng.normal(0, 1, (1500, 6)), rng.normal(40, 1, (1500, 6)))).astype(np.float32)
+    labels = np.ones((3000, 1), dtype=np.int8)
+    flat = cluster_blocks(feats, labels, [3000], [16, 8], 4, 20, max_flat=10_000)
+    staged = cluster_blocks(feats, labels, [3000], [16, 8], 4, 20, max_flat=32)
+    np.testing.assert_array_equal(flat[16], staged[16])  # the top level is never staged
+    starts = block_starts([3000], 8)
+    emb = block_embedding(feats, labels, starts, 8, 1.0)
+    np.testing.assert_array_equal(staged[8][starts], two_stage_kmeans(emb, 150, 20))
+    cl = two_stage_kmeans(emb, 150, 20, cell_clusters=16)  # 10 cells of about 15 clusters
+    assert not np.array_equal(cl, flat[8][starts])
+    sizes = np.bincount(cl)
+    assert sizes.min() > 0  # dense ids
+    assert 12 < starts.size / sizes.size < 30  # about blocks_per_cluster blocks each
+    kind = starts + 4 >= 1500
+    mixed = [c for c in range(sizes.size) if 0 < kind[cl == c].mean() < 1]
+    assert len(mixed) <= 1  # only blocks straddling the change of kind may share a cluster
+    with pytest.raises(ValueError, match="no blocks"):
+        two_stage_kmeans(emb[:0], 4, 20)
