@@ -6,7 +6,7 @@ import hashlib
 import json
 from datetime import datetime
 from enum import StrEnum
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import Field
 
@@ -61,17 +61,28 @@ class GraphDatabaseSpec(DatabaseSpecBase):
 from .movement_graph import DerivedFrom  # noqa: E402
 
 
+MIRROR_VERSION = 2
+"""How mirror images are made (:func:`motion.mirror.mirror`); part of the id of every database whose
+spec asks for them, so a spec built with an older convention is built anew when posted again
+(2: the skeleton's joint frames kept, one convention over the library's clips; 1 had every joint
+frame of a rig whose bones lie along a local axis turned half way round)."""
+
+
 def database_id(spec: DatabaseSpecBase, clip_hashes: list[str]) -> str:
     """Content address of a database: sha256 of the clips' content hashes (in spec order), the
     canonical spec JSON (sorted keys, clip file references replaced by hashes, every clip named as
-    reports name it) and the schema version. ``segue build`` and ``POST /v1/databases`` give the
-    same id to the same clips and spec."""
+    reports name it), the schema version and, for specs with ``mirror`` on,
+    :data:`MIRROR_VERSION`. ``segue build`` and ``POST /v1/databases`` give the same id to the same
+    clips and spec."""
     canonical = spec.model_dump(mode="json", exclude={"name"})
     for entry, source, digest in zip(canonical["clips"], spec.clips, clip_hashes, strict=True):
         entry.pop("bvh", None)
         entry["clip"] = digest
         entry["name"] = source.display_name()
-    payload = json.dumps({"schema": SCHEMA_VERSION, "spec": canonical}, sort_keys=True, separators=(",", ":"))
+    identity: dict[str, Any] = {"schema": SCHEMA_VERSION, "spec": canonical}
+    if canonical.get("mirror") is True:
+        identity["mirror_images"] = MIRROR_VERSION
+    payload = json.dumps(identity, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(payload.encode()).hexdigest()
 
 

@@ -75,3 +75,19 @@ def test_job_requests() -> None:
         parse_job_request({"engine": "clip", "clip": "w", "start": 9, "end": 3})
     with pytest.raises(ValidationError, match="less than or equal"):
         parse_job_request({"engine": "clip", "clip": "w", "budget_s": 1e9})
+
+
+@pytest.mark.parametrize("kind", ["graph", "annotated", "rhythm"])
+def test_a_new_mirror_convention_gives_mirrored_databases_new_ids(
+    kind: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Databases with mirror images are built anew when the way images are made changes; the others
+    keep their ids."""
+    from schemas import databases
+
+    plain = parse_database_spec({"kind": kind, "clips": [{"bvh": "a.bvh"}]})
+    both = parse_database_spec({"kind": kind, "clips": [{"bvh": "a.bvh"}], "mirror": True})
+    before = database_id(plain, ["h1"]), database_id(both, ["h1"])
+    monkeypatch.setattr(databases, "MIRROR_VERSION", databases.MIRROR_VERSION + 1)
+    assert database_id(plain, ["h1"]) == before[0]
+    assert database_id(both, ["h1"]) != before[1]
