@@ -60,7 +60,6 @@ class GraphDatabaseSpec(DatabaseSpecBase):
 # (engines.registry.spec_union / parse_database_spec), which names every kind's model.
 from .movement_graph import DerivedFrom  # noqa: E402
 
-
 MIRROR_VERSION = 2
 """How mirror images are made (:func:`motion.mirror.mirror`); part of the id of every database whose
 spec asks for them, so a spec built with an older convention is built anew when posted again
