@@ -261,7 +261,7 @@ def _cpu_count() -> int:
 # Build cost per frame, measured by bench/graph_scale.py (Bandai-Namco and copies, 100k-1M frames;
 # whole worker build: library arrays, graph, quality reference, npz), with a margin.
 _INDEXED_CPU_S = (10.0, 2.5e-4)  # seconds: a + b * N
-_INDEXED_MB = (400.0, 9.0e-3)  # MiB: a + b * N
+_INDEXED_MB = (400.0, 6.0e-3)  # MiB: a + b * N (measured 5.1e-3: 2.45 GB at 400k, 5.5 GB at 1M)
 _ALL_PAIRS_CPU_S = (5.0, 4.0e-9)  # seconds: a + b * N^2
 _ALL_PAIRS_MB = (400.0, 1.4e-7)  # MiB: a + b * N^2 (the edges grow about as N^2)
 

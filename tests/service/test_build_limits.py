@@ -42,8 +42,9 @@ def test_build_estimates_grow_linearly_with_the_index_and_quadratically_without(
     assert 9 < (big.cpu_s - 10) / (small.cpu_s - 10) < 11
     pairs_small, pairs_big = build_work(10_000, "all_pairs"), build_work(100_000, "all_pairs")
     assert (pairs_big.memory_mb - 400) / (pairs_small.memory_mb - 400) > 90
-    # the default job memory (4 GiB) allows an indexed graph of ~400k frames, not the all-pairs one
-    assert build_work(400_000, "auto").memory_mb < 4096 < build_work(400_000, "all_pairs").memory_mb
+    # the default job memory (4 GiB) allows an indexed graph of ~600k frames, not the all-pairs one
+    assert build_work(600_000, "auto").memory_mb < 4096 < build_work(400_000, "all_pairs").memory_mb
+    assert build_work(1_000_000, "auto").memory_mb < 8192
 
 
 def test_mirror_images_count_against_the_frame_limit(
