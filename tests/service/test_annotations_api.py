@@ -24,14 +24,20 @@ def _ready(client: TestClient, response: Any) -> dict[str, Any]:
     return dict(db)
 
 
-@pytest.fixture(scope="module")
-def annotated_db(client: TestClient) -> dict[str, Any]:
+def upload_salsa(client: TestClient) -> list[str]:
+    """Upload the bundled salsa leader and follower; their clip names."""
     names = []
     for sample in ("salsa-leader", "salsa-follower"):
         path = sample_path(sample)
         r = client.post("/v1/clips", files={"file": (path.name, path.read_bytes())})
         assert r.status_code in (200, 201), r.text
         names.append(r.json()["name"])
+    return names
+
+
+@pytest.fixture(scope="module")
+def annotated_db(client: TestClient) -> dict[str, Any]:
+    names = upload_salsa(client)
     spec = {
         "kind": "annotated",
         "gammas": [1.0],
@@ -103,12 +109,7 @@ def test_corrections_count_against_the_job_quota(
 
 
 def test_a_mirrored_database_names_and_labels_its_mirror_images(client: TestClient) -> None:
-    names = []
-    for sample in ("salsa-leader", "salsa-follower"):
-        path = sample_path(sample)
-        r = client.post("/v1/clips", files={"file": (path.name, path.read_bytes())})
-        assert r.status_code in (200, 201), r.text
-        names.append(r.json()["name"])
+    names = upload_salsa(client)
     spec = {
         "kind": "annotated",
         "gammas": [1.0],
