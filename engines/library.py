@@ -8,7 +8,6 @@ offsets may differ per clip (different performers).
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -109,23 +108,14 @@ MIRROR_SUFFIX = " (mirror)"
 """Appended to a clip's name to name its mirror image (:func:`with_mirrors`)."""
 
 
-def mirrored_labels(labels: Sequence[Mapping[str, Any]]) -> tuple[dict[str, Any], ...]:
-    """A clip's label ranges as its mirror image carries them: the same frames and values, each
-    label's named side exchanged (:func:`motion.mirror.mirror_label`: ``wave-left-hand`` ->
-    ``wave-right-hand``; ``walk`` stays ``walk``)."""
-    from motion.mirror import mirror_label
-
-    return tuple({**lb, "label": mirror_label(str(lb["label"]))} for lb in labels)
-
-
 def with_mirrors(lib: MotionLibrary) -> MotionLibrary:
     """The library followed by the mirror image of each of its clips (:func:`motion.mirror.mirror`:
     reflected across the YZ plane, left and right exchanged, in the skeleton's own conventions,
     with the joint frames of :func:`motion.mirror.joint_frames` over all the clips), named
-    ``<name> (mirror)``, with its source's labels, sides exchanged (:func:`mirrored_labels`).
+    ``<name> (mirror)``, with its source's labels, sides exchanged (:func:`motion.mirror.mirrored_labels`).
     Raises :class:`MotionError` when the skeleton's left/right joints are not symmetric or a
     mirror's name is taken."""
-    from motion.mirror import joint_frames, mirror
+    from motion.mirror import joint_frames, mirror, mirrored_labels
 
     names = [n + MIRROR_SUFFIX for n in lib.names]
     taken = sorted(set(names) & set(lib.names))

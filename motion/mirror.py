@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import itertools
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -91,6 +92,13 @@ def mirror_label(label: str) -> str:
     and ``walk-turn-right`` becomes ``walk-turn-left``; a label that names no side is returned as is
     (``walk``, ``bright``, ``leftover``)."""
     return _SIDE_WORD.sub(lambda m: _SWAP[m.group(0)], label)
+
+
+def mirrored_labels(labels: Sequence[Mapping[str, Any]]) -> tuple[dict[str, Any], ...]:
+    """A clip's label ranges (mappings with ``label``, ``start``, ``end``, ``value``) as its mirror
+    image carries them: the same frames and values, each label's named side exchanged
+    (:func:`mirror_label`: ``wave-left-hand`` -> ``wave-right-hand``; ``walk`` stays ``walk``)."""
+    return tuple({**lb, "label": mirror_label(str(lb["label"]))} for lb in labels)
 
 
 def reflect_vectors(v: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from engines.library import mirrored_labels
 from engines.registry import kind_class
 from motion.ground import body_root
+from motion.mirror import mirrored_labels
 from motion.serialize import skeleton_from_arrays
 from schemas.clips import LabelRange
 from schemas.databases import ClipSummary, DatabaseSummary, SkeletonSummary
