@@ -8,6 +8,7 @@ offsets may differ per clip (different performers).
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -125,6 +126,54 @@ def with_mirrors(lib: MotionLibrary) -> MotionLibrary:
     mirrored = tuple(replace(mirror(m, frames), name=n) for m, n in zip(lib.motions, names, strict=True))
     labels = tuple(mirrored_labels(lb) for lb in lib.labels)
     return MotionLibrary(lib.names + tuple(names), lib.motions + mirrored, lib.labels + labels)
+
+
+def speed_suffix(speed: float) -> str:
+    """Appended to a clip's name to name its copy played at ``speed`` (:func:`with_speeds`): `` (x0.9)``."""
+    return f" (x{speed:g})"
+
+
+def time_scaled_labels(
+    labels: Sequence[Mapping[str, Any]], speed: float, frames: int
+) -> tuple[dict[str, Any], ...]:
+    """A clip's label ranges as its copy played at ``speed`` carries them: source frame ``f`` is
+    the copy's frame ``f / speed``, so ``[start, end)`` becomes ``[floor(start / speed),
+    ceil(end / speed))``, clipped to the copy's ``frames`` frames (never empty)."""
+    out = []
+    for lb in labels:
+        end = min(int(np.ceil(int(lb["end"]) / speed - 1e-9)), frames)
+        start = min(int(np.floor(int(lb["start"]) / speed + 1e-9)), end - 1)
+        out.append({**lb, "start": start, "end": end})
+    return tuple(out)
+
+
+def with_speeds(lib: MotionLibrary, speeds: Sequence[float]) -> MotionLibrary:
+    """The library followed, for each of ``speeds`` in turn, by a copy of each of its clips played
+    at that speed (``0.9``: 10 % slower, 1/0.9 as many frames) and resampled to the library's rate
+    (:func:`motion.resample.resample`), named ``<name> (x0.9)`` (:func:`speed_suffix`), with its
+    source's labels on the copy's frames (:func:`time_scaled_labels`). Applied after
+    :func:`with_mirrors`, every mirror image has its copies too. Raises :class:`MotionError` when
+    a copy's name is taken."""
+    if not speeds:
+        return lib
+    names, motions, labels = list(lib.names), list(lib.motions), list(lib.labels)
+    for speed in speeds:
+        copies = [n + speed_suffix(speed) for n in lib.names]
+        taken = sorted(set(copies) & set(names))
+        if taken:
+            raise MotionError(f"cannot name the copies at x{speed:g}: names {', '.join(taken)} are taken")
+        for m, name, lb in zip(lib.motions, copies, lib.labels, strict=True):
+            copy = replace(resample(replace(m, fps=m.fps * speed), m.fps), name=name)
+            names.append(name)
+            motions.append(copy)
+            labels.append(time_scaled_labels(lb, speed, copy.num_frames))
+    return MotionLibrary(tuple(names), tuple(motions), tuple(labels))
+
+
+def speeds_frames(frames: int, speeds: Sequence[float]) -> int:
+    """Frames of a library of ``frames`` frames with its copies at ``speeds`` (:func:`with_speeds`):
+    ``frames / speed`` more per speed, rounded up (each copy's count is within a frame of it)."""
+    return frames + sum(int(np.ceil(frames / s - 1e-9)) for s in speeds)
 
 
 def library_to_arrays(lib: MotionLibrary) -> Arrays:

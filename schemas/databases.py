@@ -8,7 +8,7 @@ from datetime import datetime
 from enum import StrEnum
 from typing import Any, Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from .bases import DatabaseSpecBase
 from .clips import LabelRange
@@ -21,6 +21,10 @@ class ClipsDatabaseSpec(DatabaseSpecBase):
     Serves the ``clip`` engine (excerpts) and is the common part of every other kind."""
 
     kind: Literal["clips"] = "clips"
+
+
+MIN_SPEED, MAX_SPEED = 0.5, 2.0
+"""The playback speeds a graph spec's ``speeds`` may ask for (time-scaled copies of its clips)."""
 
 
 class GraphDatabaseSpec(DatabaseSpecBase):
@@ -54,6 +58,29 @@ class GraphDatabaseSpec(DatabaseSpecBase):
             "best cuts of each frame), 'auto' = all_pairs up to 20,000 frames, else indexed"
         ),
     )
+    speeds: list[float] = Field(
+        default_factory=list,
+        max_length=8,
+        description=(
+            "add a copy of every clip (and mirror image) played at each of these speeds, resampled to "
+            "the database rate, named '<clip> (x0.9)': more walking speeds and turn rates to cut "
+            f"between; each in [{MIN_SPEED:g}, {MAX_SPEED:g}], not 1, no repeats"
+        ),
+    )
+
+    @field_validator("speeds")
+    @classmethod
+    def _sane_speeds(cls, speeds: list[float]) -> list[float]:
+        for s in speeds:
+            if not (MIN_SPEED <= s <= MAX_SPEED) or s == 1.0:
+                raise ValueError(
+                    f"speeds: {s:g} is not a playback speed a copy can have: each must be in "
+                    f"[{MIN_SPEED:g}, {MAX_SPEED:g}] and not 1 (the clips themselves), e.g. [0.9, 1.1]"
+                )
+        repeated = sorted({s for s in speeds if speeds.count(s) > 1})
+        if repeated:
+            raise ValueError(f"speeds: {', '.join(f'{s:g}' for s in repeated)} given more than once")
+        return speeds
 
 
 # The spec union and its validation are built from the engine registry
@@ -70,7 +97,8 @@ frame of a rig whose bones lie along a local axis turned half way round)."""
 def database_id(spec: DatabaseSpecBase, clip_hashes: list[str]) -> str:
     """Content address of a database: sha256 of the clips' content hashes (in spec order), the
     canonical spec JSON (sorted keys, clip file references replaced by hashes, every clip named as
-    reports name it), the schema version and, for specs with ``mirror`` on,
+    reports name it; a graph spec's empty ``speeds`` left out), the schema version and, for specs
+    with ``mirror`` on,
     :data:`MIRROR_VERSION`. ``segue build`` and ``POST /v1/databases`` give the same id to the same
     clips and spec."""
     canonical = spec.model_dump(mode="json", exclude={"name"})
@@ -78,6 +106,8 @@ def database_id(spec: DatabaseSpecBase, clip_hashes: list[str]) -> str:
         entry.pop("bvh", None)
         entry["clip"] = digest
         entry["name"] = source.display_name()
+    if canonical.get("speeds") == []:
+        del canonical["speeds"]  # no copies: the id a spec had before graph specs had ``speeds``
     identity: dict[str, Any] = {"schema": SCHEMA_VERSION, "spec": canonical}
     if canonical.get("mirror") is True:
         identity["mirror_images"] = MIRROR_VERSION

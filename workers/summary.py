@@ -26,7 +26,7 @@ from .store import NotFoundError, Store
 STATIC_M = 1e-3
 """Joint 0 moving less than this on the floor (metres) over every clip is a static ground node."""
 
-_KEYS = ("names", "frame_counts", "fps", "root_positions")
+_KEYS = ("names", "frame_counts", "fps", "root_positions", "labels")
 
 
 def _library_arrays(npz: bytes | Mapping[str, Any], extra: tuple[str, ...] = ()) -> dict[str, Any]:
@@ -73,8 +73,17 @@ def summarize(
     roles = own.roles
     clips = []
     entries = list(spec["clips"])
-    if spec.get("mirror") and len(names) == 2 * len(entries):  # mirror images follow their clips
+    copies = len(spec.get("speeds") or [])
+    if spec.get("mirror") and len(names) == 2 * (1 + copies) * len(entries):  # images follow the clips
         entries += [{**e, "labels": list(mirrored_labels(e.get("labels") or []))} for e in entries]
+    if copies and len(names) == (1 + copies) * len(entries):  # time-scaled copies follow, speed by speed
+        stored = json.loads(str(arrays["library.labels"]))  # their labels on the copies' frames
+        base = list(entries)
+        entries += [
+            {**e, "labels": stored[len(base) * (1 + k) + i]}
+            for k in range(copies)
+            for i, e in enumerate(base)
+        ]
     entries += [{}] * (len(names) - len(entries))
     for entry, name, count in zip(entries, names, counts, strict=True):
         units = entry.get("units") or source_units.get(entry.get("clip") or "")

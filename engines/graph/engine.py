@@ -33,7 +33,7 @@ from ..base import (
     Solution,
     Stopped,
 )
-from ..library import MotionLibrary, with_mirrors
+from ..library import MotionLibrary, speeds_frames, with_mirrors, with_speeds
 from .assemble import pinned_clips
 from .build import build_graph, build_work
 from .coupled import CoupledSearch
@@ -71,12 +71,14 @@ class GraphEngine(Engine[GraphRequest, GraphDatabaseSpec]):
 
     @classmethod
     def library_for(cls, spec: GraphDatabaseSpec, library: MotionLibrary) -> MotionLibrary:
-        return with_mirrors(library) if spec.mirror else library
+        """With ``mirror``, the clips followed by their mirror images; with ``speeds``, those followed
+        by their time-scaled copies (every mirror image's too: :func:`engines.library.with_speeds`)."""
+        return with_speeds(with_mirrors(library) if spec.mirror else library, spec.speeds)
 
     @classmethod
     def library_frames(cls, spec: GraphDatabaseSpec, frames: int) -> int:
-        """Twice the clips' frames with ``mirror``."""
-        return 2 * frames if spec.mirror else frames
+        """Twice the clips' frames with ``mirror``; each of ``speeds`` adds ``frames / speed`` of those."""
+        return speeds_frames(2 * frames if spec.mirror else frames, spec.speeds)
 
     @classmethod
     def build_work(cls, spec: GraphDatabaseSpec, frames: int) -> BuildWork:

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
+
 import pytest
 from pydantic import ValidationError
 
 from engines.registry import parse_database_spec, parse_job_request
+from schemas.common import SCHEMA_VERSION
 from schemas.databases import database_id
 from schemas.jobs import RequestError
 
@@ -60,6 +64,31 @@ def test_graph_and_annotated_specs_may_add_mirror_images() -> None:
         assert database_id(plain, ["h1"]) != database_id(both, ["h1"])
         with pytest.raises(ValidationError, match="mirror"):
             parse_database_spec({"kind": kind, "clips": [{"bvh": "a.bvh"}], "mirror": "sideways"})
+
+
+def test_graph_specs_may_add_time_scaled_copies() -> None:
+    plain = parse_database_spec({"kind": "graph", "clips": [{"bvh": "a.bvh"}]})
+    copies = parse_database_spec({"kind": "graph", "clips": [{"bvh": "a.bvh"}], "speeds": [0.9, 1.1]})
+    assert plain.speeds == [] and copies.speeds == [0.9, 1.1]  # type: ignore[attr-defined]
+    assert database_id(plain, ["h1"]) != database_id(copies, ["h1"])
+    # no copies: the id the spec had before graph specs had 'speeds' (databases are not built anew)
+    canonical = plain.model_dump(mode="json", exclude={"name"})
+    del canonical["speeds"]
+    canonical["clips"][0].pop("bvh")
+    canonical["clips"][0].update(clip="h1", name="a")
+    payload = json.dumps({"schema": SCHEMA_VERSION, "spec": canonical}, sort_keys=True, separators=(",", ":"))
+    assert database_id(plain, ["h1"]) == hashlib.sha256(payload.encode()).hexdigest()
+    for bad, match in (
+        ([1.0], "not 1"),
+        ([0.4], "in \\[0.5, 2\\]"),
+        ([2.5], "in \\[0.5, 2\\]"),
+        ([0.9, 1.1, 0.9], "0.9 given more than once"),
+        ([float("nan")], "finite number"),
+    ):
+        with pytest.raises(ValidationError, match=match):
+            parse_database_spec({"kind": "graph", "clips": [{"bvh": "a.bvh"}], "speeds": bad})
+    with pytest.raises(ValidationError, match="speeds"):
+        parse_database_spec({"kind": "annotated", "clips": [{"bvh": "a.bvh"}], "speeds": [0.9]})
 
 
 def test_job_requests() -> None:

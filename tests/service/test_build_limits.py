@@ -57,3 +57,23 @@ def test_mirror_images_count_against_the_frame_limit(
     assert err["details"] == {"frames": 158, "limit": 100}
     spec["mirror"] = False
     assert client.post("/v1/databases", json=spec).status_code in (200, 202)
+
+
+def test_time_scaled_copies_count_in_the_build_estimate(
+    client: TestClient, walk_clip: dict[str, Any], override_settings: Callable[..., Settings]
+) -> None:
+    # 79 frames at 30 fps; mirrored 158, and copies of those at 0.5 (316) and 2 (79): 553
+    override_settings(max_job_memory_mb=1, max_build_cpu_s=0)
+    spec: dict[str, Any] = {
+        "kind": "graph",
+        "clips": [{"clip": walk_clip["id"]}],
+        "fps": 30,
+        "candidates": "indexed",
+        "mirror": True,
+        "speeds": [0.5, 2.0],
+    }
+    err = error_of(client.post("/v1/databases", json=spec), 413, "over_budget")
+    assert err["details"]["frames"] == 553
+    assert err["details"]["memory_mb"] == round(build_work(553, "indexed").memory_mb)
+    spec["speeds"] = [2.0]
+    assert error_of(client.post("/v1/databases", json=spec), 413, "over_budget")["details"]["frames"] == 237

@@ -79,3 +79,39 @@ def test_mirror_adds_the_mirror_image_of_every_clip(
     np.testing.assert_allclose(m[:, :, 0], -a[:, partner, 0], atol=1e-9)  # x -> -x, left <-> right
     np.testing.assert_allclose(m[:, :, 1:], a[:, partner, 1:], atol=1e-9)
     assert summary.graph is not None and summary.graph.kept_clips == 4  # the mirrors join the graph
+
+
+def test_speeds_add_time_scaled_copies_of_every_clip_and_mirror_image(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    clips = {"walk-a": walking_biped(150, seed=0), "walk-b": walking_biped(150, seed=1, heading_deg=90.0)}
+    for name, m in clips.items():
+        write_bvh(m, tmp_path / f"{name}.bvh")
+    spec = {
+        "kind": "graph",
+        "mirror": True,
+        "speeds": [0.9, 1.2],
+        "clips": [{"bvh": f"{name}.bvh", "units": "m"} for name in clips],
+    }
+    spec["clips"][0]["labels"] = [{"label": "step-left-foot", "start": 30, "end": 120}]  # type: ignore[index]
+    (tmp_path / "db.json").write_text(json.dumps(spec), encoding="utf-8")
+    assert main(["build", str(tmp_path / "db.json"), "--out", str(tmp_path / "db"), "-q"]) == 0
+    npz = (tmp_path / "db" / "data.npz").read_bytes()
+    stored = json.loads((tmp_path / "db" / "spec.json").read_text(encoding="utf-8"))
+    summary = summarize(stored, npz, {})
+    images = ["walk-a", "walk-b", "walk-a (mirror)", "walk-b (mirror)"]
+    assert [c.name for c in summary.clips] == images + [f"{n} (x{s:g})" for s in (0.9, 1.2) for n in images]
+    # 150 frames at 30 fps played at 0.9 / 1.2: 166 / 125 frames at 30 fps
+    assert [c.frames for c in summary.clips] == [150] * 4 + [166] * 4 + [125] * 4
+    # labels on the copies' frames: [30, 120) played at 0.9 is [33, 134), at 1.2 [25, 100)
+    labels = {c.name: [(lb.label, lb.start, lb.end) for lb in c.labels] for c in summary.clips}
+    assert labels["walk-a (x0.9)"] == [("step-left-foot", 33, 134)]
+    assert labels["walk-a (mirror) (x1.2)"] == [("step-right-foot", 25, 100)]
+    assert labels["walk-b (x1.2)"] == [] and all(c.source_units == "m" for c in summary.clips)
+    with np.load(tmp_path / "db" / "data.npz") as z:
+        lib = library_from_arrays(z)
+    image, fast = lib.clip("walk-b (mirror)").global_positions(), lib.clip("walk-b (mirror) (x1.2)")
+    np.testing.assert_allclose(fast.global_positions()[::5], image[::6], atol=1e-5)  # stored as float32
+    # the copies at 0.9 join the graph; the synthetic walk at 1.2 is too far from it (tau 1): left out
+    assert summary.graph is not None and summary.graph.kept_clips == 8
+    assert sorted(d.clip for d in summary.graph.dropped) == sorted(f"{n} (x1.2)" for n in images)
