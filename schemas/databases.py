@@ -98,8 +98,8 @@ def database_id(spec: DatabaseSpecBase, clip_hashes: list[str]) -> str:
     """Content address of a database: sha256 of the clips' content hashes (in spec order), the
     canonical spec JSON (sorted keys, clip file references replaced by hashes, every clip named as
     reports name it; a graph spec's empty ``speeds`` left out), the schema version and, for specs
-    with ``mirror`` on, :data:`MIRROR_VERSION`. ``segue build`` and ``POST /v1/databases`` give the same id to the same
-    clips and spec."""
+    with ``mirror`` on, :data:`MIRROR_VERSION`. ``segue build`` and ``POST /v1/databases`` give the
+    same id to the same clips and spec."""
     canonical = spec.model_dump(mode="json", exclude={"name"})
     for entry, source, digest in zip(canonical["clips"], spec.clips, clip_hashes, strict=True):
         entry.pop("bvh", None)
