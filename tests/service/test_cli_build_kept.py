@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from motion import Motion
 from motion import rotations as rot
 from motion.bvh import write_bvh
 from motion.mirror import mirror_map
+from schemas.databases import DatabaseSummary
 from service.cli import main
 from tests.motion.synthetic import walking_biped
 from workers.summary import summarize
@@ -54,22 +56,27 @@ def test_build_prints_the_kept_component_and_the_summary_holds_it(
     assert summary.graph.dropped_frames == 150 and summary.graph.leaf_edges > 0
 
 
-def test_mirror_adds_the_mirror_image_of_every_clip(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def build_two_walks(
+    tmp_path: Path, settings: dict[str, Any], first_labels: list[dict[str, Any]] | None = None
+) -> DatabaseSummary:
+    """`segue build` of a graph spec of two synthetic walks (``walk-a`` labelled ``first_labels``,
+    ``walk-b`` heading 90 degrees) with ``settings``, into ``tmp_path/db``; its summary."""
     clips = {"walk-a": walking_biped(150, seed=0), "walk-b": walking_biped(150, seed=1, heading_deg=90.0)}
     for name, m in clips.items():
         write_bvh(m, tmp_path / f"{name}.bvh")
-    spec = {
-        "kind": "graph",
-        "mirror": True,
-        "clips": [{"bvh": f"{name}.bvh", "units": "m"} for name in clips],
-    }
+    spec: dict[str, Any] = {"kind": "graph", **settings}
+    spec["clips"] = [{"bvh": f"{name}.bvh", "units": "m"} for name in clips]
+    spec["clips"][0]["labels"] = first_labels or []
     (tmp_path / "db.json").write_text(json.dumps(spec), encoding="utf-8")
     assert main(["build", str(tmp_path / "db.json"), "--out", str(tmp_path / "db"), "-q"]) == 0
-    npz = (tmp_path / "db" / "data.npz").read_bytes()
     stored = json.loads((tmp_path / "db" / "spec.json").read_text(encoding="utf-8"))
-    summary = summarize(stored, npz, {})
+    return summarize(stored, (tmp_path / "db" / "data.npz").read_bytes(), {})
+
+
+def test_mirror_adds_the_mirror_image_of_every_clip(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    summary = build_two_walks(tmp_path, {"mirror": True})
     assert [c.name for c in summary.clips] == ["walk-a", "walk-b", "walk-a (mirror)", "walk-b (mirror)"]
     assert [c.frames for c in summary.clips] == [150] * 4
     with np.load(tmp_path / "db" / "data.npz") as z:
@@ -84,21 +91,8 @@ def test_mirror_adds_the_mirror_image_of_every_clip(
 def test_speeds_add_time_scaled_copies_of_every_clip_and_mirror_image(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    clips = {"walk-a": walking_biped(150, seed=0), "walk-b": walking_biped(150, seed=1, heading_deg=90.0)}
-    for name, m in clips.items():
-        write_bvh(m, tmp_path / f"{name}.bvh")
-    spec = {
-        "kind": "graph",
-        "mirror": True,
-        "speeds": [0.9, 1.2],
-        "clips": [{"bvh": f"{name}.bvh", "units": "m"} for name in clips],
-    }
-    spec["clips"][0]["labels"] = [{"label": "step-left-foot", "start": 30, "end": 120}]  # type: ignore[index]
-    (tmp_path / "db.json").write_text(json.dumps(spec), encoding="utf-8")
-    assert main(["build", str(tmp_path / "db.json"), "--out", str(tmp_path / "db"), "-q"]) == 0
-    npz = (tmp_path / "db" / "data.npz").read_bytes()
-    stored = json.loads((tmp_path / "db" / "spec.json").read_text(encoding="utf-8"))
-    summary = summarize(stored, npz, {})
+    labels = [{"label": "step-left-foot", "start": 30, "end": 120}]
+    summary = build_two_walks(tmp_path, {"mirror": True, "speeds": [0.9, 1.2]}, labels)
     images = ["walk-a", "walk-b", "walk-a (mirror)", "walk-b (mirror)"]
     assert [c.name for c in summary.clips] == images + [f"{n} (x{s:g})" for s in (0.9, 1.2) for n in images]
     # 150 frames at 30 fps played at 0.9 / 1.2: 166 / 125 frames at 30 fps
