@@ -10,9 +10,12 @@ time and is downloaded again.
   last), so two processes fetching the same database never see half of one; the loser of the rename
   discards its copy.
 * After each download the least recently used databases (by the manifest's modification time,
-  touched on every use) are deleted until the cache holds at most ``max_bytes``; the one just
+  stamped on every use) are deleted until the cache holds at most ``max_bytes``; the one just
   fetched stays even when it alone is larger. Deleting files another process has mapped is safe on
   POSIX: its pages stay valid until it unmaps them.
+* A use is stamped with the nanosecond clock (``time.time_ns``), never later than the process's
+  previous stamp: the kernel's own file times tick in jiffies (1-10 ms), so two uses in quick
+  succession would otherwise tie and the order of use be lost.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import os
 import shutil
 import tempfile
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
@@ -56,6 +60,14 @@ class DiskCache:
         self.root = Path(root)
         self.max_bytes = max_bytes
         self._lock = threading.Lock()
+        self._last_use_ns = 0
+
+    def _stamp(self, manifest: Path) -> None:
+        """Record a use of the database whose manifest is ``manifest`` (``OSError`` when it is gone)."""
+        with self._lock:
+            now = max(time.time_ns(), self._last_use_ns + 1)
+            self._last_use_ns = now
+        os.utime(manifest, ns=(now, now))
 
     def _dir(self, db_id: str) -> Path:
         return self.root / db_id
@@ -65,7 +77,7 @@ class DiskCache:
         d = self._dir(db_id)
         manifest = d / container.MANIFEST
         try:
-            os.utime(manifest)
+            self._stamp(manifest)
         except OSError:
             return None
         return d
@@ -93,12 +105,14 @@ class DiskCache:
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
+        with contextlib.suppress(OSError):  # evicted at once by another process: fetched again next time
+            self._stamp(self._dir(db_id) / container.MANIFEST)
         self.evict_over(keep=db_id)
         return self._dir(db_id)
 
-    def entries(self) -> list[tuple[float, int, str]]:
-        """``(last use, bytes, id)`` of every complete cached database, oldest first."""
-        out: list[tuple[float, int, str]] = []
+    def entries(self) -> list[tuple[int, int, str]]:
+        """``(last use ns, bytes, id)`` of every complete cached database, oldest first."""
+        out: list[tuple[int, int, str]] = []
         if not self.root.is_dir():
             return out
         for d in self.root.iterdir():
@@ -107,7 +121,7 @@ class DiskCache:
                 continue
             try:
                 size = container.read_manifest(d).total_bytes
-                out.append((manifest.stat().st_mtime, size, d.name))
+                out.append((manifest.stat().st_mtime_ns, size, d.name))
             except (OSError, container.ContainerError):
                 continue
         return sorted(out)
