@@ -51,7 +51,7 @@ from schemas.movement_graph import DerivedFrom, GraphEdits, MovementGraph, Resol
 from . import container as container  # the database file format, for the store
 from .library import ClipInput as ClipInput  # a clip as read, for the runtime that reads them
 from .library import MotionLibrary as MotionLibrary  # what a database is built from
-from .library import build_library, library_from_arrays, library_to_arrays
+from .library import build_library, clip_sources, library_from_arrays, library_to_arrays
 
 Arrays = dict[str, npt.NDArray[Any]]
 ShouldStop = Callable[[], bool]
@@ -467,6 +467,14 @@ class Engine(ABC, Generic[RequestT, SpecT]):
         """The library a database of ``spec`` is built from and stores, given its clips as read
         (default: as read; graph and annotated databases add mirror images with ``mirror``)."""
         return library
+
+    @classmethod
+    def clip_sources(cls, stored_spec: Mapping[str, Any], stored: int) -> list[int | None]:
+        """For each of the ``stored`` clips of a database of ``stored_spec`` (JSON, as stored), the
+        index in the spec's ``clips`` of the clip it is or was made from (:meth:`library_for`: a
+        mirror image or a time-scaled copy comes from its clip), ``None`` for none; the summary
+        gives a clip its source's units. Default: the spec's clips, in order."""
+        return clip_sources(len(stored_spec.get("clips") or []), 1, stored)
 
     @classmethod
     def library_frames(cls, spec: SpecT, frames: int) -> int:

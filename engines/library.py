@@ -176,6 +176,17 @@ def speeds_frames(frames: int, speeds: Sequence[float]) -> int:
     return frames + sum(int(np.ceil(frames / s - 1e-9)) for s in speeds)
 
 
+def clip_sources(clips: int, repeats: int, stored: int) -> list[int | None]:
+    """For each of a library's ``stored`` clips, the index of the spec's clip (of ``clips``) it is or
+    was made from, for a library laid out as :func:`with_mirrors` and :func:`with_speeds` lay it
+    out: the clips, then ``repeats - 1`` whole repeats of clips derived from them in the same order
+    (mirror images, then copies speed by speed), so clip ``i`` comes from ``i % clips``. A library
+    of any other size (not laid out so) has the spec's clips first and ``None`` (no source) after."""
+    if clips > 0 and stored == clips * repeats:
+        return [i % clips for i in range(stored)]
+    return [i if i < clips else None for i in range(stored)]
+
+
 def library_to_arrays(lib: MotionLibrary) -> Arrays:
     """Concatenated arrays of a library (frames of all clips end to end)."""
     counts = np.array([m.num_frames for m in lib.motions], dtype=np.int64)

@@ -16,7 +16,6 @@ import numpy as np
 
 from engines.registry import kind_class
 from motion.ground import body_root
-from motion.mirror import mirrored_labels
 from motion.serialize import skeleton_from_arrays
 from schemas.clips import LabelRange
 from schemas.databases import ClipSummary, DatabaseSummary, SkeletonSummary
@@ -71,23 +70,19 @@ def summarize(
     if static and hips == 0:  # no hip names: the first joint under the ground node
         hips = next((j for j, p in enumerate(skeleton.parents) if p == 0), 0)
     roles = own.roles
-    clips = []
     entries = list(spec["clips"])
-    copies = len(spec.get("speeds") or [])
-    if spec.get("mirror") and len(names) == 2 * (1 + copies) * len(entries):  # images follow the clips
-        entries += [{**e, "labels": list(mirrored_labels(e.get("labels") or []))} for e in entries]
-    if copies and len(names) == (1 + copies) * len(entries):  # time-scaled copies follow, speed by speed
-        stored = json.loads(str(arrays["library.labels"]))  # their labels on the copies' frames
-        base = list(entries)
-        entries += [
-            {**e, "labels": stored[len(base) * (1 + k) + i]}
-            for k in range(copies)
-            for i, e in enumerate(base)
-        ]
-    entries += [{}] * (len(names) - len(entries))
-    for entry, name, count in zip(entries, names, counts, strict=True):
+    stored_labels = json.loads(str(arrays["library.labels"])) if "library.labels" in arrays else None
+    if stored_labels is not None and len(stored_labels) != len(names):
+        stored_labels = None
+    clips = []
+    for i, (source, name, count) in enumerate(
+        zip(engine.clip_sources(spec, len(names)), names, counts, strict=True)
+    ):
+        entry = entries[source] if source is not None else {}
         units = entry.get("units") or source_units.get(entry.get("clip") or "")
-        labels = [LabelRange.model_validate(lb) for lb in entry.get("labels") or []]
+        # the labels the database holds: a mirror image's sides exchanged, a copy's on its frames
+        held = stored_labels[i] if stored_labels is not None else entry.get("labels") if source == i else None
+        labels = [LabelRange.model_validate(lb) for lb in held or []]
         clips.append(
             ClipSummary(name=name, frames=count, source_units=units, labels=labels, role=roles.get(name))
         )

@@ -18,7 +18,7 @@ Example
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -44,7 +44,7 @@ from ..base import (
     Solution,
     Stopped,
 )
-from ..library import MotionLibrary, with_mirrors
+from ..library import MotionLibrary, clip_sources, with_mirrors
 from .assemble import Frames, assemble, discontinuity, label_report, quality_inputs
 from .build import BLAS_THREADS, build_annotated
 from .corrections import apply_corrections, propagated_ranges
@@ -143,6 +143,12 @@ class AnnotationEngine(Engine[AnnotationRequest, AnnotatedDatabaseSpec]):
         """With ``mirror``, the clips followed by their mirror images (labels' sides exchanged:
         :func:`engines.library.with_mirrors`)."""
         return with_mirrors(library) if spec.mirror else library
+
+    @classmethod
+    def clip_sources(cls, stored_spec: Mapping[str, Any], stored: int) -> list[int | None]:
+        """The clips, then their mirror images with ``mirror``."""
+        repeats = 2 if stored_spec.get("mirror") else 1
+        return clip_sources(len(stored_spec.get("clips") or []), repeats, stored)
 
     @classmethod
     def library_frames(cls, spec: AnnotatedDatabaseSpec, frames: int) -> int:

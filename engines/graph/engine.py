@@ -33,7 +33,7 @@ from ..base import (
     Solution,
     Stopped,
 )
-from ..library import MotionLibrary, speeds_frames, with_mirrors, with_speeds
+from ..library import MotionLibrary, clip_sources, speeds_frames, with_mirrors, with_speeds
 from .assemble import pinned_clips
 from .build import build_graph, build_work
 from .coupled import CoupledSearch
@@ -74,6 +74,12 @@ class GraphEngine(Engine[GraphRequest, GraphDatabaseSpec]):
         """With ``mirror``, the clips followed by their mirror images; with ``speeds``, those followed
         by their time-scaled copies (every mirror image's too: :func:`engines.library.with_speeds`)."""
         return with_speeds(with_mirrors(library) if spec.mirror else library, spec.speeds)
+
+    @classmethod
+    def clip_sources(cls, stored_spec: Mapping[str, Any], stored: int) -> list[int | None]:
+        """The clips, their mirror images with ``mirror``, then copies of those speed by speed."""
+        repeats = (2 if stored_spec.get("mirror") else 1) * (1 + len(stored_spec.get("speeds") or []))
+        return clip_sources(len(stored_spec.get("clips") or []), repeats, stored)
 
     @classmethod
     def library_frames(cls, spec: GraphDatabaseSpec, frames: int) -> int:

@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 
 from engines.graph.engine import GraphEngine
-from engines.library import MIRROR_SUFFIX, MotionLibrary, speeds_frames, with_mirrors, with_speeds
+from engines.library import (
+    MIRROR_SUFFIX,
+    MotionLibrary,
+    clip_sources,
+    speeds_frames,
+    with_mirrors,
+    with_speeds,
+)
 from engines.registry import parse_database_spec
 from motion import MotionError
 from motion import rotations as rot
@@ -73,6 +80,16 @@ def test_mirror_and_speeds_make_every_combination() -> None:
         lib.clip("a (mirror) (x0.9)").global_positions()[::10], mirrored[::9], atol=1e-9
     )
     assert abs(GraphEngine.library_frames(spec, 120) - lib.total_frames) <= len(clips) * 2
+    # each stored clip's source, where the summary finds its units: the layout just built
+    sources = GraphEngine.clip_sources(spec.model_dump(mode="json"), len(lib.names))
+    assert [lib.names[0 if s is None else s] for s in sources] == ["a", "b"] * 4
+    assert [n.startswith("a") for n in lib.names] == [s == 0 for s in sources]
+
+
+def test_clip_sources_of_a_library_laid_out_otherwise_name_only_the_clips() -> None:
+    assert clip_sources(2, 3, 6) == [0, 1, 0, 1, 0, 1]
+    assert clip_sources(2, 3, 5) == [0, 1, None, None, None]  # not the layout: no guess
+    assert clip_sources(0, 2, 1) == [None]
 
 
 def test_a_copys_name_must_be_free() -> None:
