@@ -31,6 +31,10 @@ from ..container import read_only
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
+StoredInts = npt.NDArray[np.signedinteger[Any]]
+"""Indices as a loaded database stores them (int32) or a build computes them (int64)."""
+StoredFloats = npt.NDArray[np.floating[Any]]
+"""Numbers as a loaded database stores them (float32) or a build computes them (float64)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,14 +47,14 @@ class EdgeTree:
     arithmetic that can pass 2^31 (``clip * span + frame``) in int64, costs through :meth:`costs`
     (float64, the numbers widening at load gave)."""
 
-    from_clip: IntArray
-    from_frame: IntArray
-    to_clip: IntArray
-    to_frame: IntArray
-    cost: FloatArray
-    parent: IntArray
-    left: IntArray
-    right: IntArray
+    from_clip: StoredInts
+    from_frame: StoredInts
+    to_clip: StoredInts
+    to_frame: StoredInts
+    cost: StoredFloats
+    parent: StoredInts
+    left: StoredInts
+    right: StoredInts
 
     @property
     def size(self) -> int:
