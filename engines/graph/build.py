@@ -34,7 +34,6 @@ import json
 import os
 import threading
 import time
-from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
 from typing import Any
@@ -48,7 +47,15 @@ from schemas.databases import GraphDatabaseSpec
 
 from ..base import Arrays, BuildWork, Emitter, EngineError, ShouldStop
 from ..library import MotionLibrary
-from .candidates import FrameIndex, IndexStats, frame_index, indexed_minima
+from .candidates import (
+    FrameIndex,
+    IndexStats,
+    Progress,
+    frame_index,
+    indexed_minima,
+    never_stop,
+    no_progress,
+)
 from .features import TransitionFeatures, exact_costs, reduce_features, transition_features
 from .hierarchy import LeafEdges, build_hierarchy
 from .model import RootTracks
@@ -56,7 +63,6 @@ from .tracks import foot_contacts, root_tracks
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
-Progress = Callable[[float, str], None]
 
 TILE = 2048
 """Side of the square tiles of the cost matrix (frames): 16 MB of float32 per tile."""
@@ -93,14 +99,6 @@ class ScanStats:
     below_tau: int
     minima: int
     dims: int
-
-
-def _never() -> bool:
-    return False
-
-
-def _no_progress(fraction: float, message: str) -> None:
-    pass
 
 
 class _TileScanner:
@@ -192,8 +190,8 @@ def local_minima(
     *,
     tile: int = TILE,
     workers: int | None = None,
-    progress: Progress = _no_progress,
-    should_stop: ShouldStop = _never,
+    progress: Progress = no_progress,
+    should_stop: ShouldStop = never_stop,
 ) -> tuple[IntArray, IntArray, FloatArray, ScanStats]:
     """Local minima below ``tau`` of the cost matrix ``M[x, y] = ||rows[x] - rows[y]||^2``, ``x < y``.
 
@@ -306,8 +304,8 @@ def candidate_edges(
     screen: npt.NDArray[np.float32] | None = None,
     index: FrameIndex | None = None,
     workers: int | None = None,
-    progress: Progress = _no_progress,
-    should_stop: ShouldStop = _never,
+    progress: Progress = no_progress,
+    should_stop: ShouldStop = never_stop,
 ) -> tuple[LeafEdges, ScanStats | IndexStats]:
     """The edges of G: local minima of the transition cost below ``tau`` (module docstring, step 2),
     both directions of every minimum, sorted by (from clip, to clip, from frame, to frame), found by
@@ -355,7 +353,7 @@ def bridge_edges(
     *,
     index: FrameIndex | None = None,
     workers: int | None = None,
-    should_stop: ShouldStop = _never,
+    should_stop: ShouldStop = never_stop,
 ) -> LeafEdges:
     """Edges below ``tau`` touching ``clips`` (the clips outside the kept component) that the first
     indexed search may have missed: every frame of those clips (not only the held ones) asks the

@@ -81,12 +81,13 @@ class IndexStats:
     dims: int
 
 
-def _never() -> bool:
+def never_stop() -> bool:
+    """A ``should_stop`` that never asks to stop."""
     return False
 
 
-def _no_progress(fraction: float, message: str) -> None:
-    pass
+def no_progress(fraction: float, message: str) -> None:
+    """A ``progress`` that reports nowhere."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -144,8 +145,8 @@ def indexed_minima(
     queries: IntArray | None = None,
     index: FrameIndex | None = None,
     workers: int = 1,
-    progress: Progress = _no_progress,
-    should_stop: ShouldStop = _never,
+    progress: Progress = no_progress,
+    should_stop: ShouldStop = never_stop,
 ) -> tuple[IntArray, IntArray, FloatArray, IndexStats]:
     """Local minima below ``tau`` of ``M[x, y] = ||rows[x] - rows[y]||^2``, ``x < y``, reached by
     descent from the index's seeds (module docstring).
