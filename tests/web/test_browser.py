@@ -251,9 +251,13 @@ def test_constraints_build_and_alternatives(page: Any, segue: SegueClient) -> No
     assert page.locator(f"#db-list li[data-db='{db['id']}'] .status-ready").count() == 1
     label = page.text_content(f"#db-list li[data-db='{db['id']}'] .grow")
     assert label == "walk+salsa graph · graph", label
+    assert_kept_shown(page, segue, db["id"])
 
     demo = segue.build_database(DEMOS["graph"].spec).id  # the database `segue demo graph` builds
+    jumps = [{"bvh": f"sample:{n}"} for n in ("salsa-leader", "jump-13-11", "jump-13-32")]
+    sparse = segue.build_database({"kind": "graph", "clips": jumps}).id  # the jumps join no transition
     reload_databases(page)
+    assert_kept_shown(page, segue, sparse, left_out=2)
     page.click("#tabs button[data-tool='constraints']")
     select_database(page, "cons-db", demo)
     option = page.eval_on_selector(f"#cons-db option[value='{demo}']", "o => o.textContent")
@@ -340,6 +344,22 @@ def test_constraints_build_and_alternatives(page: Any, segue: SegueClient) -> No
 
 
 # ------------------------------------------------------------------------------ engines as they land
+
+
+def assert_kept_shown(page: Any, segue: SegueClient, db_id: str, left_out: int = 0) -> None:
+    """The database list shows what a graph build kept as the API's summary says it: the figures in
+    the entry's tooltip, every clip left out with its reason, and how many beside the frame count."""
+    summary = segue.database(db_id).summary
+    assert summary is not None and summary.graph is not None
+    kept = summary.graph
+    assert len(kept.dropped) == left_out
+    entry = f"#db-list li[data-db='{db_id}']"
+    title = page.get_attribute(f"{entry} .grow", "title")
+    total = kept.kept_clips + left_out
+    assert f"kept {kept.kept_clips} of {total} clips, {kept.kept_frames} of " in title, title
+    assert all(f"{c.clip} ({c.frames} frames): {c.reason}" in title for c in kept.dropped), title
+    figures = page.text_content(f"{entry} span.mono")
+    assert figures.endswith(f" · {left_out} left out" if left_out else "f"), figures
 
 
 def test_path_walk(page: Any, segue: SegueClient) -> None:

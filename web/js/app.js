@@ -227,6 +227,18 @@ export function dbLabel(d) {
   return `${name} · ${d.kind}${drive}${edited}`;
 }
 
+// what a graph build kept (GET /v1/databases/{id}: summary.graph): the clips a search can play and
+// those left out of the motion graph, with why; null for other kinds
+export function keptNote(d) {
+  const g = d.summary && d.summary.graph;
+  if (!g) return null;
+  const total = g.kept_clips + g.dropped.length;
+  const lines = [`kept ${g.kept_clips} of ${total} clips, ${g.kept_frames} of ${g.kept_frames + g.dropped_frames} frames (${g.leaf_edges} transitions)`];
+  const shown = g.dropped.slice(0, 8);
+  if (shown.length) lines.push(`left out (never played): ${shown.map((c) => `${c.clip} (${c.frames} frames): ${c.reason}`).join('; ')}${g.dropped.length > shown.length ? `; and ${g.dropped.length - shown.length} more` : ''}`);
+  return { short: g.dropped.length ? `${g.dropped.length} left out` : '', long: lines.join('\n') };
+}
+
 // whether a database fits a picker: its kind, and for control databases what drives them
 function fits(d, sel) {
   if (d.kind !== sel.dataset.kind || d.status !== 'ready') return false;
@@ -254,10 +266,12 @@ async function refreshDatabases() {
     li.dataset.db = d.id;
     li.innerHTML = '<span class="grow"></span><span></span><span class="muted mono"></span>';
     li.children[0].textContent = dbLabel(d);
-    li.children[0].title = `${d.id}\nclips: ${d.clips.join(', ')}${d.error ? `\n${d.error}` : ''}`;
+    const kept = keptNote(d);
+    li.children[0].title = `${d.id}\nclips: ${d.clips.join(', ')}${kept ? `\n${kept.long}` : ''}${d.error ? `\n${d.error}` : ''}`;
     li.children[1].textContent = d.status;
     li.children[1].className = `status-${d.status}`;
-    li.children[2].textContent = d.frames ? `${d.frames}f` : '';
+    li.children[2].textContent = [d.frames ? `${d.frames}f` : '', kept ? kept.short : ''].filter(Boolean).join(' · ');
+    if (kept) li.children[2].title = kept.long;
     list.appendChild(li);
   }
   for (const sel of document.querySelectorAll('.db-select')) {
