@@ -12,7 +12,8 @@ a Redis that lost its keys never hands out a number twice). From then on:
   between the check and the write (:mod:`workers.redis_events`); a refused publish raises
   :class:`StaleAttempt` and the worker cancels its run and acknowledges nothing;
 - **every durable write** of its engine process (results, database arrays and records, job records)
-  is checked first (:class:`FencedStore`), and the engine's ``should_stop`` polls the key
+  is checked first (:class:`FencedStore`; a result is checked again once written and removed when
+  the run lost its job meanwhile), and the engine's ``should_stop`` polls the key
   (:class:`Fence`), so a run that lost its job stops its search by itself even while its worker
   process is stopped (SIGSTOP) and cannot relay anything. A write is a file (or object) in the store,
   which Redis cannot make conditional: what makes a late write harmless is that a run's results are
@@ -129,8 +130,14 @@ class FencedStore(Store):
             self.fence.check()
 
     def put_result(self, job_id: str, result_id: str, motion: Motion, report: Report) -> None:
+        """Write a result while the run holds its job; checked again once written, and removed when
+        another run took the job meanwhile (between the first check and the write, or while this
+        process was stopped there), so a run leaves no result written after it lost its job."""
         self._check()
         super().put_result(job_id, result_id, motion, report)
+        if self.fence is not None and not self.fence.current():
+            self.delete_result(job_id, result_id)
+            raise StaleAttempt(self.fence.job_id, self.fence.attempt, self.fence.lost_to)
 
     def put_database_arrays(self, db_id: str, arrays: Mapping[str, Any] | bytes) -> None:
         self._check()

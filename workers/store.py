@@ -571,6 +571,12 @@ class Store:
         self.objects.put(f"{d}.npz", npz_bytes(motion_to_arrays(motion)))
         self.objects.put(f"{d}.json", report.model_dump_json().encode())
 
+    def delete_result(self, job_id: str, result_id: str) -> None:
+        """Remove a result's motion and report (nothing when there is none)."""
+        d = f"{self._job(job_id)}/results/{_safe_id(result_id)}"
+        self.objects.delete(f"{d}.json")
+        self.objects.delete(f"{d}.npz")
+
     def result_motion(self, job_id: str, result_id: str) -> Motion:
         key = f"{self._job(job_id)}/results/{_safe_id(result_id)}.npz"
         data = self._get(key, f"job {job_id!r} has no result {result_id!r}")

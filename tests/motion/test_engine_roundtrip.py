@@ -170,7 +170,7 @@ def _godot(folder: Path, root_track: str) -> dict[str, dict[str, Any]]:
         time.sleep(1.0)
     finally:
         os.killpg(editor.pid, signal.SIGTERM)
-        editor.wait(timeout=30)
+        editor.wait(timeout=120)  # a hang guard: Godot under xvfb may be slow to exit on a busy machine
     res = subprocess.run(
         [xvfb, "-a", godot, "--path", str(project), "-s", "godot_check.gd"],
         capture_output=True, text=True, timeout=300, check=False,

@@ -92,18 +92,22 @@ def test_slow_headers_and_stalled_bodies_are_cut(monkeypatch: pytest.MonkeyPatch
                 received += chunk
         assert b"200 OK" not in received  # cut before the body was whole
         stall.close()
+        assert httpx.get(f"http://127.0.0.1:{port}/", timeout=GUARD_S).text == "0 bytes"
 
-        # a slow but moving upload is not cut: 5 chunks, each sent within the timeout
+    # a slow but moving upload is not cut: 16 chunks 0.25 s apart, 4 s in all, past a 3-s timeout
+    # (each pause is 2.75 s inside it: a loaded machine may be late with a chunk without the
+    # connection being cut; with a 1-s timeout and 0.5-s pauses a 0.5-s stall of this process cut it)
+    with server(request_timeout_s=3.0) as port:
         moving = socket.create_connection(("127.0.0.1", port))
-        moving.sendall(b"POST / HTTP/1.1\r\nHost: localhost\r\nContent-Length: 50\r\n\r\n")
-        for _ in range(5):
-            time.sleep(0.5)
+        moving.sendall(b"POST / HTTP/1.1\r\nHost: localhost\r\nContent-Length: 160\r\n\r\n")
+        for _ in range(16):  # sleeps of 4 s in all: the upload outlasts the timeout
+            time.sleep(0.25)
             moving.sendall(b"0123456789")
         moving.settimeout(GUARD_S)
         reply = b""
         while b"bytes" not in reply and (chunk := moving.recv(65536)):
             reply += chunk
-        assert reply.startswith(b"HTTP/1.1 200 OK") and reply.endswith(b"50 bytes")
+        assert reply.startswith(b"HTTP/1.1 200 OK") and reply.endswith(b"160 bytes")
         moving.close()
         assert httpx.get(f"http://127.0.0.1:{port}/", timeout=GUARD_S).text == "0 bytes"
 

@@ -78,6 +78,9 @@ def page(browser: Any, server: str) -> Iterator[Any]:
     """A fresh page on the service's front end, ready (``window.__segue.ready``); fails the test on
     uncaught JavaScript errors."""
     context = browser.new_context(viewport={"width": 1400, "height": 820}, accept_downloads=True)
+    # every wait without its own timeout (clicks, fills, selectors, navigation) is a hang guard too,
+    # not Playwright's 30-s default: a loaded machine is slow, not broken
+    context.set_default_timeout(120_000)
     pg = context.new_page()
     errors = PageErrors()
     pg.on("pageerror", lambda exc: errors.append(f"pageerror: {exc}"))

@@ -145,6 +145,7 @@ def test_a_first_visit_offers_one_click_sample_databases(browser: Any, tmp_path:
     needs_engine("control")
     with live_server(tmp_path, workers=1) as url:
         context = browser.new_context(viewport={"width": 1400, "height": 820})
+        context.set_default_timeout(GUARD_MS)  # a hang guard, not Playwright's 30-s default
         page = context.new_page()
         errors: list[str] = []
         page.on("pageerror", lambda exc: errors.append(str(exc)))

@@ -189,9 +189,13 @@ def synth(store: Store, db_id: str, **request: Any) -> tuple[JobInfo, dict[str, 
 @contextlib.contextmanager
 def worker_thread(redis_url: str, store: Store, name: str, **fields: Any) -> Iterator[threading.Event]:
     """A worker running in a thread of this process (``fields`` of its
-    :class:`~workers.settings.Settings`); stopped (and joined) on exit."""
+    :class:`~workers.settings.Settings`); stopped (and joined) on exit.
+
+    Its heartbeat lives 60 s: a thread worker is never killed (it deletes its key when it stops), and
+    with a 1-s TTL a stall of this process (a loaded machine) made a second worker thread take the
+    first one's job as if it had died (tests/workers/test_recovery.py, test_redis_backend.py)."""
     stop = threading.Event()
-    fields = {"heartbeat_s": 0.2, "heartbeat_ttl_s": 1.0, "block_ms": 100, **fields}
+    fields = {"heartbeat_s": 0.2, "heartbeat_ttl_s": 60.0, "block_ms": 100, **fields}
     fields = {"store_url": store.url, "data_dir": store.root, **fields}
     settings = Settings(redis_url=redis_url, worker_name=name, **fields)
     thread = threading.Thread(target=run_worker, args=(settings, stop), daemon=True)
@@ -208,10 +212,12 @@ def worker_thread(redis_url: str, store: Store, name: str, **fields: Any) -> Ite
 def spawn_worker(
     redis_url: str, store: Store, name: str, log: Path | None = None, **settings: str
 ) -> subprocess.Popen[bytes]:
-    """A ``segue worker`` process (heartbeat 0.2 s, TTL 1 s, 100-ms blocking reads; ``settings``:
+    """A ``segue worker`` process (heartbeat 0.2 s, TTL 5 s, 100-ms blocking reads; ``settings``:
     more :class:`workers.settings.Settings` fields as their ``SEGUE_*`` variables, e.g.
-    ``heartbeat_ttl_s="600"``; its stderr appended to ``log`` when given)."""
-    own = {"heartbeat_s": "0.2", "heartbeat_ttl_s": "1.0", "block_ms": "100", "log_level": "WARNING"}
+    ``heartbeat_ttl_s="600"``; its stderr appended to ``log`` when given). The TTL bounds how soon a
+    killed worker's job is taken over; with 1 s, a live worker that a loaded machine left unscheduled
+    for 0.8 s had its job taken by another as if it had died."""
+    own = {"heartbeat_s": "0.2", "heartbeat_ttl_s": "5.0", "block_ms": "100", "log_level": "WARNING"}
     env = dict(
         os.environ,
         PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),

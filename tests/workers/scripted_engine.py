@@ -2,12 +2,17 @@
 
 It optionally keeps the CPU busy for ``spin_s`` first (an engine that ignores cancels), then improves
 its score ``steps`` times, ``step_s`` seconds apart, polling ``should_stop`` between steps, so tests
-can observe solutions arriving, cancel mid-search, or kill a worker mid-job. Each solution is a real
-excerpt of the database's first clip (10 + i frames), so results download.
+can observe solutions arriving, cancel mid-search, or kill a worker mid-job. With ``hold_after`` it
+stops improving after that many solutions and waits (polling ``should_stop``, within ``budget_s``)
+for a cancel: a test that cancels after seeing them then knows exactly which solutions exist,
+however long the cancel takes to arrive on a loaded machine. With ``go_file`` it waits (the same
+way) until that file exists before its first step: a test can kill it mid-job at its leisure. Each
+solution is a real excerpt of the database's first clip (10 + i frames), so results download.
 """
 
 from __future__ import annotations
 
+import os
 import time
 from typing import Literal
 
@@ -27,6 +32,12 @@ class ScriptedRequest(JobRequestBase):
     input: str | None = Field(default=None, description="an input file; its size becomes a score term")
     frames: int | None = Field(
         default=None, ge=1, le=100_000, description="frames asked for (each solution has 10 + i frames)"
+    )
+    hold_after: int | None = Field(
+        default=None, ge=1, description="after this many solutions, wait for a cancel (within budget_s)"
+    )
+    go_file: str | None = Field(
+        default=None, description="wait until this file exists (within budget_s) before the first step"
     )
     spin_s: float = Field(
         default=0.0, ge=0, le=60, description="busy the CPU (holding the GIL, not polling should_stop) first"
@@ -53,11 +64,23 @@ class ScriptedEngine(Engine[ScriptedRequest, ClipsDatabaseSpec]):
         while time.monotonic() < spin_until:
             sum(range(10_000))  # an engine busy in Python: ignores cancels and holds the GIL
         t0 = time.monotonic()
+        while request.go_file is not None and not os.path.exists(request.go_file):
+            if should_stop():
+                return Stopped.cancelled
+            if time.monotonic() - t0 > budget_s:
+                return Stopped.budget
+            time.sleep(0.01)
         for i in range(request.steps):
             if should_stop():
                 return Stopped.cancelled
             if time.monotonic() - t0 > budget_s:
                 return Stopped.budget
+            if request.hold_after is not None and i >= request.hold_after:
+                while not should_stop():
+                    if time.monotonic() - t0 > budget_s:
+                        return Stopped.budget
+                    time.sleep(0.01)
+                return Stopped.cancelled
             if request.fail_at == i:
                 raise EngineError(f"scripted failure at step {i}")
             time.sleep(request.step_s)

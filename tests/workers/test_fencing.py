@@ -13,8 +13,10 @@ from pathlib import Path
 import pytest
 import redis
 
-from schemas import EventType, JobEvent, JobStatus
-from workers.fencing import StaleAttempt
+from motion import parse_bvh
+from motion.samples import sample_path
+from schemas import EventType, JobEvent, JobStatus, Report
+from workers.fencing import Fence, FencedStore, StaleAttempt
 from workers.redis_backend import RedisBackend
 from workers.redis_events import EventPublisher
 from workers.redis_keys import RedisKeys
@@ -151,6 +153,35 @@ def test_a_hung_worker_resumed_publishes_nothing(
     assert late == []
     text = w1_log.read_text(errors="replace")
     assert "attempt 1 lost the job" in text and "publishes nothing more" in text
+
+
+def test_a_result_written_while_the_run_lost_its_job_is_removed(
+    rclient: redis.Redis, store: Store, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Attempt 2 takes the job between attempt 1's check and its write (or while attempt 1's process
+    is stopped there): the result is checked again once written and removed, and the write refused;
+    a write while the run holds its job stays."""
+    job_id, key = "f" * 32, KEYS.attempt("f" * 32)
+    fenced = FencedStore(store.objects)
+    motion = parse_bvh(sample_path("walk").read_bytes()).slice(0, 10)
+    report = Report(job=job_id, result="r1", engine="x", score=0.0, frames=10, fps=motion.fps, provenance=[])
+    rclient.set(key, 1)
+    fenced.fence = Fence(rclient, key, job_id, 1)
+    fenced.put_result(job_id, "r1", motion, report)  # held: written
+    write = Store.put_result
+
+    def taken_meanwhile(self: Store, *args: object) -> None:
+        write(self, *args)  # type: ignore[arg-type]
+        rclient.set(key, 2)  # attempt 2 took the job while attempt 1 wrote
+
+    monkeypatch.setattr(Store, "put_result", taken_meanwhile)
+    with pytest.raises(StaleAttempt):
+        fenced.put_result(job_id, "r2", motion, report)
+    assert sorted(store.objects.list(f"jobs/{job_id}/results")) == [
+        f"jobs/{job_id}/results/r1.json",
+        f"jobs/{job_id}/results/r1.npz",
+    ]
+    assert store.result_report(job_id, "r1") == report
 
 
 def test_an_api_cancel_while_queued_is_refused_once_a_run_started(redis_url: str, store: Store) -> None:

@@ -83,15 +83,17 @@ def test_a_busy_engine_cannot_starve_the_heartbeat(
         backend = RedisBackend(store, redis_url, block_ms=200)
         await backend.start()
         try:
-            info, payload = synth(store, db, steps=2, step_s=0.0, spin_s=2.5)
+            info, payload = synth(store, db, steps=2, step_s=0.0, spin_s=6.0)
             await backend.submit(info, "synth", payload)
             backend_events.extend(await _collect(backend, info.id))
         finally:
             await backend.close()
 
+    # the engine spins 6 s, past the 4-s idle backstop; the entry is refreshed every 0.2 s, so only
+    # a stall of this process of nearly 4 s could let w2 take the job (1 s did, with a 1-s backstop)
     with (
-        worker_thread(redis_url, store, "w1", reclaim_idle_s=1.0),
-        worker_thread(redis_url, store, "w2", reclaim_idle_s=1.0),
+        worker_thread(redis_url, store, "w1", reclaim_idle_s=4.0),
+        worker_thread(redis_url, store, "w2", reclaim_idle_s=4.0),
     ):
         run(scenario())
     assert backend_events[-1].type == EventType.done

@@ -76,11 +76,13 @@ def hosts(redis_url: str, s3_url: str, tmp_path: Path) -> Iterator[Hosts]:
         env=common | {"SEGUE_DATA_DIR": str(data_dirs["api"])},
         cwd=REPO,
     )
-    # a hung worker: its heartbeat expires after 1 s, a pending entry idle 2 s is taken over
+    # a hung worker: its heartbeat expires after 5 s, a pending entry idle 5 s is taken over (both
+    # refreshed every 0.2 s: a live worker a loaded machine leaves unscheduled for a second keeps its
+    # job; with 1 s and 2 s it could lose it as if it had hung)
     worker_env = {
         "SEGUE_HEARTBEAT_S": "0.2",
-        "SEGUE_HEARTBEAT_TTL_S": "1.0",
-        "SEGUE_RECLAIM_IDLE_S": "2",
+        "SEGUE_HEARTBEAT_TTL_S": "5.0",
+        "SEGUE_RECLAIM_IDLE_S": "5",
         "SEGUE_BLOCK_MS": "100",
         "SEGUE_LOG_LEVEL": "WARNING",
     }
