@@ -3,6 +3,8 @@
 Commands::
 
     segue inspect FILE [--json] [--units U] [--up A]  frames, fps, joints, height, units, up axis (BVH, GLB)
+    segue inspect DIR [--json]                    a database segue build wrote: its summary (clips,
+                                                  labels, skeleton; what a graph build left out)
     segue beats FILE [--json] [--joints A,B] [--positions] [--tempo LO:HI]   motion beats (Kim et al. 2003)
     segue beats SONG.wav [--json] [--tempo-bpm X]      music beats of a recording (WAV, FLAC, Ogg, MP3)
     segue convert IN OUT [--fps N] [--target T]   BVH -> .bvh/.bvh.gz/.glb/.json/.npz
@@ -105,8 +107,14 @@ def build_parser() -> argparse.ArgumentParser:
     from ..demos import DEMOS
 
     units = sorted(UNITS)
-    p = command("inspect", help="frames, fps, joints, height, units and up axis of a BVH or glTF/GLB file")
-    p.add_argument("file", help="BVH file (.bvh, .bvh.gz), glTF file (.glb, .gltf) or sample:NAME")
+    p = command(
+        "inspect",
+        help="frames, fps, joints, height, units and up axis of a BVH or glTF/GLB file; "
+        "the summary of a database folder segue build wrote",
+    )
+    p.add_argument(
+        "file", help="BVH file (.bvh, .bvh.gz), glTF file (.glb, .gltf), sample:NAME, or a database folder"
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--units", choices=units, help="declare the file's length unit instead of guessing")
     p.add_argument(

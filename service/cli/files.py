@@ -47,11 +47,47 @@ UNITS_SOURCES = {
 }
 
 
+def _inspect_database(db_dir: Path, as_json: bool) -> int:
+    """``segue inspect DIR`` of a folder ``segue build`` wrote: its summary (what ``GET
+    /v1/databases/{id}`` says of it once served), every clip a graph build left out included."""
+    from workers.summary import database_dir_summary
+
+    from .jobs import kept_lines
+
+    summary = database_dir_summary(db_dir)
+    if as_json:
+        print(summary.model_dump_json())
+        return 0
+    frames = sum(c.frames for c in summary.clips)
+    sk = summary.skeleton
+    print(f"{db_dir}")
+    print(f"  kind       {summary.kind}")
+    seconds = frames / summary.fps
+    print(f"  clips      {len(summary.clips)}, {frames} frames at {summary.fps:g} fps ({seconds:.1f} s)")
+    print(
+        f"  skeleton   {len(sk.joints)} joints, hips {sk.hips}" + (" (static root)" if sk.static_root else "")
+    )
+    shown = ", ".join(summary.labels[:12]) + (
+        f", ... (+{len(summary.labels) - 12})" if len(summary.labels) > 12 else ""
+    )
+    print(f"  labels     {len(summary.labels)}" + (f": {shown}" if shown else ""))
+    for line in kept_lines(db_dir, limit=None):
+        print(f"  {line}")
+    return 0
+
+
 def cmd_inspect(args: argparse.Namespace) -> int:
     from motion import MotionError
     from motion.io import load_motion
     from motion.retarget.character import GLTF_SUFFIXES, gltf_character, gltf_timing
 
+    if not args.file.startswith(SAMPLE_PREFIX) and Path(args.file).is_dir():
+        db_dir = Path(args.file)
+        if not (db_dir / "spec.json").is_file() or not (db_dir / "data.npz").is_file():
+            raise MotionError(
+                f"{db_dir}: a folder, not a database segue build wrote (no spec.json and data.npz)"
+            )
+        return _inspect_database(db_dir, args.json)
     path = _resolve(args.file)
     timing = None
     if path.name.lower().endswith(GLTF_SUFFIXES):

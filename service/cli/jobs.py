@@ -74,9 +74,10 @@ def cmd_build(args: argparse.Namespace) -> int:
     return 0
 
 
-def kept_lines(db_dir: Path, limit: int = 20) -> list[str]:
+def kept_lines(db_dir: Path, limit: int | None = 20) -> list[str]:
     """What a graph build kept and left out (the ``graph`` part of the database's summary), one
-    line per dropped clip up to ``limit``; no lines for other kinds of database."""
+    line per dropped clip up to ``limit`` (``None``: every one); no lines for other kinds of
+    database."""
     from workers.summary import database_dir_summary
 
     kept = database_dir_summary(db_dir).graph
@@ -88,9 +89,13 @@ def kept_lines(db_dir: Path, limit: int = 20) -> list[str]:
         f"frames ({kept.moving_frames} in locomotion), {kept.leaf_edges} transitions; "
         f"left out {len(kept.dropped)} clips, {kept.dropped_frames} frames" + (":" if kept.dropped else "")
     ]
-    lines += [f"  {d.clip} ({d.frames} frames): {d.reason}" for d in kept.dropped[:limit]]
-    if len(kept.dropped) > limit:
-        lines.append(f"  ... and {len(kept.dropped) - limit} more (GET /v1/databases/{{id}}: summary.graph)")
+    shown = kept.dropped if limit is None else kept.dropped[:limit]
+    lines += [f"  {d.clip} ({d.frames} frames): {d.reason}" for d in shown]
+    if len(kept.dropped) > len(shown):
+        lines.append(
+            f"  ... and {len(kept.dropped) - len(shown)} more (`segue inspect {db_dir}` lists them all; "
+            "served: GET /v1/databases/{id}, summary.graph)"
+        )
     return lines
 
 

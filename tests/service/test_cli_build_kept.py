@@ -17,6 +17,7 @@ from motion.bvh import write_bvh
 from motion.mirror import mirror_map
 from schemas.databases import DatabaseSummary
 from service.cli import main
+from service.cli.jobs import kept_lines
 from tests.motion.synthetic import walking_biped
 from workers.summary import summarize
 
@@ -54,6 +55,18 @@ def test_build_prints_the_kept_component_and_the_summary_holds_it(
     assert summary.graph.moving_frames > 200  # the walks travel
     assert [(d.clip, d.frames) for d in summary.graph.dropped] == [("arms-up", 150)]
     assert summary.graph.dropped_frames == 150 and summary.graph.leaf_edges > 0
+
+    # segue inspect DIR: the same summary, every clip left out listed
+    assert main(["inspect", str(tmp_path / "db"), "--json"]) == 0
+    assert DatabaseSummary.model_validate_json(capsys.readouterr().out) == summary
+    assert main(["inspect", str(tmp_path / "db")]) == 0
+    out = capsys.readouterr().out
+    assert "  kind       graph\n  clips      3, 450 frames at 30 fps (15.0 s)\n" in out
+    assert "    arms-up (150 frames): no transition below tau" in out
+    hint = kept_lines(tmp_path / "db", limit=0)[-1]  # segue build shows 20 and says where the rest are
+    assert hint.startswith("  ... and 1 more (`segue inspect ") and "lists them all" in hint
+    assert main(["inspect", str(tmp_path)]) == 2  # a folder, not a database
+    assert "not a database segue build wrote" in capsys.readouterr().err
 
 
 def build_two_walks(
