@@ -160,6 +160,34 @@ def test_straight_knee_bends_forward_every_frame(bent_frames: int) -> None:
     assert np.allclose(bone_lengths(res.motion), bone_lengths(m), atol=1e-12)
 
 
+def test_toe_never_sinks_below_its_floor_while_its_pin_fades_in() -> None:
+    # heel and toe plant at frame 30, the heel 6 cm lower than it stands (a smoothed cut between
+    # clips of different hip heights): in the fade-in frames the ankle's pin lowers the foot while
+    # the toe turns only part of the way to its own target, which carried the toe through the
+    # floor its target stays above (2.8 cm in a graph output; 0.7 cm here)
+    m = sliding_biped(speed=0.0)
+    pos = m.global_positions()
+    joints = np.array([3, 4])
+    flags = np.zeros((m.num_frames, 2), dtype=bool)
+    flags[30:50] = True
+    heights = pos[:, joints, 1].copy()
+    heights[:, 0] -= 0.06
+    toe_floor = float(pos[:, 4, 1].min())
+    free = solve_foot_skate(m, (joints, flags), heights=heights, floor=np.array([-1.0, -1.0]))
+    sunk = free.motion.global_positions()[:, 4, 1] < toe_floor - 1e-9
+    assert np.flatnonzero(sunk).tolist() == [28, 29, 51]  # the case: without a floor the toe sinks
+    res = solve_foot_skate(m, (joints, flags), heights=heights, floor=np.array([-1.0, toe_floor]))
+    out = res.motion.global_positions()
+    assert out[:, 4, 1].min() >= toe_floor - 1e-9
+    np.testing.assert_allclose(out[sunk, 4, 1], toe_floor, atol=1e-9)  # tilted up just to the floor
+    # only the sinking frames change, and only the ankle's rotation (the foot tilts about it)
+    changed = np.abs(res.motion.rotations - free.motion.rotations).max(axis=2) > 0
+    assert np.array_equal(changed.any(axis=1), sunk)
+    assert np.flatnonzero(changed.any(axis=0)).tolist() == [3]
+    np.testing.assert_allclose(out[:, 3], free.motion.global_positions()[:, 3], atol=1e-12)
+    assert np.allclose(bone_lengths(res.motion), bone_lengths(m), atol=1e-12)
+
+
 def test_out_of_reach_targets_report_residual_and_root_adjust_helps() -> None:
     m = sliding_biped(speed=1.5)  # 30 frames at 1.5 m/s: the foot cannot stay put
     joints = np.array([3])
