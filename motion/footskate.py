@@ -29,9 +29,13 @@ frames, the leg is solved in closed form:
 3. the ankle keeps its original global orientation (the foot does not rotate with the leg), and
    when a toe joint of that foot is pinned too, the foot turns by the shortest arc that brings
    the toe onto its own target. A toe pinned while its ankle is free (heel off) moves the whole
-   foot by the toe's correction instead. With a floor, a toe that would still end below it (its
-   pin only fading in while the ankle's pin lowers the foot, or a foot too short for its two
-   targets) is tilted up about the ankle to the floor (:func:`_lift_toe`).
+   foot by the toe's correction instead. With a floor, a toe that the solved leg still carries
+   below it (its pin only fading in while the ankle's pin lowers the foot, or a foot whose length
+   does not fit its two pinned targets) lifts the whole foot by what it lacks: the leg is solved
+   again with both targets that much higher, so the foot keeps its orientation and its floor
+   position (tilting the foot up instead swung a near-vertical toe sideways: larger joint
+   accelerations at cuts); what the leg cannot reach is tilted up about the ankle
+   (:func:`_lift_toe`).
 
 Only local rotations of hips, knees and ankles change, so bone lengths are exactly preserved;
 the root is untouched unless ``root_adjust`` is set, in which case the root is moved (smoothly,
@@ -446,13 +450,8 @@ def _lift_toe(ankle: Array, foot: Array, floor: float) -> Array:
     """``(N, 4)`` rotations of the foot about its ankle that keep a toe at ``ankle + foot`` (both
     ``(N, 3)``) from ending below ``floor``: identity where it is at or above it, elsewhere the
     shortest arc tilting the foot up (same heading) until the toe is at ``floor`` (as high as it
-    goes when the floor is out of the foot's reach).
-
-    The ankle follows its own target and the foot keeps its orientation; a toe whose pin is only
-    fading in (or not pinned) turns only that fraction of the way to its target, so an ankle
-    lowered by its pin (e.g. a foot planting right after a smoothed cut) would carry the toe
-    through the floor the toe's own target stays above: 2.8 cm in a graph output, against the
-    examples' 0.2 cm."""
+    goes when the floor is out of the foot's reach). The last resort of the floor, where the
+    leg could not lift the ankle as far as the toe needed (:func:`_solve_all`)."""
     q = np.zeros((foot.shape[0], 4))
     q[:, 3] = 1.0
     low = ankle[:, 1] + foot[:, 1] < floor
@@ -508,7 +507,8 @@ def _solve_all(
 ) -> tuple[Array, Array, Array]:
     """Solve every leg; returns new local rotations, reached ankle targets' residuals ``(F, K)``
     and the ankle error vectors ``(F, L, 3)`` (target - reached). ``floor (K,)``: the contact
-    joints' lowest heights; a toe among them never ends lower (:func:`_lift_toe`)."""
+    joints' lowest heights; a toe among them that the solved leg carries lower lifts its whole
+    foot (the ankle target rises with it, so the errors are measured from the lifted targets)."""
     local = np.array(motion.rotations, copy=True)
     n = motion.num_frames
     residual = np.zeros(weight.shape)
@@ -528,19 +528,42 @@ def _solve_all(
         target = pos[frames, leg.ankle] + shift
         toe_target = pos[frames, leg.toe] + corr[frames, leg.toe_slot] if has_t else None
         hinge = hinge_axes(leg, pos, grot, forward)[frames]
+        toe_weight = wt[frames] if has_t else None
         reached, toe_reached = _solve_leg(
-            leg,
-            motion.skeleton,
-            pos,
-            grot,
-            local,
-            frames,
-            target,
-            toe_target,
-            wt[frames] if has_t else None,
-            hinge,
-            float(floor[leg.toe_slot]) if has_t and floor is not None else None,
+            leg, motion.skeleton, pos, grot, local, frames, target, toe_target, toe_weight, hinge
         )
+        if (
+            floor is not None
+            and toe_target is not None
+            and toe_weight is not None
+            and toe_reached is not None
+        ):
+            # a toe the solved leg carries below its floor: the whole foot rises by what it lacks
+            # (ankle and toe targets alike, so the foot keeps its orientation and both keep their
+            # floor position), and what the leg cannot reach is tilted up (_lift_toe)
+            toe_floor = float(floor[leg.toe_slot])
+            sink = toe_reached[:, 1] < toe_floor
+            if sink.any():
+                rise = toe_floor - toe_reached[sink, 1]
+                target, toe_target = target.copy(), toe_target.copy()
+                target[sink, 1] += rise
+                toe_target[sink, 1] += rise
+                lifted, toe_lifted = _solve_leg(
+                    leg,
+                    motion.skeleton,
+                    pos,
+                    grot,
+                    local,
+                    frames[sink],
+                    target[sink],
+                    toe_target[sink],
+                    toe_weight[sink],
+                    hinge[sink],
+                    toe_floor,
+                )
+                reached[sink] = lifted
+                if toe_lifted is not None:
+                    toe_reached[sink] = toe_lifted
         errors[frames, li] = target - reached
         if has_a:
             full = wa[frames] >= 1.0
@@ -589,7 +612,7 @@ def solve_foot_skate(
         joint that would go lower (a blended or smoothed leg swinging through the floor) is lifted
         to it by the same leg IK, height only. The lift is zero where the joint is above, so it
         fades in and out with the joint's own motion. A toe among them that the solved leg would
-        still carry below its floor is tilted up about its ankle (:func:`_lift_toe`).
+        still carry below its floor lifts its whole foot (step 3 of the module docstring).
     fk:
         The motion's :meth:`Motion.fk` (``positions (F, J, 3)``, ``rotations (F, J, 4)``) when the
         caller has it already.
