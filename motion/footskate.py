@@ -29,7 +29,13 @@ frames, the leg is solved in closed form:
 3. the ankle keeps its original global orientation (the foot does not rotate with the leg), and
    when a toe joint of that foot is pinned too, the foot turns by the shortest arc that brings
    the toe onto its own target. A toe pinned while its ankle is free (heel off) moves the whole
-   foot by the toe's correction instead.
+   foot by the toe's correction instead. With a floor, a toe that the solved leg still carries
+   below it (its pin only fading in while the ankle's pin lowers the foot, or a foot whose length
+   does not fit its two pinned targets) lifts the whole foot by what it lacks: the leg is solved
+   again with both targets that much higher, so the foot keeps its orientation and its floor
+   position (tilting the foot up instead swung a near-vertical toe sideways: larger joint
+   accelerations at cuts); what the leg cannot reach is tilted up about the ankle
+   (:func:`_lift_toe`).
 
 Only local rotations of hips, knees and ankles change, so bone lengths are exactly preserved;
 the root is untouched unless ``root_adjust`` is set, in which case the root is moved (smoothly,
@@ -377,10 +383,12 @@ def _solve_leg(
     toe_target: Array | None,
     toe_weight: Array | None,
     hinge: Array,
+    toe_floor: float | None = None,
 ) -> tuple[Array, Array | None]:
     """Solve one leg on ``frames``: write new local rotations into ``local``; return the ankle
     positions reached ``(N, 3)`` and, with a toe, the toe positions reached. ``hinge (N, 3)``: the
-    knee's hinge axis in those frames (:func:`hinge_axes`)."""
+    knee's hinge axis in those frames (:func:`hinge_axes`); ``toe_floor``: the lowest height the
+    toe may end at (:func:`_lift_toe`), none when ``None``."""
     par = skeleton.parents
     h = pos[frames, leg.hip]
     k = pos[frames, leg.knee]
@@ -421,6 +429,10 @@ def _solve_leg(
             q_toe = _scaled_rotation(_arc(foot, _toe_direction(toe_target - reached, foot)), toe_weight)
             g_ankle = rot.multiply(q_toe, g_ankle)
             foot = rot.rotate(q_toe, foot)
+        if toe_floor is not None:
+            q_lift = _lift_toe(reached, foot, toe_floor)
+            g_ankle = rot.multiply(q_lift, g_ankle)
+            foot = rot.rotate(q_lift, foot)
         toe_reached = reached + foot
     g_hip_new = rot.multiply(q_hip, grot[frames, leg.hip])
     hip_parent = grot[frames, par[leg.hip]]
@@ -432,6 +444,30 @@ def _solve_leg(
     ankle_parent_new = rot.multiply(q_hip, rot.multiply(q_knee, grot[frames, par[leg.ankle]]))
     local[frames, leg.ankle] = rot.multiply(rot.inverse(ankle_parent_new), g_ankle)
     return np.asarray(reached), toe_reached
+
+
+def _lift_toe(ankle: Array, foot: Array, floor: float) -> Array:
+    """``(N, 4)`` rotations of the foot about its ankle that keep a toe at ``ankle + foot`` (both
+    ``(N, 3)``) from ending below ``floor``: identity where it is at or above it, elsewhere the
+    shortest arc tilting the foot up (same heading) until the toe is at ``floor`` (as high as it
+    goes when the floor is out of the foot's reach). The last resort of the floor, where the
+    leg could not lift the ankle as far as the toe needed (:func:`_solve_all`)."""
+    q = np.zeros((foot.shape[0], 4))
+    q[:, 3] = 1.0
+    low = ankle[:, 1] + foot[:, 1] < floor
+    if not low.any():
+        return q
+    f = foot[low]
+    length = np.maximum(norms(f), 1e-12)
+    uy = np.clip((floor - ankle[low, 1]) / length, -1.0, 1.0)
+    h = f[:, [0, 2]]
+    hn = norms(h)
+    flat = hn > 1e-9 * length  # a foot pointing straight down has no heading: tilt it along x
+    h = np.where(flat[:, None], h / np.maximum(hn, 1e-300)[:, None], np.array([1.0, 0.0]))
+    side = np.sqrt(np.maximum(1.0 - uy**2, 0.0))
+    up = length[:, None] * np.stack((h[:, 0] * side, uy, h[:, 1] * side), axis=-1)
+    q[low] = _arc(f, up)
+    return q
 
 
 def _toe_direction(to_target: Array, foot: Array) -> Array:
@@ -467,9 +503,12 @@ def _solve_all(
     corr: Array,
     weight: Array,
     forward: Array,
+    floor: Array | None = None,
 ) -> tuple[Array, Array, Array]:
     """Solve every leg; returns new local rotations, reached ankle targets' residuals ``(F, K)``
-    and the ankle error vectors ``(F, L, 3)`` (target - reached)."""
+    and the ankle error vectors ``(F, L, 3)`` (target - reached). ``floor (K,)``: the contact
+    joints' lowest heights; a toe among them that the solved leg carries lower lifts its whole
+    foot (the ankle target rises with it, so the errors are measured from the lifted targets)."""
     local = np.array(motion.rotations, copy=True)
     n = motion.num_frames
     residual = np.zeros(weight.shape)
@@ -489,18 +528,42 @@ def _solve_all(
         target = pos[frames, leg.ankle] + shift
         toe_target = pos[frames, leg.toe] + corr[frames, leg.toe_slot] if has_t else None
         hinge = hinge_axes(leg, pos, grot, forward)[frames]
+        toe_weight = wt[frames] if has_t else None
         reached, toe_reached = _solve_leg(
-            leg,
-            motion.skeleton,
-            pos,
-            grot,
-            local,
-            frames,
-            target,
-            toe_target,
-            wt[frames] if has_t else None,
-            hinge,
+            leg, motion.skeleton, pos, grot, local, frames, target, toe_target, toe_weight, hinge
         )
+        if (
+            floor is not None
+            and toe_target is not None
+            and toe_weight is not None
+            and toe_reached is not None
+        ):
+            # a toe the solved leg carries below its floor: the whole foot rises by what it lacks
+            # (ankle and toe targets alike, so the foot keeps its orientation and both keep their
+            # floor position), and what the leg cannot reach is tilted up (_lift_toe)
+            toe_floor = float(floor[leg.toe_slot])
+            sink = toe_reached[:, 1] < toe_floor
+            if sink.any():
+                rise = toe_floor - toe_reached[sink, 1]
+                target, toe_target = target.copy(), toe_target.copy()
+                target[sink, 1] += rise
+                toe_target[sink, 1] += rise
+                lifted, toe_lifted = _solve_leg(
+                    leg,
+                    motion.skeleton,
+                    pos,
+                    grot,
+                    local,
+                    frames[sink],
+                    target[sink],
+                    toe_target[sink],
+                    toe_weight[sink],
+                    hinge[sink],
+                    toe_floor,
+                )
+                reached[sink] = lifted
+                if toe_lifted is not None:
+                    toe_reached[sink] = toe_lifted
         errors[frames, li] = target - reached
         if has_a:
             full = wa[frames] >= 1.0
@@ -548,7 +611,8 @@ def solve_foot_skate(
         ``(K,)`` the lowest height (motion units) each contact joint may reach, in any frame: a
         joint that would go lower (a blended or smoothed leg swinging through the floor) is lifted
         to it by the same leg IK, height only. The lift is zero where the joint is above, so it
-        fades in and out with the joint's own motion.
+        fades in and out with the joint's own motion. A toe among them that the solved leg would
+        still carry below its floor lifts its whole foot (step 3 of the module docstring).
     fk:
         The motion's :meth:`Motion.fk` (``positions (F, J, 3)``, ``rotations (F, J, 4)``) when the
         caller has it already.
@@ -578,7 +642,7 @@ def solve_foot_skate(
     blend = int(round(blend_s * motion.fps))
     corr, weight = _pin_targets(motion, pos, joints, flags, blend, heights, floor)
     forward = _forward(motion, pos)
-    local, residual, errors = _solve_all(motion, legs, pos, grot, corr, weight, forward)
+    local, residual, errors = _solve_all(motion, legs, pos, grot, corr, weight, forward, floor)
     root_shift = no_shift
     limit = max_root_shift_m / motion.metres_per_unit
     if root_adjust and limit > 0 and residual.max() > 1e-6 * limit:
@@ -586,7 +650,7 @@ def solve_foot_skate(
         pos = pos + root_shift[:, None, :]
         # targets are world positions: the corrections are relative to the shifted pose
         corr -= weight[:, :, None] * root_shift[:, None, :]
-        local, residual, _ = _solve_all(motion, legs, pos, grot, corr, weight, forward)
+        local, residual, _ = _solve_all(motion, legs, pos, grot, corr, weight, forward, floor)
     out = replace(motion, rotations=local, root_positions=motion.root_positions + root_shift)
     return FootSkateResult(out, legs, residual, root_shift)
 

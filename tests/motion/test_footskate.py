@@ -10,7 +10,7 @@ import pytest
 from motion import Motion, MotionError, Skeleton
 from motion import rotations as rot
 from motion.contacts import detect_contacts
-from motion.footskate import leg_chains, pin_corrections, remove_foot_skate, solve_foot_skate
+from motion.footskate import _lift_toe, leg_chains, pin_corrections, remove_foot_skate, solve_foot_skate
 from motion.io import load_motion
 from motion.metrics import foot_slip
 from motion.skeleton import default_channels
@@ -158,6 +158,54 @@ def test_straight_knee_bends_forward_every_frame(bent_frames: int) -> None:
     accel = np.linalg.norm(np.diff(knee, 2, axis=0), axis=-1) * FPS**2
     assert accel.max() < 5.0  # m/s^2: the knee moves smoothly
     assert np.allclose(bone_lengths(res.motion), bone_lengths(m), atol=1e-12)
+
+
+def test_toe_never_sinks_below_its_floor_while_its_pin_fades_in() -> None:
+    # heel and toe plant at frame 30, the heel 6 cm lower than it stands (a smoothed cut between
+    # clips of different hip heights): in the fade-in frames the ankle's pin lowers the foot while
+    # the toe turns only part of the way to its own target, which carried the toe through the
+    # floor its target stays above (2.8 cm in a graph output; 0.7 cm here)
+    m = sliding_biped(speed=0.0)
+    pos = m.global_positions()
+    joints = np.array([3, 4])
+    flags = np.zeros((m.num_frames, 2), dtype=bool)
+    flags[30:50] = True
+    heights = pos[:, joints, 1].copy()
+    heights[:, 0] -= 0.06
+    toe_floor = float(pos[:, 4, 1].min())
+    free = solve_foot_skate(m, (joints, flags), heights=heights, floor=np.array([-1.0, -1.0]))
+    sunk = free.motion.global_positions()[:, 4, 1] < toe_floor - 1e-9
+    assert np.flatnonzero(sunk).tolist() == [28, 29, 51]  # the case: without a floor the toe sinks
+    res = solve_foot_skate(m, (joints, flags), heights=heights, floor=np.array([-1.0, toe_floor]))
+    out, was = res.motion.global_positions(), free.motion.global_positions()
+    assert out[:, 4, 1].min() >= toe_floor - 1e-9
+    np.testing.assert_allclose(out[sunk, 4, 1], toe_floor, atol=1e-3)  # lifted to the floor
+    # only the sinking frames change, and only that leg: the whole foot rises by what the toe
+    # lacked (same orientation, same floor position), it does not tilt
+    changed = np.abs(res.motion.rotations - free.motion.rotations).max(axis=2) > 0
+    assert np.array_equal(changed.any(axis=1), sunk)
+    assert set(np.flatnonzero(changed.any(axis=0))) <= {1, 2, 3}
+    np.testing.assert_allclose(out[:, 4] - out[:, 3], was[:, 4] - was[:, 3], atol=1e-3)
+    np.testing.assert_allclose(out[:, 3, [0, 2]], was[:, 3, [0, 2]], atol=1e-4)
+    rise = out[sunk, 3, 1] - was[sunk, 3, 1]
+    np.testing.assert_allclose(rise, toe_floor - was[sunk, 4, 1], atol=1e-3)
+    assert rise.max() > 0.005
+    assert np.allclose(bone_lengths(res.motion), bone_lengths(m), atol=1e-12)
+
+
+def test_lift_toe_tilts_the_foot_up_to_the_floor() -> None:
+    # the last resort of the toe floor (a leg that cannot lift its ankle as far as the toe needs):
+    # the foot turns about the ankle, keeping its length and heading, until the toe is on the floor
+    ankle = np.array([[0.0, 0.10, 0.0], [0.0, 0.10, 0.0], [0.0, 0.10, 0.0], [0.0, 0.10, 0.0]])
+    foot = np.array([[0.0, -0.08, 0.10], [0.06, -0.12, 0.0], [0.0, -0.13, 0.0], [0.0, -0.02, 0.12]])
+    q = _lift_toe(ankle, foot, 0.05)
+    out = rot.rotate(q, foot)
+    np.testing.assert_allclose(ankle[:3, 1] + out[:3, 1], 0.05, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(out, axis=1), np.linalg.norm(foot, axis=1), atol=1e-12)
+    np.testing.assert_allclose(out[0, [0, 2]] / np.linalg.norm(out[0, [0, 2]]), [0.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(out[1, [0, 2]] / np.linalg.norm(out[1, [0, 2]]), [1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(q[3], rot.IDENTITY)  # above the floor: untouched
+    assert np.isfinite(q).all()  # a foot pointing straight down (row 2) turns too
 
 
 def test_out_of_reach_targets_report_residual_and_root_adjust_helps() -> None:
