@@ -4,6 +4,7 @@ written before records were (owners as a plain list) still read, with the shared
 
 from __future__ import annotations
 
+import io
 import json
 import threading
 import time
@@ -13,6 +14,8 @@ from typing import Any
 
 from fastapi.testclient import TestClient
 
+from motion.bvh import write_bvh
+from tests.motion.synthetic import walking_biped
 from workers.settings import Settings
 
 from .test_api_bounded import _bvh
@@ -75,10 +78,15 @@ def test_a_spec_posted_by_another_principal_gets_its_own_name_and_no_foreign_bui
     client: TestClient, override_settings: Callable[..., Settings]
 ) -> None:
     alice, bob = _principals(override_settings)
-    data = _bvh(1.5678)  # its own bytes: other tests' principals hold the bundled samples
+    # its own bytes (other tests' principals hold the bundled samples), a walk whose graph builds:
+    # bob's post finds alice's database queued, building or ready (200) whenever it comes; with a
+    # clip whose build fails, a build that failed before bob's post was rebuilt for him (202)
+    buf = io.StringIO()
+    write_bvh(walking_biped(90, seed=15678), buf)
+    data = buf.getvalue().encode()
     clip = _upload(client, "/v1/clips", "db-clip.bvh", data, alice).json()
     _upload(client, "/v1/clips", "db-clip.bvh", data, bob)
-    clips = [{"clip": clip["id"], "name": "owners-test-clip"}]
+    clips = [{"clip": clip["id"], "name": "owners-test-clip", "units": "m"}]
     first = client.post(
         "/v1/databases", json={"kind": "graph", "name": "alice-db", "clips": clips}, headers=alice
     )
