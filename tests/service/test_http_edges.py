@@ -30,12 +30,17 @@ def _ready(client: TestClient, spec: dict[str, Any]) -> dict[str, Any]:
 
 
 def test_a_result_asked_for_before_the_first_solution_is_409_with_the_status(
-    client: TestClient, walk_db: dict[str, Any]
+    client: TestClient, walk_db: dict[str, Any], tmp_path: Path
 ) -> None:
-    job = submit(client, {"engine": "scripted", "database": walk_db["id"], "steps": 1, "step_s": 0.5})
+    # the engine waits for a file before its first step, so no solution exists until the test
+    # makes it, however loaded the machine
+    go = tmp_path / "go"
+    request = {"engine": "scripted", "database": walk_db["id"], "steps": 1, "budget_s": 120}
+    job = submit(client, request | {"go_file": str(go)})
     for path in ("result", "report"):
         err = error_of(client.get(f"/v1/jobs/{job['id']}/{path}"), 409, "result_not_ready")
         assert err["details"]["status"] in ("queued", "running") and "no result yet" in err["message"]
+    go.touch()
     assert wait_events(client, job["id"])[-1]["type"] == "done"
     assert client.get(f"/v1/jobs/{job['id']}/result").status_code == 200
     # a job that ended without a result is still a 404 (there is nothing to wait for)
