@@ -139,8 +139,10 @@ def test_the_supervisor_stops_a_job_over_its_memory(store: Store) -> None:
     db = add_database(store)
     process, seen = _supervised(store, max_rss_bytes=1)  # any process is over one byte
     try:
-        payload = {"request": {"engine": "scripted", "database": db, "steps": 50, "step_s": 0.1}}
-        assert process.run(Task("j1", "synth", payload))
+        # the engine waits for a file that never comes (120-s hang guard): stopped by the limit alone
+        never = str(store.root / "never")
+        request = {"engine": "scripted", "database": db, "steps": 1, "go_file": never, "budget_s": 120}
+        assert process.run(Task("j1", "synth", {"request": request}))
         wait_for(lambda: any(t == "end" for t, _ in seen))
         assert ("end", "memory_limit") in seen
     finally:
