@@ -186,17 +186,23 @@ def test_load_clip_and_play(page: Any) -> None:
     # the page's fast BVH reader (used for results) agrees with three.js's BVHLoader (used here)
     agree = page.evaluate(
         """async () => {
-          const { parseBvh, parseBvhText, bvhText } = await import('./js/bvh.js');
+          const { parseBvh, parseBvhText, bvhText, skeletonJoints } = await import('./js/bvh.js');
           const bytes = await (await fetch('/samples/07_01_walk_daz.bvh.gz')).arrayBuffer();
           const a = await parseBvh(bytes, 'a', 'cmu');
           const b = parseBvhText(await bvhText(bytes), 'b', 0.0254 / 0.45);
           let err = 0;
           a.positions.forEach((v, i) => { err = Math.max(err, Math.abs(v - b.positions[i])); });
           const joints = [a.joints.length, b.joints.length];
-          return { err, frames: [a.frames, b.frames], joints, fps: b.fps };
+          const sites = [a.sites.filter(Boolean).length, b.sites.filter(Boolean).length];
+          const skeleton = [skeletonJoints(a).join(), skeletonJoints(b).join()];
+          return { err, frames: [a.frames, b.frames], joints, sites, skeleton, fps: b.fps };
         }"""
     )
     assert agree["frames"] == [317, 317] and agree["joints"][0] == agree["joints"][1] == 57
+    # 43 joints and 14 End Sites; without them, the skeleton the API lists (its clip's joints)
+    assert agree["sites"] == [14, 14] and agree["skeleton"][0] == agree["skeleton"][1]
+    walk = next(c for c in s["clips"] if c["name"] == f"{WALK}.bvh.gz")
+    assert agree["skeleton"][0].split(",") == walk["joints"]
     assert agree["err"] < 1e-4 and agree["fps"] == pytest.approx(120)
     page.select_option("#speed", "2")
     page.click("#play")
@@ -478,6 +484,9 @@ def test_partner_follower_spots(page: Any, segue: SegueClient) -> None:
     page.click("#tabs button[data-tool='partner']")
     select_database(page, "partner-db", db)
     page.select_option("#partner-clip", LEADER12)
+    # drawn, with no skeleton error: the page's parse lists End Sites, the summary's skeleton not
+    wait(page, f"s.partner.drawn === '{LEADER12}'")
+    assert page.text_content("#err-partner") == ""
     wait(page, "document.querySelector('#partner-spots-info').textContent === 'no spots'")
     box = page.locator("#partner-pad").bounding_box()
     for fx, fy in ((0.3, 0.35), (0.7, 0.6)):

@@ -2,7 +2,7 @@
 // on the public API. window.__segue mirrors the page's state for tests (assert on state, not pixels).
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { api, ApiError, followJob, getToken, setToken } from './api.js';
-import { bvhText, METRES_PER_UNIT, parseBvh, parseBvhText } from './bvh.js';
+import { bvhText, METRES_PER_UNIT, parseBvh, parseBvhText, skeletonJoints } from './bvh.js';
 import { placeJoint, Viewer } from './viewer.js';
 import { FloorPad, headingDeg } from './pad.js';
 import { setupMusic } from './music.js';
@@ -865,7 +865,7 @@ tools.partner = (() => {
   let result = [];
   let shownLeader = null; // the picker value whose path is drawn
   let leaderLoading = false;
-  state.partner = { spots: [], bodies: null, offered: null, leaders: [] };
+  state.partner = { spots: [], bodies: null, offered: null, leaders: [], drawn: null };
   // test hook: where a floor point [x, z] is on the pad, as fractions of its width and height
   state.partner.padFraction = (p) => { const [x, y] = pad.toPixels(p); return [x / canvas.width, y / canvas.height]; };
   const info = (name) => state.clips.find((c) => clipName(c) === name);
@@ -978,10 +978,12 @@ tools.partner = (() => {
     shownLeader = $('partner-clip').value;
     const motion = name ? await leaderMotion(name) : null;
     const summary = summaryOf($('partner-db').value);
-    if (motion && summary && motion.joints.join('\n') !== summary.skeleton.joints.join('\n')) {
-      throw new ApiError(0, 'wrong_skeleton', `the leader ${name} has another skeleton than the database's (${motion.joints.length} joints, not ${summary.skeleton.joints.length})`);
+    const joints = motion ? skeletonJoints(motion) : [];
+    if (motion && summary && joints.join('\n') !== summary.skeleton.joints.join('\n')) {
+      throw new ApiError(0, 'wrong_skeleton', `the leader ${name} has another skeleton than the database's (${joints.length} joints, not ${summary.skeleton.joints.length})`);
     }
     leaderPath = motion ? rootPath(motion) : [];
+    state.partner.drawn = motion ? name : null; // the leader on the pad (tests wait on it)
     if (leaderPath.length) {
       const mean = (k) => leaderPath.reduce((acc, p) => acc + p[k], 0) / leaderPath.length;
       pad.center = [mean(0), mean(1)];

@@ -19,7 +19,9 @@ export async function bvhText(bytes) {
 }
 
 // bytes: ArrayBuffer of a .bvh or .bvh.gz; units: the service's unit for the clip (default: metres
-// guessed from height when unknown). Returns {name, fps, joints, parents, frames, positions}.
+// guessed from height when unknown). Returns {name, fps, joints, parents, frames, positions, sites}:
+// `joints` lists every drawn point, End Sites included (named `<parent>_end`); `sites[j]` is true
+// for those (skeletonJoints gives the joints alone, as the API lists a skeleton's).
 export async function parseBvh(bytes, name, units) {
   const text = await bvhText(bytes);
   const { skeleton, clip } = new BVHLoader().parse(text);
@@ -28,6 +30,7 @@ export async function parseBvh(bytes, name, units) {
   const index = new Map(bones.map((b, i) => [b, i]));
   const parents = bones.map((b) => (index.has(b.parent) ? index.get(b.parent) : -1));
   const joints = bones.map((b) => (b.name === 'ENDSITE' ? `${b.parent ? b.parent.name : ''}_end` : b.name));
+  const sites = bones.map((b) => b.name === 'ENDSITE');
   const byName = new Map(bones.filter((b) => b.name !== 'ENDSITE').map((b) => [b.name, b]));
   const tracks = clip.tracks
     .map((t) => {
@@ -67,13 +70,13 @@ export async function parseBvh(bytes, name, units) {
     scale = GUESSED_UNITS.map((u) => METRES_PER_UNIT[u]).reduce((best, s) => (Math.abs(Math.log((h * s) / 1.7)) < Math.abs(Math.log((h * best) / 1.7)) ? s : best), 1);
   }
   for (let i = 0; i < positions.length; i++) positions[i] *= scale;
-  return { name, fps, joints, parents, frames: F, positions };
+  return { name, fps, joints, parents, frames: F, positions, sites };
 }
 
 // A fast BVH reader for the service's results (thousands of frames): the same motion as parseBvh
 // (position channels replace the joint's offset, as motion/bvh.py reads them; rotation channels
 // are intrinsic Euler angles in file order, degrees) without building three.js animation tracks.
-// Joint order: depth first, each joint followed by its End Site (as parseBvh).
+// Joint order: depth first, each joint followed by its End Site (as parseBvh); `sites` marks those.
 export function parseBvhText(text, name, scale = 1) {
   const tok = text.split(/\s+/).filter(Boolean);
   let i = 0;
@@ -83,6 +86,7 @@ export function parseBvhText(text, name, scale = 1) {
   };
   expect('HIERARCHY');
   const joints = [];
+  const sites = [];
   const parents = [];
   const offsets = [];
   const channels = []; // per joint: [{slot, kind: 0 pos / 1 rot, axis 0..2}]
@@ -92,12 +96,14 @@ export function parseBvhText(text, name, scale = 1) {
     const t = tok[i++];
     if (t === 'ROOT' || t === 'JOINT') {
       joints.push(tok[i++]);
+      sites.push(false);
       parents.push(stack.length ? stack[stack.length - 1] : -1);
       offsets.push([0, 0, 0]);
       channels.push([]);
     } else if (t === 'End') {
       i++; // Site
       joints.push(`${joints[stack[stack.length - 1]]}_end`);
+      sites.push(true);
       parents.push(stack[stack.length - 1]);
       offsets.push([0, 0, 0]);
       channels.push([]);
@@ -178,7 +184,7 @@ export function parseBvhText(text, name, scale = 1) {
       positions[o + 2] = gp[j * 3 + 2] * scale;
     }
   }
-  return { name, fps: dt > 0 ? 1 / dt : 30, joints, parents, frames: F, positions };
+  return { name, fps: dt > 0 ? 1 / dt : 30, joints, parents, frames: F, positions, sites };
 }
 
 // Global joint positions of frames given as root positions (n, 3) and local rotations (n, J, 4)
@@ -213,4 +219,10 @@ export function forwardKinematics(parents, offsets, root, rotations) {
     }
   }
   return out;
+}
+
+// A parsed motion's joints without its End Sites: its skeleton as the API lists it (a clip's
+// `joints`, a database summary's `skeleton.joints`), to compare skeletons by.
+export function skeletonJoints(motion) {
+  return motion.sites ? motion.joints.filter((_, j) => !motion.sites[j]) : motion.joints;
 }
