@@ -562,8 +562,10 @@ def rhythm_db(segue: SegueClient) -> str:
 
 
 def _steer(page: Any, x: float, y: float) -> None:
+    """Point the music pad at ``(x, y)`` of its box in one move: a move in steps passes through
+    headings in between, which a beat may record while this process is slow to send the rest."""
     box = page.locator("#music-pad").bounding_box()
-    page.mouse.move(box["x"] + box["width"] * x, box["y"] + box["height"] * y, steps=3)
+    page.mouse.move(box["x"] + box["width"] * x, box["y"] + box["height"] * y, steps=1)
 
 
 def test_music_live_session(page: Any, rhythm_db: str) -> None:
@@ -611,8 +613,10 @@ def test_music_midi_job_beats(page: Any, rhythm_db: str) -> None:
     page.fill("#music-bpm", "150")
     page.fill("#music-seconds", "4")
     page.click("#music-go")
-    _steer(page, 0.85, 0.5)
-    wait(page, "s.music.directions && s.music.directions.length >= 1")  # keyed on a beat; then the other way
+    wait(page, "s.music.running")  # the metronome runs (the pad steers only then)
+    _steer(page, 0.85, 0.5)  # towards +X
+    headed = "s.music.directions.some((d) => Math.round(d.heading_deg) === 90)"
+    wait(page, headed)  # keyed on a beat; then the other way
     _steer(page, 0.5, 0.85)
     wait(page, "s.current && s.current.tool === 'music'")
     wait(page, f"['done', 'cancelled'].includes(s.job.status) && {BEST_DRAWN}")
