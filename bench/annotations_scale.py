@@ -119,8 +119,6 @@ def stages(marks: list[tuple[str, float, float]], c0: float, c1: float) -> dict[
 
 def build_one(frames: int, kind: str, per_label: int, spec_extra: dict[str, Any]) -> dict[str, Any]:
     """Build the library of ``frames`` as a worker does and measure it (module docstring)."""
-    from engines.base import foot_floor_arrays
-    from engines.library import library_to_arrays
     from engines.registry import kind_class, parse_database_spec
     from motion.allocator import tune_process
     from workers.store import npz_bytes
@@ -137,12 +135,7 @@ def build_one(frames: int, kind: str, per_label: int, spec_extra: dict[str, Any]
     spec = parse_database_spec({"kind": kind, "clips": clips, **spec_extra})
     rec = StageEmitter()
     c0, t0 = time.process_time(), time.perf_counter()
-    extra = engine.build(spec, library, rec, lambda: False)  # type: ignore[arg-type]
-    arrays = library_to_arrays(library)
-    arrays.update(extra)
-    del extra
-    arrays.update(engine.quality_reference_of(library, arrays).to_arrays())
-    arrays.update(foot_floor_arrays(library, engine.example_clips(library, arrays)))
+    arrays = engine.library_arrays(spec, library, rec, lambda: False)  # type: ignore[arg-type]
     build_cpu, build_s = time.process_time() - c0, time.perf_counter() - t0
     peak = rss_mb()
     disk = len(npz_bytes(arrays))

@@ -143,19 +143,13 @@ def recall(library: Any, arrays: dict[str, Any]) -> dict[str, float]:
 def build_arrays(library: Any, candidates: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """What ``workers.execute.build_database_bytes`` stores for the library (in its order), and the
     build's figures (CPU over all threads, wall)."""
-    from engines.base import CollectingEmitter, foot_floor_arrays
+    from engines.base import CollectingEmitter
     from engines.graph.engine import GraphEngine
-    from engines.library import library_to_arrays
     from engines.registry import parse_database_spec
 
     spec = parse_database_spec({"kind": "graph", "clips": [{"bvh": "x.bvh"}], "candidates": candidates})
     c0, t0 = time.process_time(), time.perf_counter()
-    extra = GraphEngine.build(spec, library, CollectingEmitter(), lambda: False)
-    arrays = library_to_arrays(library)
-    arrays.update(extra)
-    del extra
-    arrays.update(GraphEngine.quality_reference_of(library, arrays).to_arrays())
-    arrays.update(foot_floor_arrays(library, GraphEngine.example_clips(library, arrays)))
+    arrays = GraphEngine.library_arrays(spec, library, CollectingEmitter(), lambda: False)
     build_cpu, build_s = time.process_time() - c0, time.perf_counter() - t0
     report = json.loads(str(arrays["graph.report"]))
     figures: dict[str, Any] = {
@@ -245,6 +239,24 @@ def cpu_emitter() -> Any:
     return CpuEmitter()
 
 
+def body_goal_request(
+    frames: int, seed: int, budget: float, goal: tuple[float, float, float]
+) -> dict[str, Any]:
+    """A graph request of ``frames`` frames from the origin facing +Z to the body goal ``goal =
+    (x, z, heading_deg)`` (metres, degrees) at its last frame (the benches' far and near goals)."""
+    x, z, heading = goal
+    return {
+        "engine": "graph",
+        "frames": frames,
+        "seed": seed,
+        "budget_s": budget,
+        "constraints": [
+            {"type": "body", "frame": 0, "position": [0.0, 0.0], "heading_deg": 0.0},
+            {"type": "body", "frame": frames - 1, "position": [x, z], "heading_deg": heading},
+        ],
+    }
+
+
 def search_one(path: Path, seeds: list[int], seconds: float, goal_m: float, budget: float) -> dict[str, Any]:
     """Load a kept database as an engine process does and answer the far-goal request once per
     seed (module docstring); the figures of the first seed, and every seed's verdict."""
@@ -268,18 +280,7 @@ def search_one(path: Path, seeds: list[int], seconds: float, goal_m: float, budg
     n = round(seconds * 30)
     verdicts = []
     for seed in seeds:
-        request = parse_job_request(
-            {
-                "engine": "graph",
-                "frames": n,
-                "seed": seed,
-                "budget_s": budget,
-                "constraints": [
-                    {"type": "body", "frame": 0, "position": [0.0, 0.0], "heading_deg": 0.0},
-                    {"type": "body", "frame": n - 1, "position": [goal_m, 0.0], "heading_deg": 90.0},
-                ],
-            }
-        )
+        request = parse_job_request(body_goal_request(n, seed, budget, (goal_m, 0.0, 90.0)))
         searcher = engine.searcher(request.seed)
         rec = cpu_emitter()
         t0, c0 = time.perf_counter(), time.process_time()

@@ -65,7 +65,7 @@ def library(kind: str) -> Any:
 
 
 def run(kind: str, seeds: list[int]) -> dict[str, Any]:
-    from graph_scale import build_arrays
+    from graph_scale import body_goal_request, build_arrays
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
     from engines.base import CollectingEmitter
@@ -86,18 +86,7 @@ def run(kind: str, seeds: list[int]) -> dict[str, Any]:
     for name, (x, z, h, n) in REQUESTS.items():
         rows = []
         for seed in seeds:
-            request = parse_job_request(
-                {
-                    "engine": "graph",
-                    "frames": n,
-                    "seed": seed,
-                    "budget_s": 300.0,
-                    "constraints": [
-                        {"type": "body", "frame": 0, "position": [0.0, 0.0], "heading_deg": 0.0},
-                        {"type": "body", "frame": n - 1, "position": [x, z], "heading_deg": h},
-                    ],
-                }
-            )
+            request = parse_job_request(body_goal_request(n, seed, 300.0, (x, z, h)))
             rec = CollectingEmitter()
             c0 = time.process_time()
             with threadpool_limits(limits=1, user_api="blas"):

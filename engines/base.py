@@ -447,6 +447,16 @@ class Engine(ABC, Generic[RequestT, SpecT]):
         if should_stop():
             raise InterruptedError("build cancelled")
         emit.progress(0.5, f"{library.total_frames} frames at {library.fps:g} fps")
+        return cls.library_arrays(spec, library, emit, should_stop), library
+
+    @classmethod
+    def library_arrays(
+        cls, spec: SpecT, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
+    ) -> Arrays:
+        """The arrays of a database of ``spec`` on ``library`` (as :meth:`library_for` gives it):
+        the library's, the kind's :meth:`build`, the examples' quality reference and foot floor
+        (what :meth:`build_database` stores; the benches build libraries of their own with it).
+        Raises :class:`InterruptedError` once ``should_stop()``."""
         extra = cls.build(spec, library, emit, should_stop)
         if should_stop():
             raise InterruptedError("build cancelled")
@@ -455,7 +465,7 @@ class Engine(ABC, Generic[RequestT, SpecT]):
         emit.progress(0.99, "measuring the examples (quality reference)")
         arrays.update(cls.quality_reference_of(library, arrays).to_arrays())
         arrays.update(foot_floor_arrays(library, cls.example_clips(library, arrays)))
-        return arrays, library
+        return arrays
 
     @classmethod
     def build(cls, spec: SpecT, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
