@@ -71,7 +71,7 @@ def _inspect_database(db_dir: Path, as_json: bool) -> int:
         f", ... (+{len(summary.labels) - 12})" if len(summary.labels) > 12 else ""
     )
     print(f"  labels     {len(summary.labels)}" + (f": {shown}" if shown else ""))
-    for line in kept_lines(db_dir, limit=None):
+    for line in kept_lines(db_dir, limit=None, summary=summary):
         print(f"  {line}")
     return 0
 

@@ -16,6 +16,7 @@ from ..summaries import quality_summary
 
 if TYPE_CHECKING:
     from schemas import JobEvent
+    from schemas.databases import DatabaseSummary
 
 
 def _validation_message(exc: Any) -> str:
@@ -74,13 +75,13 @@ def cmd_build(args: argparse.Namespace) -> int:
     return 0
 
 
-def kept_lines(db_dir: Path, limit: int | None = 20) -> list[str]:
-    """What a graph build kept and left out (the ``graph`` part of the database's summary), one
-    line per dropped clip up to ``limit`` (``None``: every one); no lines for other kinds of
-    database."""
+def kept_lines(db_dir: Path, limit: int | None = 20, summary: DatabaseSummary | None = None) -> list[str]:
+    """What a graph build kept and left out (the ``graph`` part of the database's summary, read
+    from ``db_dir`` unless given), one line per dropped clip up to ``limit`` (``None``: every one);
+    no lines for other kinds of database."""
     from workers.summary import database_dir_summary
 
-    kept = database_dir_summary(db_dir).graph
+    kept = (summary or database_dir_summary(db_dir)).graph
     if kept is None:
         return []
     total = kept.kept_frames + kept.dropped_frames
