@@ -243,6 +243,18 @@ def detect_units(motion: Motion, up: int | None = 1) -> UnitGuess:
     return guess_units(standing_height(points, up_axis(points) if up is None else up))
 
 
+def height_m(motion: Motion, up: int | None = 1) -> float:
+    """The motion's height in metres, Segue's one definition of it (inspect, retarget, a clip's
+    ``height_m``): its standing height (:func:`motion.units.standing_height`: the median over
+    frames of the vertical extent of joints and End Sites, on about 240 frames) along ``up`` (as
+    :func:`detect_units`), converted with the motion's unit (a motion of unknown unit: its
+    guessed one). A one-frame motion (a character's rest pose) is measured on that frame."""
+    guess = detect_units(motion, up)
+    if motion.units == "unknown":
+        return guess.height_m
+    return guess.height * motion.metres_per_unit
+
+
 def detect_up_axis(motion: Motion) -> int:
     """The vertical axis of a motion's file (1: Y, 2: Z; :func:`motion.units.up_axis`)."""
     step = _unit_step(motion.num_frames)

@@ -32,12 +32,24 @@ class ClipSource(Strict):
 
     ``bvh`` names the motion: in a spec file for the CLI, a path relative to the spec file; through the
     API, the file name of an uploaded clip (or ``clip`` gives an uploaded clip's id); anywhere,
-    ``sample:NAME`` for a bundled sample (``segue samples``). ``name`` is how reports refer to the clip
-    (default: the file name without ``.bvh``, or the sample's NAME).
+    ``sample:NAME`` for a bundled sample (``segue samples``). The file may be a glTF/GLB file with a
+    skin and an animation (``animation`` picks one of several; ``segue inspect`` lists them). ``name``
+    is how reports refer to the clip (default: the file name without ``.bvh``/``.glb``/``.gltf``, or
+    the sample's NAME).
     """
 
-    bvh: str | None = Field(default=None, min_length=1, max_length=1024, examples=["60_01_scaled.bvh"])
+    bvh: str | None = Field(
+        default=None,
+        min_length=1,
+        max_length=1024,
+        examples=["60_01_scaled.bvh"],
+        description="the motion file: BVH (.bvh, .bvh.gz) or glTF with a skin and an animation (.glb, .gltf)",
+    )
     clip: str | None = Field(default=None, description="id of an uploaded clip (API only)")
+    animation: str | int | None = Field(
+        default=None,
+        description="which animation of a glTF clip, by name or index (default: its first); BVH: none",
+    )
     name: str | None = Field(default=None, min_length=1, max_length=128)
     labels: list[LabelRange] = Field(default_factory=list)
     units: str | None = Field(default=None, description="declared length unit of the file (default: guessed)")
@@ -64,7 +76,7 @@ class ClipSource(Strict):
             return self.name
         base = (self.bvh or self.clip or "clip").replace("\\", "/").rsplit("/", 1)[-1]
         base = base.removeprefix("sample:")
-        for suffix in (".gz", ".bvh"):
+        for suffix in (".gz", ".bvh", ".glb", ".gltf"):
             base = base.removesuffix(suffix)
         return base
 
@@ -92,6 +104,19 @@ class ClipInfo(Strict):
     fps: float
     joints: list[str]
     units: str
-    height_m: float
+    height_m: float = Field(
+        description="standing height of the motion in metres (the median over frames of its vertical extent)"
+    )
     size_bytes: int
     created_at: datetime
+    format: str = Field(default="bvh", description="bvh, or gltf (a GLB or .gltf file's animation)")
+    animations: list[str] = Field(
+        default_factory=list,
+        description="glTF: every animation of the file (a database spec's 'animation' picks one); "
+        "the frames, rate and height above are of the first",
+    )
+    warnings: list[str] = Field(
+        default_factory=list,
+        description="what the file needed to be read (e.g. 'line 128: Frames: 3069, but the file holds 3070 "
+        "frame lines: read 3070'): it was read, and these say how",
+    )

@@ -48,7 +48,9 @@ import numpy as np
 
 from engines.base import container
 from motion import Motion, MotionError
-from motion.bvh import BvhLimits, detect_units, parse_bvh
+from motion.bvh import BvhLimits, detect_units
+from motion.errors import ReadWarning
+from motion.io import parse_motion
 from motion.serialize import motion_from_arrays, motion_to_arrays
 from schemas import ClipInfo, DatabaseInfo, JobInfo, Report
 from schemas.files import FileInfo
@@ -185,9 +187,12 @@ class Store:
     def put_clip(
         self, name: str, data: bytes, limits: BvhLimits | None = None, units: str | None = None
     ) -> ClipInfo:
-        """Validate and store an uploaded clip; the same bytes are stored once (content address).
+        """Validate and store an uploaded clip (BVH, or a glTF file's first animation); the same
+        bytes are stored once (content address). The info carries the reader's warnings (what the
+        file needed to be read) and a glTF file's animations.
 
-        Raises :class:`motion.MotionError` (a ``BvhError``) for invalid content; nothing is written then.
+        Raises :class:`motion.MotionError` (a ``BvhError`` for BVH) for invalid content; nothing
+        is written then.
         """
         digest = hashlib.sha256(data).hexdigest()
         key = f"clips/{digest}.json"
@@ -195,8 +200,14 @@ class Store:
             return ClipInfo.model_validate_json(self.objects.get(key))
         except ObjectNotFound:
             pass
-        motion = parse_bvh(data, units=units, limits=limits, source=name, name=name)
+        notes: list[ReadWarning] = []
+        motion = parse_motion(data, units=units, limits=limits, source=name, name=name, warnings=notes)
         guess = detect_units(motion)
+        animations: list[str] = []
+        from motion.gltf import gltf_animations, is_gltf
+
+        if is_gltf(data):
+            animations = [a.name for a in gltf_animations(data, source=name)]
         info = ClipInfo(
             id=digest,
             name=name,
@@ -207,6 +218,9 @@ class Store:
             height_m=round(guess.height * motion.metres_per_unit, 4),
             size_bytes=len(data),
             created_at=now(),
+            format="gltf" if animations else "bvh",
+            animations=animations,
+            warnings=[w.message for w in notes],
         )
         self.objects.put(f"clips/{digest}.bvh", data)
         if not self.objects.put(key, info.model_dump_json().encode(), if_absent=True):

@@ -52,9 +52,22 @@ def test_glb_is_read_with_its_animation_timing(exports: Path, capsys: pytest.Cap
     # sample:walk's 317 frames less the 4 of its reference-pose lead (dropped from samples on convert)
     assert glb["frames"] == 313 and glb["fps"] == 120.0 and glb["duration_s"] == pytest.approx(312 / 120)
     assert glb["units"] == "m" and glb["units_source"] == "gltf" and glb["up"] == "y"
-    assert glb["joints"][:2] == ["ground", "hip"] and len(glb["joints"]) == 44  # type: ignore[index,arg-type]
-    # the skin's bind pose, standing straight: within a few centimetres of the walk's 1.49 m
-    assert glb["height_m"] == pytest.approx(1.49, abs=0.06)
+    # the animation's own joints: Segue's ground root (for game engines) is folded back into the hips
+    assert glb["joints"][:2] == ["hip", "abdomen"] and len(glb["joints"]) == 43  # type: ignore[index,arg-type]
+    assert glb["animations"] == [
+        {
+            "index": 0,
+            "name": "07_01_walk_daz",
+            "frames": 313,
+            "fps": 120.0,
+            "duration_s": pytest.approx(312 / 120),
+        }
+    ]
+    # one height (issue 39): the motion's standing height, the BVH's and its GLB's alike (it read
+    # the GLB's bind pose, 5 cm taller, before)
+    bvh_out = exports / "walk_again.bvh"
+    assert main(["convert", "sample:walk", str(bvh_out), "-q"]) == 0
+    assert glb["height_m"] == pytest.approx(inspect(capsys, str(bvh_out))["height_m"], abs=1e-4)
     assert main(["inspect", str(exports / "walk.glb")]) == 0
     assert "glTF files are in metres" in capsys.readouterr().out
     assert main(["inspect", str(exports / "walk.glb"), "--units", "cm"]) == 2
