@@ -498,6 +498,13 @@ class Engine(ABC, Generic[RequestT, SpecT]):
         return frames
 
     @classmethod
+    def spec_problems(cls, spec: SpecT, frames: dict[str, int], fps: float) -> list[str]:
+        """What the build of ``spec`` would refuse, found from its clips' lengths alone: ``frames``
+        by clip name at the database rate ``fps``; one sentence each (none by default). The
+        service refuses such a spec at submission (422) instead of failing its build later."""
+        return []
+
+    @classmethod
     def build_work(cls, spec: SpecT, frames: int) -> BuildWork | None:
         """Estimated CPU time and peak memory of building a database of ``frames`` frames (at its
         rate) with ``spec``; ``None`` when the engine gives no estimate (then the service's frame

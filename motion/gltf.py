@@ -30,8 +30,9 @@ Poses
     channels and carries it per frame, so joint positions are exact either way. A non-uniform
     scale cannot be represented (rotations are read without it; a warning says so).
 Segue's own GLBs
-    The ``ground`` root Segue adds for game engines' root motion (:func:`motion.ground.add_ground_root`)
-    is folded back into the body root below it, and an in-place file's static ``origin`` root
+    The ``ground`` root Segue adds for game engines' root motion
+    (:func:`motion.ground.add_ground_root`; ``cN_ground`` for each character of a crowd) is folded
+    back into the body root below it, and an in-place file's static ``origin`` root
     (:mod:`motion.export.glb`) likewise: ``segue convert walk.bvh walk.glb`` then ``walk.glb
     back.bvh`` gives the joints, End Sites and frames of ``walk.bvh`` (positions within 1e-6 m:
     GLB holds float32).
@@ -277,7 +278,8 @@ def _sample(doc: _Doc, sampler: dict[str, Any], path: str, grid: Array) -> Array
     if n == 1:
         out = np.repeat(v[:1], grid.size, axis=0)
     elif mode == "STEP":
-        k = np.clip(np.searchsorted(times, grid + 1e-9 * (1.0 + np.abs(grid)), side="right") - 1, 0, n - 1)
+        # key times are float32: a frame within a microsecond of a key is at that key
+        k = np.clip(np.searchsorted(times, grid + 1e-6, side="right") - 1, 0, n - 1)
         out = v[k]
     else:
         k = np.clip(np.searchsorted(times, grid, side="right") - 1, 0, n - 2)
@@ -530,7 +532,8 @@ def _as_motion(
 
 def _without_segue_roots(motion: Motion) -> Motion:
     """The motion without the roots Segue's GLB export adds (module docstring): a ``ground`` root
-    with one child joint, or an ``origin`` root over ``ground`` and the body (in place)."""
+    (``cN_ground`` for a character of a crowd) with one child joint, or an ``origin`` root over
+    ``ground`` and the body (in place)."""
     from .ground import GROUND_ROOT_NAME
 
     sk = motion.skeleton
@@ -542,7 +545,8 @@ def _without_segue_roots(motion: Motion) -> Motion:
             pos, grot = motion.fk()
             keep = [j for j in range(sk.num_joints) if j not in (0, ground)]
             return _rerooted(motion, keep, body, _compose(pos, grot, ground, body, motion))
-    if names[0] == GROUND_ROOT_NAME and len(kids) == 1 and int(np.count_nonzero(sk.parents == 0)) == 1:
+    grounded = names[0] == GROUND_ROOT_NAME or names[0].endswith("_" + GROUND_ROOT_NAME)  # cN_ground
+    if grounded and len(kids) == 1:
         pos, grot = motion.fk()
         keep = list(range(1, sk.num_joints))
         return _rerooted(motion, keep, kids[0], (pos[:, kids[0]], grot[:, kids[0]]))

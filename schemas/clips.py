@@ -95,6 +95,14 @@ def labels_past_clip_end(clips: Sequence[ClipSource], frames: Sequence[int], fps
     return problems
 
 
+class AnimationInfo(Strict):
+    """One animation of a glTF clip, as Segue reads it (:func:`motion.gltf.gltf_animations`)."""
+
+    name: str
+    frames: int
+    fps: float
+
+
 class ClipInfo(Strict):
     """An uploaded clip (stored once per content hash)."""
 
@@ -110,7 +118,7 @@ class ClipInfo(Strict):
     size_bytes: int
     created_at: datetime
     format: str = Field(default="bvh", description="bvh, or gltf (a GLB or .gltf file's animation)")
-    animations: list[str] = Field(
+    animations: list[AnimationInfo] = Field(
         default_factory=list,
         description="glTF: every animation of the file (a database spec's 'animation' picks one); "
         "the frames, rate and height above are of the first",

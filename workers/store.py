@@ -4,7 +4,9 @@ The objects live in a local directory (the default) or an S3-compatible bucket
 (:mod:`workers.objects`, chosen by ``SEGUE_STORE_URL``); this class keeps the names and formats.
 Keys::
 
-    clips/<sha256>.bvh            uploaded bytes (as uploaded, possibly gzip)
+    clips/<sha256>.bvh            uploaded bytes (as uploaded: BVH, possibly gzip, or glTF/GLB)
+    clips/<sha256>.read.bvh.gz    the motion as read, as BVH (gzip), for a clip whose file a
+                                  browser cannot read as it is: glTF, or a BVH that needed warnings
     clips/<sha256>.json           ClipInfo
     clips/<sha256>.owners         the principals holding the clip, each with its own record (name,
                                   upload time, build job; :mod:`workers.holders`; likewise files/,
@@ -34,6 +36,7 @@ object store a copy downloaded once into the process's cache directory, evicted 
 
 from __future__ import annotations
 
+import gzip
 import hashlib
 import io
 import json
@@ -53,6 +56,7 @@ from motion.errors import ReadWarning
 from motion.io import parse_motion
 from motion.serialize import motion_from_arrays, motion_to_arrays
 from schemas import ClipInfo, DatabaseInfo, JobInfo, Report
+from schemas.clips import AnimationInfo
 from schemas.files import FileInfo
 
 from . import holders as holding
@@ -65,6 +69,8 @@ Visible = Callable[[str], bool]
 """``visible(id)``: may the caller see the clip, file or database with this id (ownership filter)."""
 
 LEGACY_NPZ = "data.npz"
+READ_SUFFIX = ".read.bvh.gz"
+"""A clip's motion as read (BVH text, gzip), beside its uploaded bytes: ``clips/<id>.read.bvh.gz``."""
 DEFAULT_DISK_CACHE_BYTES = 8 << 30
 
 
@@ -203,11 +209,12 @@ class Store:
         notes: list[ReadWarning] = []
         motion = parse_motion(data, units=units, limits=limits, source=name, name=name, warnings=notes)
         guess = detect_units(motion)
-        animations: list[str] = []
+        animations: list[AnimationInfo] = []
         from motion.gltf import gltf_animations, is_gltf
 
         if is_gltf(data):
-            animations = [a.name for a in gltf_animations(data, source=name)]
+            found = gltf_animations(data, source=name)
+            animations = [AnimationInfo(name=a.name, frames=a.frames, fps=a.fps) for a in found]
         info = ClipInfo(
             id=digest,
             name=name,
@@ -222,6 +229,11 @@ class Store:
             animations=animations,
             warnings=[w.message for w in notes],
         )
+        if animations or notes:
+            from motion.bvh import bvh_text
+
+            text = bvh_text(motion).encode()
+            self.objects.put(f"clips/{digest}{READ_SUFFIX}", gzip.compress(text, 6, mtime=0))
         self.objects.put(f"clips/{digest}.bvh", data)
         if not self.objects.put(key, info.model_dump_json().encode(), if_absent=True):
             return ClipInfo.model_validate_json(self.objects.get(key))  # a concurrent upload won
@@ -238,6 +250,15 @@ class Store:
 
     def clip_bytes(self, clip_id: str) -> bytes:
         return self._get(f"clips/{_safe_id(clip_id)}.bvh", f"no clip {clip_id!r}")
+
+    def clip_read_bytes(self, clip_id: str) -> bytes:
+        """The clip's motion as read, as gzip BVH text, for a clip kept so (glTF, or a BVH that
+        needed warnings); the uploaded bytes for any other clip (:class:`NotFoundError` when a
+        kept copy is gone: its bytes were restored after another holder's delete)."""
+        info = self.clip_info(clip_id)
+        if info.format == "bvh" and not info.warnings:
+            return self.clip_bytes(info.id)
+        return self._get(f"clips/{info.id}{READ_SUFFIX}", f"no readable copy of clip {clip_id!r}")
 
     def _infos_under(self, kind: str) -> list[bytes]:
         out = []
@@ -274,7 +295,7 @@ class Store:
 
     def delete_clip(self, clip_id: str) -> None:
         info = self.clip_info(clip_id)
-        for suffix in (".json", ".bvh", ".owners"):
+        for suffix in (".json", ".bvh", READ_SUFFIX, ".owners"):
             self.objects.delete(f"clips/{info.id}{suffix}")
         self._forget(f"clips/{info.id}.json")
 

@@ -36,7 +36,7 @@ from motion.quality import QualityInputs
 from motion.reach import reach, smooth_weights
 from motion.samples import declared_units, upload_units
 from motion.vectors import norms
-from schemas.control import ControlDatabaseSpec, ControlRequest
+from schemas.control import ControlDatabaseSpec, ControlRequest, unequal_pair_problems
 
 from ..base import (
     Arrays,
@@ -269,9 +269,20 @@ class ControlEngine(Engine[ControlRequest, ControlDatabaseSpec]):
         return [i for i, name in enumerate(library.names) if name in targets]
 
     @classmethod
+    def spec_problems(cls, spec: ControlDatabaseSpec, frames: dict[str, int], fps: float) -> list[str]:
+        """Pairs of unequal lengths under ``unequal_pairs = "refuse"`` (:func:`unequal_pair_problems`)."""
+        return unequal_pair_problems(spec, frames, fps)[0]
+
+    @classmethod
     def build(
         cls, spec: ControlDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
     ) -> Arrays:
+        frames = {name: m.num_frames for name, m in zip(library.names, library.motions, strict=True)}
+        problems, warnings = unequal_pair_problems(spec, frames, library.fps)
+        if problems:
+            raise EngineError("; ".join(problems))
+        for line in warnings:
+            emit.progress(0.15, f"warning: {line}")
         try:
             with threadpool_limits(limits=1):
                 db = build_control_database(spec, library, should_stop)
