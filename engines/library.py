@@ -110,10 +110,9 @@ def build_library(
     for c, m in zip(clips, motions, strict=True):
         if not m.skeleton.same_structure(first):
             raise MotionError(
-                f"clip {c.name!r} has a different joint hierarchy from {clips[0].name!r}; "
-                f"a database's clips must share one skeleton: retarget it onto {clips[0].name!r}'s first "
-                f"(segue retarget FILE_OF_{c.name} --to FILE_OF_{clips[0].name} --out NEW.bvh) and use "
-                "the new file"
+                f"clip {c.name!r} has a different joint hierarchy from {clips[0].name!r}; a database's clips "
+                f"must share one skeleton: retarget it onto the skeleton of {clips[0].name!r} first (segue "
+                f"retarget FILE_OF_{c.name} --to FILE_OF_{clips[0].name} --out NEW.bvh) and use the new file"
             )
         m = resample(m.to_units("m") if m.units != "unknown" else m.with_units("m"), rate)
         out.append(replace(m, name=c.name))

@@ -11,11 +11,13 @@ from .common import Strict
 
 
 class LabelRange(Strict):
-    """A label on a frame range ``[start, end)`` of a clip (source frames)."""
+    """A label on a frame range ``[start, end)`` of a clip, in frames at the database rate (the
+    spec's ``fps``, else the first clip's; not the file's own rate: a 120 fps clip in a 30 fps
+    database has a quarter as many frames)."""
 
     label: str = Field(min_length=1, max_length=64)
-    start: int = Field(ge=0)
-    end: int = Field(gt=0)
+    start: int = Field(ge=0, description="first frame, at the database rate")
+    end: int = Field(gt=0, description="frame after the last, at the database rate")
     value: int = Field(default=1, description="+1 the label applies, -1 it does not")
 
     @model_validator(mode="after")

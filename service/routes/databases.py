@@ -249,7 +249,7 @@ def check_clips(store: Store, spec: DatabaseSpecBase, hashes: list[str]) -> None
             a, b = spec.clips[i].display_name(), spec.clips[0].display_name()
             problems.append(
                 f"clips[{i}] ({a}) has another skeleton than clips[0] ({b}) ({len(info.joints)} joints, "
-                f"{len(first.joints)}): a database's clips share one; retarget it onto {b}'s skeleton "
+                f"{len(first.joints)}): a database's clips share one; retarget it onto the skeleton of {b} "
                 f"first (segue retarget FILE_OF_{a} --to FILE_OF_{b} --out NEW.bvh) and upload the new file"
             )
     if not problems and lengths:
