@@ -63,6 +63,17 @@ def _read(path: Path, args: argparse.Namespace, units: str | None, animation: st
     return motion
 
 
+def _picked(animations: list[Any], wanted: str | int | None) -> str:
+    """The name of the animation ``--animation`` reads (the first by default; by name, else index),
+    among those :func:`motion.gltf.gltf_animations` listed (the read itself refused a missing one)."""
+    names = [a.name for a in animations]
+    if wanted is None:
+        return str(names[0])
+    if isinstance(wanted, str) and wanted in names:
+        return wanted
+    return str(names[int(wanted)])
+
+
 def print_warnings(warnings: list[Any]) -> None:
     """Each reader warning on its own stderr line (what the file needed to be read)."""
     for w in warnings:
@@ -151,7 +162,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
             {"index": a.index, "name": a.name, "frames": a.frames, "fps": a.fps, "duration_s": a.duration_s}
             for a in animations
         ]
-        info["animation"] = motion.name if animations else None
+        info["animation"] = _picked(animations, _animation(args)) if animations else None
     if args.json:
         print(json.dumps(info))
         return 0
@@ -164,7 +175,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
         n = len(animations)
         print(f"  animations {n}" + (": none (the skin's bind pose is shown)" if not n else ""))
         for a in animations:
-            mark = "*" if a.name == motion.name else " "
+            mark = "*" if a.name == info["animation"] else " "
             print(
                 f"   {mark}{a.index:>2} {a.name!r}: {a.frames} frames at {a.fps:g} fps ({a.duration_s:.2f} s)"
             )
