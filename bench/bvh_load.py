@@ -46,17 +46,21 @@ def _peak_read(data: bytes, limits: BvhLimits | None = None) -> tuple[float, flo
 
 
 def _hostile(text: bytes, frames: int, max_joint_frames: int) -> dict[str, Any]:
-    """A gzip file declaring and holding ``frames`` copies of the first frame line of ``text``."""
+    """A gzip file declaring and holding ``frames`` copies of the first frame line of ``text``:
+    the header one gzip member, then one member of 1,000 rows repeated (a valid multi-member gzip,
+    made in milliseconds whatever ``frames``)."""
     head, _, rows = text.partition(b"MOTION")
     first_row = rows.split(b"\n")[3] + b"\n"
-    body = head + b"MOTION\nFrames: %d\nFrame Time: 0.008333\n" % frames + first_row * frames
-    packed = gzip.compress(body, 9)
+    block = 1000
+    header = head + b"MOTION\nFrames: %d\nFrame Time: 0.008333\n" % frames
+    packed = gzip.compress(header, 9) + gzip.compress(first_row * block, 9) * (frames // block)
+    packed += gzip.compress(first_row * (frames % block), 9) if frames % block else b""
     limits = BvhLimits(max_frames=frames, max_bytes=1 << 40, max_joint_frames=max_joint_frames)
     peak, seconds, outcome = _peak_read(packed, limits)
     return {
         "frames": frames,
         "gzip_mib": round(len(packed) / 2**20, 2),
-        "text_mib": round(len(body) / 2**20, 1),
+        "text_mib": round((len(header) + len(first_row) * frames) / 2**20, 1),
         "peak_mib": peak,
         "s": seconds,
         "outcome": outcome,
