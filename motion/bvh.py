@@ -2,7 +2,10 @@
 
 The reader accepts any per-joint channel order and count (position channels on any joint), End
 Sites, tabs or spaces, CRLF or LF line ends, and gzip-compressed files (``.bvh.gz``, detected by
-content). Every problem is a :class:`~motion.errors.BvhError` naming the line. The MOTION block is
+content). What common exporters write besides (a ``Frames:`` count that disagrees with the frame
+lines, decimal commas, leaf joints without End Sites) is read and reported as a
+:class:`~motion.errors.ReadWarning` naming the line (:func:`parse_bvh`); every problem that
+cannot be read unambiguously is a :class:`~motion.errors.BvhError` naming the line. The MOTION block is
 parsed by :func:`motion.numparse.parse_decimals` (one compiled pass, exact); files outside its plain
 decimal grammar take a line-by-line path that also pinpoints bad lines.
 
