@@ -54,6 +54,11 @@ def inspect_summary(path: Path, motion: Motion, declared: str | None, up: str = 
     }
 
 
+def count(n: int, noun: str) -> str:
+    """``n`` and the noun, plural unless one: ``count(1, "clip")`` is ``"1 clip"``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
 def quality_summary(report: Report) -> str:
     """One line per reason a result is not ok (``quality: ok`` when it is)."""
     if report.ok is None:
