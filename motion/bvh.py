@@ -310,8 +310,10 @@ def inflate_chunks(data: bytes, limit: int, source: str, chunk: int = INFLATE_CH
                     raise BvhError(f"decompressed file is larger than the {limit}-byte limit", source=source)
                 if piece:
                     yield piece
+                if d.eof:  # the member's end: what follows it is in unused_data (and, once the
+                    break  # output limit has cut a call, still in unconsumed_tail: not to be fed again)
                 pending = d.unconsumed_tail
-                if not pending and (d.eof or not piece):
+                if not pending and not piece:
                     break
             if not d.eof:
                 raise BvhError("gzip stream is truncated", source=source)
@@ -326,18 +328,23 @@ def inflate_chunks(data: bytes, limit: int, source: str, chunk: int = INFLATE_CH
 
 def _maybe_gunzip(data: bytes, lim: BvhLimits, source: str) -> bytes:
     """Decompress gzip content (all members, as ``gzip`` does), within the byte limit. The
-    header (HIERARCHY and the ``Frames:`` / ``Frame Time:`` lines) is checked as soon as it has
-    been inflated, so that a file whose header breaks a limit (``Frames: 1900000`` in a 0.9 MB
-    gzip) is refused before its rows are inflated."""
+    header (HIERARCHY and the ``Frames:`` / ``Frame Time:`` lines) is checked once 16 MiB are
+    inflated, so that a file whose header breaks a limit (``Frames: 1900000`` in a 0.9 MB gzip)
+    is refused before the rest of its rows are inflated."""
     if not data.startswith(b"\x1f\x8b"):
         return data
     text = bytearray()
     checked = False
     for piece in inflate_chunks(data, lim.max_bytes, source):
         text += piece
-        if not checked:
+        if not checked and len(text) >= _EARLY_CHECK_BYTES:  # smaller files: the parse checks it
             checked = _header_checked(text, lim, source)
     return bytes(text)
+
+
+_EARLY_CHECK_BYTES = 16 << 20
+"""Inflated bytes after which :func:`_maybe_gunzip` checks a gzip file's header before going on
+(below, inflating it all costs less than parsing the header twice)."""
 
 
 def _header_checked(text: bytearray, lim: BvhLimits, source: str) -> bool:

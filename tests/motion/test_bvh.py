@@ -803,3 +803,28 @@ def test_utf8_byte_order_mark_is_accepted() -> None:
     with_bom = parse_bvh(b"\xef\xbb\xbf" + text)
     plain = parse_bvh(text)
     np.testing.assert_array_equal(with_bom.rotations, plain.rotations)
+
+
+def test_gzip_members_larger_than_an_inflated_piece_are_read_once() -> None:
+    # Regression: when a member's end came in a call cut by the output limit, the bytes after it
+    # stayed in zlib's unconsumed_tail and were fed again after the end: the reader looped for ever
+    # (a two-member gzip whose first member inflates past 1 MiB; its memory grew without bound).
+    # In a child process with a hang guard, so that a regression fails instead of hanging the run.
+    import subprocess
+    import sys
+
+    code = (
+        "import gzip; from motion.bvh import inflate_chunks\n"
+        "one = b'0.5 ' * 2000\n"
+        "out = b''.join(inflate_chunks(gzip.compress(one) * 3, 1 << 20, 's', chunk=1024))\n"
+        "assert out == one * 3, len(out)\n"
+        "print('ok')\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr[-2000:]
+    text = base_text().encode()
+    cut = text.index(b"0.5 91.0")
+    packed = gzip.compress(text[:cut]) + gzip.compress(text[cut:])
+    from motion.bvh import inflate_chunks
+
+    assert b"".join(inflate_chunks(packed, 1 << 20, "s", chunk=16)) == text
