@@ -160,7 +160,7 @@ def parse_bvh(
     hierarchy) is a :class:`BvhError` naming the line and what to fix.
 
     Memory: the header's frames x joints is checked against ``limits.max_joint_frames`` before
-    any row is read (a gzip file is inflated no further than its header then), the frame lines
+    any row is read (a gzip file is inflated no further than its first 16 MiB then), the frame lines
     present are counted against it before the table is allocated, and the rows are parsed into
     that one preallocated ``(F, C)`` array."""
     lim = limits or BvhLimits()
@@ -333,13 +333,14 @@ def _maybe_gunzip(data: bytes, lim: BvhLimits, source: str) -> bytes:
     is refused before the rest of its rows are inflated."""
     if not data.startswith(b"\x1f\x8b"):
         return data
-    text = bytearray()
-    checked = False
+    pieces: list[bytes] = []
+    size, checked = 0, False
     for piece in inflate_chunks(data, lim.max_bytes, source):
-        text += piece
-        if not checked and len(text) >= _EARLY_CHECK_BYTES:  # smaller files: the parse checks it
-            checked = _header_checked(text, lim, source)
-    return bytes(text)
+        pieces.append(piece)
+        size += len(piece)
+        if not checked and size >= _EARLY_CHECK_BYTES:  # smaller files: the parse checks it
+            checked = _header_checked(b"".join(pieces)[:_HEADER_SCAN_BYTES], lim, source)
+    return b"".join(pieces)
 
 
 _EARLY_CHECK_BYTES = 16 << 20
@@ -347,15 +348,15 @@ _EARLY_CHECK_BYTES = 16 << 20
 (below, inflating it all costs less than parsing the header twice)."""
 
 
-def _header_checked(text: bytearray, lim: BvhLimits, source: str) -> bool:
-    """Whether the start of BVH ``text`` holds its whole header, once checked against the limits
-    (:class:`BvhError` when it breaks one); False while the header is not all there."""
-    view = bytes(text[:_HEADER_SCAN_BYTES])
+def _header_checked(view: bytes, lim: BvhLimits, source: str) -> bool:
+    """Whether the start of BVH text ``view`` (its first :data:`_HEADER_SCAN_BYTES`) holds its
+    whole header, once checked against the limits (:class:`BvhError` when it breaks one); False
+    while the header is not all there."""
     if view.startswith(b"\xef\xbb\xbf"):
         view = view[3:]
     m = _MOTION.search(view)
     if m is None or _MOTION_HEADER.match(view, m.end()) is None:
-        return len(text) > _HEADER_SCAN_BYTES  # no header that early: the parse says what is wrong
+        return len(view) >= _HEADER_SCAN_BYTES  # no header that early: the parse says what is wrong
     # the same parsers and text as the whole parse: a header error here is the one it would give
     skeleton = _parse_hierarchy(_decode(view[: m.start()], source), lim, source)
     motion_line = view.count(b"\n", 0, m.start()) + 1
