@@ -38,7 +38,11 @@ def start_serve(data: Path, *extra: str) -> Serve:
     """``segue serve --port P --data DATA`` (embedded workers), once ``/healthz`` answers (a
     120-s hang guard: a loaded machine imports the service slowly)."""
     port = free_port()
-    env = {k: v for k, v in os.environ.items() if k not in ("SEGUE_API_TOKENS", "SEGUE_REDIS_URL", "SEGUE_ENGINE_PLUGINS")}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("SEGUE_API_TOKENS", "SEGUE_REDIS_URL", "SEGUE_ENGINE_PLUGINS")
+    }
     env["SEGUE_JOB_GRACE_S"] = "600"
     data.mkdir(parents=True, exist_ok=True)
     log = (data / "serve.log").open("wb")
@@ -50,7 +54,9 @@ def start_serve(data: Path, *extra: str) -> Serve:
     deadline = time.monotonic() + HANG_GUARD_S
     while True:
         if proc.poll() is not None:
-            pytest.fail(f"segue serve exited with {proc.returncode}: {(data / 'serve.log').read_text()[-2000:]}")
+            pytest.fail(
+                f"segue serve exited with {proc.returncode}: {(data / 'serve.log').read_text()[-2000:]}"
+            )
         try:
             if httpx.get(f"{url}/healthz", timeout=1).status_code == 200:
                 return Serve(url, data, proc)
@@ -84,6 +90,12 @@ def serve(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Serve]:
 def addon_zip(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The zip the real command writes (``segue blender-addon --out``)."""
     out = tmp_path_factory.mktemp("addon") / "segue_blender.zip"
-    r = subprocess.run([str(SEGUE), "blender-addon", "--out", str(out)], capture_output=True, text=True, timeout=60, check=False)
+    r = subprocess.run(
+        [str(SEGUE), "blender-addon", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     assert r.returncode == 0, r.stderr
     return out

@@ -13,7 +13,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from service.demos import DEMOS
 from tests.blender import bpy_python, run_blender
 
 from .conftest import Serve
@@ -24,7 +23,8 @@ FK_M = 2e-3  # Blender's evaluated bones against Segue's own forward kinematics 
 
 WALKS_GRAPH = {  # README's graph example: four CMU walks and a salsa dance (for turns)
     "kind": "graph", "fps": 30, "tau": 1.0, "name": "walks",
-    "clips": [{"bvh": f"sample:{n}"} for n in ("walk", "walk-05-01", "walk-10-04", "walk-12-02", "salsa-leader-02")],
+    "clips": [{"bvh": f"sample:{n}"}
+              for n in ("walk", "walk-05-01", "walk-10-04", "walk-12-02", "salsa-leader-02")],
 }  # fmt: skip
 
 
@@ -48,16 +48,20 @@ def scenario(serve: Serve, addon_zip: Path, tmp_path: Path, name: str, **cfg: An
     res = run_blender(SCRIPTS / "scenario.py", str(tmp_path / "config.json"), str(out),
                       env={"BLENDER_USER_RESOURCES": str(tmp_path / "blender-user")})  # fmt: skip
     if res.returncode != 0 or not out.is_file():
-        raise AssertionError(f"Blender scenario {name} failed ({res.returncode}):\n{res.stdout[-4000:]}\n{res.stderr[-4000:]}")
+        raise AssertionError(
+            f"Blender scenario {name} failed ({res.returncode}):\n{res.stdout[-4000:]}\n{res.stderr[-4000:]}"
+        )
     return dict(json.loads(out.read_text()))
 
 
-def _segue_positions(serve: Serve, job: str, result: str, character: str, fps: float) -> tuple[list[str], np.ndarray]:
+def _segue_positions(
+    serve: Serve, job: str, result: str, character: str, fps: float
+) -> tuple[list[str], np.ndarray]:
     """The result on the character as Segue computes it: joint names and global positions
     ``(F, J, 3)`` (metres, Segue's axes) from its NPZ download."""
     with serve.client() as c:
-        raw = c.http.get(f"/v1/jobs/{job}/result", params={"format": "npz", "result": result,
-                                                          "character": character, "fps": fps}).content  # fmt: skip
+        params = {"format": "npz", "result": result, "character": character, "fps": fps}
+        raw = c.http.get(f"/v1/jobs/{job}/result", params=params).content
     with np.load(io.BytesIO(raw), allow_pickle=False) as z:
         return [str(n) for n in z["names"]], np.array(z["positions"])
 

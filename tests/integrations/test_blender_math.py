@@ -153,7 +153,9 @@ def _bones_from(raw: bytes, armature_world: mat4.Mat4, roll_seed: int) -> dict[s
         m = np.eye(4)
         m[:3, :3] = np.column_stack([x, y, z])
         m[:3, 3] = head[n]
-        out[nodes[n].name] = binding.RestBone(nodes[n].name, nodes[p].name if p is not None else None, _tuple(m))
+        out[nodes[n].name] = binding.RestBone(
+            nodes[n].name, nodes[p].name if p is not None else None, _tuple(m)
+        )
     return out
 
 
@@ -191,13 +193,17 @@ def test_binding_puts_every_bone_where_segues_forward_kinematics_does(turn: floa
         j = names.index(name)
         for k in (0, 20, 44):
             head = (w @ _np(seq[k]) @ np.array([0.0, 0.0, 0.0, 1.0]))[:3]
-            want = np.array(axes.to_blender(tuple(fk[k, j]))) + [anchor[0], anchor[1], 0.0]
+            want = np.array(axes.to_blender(tuple(fk[k, j]))) + np.array([anchor[0], anchor[1], 0.0])
             worst = max(worst, float(np.abs(head - want).max()))
             kids = [c for c in range(len(names)) if motion.skeleton.parents[c] == j]
             if kids:  # the bone's Y axis points at its first child, as at rest
-                rest_len = np.linalg.norm(_np(rest[names[kids[0]]].matrix_local)[:3, 3] - _np(rest[name].matrix_local)[:3, 3])
+                rest_len = np.linalg.norm(
+                    _np(rest[names[kids[0]]].matrix_local)[:3, 3] - _np(rest[name].matrix_local)[:3, 3]
+                )
                 tip = (w @ _np(seq[k]) @ np.array([0.0, rest_len, 0.0, 1.0]))[:3]
-                want_tip = np.array(axes.to_blender(tuple(fk[k, kids[0]]))) + [anchor[0], anchor[1], 0.0]
+                want_tip = np.array(axes.to_blender(tuple(fk[k, kids[0]]))) + np.array(
+                    [anchor[0], anchor[1], 0.0]
+                )
                 worst = max(worst, float(np.abs(tip - want_tip).max()))
     assert worst < 1e-4, worst  # float32 keys in the GLB
     # the basis matrices rebuild the poses through the bones' hierarchy
@@ -249,7 +255,9 @@ def read_bvh_text(text: str):  # type: ignore[no-untyped-def]
 
 
 # -- roles ----------------------------------------------------------------------------------------
-def _rig(spec: list[tuple[str, str | None, tuple[float, float, float], tuple[float, float, float]]]) -> list[roles.Bone]:
+def _rig(
+    spec: list[tuple[str, str | None, tuple[float, float, float], tuple[float, float, float]]],
+) -> list[roles.Bone]:
     return [roles.Bone(n, p, h, t) for n, p, h, t in spec]
 
 
@@ -284,11 +292,17 @@ def _human(names: dict[str, str], turn_deg: float = 0.0) -> list[roles.Bone]:
 
 @pytest.mark.parametrize("turn", [0.0, 90.0, 200.0])
 def test_roles_are_found_by_shape_whatever_the_names_and_facing(turn: float) -> None:
-    names = {f"{part}_{s}": f"x{i}{'ab'[k]}" for i, part in enumerate(["thigh", "shin", "foot", "toe", "clav", "upper", "lower", "palm"]) for k, s in enumerate("lr")}
+    names = {
+        f"{part}_{s}": f"x{i}{'ab'[k]}"
+        for i, part in enumerate(["thigh", "shin", "foot", "toe", "clav", "upper", "lower", "palm"])
+        for k, s in enumerate("lr")
+    }
     found = roles.detect_roles(_human(names, turn))
     want = {"Hips": "hips", "Head": "head"}
     for k, side in enumerate(("Left", "Right")):
-        for i, limb in enumerate(["UpperLeg", "LowerLeg", "Foot", "Toes", "Shoulder", "UpperArm", "LowerArm", "Hand"]):
+        for i, limb in enumerate(
+            ["UpperLeg", "LowerLeg", "Foot", "Toes", "Shoulder", "UpperArm", "LowerArm", "Hand"]
+        ):
             want[f"{side}{limb}"] = f"x{i}{'ab'[k]}"
     assert found == want
     assert roles.missing_roles(found) == []
@@ -315,7 +329,9 @@ def test_goal_empties_become_body_constraints_in_segues_frame() -> None:
         authoring.Goal("start", 1, (1.0, -1.0, 0.0)),
     ]
     frame = axes.SegueFrame((1.0, -1.0), 1.1)
-    out = authoring.scene_request({"database": "d"}, {"kind": "graph", "fps": 30}, authoring.SceneInputs(TIMING, goals), frame)
+    out = authoring.scene_request(
+        {"database": "d"}, {"kind": "graph", "fps": 30}, authoring.SceneInputs(TIMING, goals), frame
+    )
     req = out.request
     assert out.start_frame == 1
     assert req["engine"] == "graph"
@@ -331,13 +347,17 @@ def test_goal_empties_become_body_constraints_in_segues_frame() -> None:
 def test_a_goal_outside_the_frame_range_is_an_error_naming_it() -> None:
     goals = [authoring.Goal("late", 300, (0.0, 0.0, 0.0))]
     with pytest.raises(authoring.AuthoringError, match="'late' is at frame 300"):
-        authoring.scene_request({}, {"kind": "graph"}, authoring.SceneInputs(TIMING, goals), axes.SegueFrame())
+        authoring.scene_request(
+            {}, {"kind": "graph"}, authoring.SceneInputs(TIMING, goals), axes.SegueFrame()
+        )
 
 
 def test_a_curve_is_a_trajectory_timed_by_its_length_and_the_speed() -> None:
     path = [(0.0, 0.0, 0.0), (0.0, -3.0, 0.0), (2.0, -3.0, 0.0)]  # 5 m
     scene = authoring.SceneInputs(TIMING, path=path, speed=1.25)
-    req = authoring.scene_request({}, {"kind": "control", "control": "path"}, scene, axes.SegueFrame(scale=1.25)).request
+    req = authoring.scene_request(
+        {}, {"kind": "control", "control": "path"}, scene, axes.SegueFrame(scale=1.25)
+    ).request
     traj = req["control"]["trajectory"]
     pts = np.array(traj["points"])
     assert traj["fps"] == 30.0
@@ -347,13 +367,15 @@ def test_a_curve_is_a_trajectory_timed_by_its_length_and_the_speed() -> None:
     steps = np.linalg.norm(np.diff(pts, axis=0), axis=1)
     np.testing.assert_allclose(steps, 1.0 / 30, atol=1e-6)  # 1 m/s of the performers
     with pytest.raises(authoring.AuthoringError, match="needs a path"):
-        authoring.scene_request({}, {"kind": "control", "control": "path"}, authoring.SceneInputs(TIMING), axes.SegueFrame())
+        authoring.scene_request(
+            {}, {"kind": "control", "control": "path"}, authoring.SceneInputs(TIMING), axes.SegueFrame()
+        )
 
 
 def test_markers_paint_an_annotation_timeline() -> None:
     markers = [authoring.Marker("walk, !jump", 1), authoring.Marker("run", 49), authoring.Marker("~", 97)]
-    req = authoring.scene_request({}, {"kind": "annotated", "fps": 30}, authoring.SceneInputs(TIMING, markers=markers),
-                                  axes.SegueFrame()).request  # fmt: skip
+    scene = authoring.SceneInputs(TIMING, markers=markers)
+    req = authoring.scene_request({}, {"kind": "annotated", "fps": 30}, scene, axes.SegueFrame()).request
     assert req["frames"] == 151
     assert req["timeline"] == [
         {"label": "walk", "start": 0, "end": 60, "value": 1},
@@ -377,7 +399,9 @@ def test_music_and_dancers_make_a_rhythm_request() -> None:
 def test_a_leader_and_goals_make_a_partner_request() -> None:
     goals = [authoring.Goal("here", 1, (0.5, 0.0, 0.0))]
     scene = authoring.SceneInputs(TIMING, goals=goals, leader="lead.bvh")
-    req = authoring.scene_request({}, {"kind": "control", "control": "motion"}, scene, axes.SegueFrame()).request
+    req = authoring.scene_request(
+        {}, {"kind": "control", "control": "motion"}, scene, axes.SegueFrame()
+    ).request
     assert req["control"] == {"bvh": "lead.bvh"}
     assert req["bodies"] == [{"time_s": 0.0, "position": [0.5, -0.0]}]
 

@@ -25,6 +25,7 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 from typing import Any
 
 from .axes import SegueFrame, heading_deg
@@ -108,7 +109,8 @@ def _check_goals(goals: Sequence[Goal], timing: Timing) -> None:
     for g in goals:
         if not (timing.start <= g.frame <= timing.end):
             raise AuthoringError(
-                f"goal {g.name!r} is at frame {g.frame:g}, outside the scene's frames {timing.start}-{timing.end}"
+                f"goal {g.name!r} is at frame {g.frame:g}, "
+                f"outside the scene's frames {timing.start}-{timing.end}"
             )
 
 
@@ -136,7 +138,7 @@ def resample_path(points: Sequence[Sequence[float]], spacing: float) -> list[tup
     if spacing <= 0:
         raise AuthoringError("the path's spacing must be positive")
     pts = [(float(p[0]), float(p[1])) for p in points]
-    segs = [math.dist(a, b) for a, b in zip(pts, pts[1:], strict=False)]
+    segs = [math.dist(a, b) for a, b in pairwise(pts)]
     total = sum(segs)
     if len(pts) < 2 or total <= 1e-9:
         raise AuthoringError("the path has no length")
@@ -161,7 +163,7 @@ def trajectory(path: Sequence[Sequence[float]], speed: float, frame: SegueFrame)
     ``speed`` m/s of the character, in Segue's frame (lengths divided by its scale)."""
     if not (math.isfinite(speed) and speed > 0):
         raise AuthoringError(f"the walking speed must be positive (m/s), not {speed!r}")
-    floor = [frame.floor(p) for p in path]
+    floor = [frame.floor(tuple(p)) for p in path]
     pts = resample_path(floor, frame.length(speed) / PATH_FPS)
     return {"fps": PATH_FPS, "points": [_rounded(p) for p in pts]}
 

@@ -166,7 +166,9 @@ def plan(
     return Binding(order, parent, {i: nodes[i].matrix() for i in order}, base, bone, left, right, anim, nodes)
 
 
-def pose_matrices(binding: Binding, ops: MatrixOps[M], times: Sequence[float] | None = None) -> dict[str, list[M]]:
+def pose_matrices(
+    binding: Binding, ops: MatrixOps[M], times: Sequence[float] | None = None
+) -> dict[str, list[M]]:
     """Bone name -> its pose matrix (armature space) at each time (default: the animation's key
     times), in ``ops``'s matrix type."""
     anim = binding.animation
@@ -224,7 +226,9 @@ def basis_matrices(
             continue
         rel_inv = mat4.inverse(mat4.mul(mat4.inverse(rest[b.parent].matrix_local), b.matrix_local))
         parents = pose_of(b.parent, len(seq))
-        out[name] = [mat4.mul(rel_inv, mat4.mul(mat4.inverse(pp), p)) for pp, p in zip(parents, seq, strict=True)]
+        out[name] = [
+            mat4.mul(rel_inv, mat4.mul(mat4.inverse(pp), p)) for pp, p in zip(parents, seq, strict=True)
+        ]
     return out
 
 
@@ -238,4 +242,3 @@ __all__ = [
     "plan",
     "pose_matrices",
 ]
-

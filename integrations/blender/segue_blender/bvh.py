@@ -122,6 +122,7 @@ def glb_to_bvh(
             write(c, depth + 1)
         if not kids[n]:
             tip = (tips or {}).get(nodes[n].name)
+            e: tuple[float, ...]
             if tip is not None:
                 e = (tip[0] - rest_pos[n][0], tip[1] - rest_pos[n][1], tip[2] - rest_pos[n][2])
             else:

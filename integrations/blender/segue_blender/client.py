@@ -89,8 +89,14 @@ class SegueClient:
         timeout: float | None = None,
     ) -> bytes:
         """The body of a successful answer to ``method path?query`` (``SegueError`` otherwise)."""
-        params = {k: ("true" if v is True else "false" if v is False else v) for k, v in (query or {}).items()}
-        target = self.prefix + path + ("?" + urlencode({k: v for k, v in params.items() if v is not None}) if params else "")
+        params = {
+            k: ("true" if v is True else "false" if v is False else v) for k, v in (query or {}).items()
+        }
+        target = (
+            self.prefix
+            + path
+            + ("?" + urlencode({k: v for k, v in params.items() if v is not None}) if params else "")
+        )
         headers = {"User-Agent": USER_AGENT, "Accept": "application/json, */*"}
         if self.token:
             headers["Authorization"] = f"Bearer {self.token}"
@@ -144,7 +150,9 @@ class SegueClient:
 
     def upload_clip(self, data: bytes, name: str, units: str | None = None) -> dict[str, Any]:
         """Upload a BVH (raw body, ``name`` its file name): the clip's info."""
-        out = self.request("POST", "/v1/clips", {"name": name, "units": units}, data, timeout=max(self.timeout, 120))
+        out = self.request(
+            "POST", "/v1/clips", {"name": name, "units": units}, data, timeout=max(self.timeout, 120)
+        )
         return dict(json.loads(out))
 
     def files(self) -> list[dict[str, Any]]:
@@ -184,9 +192,7 @@ class SegueClient:
         """The job's events after ``after``; with ``wait`` > 0 a long poll: the answer comes when
         the job ends or after ``wait`` seconds, with every event in between."""
         return list(
-            self.json(
-                "GET", f"/v1/jobs/{quote(job_id, safe='')}/events", {"after": after, "wait": wait}
-            )
+            self.json("GET", f"/v1/jobs/{quote(job_id, safe='')}/events", {"after": after, "wait": wait})
             if wait <= 0
             else json.loads(
                 self.request(

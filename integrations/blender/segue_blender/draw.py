@@ -14,7 +14,10 @@ _HANDLE: Any = None
 
 
 def _ring(c: tuple[float, float, float], r: float, n: int = 32) -> list[tuple[float, float, float]]:
-    pts = [(c[0] + r * math.cos(2 * math.pi * k / n), c[1] + r * math.sin(2 * math.pi * k / n), c[2] + 0.005) for k in range(n)]
+    pts = [
+        (c[0] + r * math.cos(2 * math.pi * k / n), c[1] + r * math.sin(2 * math.pi * k / n), c[2] + 0.005)
+        for k in range(n)
+    ]
     return [p for k in range(n) for p in (pts[k], pts[(k + 1) % n])]
 
 

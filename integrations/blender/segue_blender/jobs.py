@@ -81,9 +81,13 @@ class JobRunner(threading.Thread):
         try:
             self._run()
         except SegueError as exc:
-            self.messages.put(Message("error", {"message": exc.message, "code": exc.code, "status": exc.status}))
+            self.messages.put(
+                Message("error", {"message": exc.message, "code": exc.code, "status": exc.status})
+            )
         except Exception as exc:  # the UI must hear of any failure
-            self.messages.put(Message("error", {"message": f"{type(exc).__name__}: {exc}", "code": "internal"}))
+            self.messages.put(
+                Message("error", {"message": f"{type(exc).__name__}: {exc}", "code": "internal"})
+            )
 
     def _show(self, rid: str, data: dict[str, Any]) -> None:
         if self.download is None:
@@ -92,7 +96,9 @@ class JobRunner(threading.Thread):
         prepared = self.prepare(raw) if self.prepare is not None else raw
         self.shown = rid
         self.messages.put(Message("solution", {"result": rid, **data}, prepared))
-        self.messages.put(Message("report", {"result": rid, "report": self.client.report(self.job_id or "", rid)}))
+        self.messages.put(
+            Message("report", {"result": rid, "report": self.client.report(self.job_id or "", rid)})
+        )
 
     def _run(self) -> None:
         if self.job_id is None:

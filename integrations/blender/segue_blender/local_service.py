@@ -39,7 +39,9 @@ class LocalService:
         Database folders ``segue build`` wrote, served by it (``--import DIR``).
     """
 
-    def __init__(self, executable: str | Path, data_dir: str | Path, imports: Sequence[str | Path] = ()) -> None:
+    def __init__(
+        self, executable: str | Path, data_dir: str | Path, imports: Sequence[str | Path] = ()
+    ) -> None:
         self.executable = Path(executable).expanduser()
         self.data_dir = Path(data_dir).expanduser()
         self.imports = [Path(d).expanduser() for d in imports]
@@ -78,7 +80,11 @@ class LocalService:
         try:
             while True:
                 if self.process.poll() is not None:
-                    raise SegueError(0, "local_service", f"segue serve exited ({self.process.returncode}): {self.log_tail()}")
+                    raise SegueError(
+                        0,
+                        "local_service",
+                        f"segue serve exited ({self.process.returncode}): {self.log_tail()}",
+                    )
                 try:
                     if client.health().get("ok"):
                         return self.url

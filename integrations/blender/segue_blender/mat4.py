@@ -169,14 +169,18 @@ def euler_from_matrix3(r: Sequence[float], order: str) -> Vec3:
 
 def matrix3_of_euler(angles: Sequence[float], order: str) -> tuple[float, ...]:
     """The rotation matrix (row major) of intrinsic Euler ``angles`` (radians) in ``order``."""
-    out = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    out: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
     for axis, angle in zip(order, angles, strict=True):
         c, s = math.cos(angle), math.sin(angle)
         if axis == "X":
-            step = (1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c)
+            step: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c)
         elif axis == "Y":
             step = (c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c)
         else:
             step = (c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
-        out = tuple(sum(out[3 * r + k] * step[3 * k + col] for k in range(3)) for r in range(3) for col in range(3))
+        out = tuple(
+            float(sum(out[3 * r + k] * step[3 * k + col] for k in range(3)))
+            for r in range(3)
+            for col in range(3)
+        )
     return out

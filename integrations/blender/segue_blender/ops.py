@@ -44,7 +44,9 @@ def _fail(op: bpy.types.Operator, message: str) -> set[str]:
 
 def _client() -> SegueClient:
     if SESSION.client is None:
-        raise SegueError(0, "not_connected", "not connected to Segue: connect first (Segue panel or bpy.ops.segue.connect)")
+        raise SegueError(
+            0, "not_connected", "not connected to Segue: connect first (Segue panel or bpy.ops.segue.connect)"
+        )
     return SESSION.client
 
 
@@ -87,8 +89,12 @@ class SEGUE_OT_connect(bpy.types.Operator):
     bl_label = "Connect"
     bl_options = {"REGISTER"}
 
-    url: StringProperty(name="URL", description="the service, e.g. http://127.0.0.1:8000 (default: the panel's)")  # type: ignore[valid-type]
-    token: StringProperty(name="Token", description="bearer token (servers with SEGUE_API_TOKENS)", subtype="PASSWORD")  # type: ignore[valid-type]
+    url: StringProperty(
+        name="URL", description="the service, e.g. http://127.0.0.1:8000 (default: the panel's)"
+    )
+    token: StringProperty(
+        name="Token", description="bearer token (servers with SEGUE_API_TOKENS)", subtype="PASSWORD"
+    )
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         settings = _settings(context)
@@ -132,7 +138,9 @@ class SEGUE_OT_start_local(bpy.types.Operator):
         exe = (prefs.segue_executable if prefs else "") or os.environ.get("SEGUE_EXECUTABLE", "")
         if not exe:
             return _fail(self, "set the path of a `segue` executable in the add-on's preferences")
-        data = (prefs.data_dir if prefs else "") or bpy.utils.user_resource("DATAFILES", path="segue", create=True)
+        data = (prefs.data_dir if prefs else "") or bpy.utils.user_resource(
+            "DATAFILES", path="segue", create=True
+        )
         imports = [d.strip() for d in ((prefs.import_dirs if prefs else "") or "").split(";") if d.strip()]
         if SESSION.local is not None and SESSION.local.running:
             SESSION.local.stop()
@@ -193,7 +201,7 @@ class SEGUE_OT_detect_roles(bpy.types.Operator):
     bl_label = "Detect roles"
     bl_options = {"REGISTER", "UNDO"}
 
-    armature: StringProperty(name="Armature", description="default: the active object")  # type: ignore[valid-type]
+    armature: StringProperty(name="Armature", description="default: the active object")
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         try:
@@ -201,9 +209,23 @@ class SEGUE_OT_detect_roles(bpy.types.Operator):
         except RoleError as exc:
             return _fail(self, str(exc))
         found = scene.detect_roles(obj)
-        missing = [r for r in ("Hips", "LeftUpperLeg", "LeftLowerLeg", "LeftFoot", "RightUpperLeg", "RightLowerLeg", "RightFoot") if r not in found]
+        missing = [
+            r
+            for r in (
+                "Hips",
+                "LeftUpperLeg",
+                "LeftLowerLeg",
+                "LeftFoot",
+                "RightUpperLeg",
+                "RightLowerLeg",
+                "RightFoot",
+            )
+            if r not in found
+        ]
         if missing:
-            self.report({"WARNING"}, f"{obj.name}: no bone found for {', '.join(missing)}: set them in the Rig panel")
+            self.report(
+                {"WARNING"}, f"{obj.name}: no bone found for {', '.join(missing)}: set them in the Rig panel"
+            )
         else:
             self.report({"INFO"}, f"{obj.name}: {len(found)} roles found")
         return {"FINISHED"}
@@ -220,11 +242,13 @@ class SEGUE_OT_upload_action(bpy.types.Operator):
     bl_idname = "segue.upload_action"
     bl_label = "Upload action"
 
-    action: StringProperty(name="Action", description="default: the armature's current action")  # type: ignore[valid-type]
-    all_actions: BoolProperty(name="All actions", description="every action made for this armature")  # type: ignore[valid-type]
-    name: StringProperty(name="Clip name", description="default: ARMATURE-ACTION.bvh")  # type: ignore[valid-type]
-    armature: StringProperty(name="Armature", description="default: the active object")  # type: ignore[valid-type]
-    keep_names: BoolProperty(name="Keep bone names", description="upload the bones under their own names (no roles)")  # type: ignore[valid-type]
+    action: StringProperty(name="Action", description="default: the armature's current action")
+    all_actions: BoolProperty(name="All actions", description="every action made for this armature")
+    name: StringProperty(name="Clip name", description="default: ARMATURE-ACTION.bvh")
+    armature: StringProperty(name="Armature", description="default: the active object")
+    keep_names: BoolProperty(
+        name="Keep bone names", description="upload the bones under their own names (no roles)"
+    )
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         try:
@@ -267,7 +291,13 @@ def _drives(action: bpy.types.Action, obj: bpy.types.Object) -> bool:
 
 def _fcurves_of(action: bpy.types.Action) -> list[Any]:
     if hasattr(action, "layers"):
-        return [fc for layer in action.layers for strip in layer.strips for bag in strip.channelbags for fc in bag.fcurves]
+        return [
+            fc
+            for layer in action.layers
+            for strip in layer.strips
+            for bag in strip.channelbags
+            for fc in bag.fcurves
+        ]
     return list(action.fcurves)
 
 
@@ -286,7 +316,9 @@ def wait_database(client: SegueClient, db: Mapping[str, Any], guard: float = WAI
     info = dict(db)
     while info.get("status") not in ("ready", "failed"):
         if time.monotonic() > deadline:
-            raise SegueError(0, "timeout", f"database {info.get('id')} still {info.get('status')} after {guard:.0f} s")
+            raise SegueError(
+                0, "timeout", f"database {info.get('id')} still {info.get('status')} after {guard:.0f} s"
+            )
         time.sleep(0.2)
         info = client.database(str(info["id"]))
     if info["status"] == "failed":
@@ -300,11 +332,13 @@ class SEGUE_OT_build_database(bpy.types.Operator):
     bl_idname = "segue.build_database"
     bl_label = "Build database"
 
-    kind: EnumProperty(name="Kind", items=KINDS, default="graph")  # type: ignore[valid-type]
-    clips: StringProperty(name="Clips", description="clip names, comma separated (default: uploaded this session)")  # type: ignore[valid-type]
-    spec: StringProperty(name="Spec", description="more of the spec as JSON, e.g. {\"tau\": 1.2}")  # type: ignore[valid-type]
-    name: StringProperty(name="Name")  # type: ignore[valid-type]
-    wait: BoolProperty(name="Wait", description="return once it is built (scripts)")  # type: ignore[valid-type]
+    kind: EnumProperty(name="Kind", items=KINDS, default="graph")
+    clips: StringProperty(
+        name="Clips", description="clip names, comma separated (default: uploaded this session)"
+    )
+    spec: StringProperty(name="Spec", description='more of the spec as JSON, e.g. {"tau": 1.2}')
+    name: StringProperty(name="Name")
+    wait: BoolProperty(name="Wait", description="return once it is built (scripts)")
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         try:
@@ -356,7 +390,9 @@ class _Rig:
 class _Job:
     """One Generate: the rigs, the request's parts, and the thread following it."""
 
-    def __init__(self, view: JobView, rigs: list[_Rig], build: Callable[[], Mapping[str, Any]], fps: float) -> None:
+    def __init__(
+        self, view: JobView, rigs: list[_Rig], build: Callable[[], Mapping[str, Any]], fps: float
+    ) -> None:
         self.view, self.rigs, self.fps = view, rigs, fps
         self.start_frame = 0
         self.frame = SegueFrame()
@@ -389,7 +425,10 @@ class _Job:
     def prepare(self, raw: bytes) -> list[binding.Binding]:
         parts = [bytes.fromhex(h) for h in json.loads(raw)] if len(self.rigs) > 1 else [raw]
         placement = self.frame.placement()
-        return [binding.plan(p, rig.bone_of, rig.rest, rig.world, placement) for p, rig in zip(parts, self.rigs, strict=True)]
+        return [
+            binding.plan(p, rig.bone_of, rig.rest, rig.world, placement)
+            for p, rig in zip(parts, self.rigs, strict=True)
+        ]
 
 
 JOBS: dict[str, _Job] = {}
@@ -418,7 +457,9 @@ def handle(job: _Job, msg: Message) -> None:
             if obj is None:
                 continue
             step = 1.0
-            _, poses = scene.key_result(obj, prepared, job.start_frame, step, _action_name(view.id, rig.name, many))
+            _, poses = scene.key_result(
+                obj, prepared, job.start_frame, step, _action_name(view.id, rig.name, many)
+            )
             job.poses.append({rig.hips: scene.world_heads(obj, poses, rig.hips)} if rig.hips else {})
         view.action_name = _action_name(view.id, job.rigs[0].name, many)
         view.solutions += 1
@@ -466,12 +507,16 @@ def _goal_results(job: _Job, report: Mapping[str, Any]) -> list[GoalResult]:
         g = goals[entry["index"]]
         reached = None
         heads = job.poses[entry["dancer"]] if entry["dancer"] < len(job.poses) else {}
-        seq = next(iter(heads.values()), [])
+        seq: list[Any] = next(iter(heads.values()), [])
         k = round(g.frame - job.start_frame)
         if seq and 0 <= k < len(seq):
             reached = seq[k]
         err = entry["error_cm"]
-        out.append(GoalResult(g.name, g.position, reached, float(err) if err is not None else None, entry["satisfied"]))
+        out.append(
+            GoalResult(
+                g.name, g.position, reached, float(err) if err is not None else None, entry["satisfied"]
+            )
+        )
     return out
 
 
@@ -514,16 +559,45 @@ class SEGUE_OT_generate(bpy.types.Operator):
     bl_label = "Generate"
     bl_options = {"REGISTER"}
 
-    database: StringProperty(name="Database", description="id, id prefix or name (default: the panel's)")  # type: ignore[valid-type]
-    request: StringProperty(name="Request", description="the request as the HTTP API takes it (JSON); the database is added")  # type: ignore[valid-type]
-    scene_goals: BoolProperty(name="Scene goals", description="add what the scene authors: goal empties, path, markers, music, leader", default=False)  # type: ignore[valid-type]
-    wait: BoolProperty(name="Wait", description="block until the job ends (scripts, tests)", default=False)  # type: ignore[valid-type]
-    armatures: StringProperty(name="Armatures", description="the dancers, comma separated (default: the active armature, then the other selected ones)")  # type: ignore[valid-type]
-    path: StringProperty(name="Path", description="a curve object: the path to walk (default: the panel's)")  # type: ignore[valid-type]
-    speed: FloatProperty(name="Speed", description="walking speed along the path, m/s (0: the panel's)", default=0.0, min=0.0, max=10.0)  # type: ignore[valid-type]
-    bpm: FloatProperty(name="BPM", description="music tempo when the scene has no sound strip (0: the panel's)", default=0.0, min=0.0, max=400.0)  # type: ignore[valid-type]
-    leader: StringProperty(name="Leader", description="an armature whose action leads (Partner databases; default: the panel's)")  # type: ignore[valid-type]
-    timeout: FloatProperty(name="Timeout", description="wait=True: give up after this many seconds", default=WAIT_GUARD_S, min=1.0)  # type: ignore[valid-type]
+    database: StringProperty(name="Database", description="id, id prefix or name (default: the panel's)")
+    request: StringProperty(
+        name="Request", description="the request as the HTTP API takes it (JSON); the database is added"
+    )
+    scene_goals: BoolProperty(
+        name="Scene goals",
+        description="add what the scene authors: goal empties, path, markers, music, leader",
+        default=False,
+    )
+    wait: BoolProperty(name="Wait", description="block until the job ends (scripts, tests)", default=False)
+    armatures: StringProperty(
+        name="Armatures",
+        description="the dancers, comma separated (default: the active armature, then the other "
+        "selected ones)",
+    )
+    path: StringProperty(name="Path", description="a curve object: the path to walk (default: the panel's)")
+    speed: FloatProperty(
+        name="Speed",
+        description="walking speed along the path, m/s (0: the panel's)",
+        default=0.0,
+        min=0.0,
+        max=10.0,
+    )
+    bpm: FloatProperty(
+        name="BPM",
+        description="music tempo when the scene has no sound strip (0: the panel's)",
+        default=0.0,
+        min=0.0,
+        max=400.0,
+    )
+    leader: StringProperty(
+        name="Leader", description="an armature whose action leads (Partner databases; default: the panel's)"
+    )
+    timeout: FloatProperty(
+        name="Timeout",
+        description="wait=True: give up after this many seconds",
+        default=WAIT_GUARD_S,
+        min=1.0,
+    )
 
     def _dancers(self, context: bpy.types.Context) -> list[bpy.types.Object]:
         if self.armatures.strip():
@@ -582,8 +656,15 @@ class SEGUE_OT_generate(bpy.types.Operator):
             anchor = scene.anchor_of(inputs, dancers[0])
             if leader_name:
                 leader = bpy.data.objects.get(leader_name)
-                if leader is None or leader.type != "ARMATURE" or leader.animation_data is None or leader.animation_data.action is None:
-                    raise SegueError(0, "bad_request", f"the leader {leader_name!r} must be an armature with an action")
+                if (
+                    leader is None
+                    or leader.type != "ARMATURE"
+                    or leader.animation_data is None
+                    or leader.animation_data.action is None
+                ):
+                    raise SegueError(
+                        0, "bad_request", f"the leader {leader_name!r} must be an armature with an action"
+                    )
                 anchor = (0.0, 0.0) if not inputs.goals else anchor
                 text = scene.export_clip(leader, leader.animation_data.action, keep_names=True, origin=anchor)
                 leader_bvh = (text, f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', leader.name)}-leader.bvh")
@@ -643,7 +724,9 @@ class SEGUE_OT_generate(bpy.types.Operator):
         view = job.view
         if view.state == "failed":
             return _fail(self, view.message or "the job failed")
-        self.report({"INFO"}, f"{view.state}: {view.solutions} solution(s), quality {'ok' if view.ok else 'not ok'}")
+        self.report(
+            {"INFO"}, f"{view.state}: {view.solutions} solution(s), quality {'ok' if view.ok else 'not ok'}"
+        )
         return {"FINISHED"}
 
     def invoke(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
@@ -699,9 +782,9 @@ class SEGUE_OT_add_goal(bpy.types.Operator):
     bl_label = "Add goal"
     bl_options = {"REGISTER", "UNDO"}
 
-    frame: IntProperty(name="Frame", description="default (-1): the current frame", default=-1)  # type: ignore[valid-type]
-    heading: BoolProperty(name="Heading", description="also meet the empty's facing (its -Y)", default=False)  # type: ignore[valid-type]
-    dancer: IntProperty(name="Dancer", description="the dancer of several it belongs to", default=0, min=0)  # type: ignore[valid-type]
+    frame: IntProperty(name="Frame", description="default (-1): the current frame", default=-1)
+    heading: BoolProperty(name="Heading", description="also meet the empty's facing (its -Y)", default=False)
+    dancer: IntProperty(name="Dancer", description="the dancer of several it belongs to", default=0, min=0)
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         sc = context.scene

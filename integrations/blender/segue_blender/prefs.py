@@ -9,15 +9,17 @@ from bpy.props import StringProperty
 class SeguePreferences(bpy.types.AddonPreferences):
     bl_idname = __package__ or "segue_blender"
 
-    segue_executable: StringProperty(  # type: ignore[valid-type]
+    segue_executable: StringProperty(
         name="segue executable",
         description="the `segue` program of a venv where Segue is installed (e.g. ~/venvs/segue/bin/segue)",
         subtype="FILE_PATH",
     )
-    data_dir: StringProperty(  # type: ignore[valid-type]
-        name="Data folder", description="the local service's data (default: Blender's user data folder)", subtype="DIR_PATH"
+    data_dir: StringProperty(
+        name="Data folder",
+        description="the local service's data (default: Blender's user data folder)",
+        subtype="DIR_PATH",
     )
-    import_dirs: StringProperty(  # type: ignore[valid-type]
+    import_dirs: StringProperty(
         name="Databases to serve",
         description="folders `segue build` wrote, separated by ';' (segue serve --import DIR)",
     )

@@ -21,13 +21,30 @@ def _is_armature(_self: Any, obj: bpy.types.Object) -> bool:
 class SegueSceneSettings(bpy.types.PropertyGroup):
     """Segue's settings of a scene (saved with the .blend; the token is not)."""
 
-    url: StringProperty(name="URL", description="the Segue service", default="http://127.0.0.1:8000")  # type: ignore[valid-type]
-    database: StringProperty(name="Database", description="the database to generate with (id or name)")  # type: ignore[valid-type]
-    request: StringProperty(name="Request", description="more of the request, JSON (as the HTTP API takes it)", default="{}")  # type: ignore[valid-type]
-    path: PointerProperty(name="Path", type=bpy.types.Object, poll=_is_curve, description="the curve to walk (walk databases)")  # type: ignore[valid-type]
-    speed: FloatProperty(name="Speed", description="walking speed along the path (m/s)", default=1.3, min=0.1, max=6.0)  # type: ignore[valid-type]
-    bpm: FloatProperty(name="BPM", description="the music's tempo when the scene has no sound strip", default=120.0, min=0.0, max=400.0)  # type: ignore[valid-type]
-    leader: PointerProperty(name="Leader", type=bpy.types.Object, poll=_is_armature, description="the armature whose action leads (Partner databases)")  # type: ignore[valid-type]
+    url: StringProperty(name="URL", description="the Segue service", default="http://127.0.0.1:8000")
+    database: StringProperty(name="Database", description="the database to generate with (id or name)")
+    request: StringProperty(
+        name="Request", description="more of the request, JSON (as the HTTP API takes it)", default="{}"
+    )
+    path: PointerProperty(
+        name="Path", type=bpy.types.Object, poll=_is_curve, description="the curve to walk (walk databases)"
+    )
+    speed: FloatProperty(
+        name="Speed", description="walking speed along the path (m/s)", default=1.3, min=0.1, max=6.0
+    )
+    bpm: FloatProperty(
+        name="BPM",
+        description="the music's tempo when the scene has no sound strip",
+        default=120.0,
+        min=0.0,
+        max=400.0,
+    )
+    leader: PointerProperty(
+        name="Leader",
+        type=bpy.types.Object,
+        poll=_is_armature,
+        description="the armature whose action leads (Partner databases)",
+    )
 
 
 _ROLE_PROPS = {
@@ -37,7 +54,10 @@ _ROLE_PROPS = {
 SegueRoles = type(
     "SegueRoles",
     (bpy.types.PropertyGroup,),
-    {"__annotations__": dict(_ROLE_PROPS), "__doc__": "Which bone plays each part of the body (the Rig panel)."},
+    {
+        "__annotations__": dict(_ROLE_PROPS),
+        "__doc__": "Which bone plays each part of the body (the Rig panel).",
+    },
 )
 
 CLASSES = (SegueSceneSettings, SegueRoles)

@@ -203,7 +203,11 @@ def detect_roles(bones: Sequence[Bone], forward_hint: Vec3 = (0.0, -1.0, 0.0)) -
                 if r > reach:
                     best, reach = c, r
         if best is not None:
-            arm = sk.chain(best, lambda pts, sg=sign: -max(sg * _dot(_sub(p, hip_head), left) for p in pts))
+
+            def outward(pts: list[Vec3], sg: float = sign) -> float:
+                return -max(sg * _dot(_sub(p, hip_head), left) for p in pts)
+
+            arm = sk.chain(best, outward)
             roles.update({f"{side}{k}": v for k, v in _arm_roles(sk, arm).items()})
     return roles
 
@@ -248,12 +252,18 @@ def _leg_roles(sk: _Skeleton, chain: list[str], f: int) -> dict[str, str]:
 
 def _arm_roles(sk: _Skeleton, chain: list[str]) -> dict[str, str]:
     out: dict[str, str] = {}
-    named = {limb: [n for n in chain if _says(n, limb)] for limb in ("Shoulder", "UpperArm", "LowerArm", "Hand")}
+    named = {
+        limb: [n for n in chain if _says(n, limb)] for limb in ("Shoulder", "UpperArm", "LowerArm", "Hand")
+    }
     # the hand: named, else the first bone branching into fingers, else a short last bone
     hand = named["Hand"][0] if named["Hand"] else None
     if hand is None:
         for n in chain[1:]:
-            kids = [c for c in sk.children.get(n, []) if len(sk.subtree(c)) > 1 or sk.length(c) >= 0.25 * sk.length(n)]
+            kids = [
+                c
+                for c in sk.children.get(n, [])
+                if len(sk.subtree(c)) > 1 or sk.length(c) >= 0.25 * sk.length(n)
+            ]
             if len(kids) >= 2:
                 hand = n
                 break

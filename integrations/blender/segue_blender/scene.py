@@ -7,11 +7,11 @@ in the plain modules (:mod:`.binding`, :mod:`.authoring`, :mod:`.roles`, :mod:`.
 from __future__ import annotations
 
 import hashlib
-import math
 import os
 import struct
 import tempfile
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from itertools import pairwise
 from typing import Any
 
 import bpy
@@ -52,7 +52,9 @@ def world_bones(obj: bpy.types.Object) -> list[roles.Bone]:
         p = b.parent
         while p is not None and p.name not in deform:
             p = p.parent
-        out.append(roles.Bone(b.name, p.name if p else None, tuple(mw @ b.head_local), tuple(mw @ b.tail_local)))
+        out.append(
+            roles.Bone(b.name, p.name if p else None, tuple(mw @ b.head_local), tuple(mw @ b.tail_local))
+        )
     return out
 
 
@@ -269,7 +271,7 @@ def curve_points(obj: bpy.types.Object) -> list[tuple[float, float, float]]:
     pts: list[Vector] = []
     if spline.type == "BEZIER":
         bp = list(spline.bezier_points)
-        segs = list(zip(bp, bp[1:], strict=False))
+        segs = list(pairwise(bp))
         if spline.use_cyclic_u and bp:
             segs.append((bp[-1], bp[0]))
         res = max(2, spline.resolution_u + 1)
@@ -334,7 +336,9 @@ def _fcurves(action: bpy.types.Action, obj: bpy.types.Object) -> Any:
     """A function (data path, index, group) -> an F-curve of ``action`` for ``obj``: Blender 4.4+
     keeps F-curves in slotted layers (``Action.fcurves`` is gone in 5.0), older ones on the action."""
     if hasattr(action, "fcurve_ensure_for_datablock"):
-        return lambda path, index, group: action.fcurve_ensure_for_datablock(obj, path, index=index, group_name=group)
+        return lambda path, index, group: action.fcurve_ensure_for_datablock(
+            obj, path, index=index, group_name=group
+        )
     return lambda path, index, group: action.fcurves.new(path, index=index, action_group=group)
 
 
@@ -409,7 +413,11 @@ def key_result(
                     basis.append(bone.convert_local_to_pose(pose, rest, invert=True))
                 else:
                     pp = parents[k] if parents is not None else prest
-                    basis.append(bone.convert_local_to_pose(pose, rest, parent_matrix=pp, parent_matrix_local=prest, invert=True))
+                    basis.append(
+                        bone.convert_local_to_pose(
+                            pose, rest, parent_matrix=pp, parent_matrix_local=prest, invert=True
+                        )
+                    )
             pose_of[bone.name] = list(seq)
         else:
             basis = [ident] * frames_n
@@ -417,14 +425,21 @@ def key_result(
                 pose_of[bone.name] = [rest.copy()] * frames_n
             else:
                 pose_of[bone.name] = [
-                    bone.convert_local_to_pose(ident, rest, parent_matrix=(parents[k] if parents else prest), parent_matrix_local=prest)
+                    bone.convert_local_to_pose(
+                        ident,
+                        rest,
+                        parent_matrix=(parents[k] if parents else prest),
+                        parent_matrix_local=prest,
+                    )
                     for k in range(frames_n)
                 ]
         _key_bone(new_curve, pbone, basis, frames)
     return action, {n: pose_of[n] for n in poses}
 
 
-def _key_bone(new_curve: Any, pbone: bpy.types.PoseBone, basis: Sequence[Matrix], frames: Sequence[float]) -> None:
+def _key_bone(
+    new_curve: Any, pbone: bpy.types.PoseBone, basis: Sequence[Matrix], frames: Sequence[float]
+) -> None:
     name = pbone.name
     path = f'pose.bones["{bpy.utils.escape_identifier(name)}"]'
     locs, rots, scales = [], [], []
@@ -447,7 +462,9 @@ def _key_bone(new_curve: Any, pbone: bpy.types.PoseBone, basis: Sequence[Matrix]
             e = q.to_euler(mode, prev_e) if prev_e is not None else q.to_euler(mode)
             prev_e = e
             rots.append(tuple(e))
-    prop = {"QUATERNION": "rotation_quaternion", "AXIS_ANGLE": "rotation_axis_angle"}.get(mode, "rotation_euler")
+    prop = {"QUATERNION": "rotation_quaternion", "AXIS_ANGLE": "rotation_axis_angle"}.get(
+        mode, "rotation_euler"
+    )
     for i in range(3):
         _set_keys(new_curve(f"{path}.location", i, name), frames, [v[i] for v in locs])
         _set_keys(new_curve(f"{path}.scale", i, name), frames, [v[i] for v in scales])
@@ -455,7 +472,9 @@ def _key_bone(new_curve: Any, pbone: bpy.types.PoseBone, basis: Sequence[Matrix]
         _set_keys(new_curve(f"{path}.{prop}", i, name), frames, [v[i] for v in rots])
 
 
-def world_heads(obj: bpy.types.Object, poses: Mapping[str, Sequence[Matrix]], bone: str) -> list[tuple[float, float, float]]:
+def world_heads(
+    obj: bpy.types.Object, poses: Mapping[str, Sequence[Matrix]], bone: str
+) -> list[tuple[float, float, float]]:
     """A bone's head in the world at each keyed frame."""
     mw = obj.matrix_world
     return [tuple(mw @ p.translation) for p in poses.get(bone, [])]
@@ -488,5 +507,3 @@ def anchor_of(inputs: authoring.SceneInputs, obj: bpy.types.Object) -> tuple[flo
 
 def frame_of(inputs: authoring.SceneInputs, obj: bpy.types.Object, summary: Mapping[str, Any]) -> SegueFrame:
     return SegueFrame(anchor_of(inputs, obj), scale_for(obj, summary))
-
-

@@ -69,7 +69,9 @@ class Session:
     def database(self, ref: str) -> dict[str, Any] | None:
         """A database of the list by id, id prefix or name."""
         for db in self.databases:
-            if ref in (db.get("id"), db.get("name")) or (len(ref) >= 6 and str(db.get("id", "")).startswith(ref)):
+            if ref in (db.get("id"), db.get("name")) or (
+                len(ref) >= 6 and str(db.get("id", "")).startswith(ref)
+            ):
                 return db
         return None
 

@@ -40,7 +40,10 @@ class SEGUE_PT_connection(_Panel, bpy.types.Panel):
         layout.label(text=SESSION.status, icon="CHECKMARK" if SESSION.client else "INFO")
         if SESSION.client is not None:
             backend = SESSION.health.get("backend", {})
-            layout.label(text=f"{backend.get('backend', '?')} backend, {backend.get('workers_ready', '?')} workers ready")
+            layout.label(
+                text=f"{backend.get('backend', '?')} backend, "
+                f"{backend.get('workers_ready', '?')} workers ready"
+            )
         if SESSION.error:
             for line in _wrap(SESSION.error):
                 layout.label(text=line, icon="ERROR")
@@ -129,7 +132,10 @@ class SEGUE_PT_generate(_Panel, bpy.types.Panel):
         elif kind == "control":
             box.prop(settings, "leader")
         elif kind == "annotated":
-            box.label(text=f"{len(context.scene.timeline_markers)} markers; labels: {', '.join(summary.get('labels', [])[:6])}")
+            box.label(
+                text=f"{len(context.scene.timeline_markers)} markers; "
+                f"labels: {', '.join(summary.get('labels', [])[:6])}"
+            )
         elif kind == "rhythm":
             box.prop(settings, "bpm")
             box.prop(settings, "path")
@@ -149,7 +155,9 @@ class SEGUE_PT_generate(_Panel, bpy.types.Panel):
         col = layout.column(align=True)
         col.label(text=f"job {view.id[:12] or '…'}: {view.state}")
         if view.solutions:
-            first = f", first after {view.first_solution_s:.2f} s" if view.first_solution_s is not None else ""
+            first = (
+                f", first after {view.first_solution_s:.2f} s" if view.first_solution_s is not None else ""
+            )
             col.label(text=f"{view.solutions} solution(s){first}; showing {view.shown}")
             if view.score is not None:
                 col.label(text=f"score {float(view.score):.4g}")

@@ -32,19 +32,79 @@ _COURIER = [
 for side, sx in (("L", 1.0), ("R", -1.0)):
     _COURIER += [
         (f"DEF-thigh.{side}", "DEF-spine", (0.095 * sx, 0.0, 0.95), (0.10 * sx, -0.01, 0.73), 4 * sx),
-        (f"DEF-thigh.{side}.001", f"DEF-thigh.{side}", (0.10 * sx, -0.01, 0.73), (0.105 * sx, -0.02, 0.51), 4 * sx),
-        (f"DEF-shin.{side}", f"DEF-thigh.{side}.001", (0.105 * sx, -0.02, 0.51), (0.105 * sx, 0.0, 0.30), -3 * sx),
-        (f"DEF-shin.{side}.001", f"DEF-shin.{side}", (0.105 * sx, 0.0, 0.30), (0.105 * sx, 0.03, 0.085), -3 * sx),
+        (
+            f"DEF-thigh.{side}.001",
+            f"DEF-thigh.{side}",
+            (0.10 * sx, -0.01, 0.73),
+            (0.105 * sx, -0.02, 0.51),
+            4 * sx,
+        ),
+        (
+            f"DEF-shin.{side}",
+            f"DEF-thigh.{side}.001",
+            (0.105 * sx, -0.02, 0.51),
+            (0.105 * sx, 0.0, 0.30),
+            -3 * sx,
+        ),
+        (
+            f"DEF-shin.{side}.001",
+            f"DEF-shin.{side}",
+            (0.105 * sx, 0.0, 0.30),
+            (0.105 * sx, 0.03, 0.085),
+            -3 * sx,
+        ),
         (f"DEF-foot.{side}", f"DEF-shin.{side}.001", (0.105 * sx, 0.03, 0.085), (0.11 * sx, -0.10, 0.02), 0),
         (f"DEF-toe.{side}", f"DEF-foot.{side}", (0.11 * sx, -0.10, 0.02), (0.11 * sx, -0.17, 0.02), 0),
         (f"DEF-shoulder.{side}", "DEF-spine.002", (0.02 * sx, -0.01, 1.39), (0.16 * sx, 0.03, 1.41), 10 * sx),
-        (f"DEF-upper_arm.{side}", f"DEF-shoulder.{side}", (0.18 * sx, 0.03, 1.40), (0.30 * sx, 0.04, 1.27), 30 * sx),
-        (f"DEF-upper_arm.{side}.001", f"DEF-upper_arm.{side}", (0.30 * sx, 0.04, 1.27), (0.41 * sx, 0.05, 1.14), 30 * sx),
-        (f"DEF-forearm.{side}", f"DEF-upper_arm.{side}.001", (0.41 * sx, 0.05, 1.14), (0.49 * sx, 0.02, 1.03), 80 * sx),
-        (f"DEF-forearm.{side}.001", f"DEF-forearm.{side}", (0.49 * sx, 0.02, 1.03), (0.56 * sx, -0.01, 0.93), 80 * sx),
-        (f"DEF-hand.{side}", f"DEF-forearm.{side}.001", (0.56 * sx, -0.01, 0.93), (0.59 * sx, -0.02, 0.86), 80 * sx),
-        (f"DEF-f_index.01.{side}", f"DEF-hand.{side}", (0.59 * sx, -0.03, 0.86), (0.60 * sx, -0.04, 0.82), 80 * sx),
-        (f"DEF-thumb.01.{side}", f"DEF-hand.{side}", (0.57 * sx, -0.04, 0.90), (0.58 * sx, -0.07, 0.87), 20 * sx),
+        (
+            f"DEF-upper_arm.{side}",
+            f"DEF-shoulder.{side}",
+            (0.18 * sx, 0.03, 1.40),
+            (0.30 * sx, 0.04, 1.27),
+            30 * sx,
+        ),
+        (
+            f"DEF-upper_arm.{side}.001",
+            f"DEF-upper_arm.{side}",
+            (0.30 * sx, 0.04, 1.27),
+            (0.41 * sx, 0.05, 1.14),
+            30 * sx,
+        ),
+        (
+            f"DEF-forearm.{side}",
+            f"DEF-upper_arm.{side}.001",
+            (0.41 * sx, 0.05, 1.14),
+            (0.49 * sx, 0.02, 1.03),
+            80 * sx,
+        ),
+        (
+            f"DEF-forearm.{side}.001",
+            f"DEF-forearm.{side}",
+            (0.49 * sx, 0.02, 1.03),
+            (0.56 * sx, -0.01, 0.93),
+            80 * sx,
+        ),
+        (
+            f"DEF-hand.{side}",
+            f"DEF-forearm.{side}.001",
+            (0.56 * sx, -0.01, 0.93),
+            (0.59 * sx, -0.02, 0.86),
+            80 * sx,
+        ),
+        (
+            f"DEF-f_index.01.{side}",
+            f"DEF-hand.{side}",
+            (0.59 * sx, -0.03, 0.86),
+            (0.60 * sx, -0.04, 0.82),
+            80 * sx,
+        ),
+        (
+            f"DEF-thumb.01.{side}",
+            f"DEF-hand.{side}",
+            (0.57 * sx, -0.04, 0.90),
+            (0.58 * sx, -0.07, 0.87),
+            20 * sx,
+        ),
     ]
 
 # Y up, centimetres, facing +Z (a Y-up program's convention); leg_a is the character's left (+X)
@@ -140,7 +200,9 @@ def _build(
         eb.head, eb.tail, eb.roll = head, tail, math.radians(roll)
         if parent:
             eb.parent = made[parent]
-            eb.use_connect = (Vector(head) - made[parent].tail).length < 1e-6 and not bname.endswith("thumb.01.L")
+            eb.use_connect = (Vector(head) - made[parent].tail).length < 1e-6 and not bname.endswith(
+                "thumb.01.L"
+            )
         made[bname] = eb
     bpy.ops.object.mode_set(mode="OBJECT")
     for bname in skip:

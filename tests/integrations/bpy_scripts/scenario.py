@@ -15,10 +15,9 @@ import time
 from pathlib import Path
 
 import bpy
-from mathutils import Vector
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import rigs  # noqa: E402
+import rigs
 
 ARGS = sys.argv[sys.argv.index("--") + 1 :]
 CFG = json.loads(Path(ARGS[0]).read_text())
@@ -32,14 +31,22 @@ def addon_module(name: str):  # type: ignore[no-untyped-def]
 
 def install(zip_path: str, how: str) -> str:
     if how == "extension":
-        assert bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True) == {"FINISHED"}
+        assert bpy.ops.extensions.package_install_files(
+            filepath=zip_path, repo="user_default", enable_on_install=True
+        ) == {"FINISHED"}
     else:
         assert bpy.ops.preferences.addon_install(filepath=zip_path) == {"FINISHED"}
         assert bpy.ops.preferences.addon_enable(module="segue_blender") == {"FINISHED"}
-    return next(k for k in bpy.context.preferences.addons.keys() if k.endswith("segue_blender"))
+    return next(k for k in bpy.context.preferences.addons if k.endswith("segue_blender"))
 
 
-def goal(name: str, frame: int, location: tuple[float, float, float], facing_deg: float | None = None, dancer: int = 0) -> bpy.types.Object:
+def goal(
+    name: str,
+    frame: int,
+    location: tuple[float, float, float],
+    facing_deg: float | None = None,
+    dancer: int = 0,
+) -> bpy.types.Object:
     """A goal empty as an artist adds one (Empty, custom property ``segue_frame``); with
     ``facing_deg`` it also asks for the facing: the empty turned about Z (its -Y is its facing)."""
     e = bpy.data.objects.new(name, None)
@@ -57,22 +64,40 @@ def goal(name: str, frame: int, location: tuple[float, float, float], facing_deg
 
 def rig_state(obj: bpy.types.Object) -> dict:
     """Bones (names, parents, rest matrices, deform) and bound meshes (vertices, groups, modifiers)."""
-    bones = {b.name: [b.parent.name if b.parent else None, [round(v, 7) for row in b.matrix_local for v in row], b.use_deform]
-             for b in obj.data.bones}
+    bones = {
+        b.name: [
+            b.parent.name if b.parent else None,
+            [round(v, 7) for row in b.matrix_local for v in row],
+            b.use_deform,
+        ]
+        for b in obj.data.bones
+    }
     meshes = {}
     for m in bpy.context.scene.objects:
         if m.type == "MESH" and any(md.type == "ARMATURE" and md.object == obj for md in m.modifiers):
             meshes[m.name] = {
                 "vertices": [round(c, 7) for v in m.data.vertices for c in v.co],
                 "groups": [g.name for g in m.vertex_groups],
-                "modifiers": [(md.type, md.object.name if getattr(md, "object", None) else None) for md in m.modifiers],
+                "modifiers": [
+                    (md.type, md.object.name if getattr(md, "object", None) else None) for md in m.modifiers
+                ],
             }
-    return {"bones": bones, "meshes": meshes, "matrix_world": [round(v, 7) for row in obj.matrix_world for v in row]}
+    return {
+        "bones": bones,
+        "meshes": meshes,
+        "matrix_world": [round(v, 7) for row in obj.matrix_world for v in row],
+    }
 
 
 def fcurves_of(action: bpy.types.Action) -> list:
     if hasattr(action, "layers"):
-        return [fc for layer in action.layers for strip in layer.strips for bag in strip.channelbags for fc in bag.fcurves]
+        return [
+            fc
+            for layer in action.layers
+            for strip in layer.strips
+            for bag in strip.channelbags
+            for fc in bag.fcurves
+        ]
     return list(action.fcurves)
 
 
@@ -93,7 +118,10 @@ def mesh_motion(obj: bpy.types.Object, frame: int) -> float:
     sc.frame_set(frame)
     ev = mesh.evaluated_get(bpy.context.evaluated_depsgraph_get())
     me = ev.to_mesh()
-    moved = max((mesh.matrix_world @ a.co - mesh.matrix_world @ b.co).length for a, b in zip(me.vertices, mesh.data.vertices, strict=True))
+    moved = max(
+        (mesh.matrix_world @ a.co - mesh.matrix_world @ b.co).length
+        for a, b in zip(me.vertices, mesh.data.vertices, strict=True)
+    )
     ev.to_mesh_clear()
     return moved
 
@@ -102,7 +130,9 @@ def action_report(obj: bpy.types.Object) -> dict:
     act = obj.animation_data.action if obj.animation_data else None
     if act is None:
         return {"name": None, "driven": []}
-    driven = sorted({fc.data_path.split('"')[1] for fc in fcurves_of(act) if fc.data_path.startswith("pose.bones")})
+    driven = sorted(
+        {fc.data_path.split('"')[1] for fc in fcurves_of(act) if fc.data_path.startswith("pose.bones")}
+    )
     return {"name": act.name, "driven": driven, "frame_range": list(act.frame_range)}
 
 
@@ -120,8 +150,16 @@ def job_report() -> dict:
         "ok": view.ok,
         "reasons": view.reasons,
         "message": view.message,
-        "goals": [{"name": g.name, "position": list(g.position), "reached": list(g.reached) if g.reached else None,
-                   "error_cm": g.error_cm, "satisfied": g.satisfied} for g in view.goals],
+        "goals": [
+            {
+                "name": g.name,
+                "position": list(g.position),
+                "reached": list(g.reached) if g.reached else None,
+                "error_cm": g.error_cm,
+                "satisfied": g.satisfied,
+            }
+            for g in view.goals
+        ],
         "rig_files": {k[1][:12]: v for k, v in state.SESSION.rig_files.items()},
         "file_ids": list(state.SESSION.rig_files.values()),
         "_": bool(ops),
@@ -190,7 +228,9 @@ def scenario_goals() -> dict:
     }
 
 
-SCENARIOS = {name.removeprefix("scenario_"): fn for name, fn in list(globals().items()) if name.startswith("scenario_")}
+SCENARIOS = {
+    name.removeprefix("scenario_"): fn for name, fn in list(globals().items()) if name.startswith("scenario_")
+}
 
 if __name__ == "__main__":
     bpy.ops.wm.read_factory_settings(use_empty=True)
