@@ -5,17 +5,21 @@ characters of their own naming are built in Blender (bpy_scripts/rigs.py), and e
 
 from __future__ import annotations
 
+import gzip
 import io
 import json
+import os
+import subprocess
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
+from service.demos import DEMOS
 from tests.blender import bpy_python, run_blender
 
-from .conftest import Serve
+from .conftest import SEGUE, Serve
 
 SCRIPTS = Path(__file__).resolve().parent / "bpy_scripts"
 GOAL_M = 0.10  # the issue's bar: hips within 10 cm of each goal, in Blender's axes
@@ -108,3 +112,170 @@ def test_a_held_out_character_meets_two_goals_with_its_own_bones(
             want = np.array([x, -z, y]) + anchor  # Segue (Y up) -> Blender (Z up), at the anchor
             worst = max(worst, float(np.abs(np.array(head) - want).max()))
     assert worst < FK_M, worst
+
+
+def _report(serve: Serve, job: str, result: str) -> dict[str, Any]:
+    with serve.client() as c:
+        return dict(c.http.get(f"/v1/jobs/{job}/report", params={"result": result}).json())
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:  # a zombie (exited, not yet reaped by its parent) is not running
+        return Path(f"/proc/{pid}/status").read_text().split("State:")[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
+@pytest.mark.slow
+def test_an_uploaded_action_builds_a_database_another_character_generates_from(
+    serve: Serve, addon_zip: Path, dbs: dict[str, str], tmp_path: Path
+) -> None:
+    """Upload an action of the artist's rig as a clip (its role bones under Segue's humanoid
+    names, its frames at the scene's rate), build a graph database from it, generate from that
+    database onto another character."""
+    db = _databases(serve, dbs, "walks", WALKS_GRAPH)
+    got = scenario(serve, addon_zip, tmp_path, "upload_build", database=db)
+    clip = got["clip"]
+    assert clip["frames"] == 97 and clip["units"] == "m"
+    assert {"Hips", "LeftUpperLeg", "LeftLowerLeg", "LeftFoot", "RightFoot", "Head"} <= set(clip["joints"])
+    assert "DEF-spine.001" in clip["joints"]  # bones without a role keep their own names
+    assert 1.5 < clip["height_m"] < 2.0
+    assert got["job"]["state"] == "done", got["job"]
+    assert set(got["deform_bones"]) <= set(got["action"]["driven"])
+    assert got["hips_moved"] > 0.3
+
+
+@pytest.mark.slow
+def test_a_curve_is_the_path_a_walk_database_follows(
+    serve: Serve, addon_zip: Path, dbs: dict[str, str], tmp_path: Path
+) -> None:
+    db = _databases(serve, dbs, "walk", DEMOS["walk"].spec)
+    got = scenario(serve, addon_zip, tmp_path, "path", database=db)
+    assert got["job"]["state"] == "done", got["job"]
+    d = np.array(got["distances"])
+    assert np.median(d) < 0.15 and d.max() < 0.4, d
+    assert got["start_to_path_start"] < 0.15
+    assert got["end_to_path_end"] < 0.5
+
+
+@pytest.mark.slow
+def test_timeline_markers_paint_the_labels(
+    serve: Serve, addon_zip: Path, dbs: dict[str, str], tmp_path: Path
+) -> None:
+    db = _databases(serve, dbs, "annotations", DEMOS["annotations"].spec)
+    got = scenario(serve, addon_zip, tmp_path, "timeline", database=db)
+    job = got["job"]
+    assert job["state"] == "done", job
+    report = _report(serve, job["id"], job["shown"])
+    labels = {k: v for k, v in report["constraint_errors"].items() if k.startswith("label")}
+    painted = sorted((v["label"], v["value"]) for v in labels.values())
+    assert painted == [("jump", -1), ("jump", -1), ("run", 1), ("walk", 1)], labels
+    assert all(v["satisfied"] for v in labels.values()), labels
+
+
+@pytest.mark.slow
+def test_the_scenes_sound_strip_is_the_music(
+    serve: Serve, addon_zip: Path, dbs: dict[str, str], tmp_path: Path
+) -> None:
+    db = _databases(serve, dbs, "rhythm", DEMOS["rhythm"].spec)
+    got = scenario(serve, addon_zip, tmp_path, "music", database=db, tmp=str(tmp_path), bpm=120.0)
+    job = got["job"]
+    assert job["state"] == "done", job
+    beats = np.array(_report(serve, job["id"], job["shown"])["annotations"]["music_beats_s"])
+    assert len(beats) >= 10
+    assert np.median(np.diff(beats)) == pytest.approx(0.5, abs=0.03)  # the click track's 120 BPM
+    assert got["action"]["name"] == f"Segue {job['id'][:12]}"
+
+
+@pytest.mark.slow
+def test_another_armatures_action_leads_the_partner(
+    serve: Serve, addon_zip: Path, dbs: dict[str, str], tmp_path: Path
+) -> None:
+    from motion.samples import sample_path
+
+    db = _databases(serve, dbs, "salsa", DEMOS["control"].spec)
+    leader = tmp_path / "leader.bvh"
+    leader.write_bytes(gzip.decompress(sample_path("salsa-leader-12").read_bytes()))
+    got = scenario(
+        serve, addon_zip, tmp_path, "partner", database=db, leader_bvh=str(leader), leader_scale=1.28
+    )
+    assert got["job"]["state"] == "done", got["job"]
+    gaps = np.array(got["gaps"])
+    assert got["leader_travel"] > 0.1
+    assert np.median(gaps) < 1.5, gaps  # she dances with him
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("group", ["crowd", "couple", "graph"])
+def test_one_armature_per_dancer(
+    serve: Serve, addon_zip: Path, dbs: dict[str, str], tmp_path: Path, group: str
+) -> None:
+    if group == "graph":
+        db = _databases(serve, dbs, "walks", WALKS_GRAPH)
+        goals = [[(0.0, 0.0, 0.0), (2.5, -1.0, 0.0)], [(2.0, 0.5, 0.0), (0.5, -2.0, 0.0)]]
+        got = scenario(serve, addon_zip, tmp_path, "dancers", database=db, goals=goals)
+    elif group == "crowd":
+        db = _databases(serve, dbs, "rhythm", DEMOS["rhythm"].spec)
+        got = scenario(serve, addon_zip, tmp_path, "dancers", database=db, three=True, bpm=120.0)
+    else:
+        db = _databases(serve, dbs, "couples", COUPLES)
+        got = scenario(
+            serve, addon_zip, tmp_path, "dancers", database=db, bpm=110.0, request={"couples": True}
+        )
+    job = got["job"]
+    assert job["state"] == "done", job
+    names = [d["action"]["name"] for d in got["dancers"]]
+    assert len(set(names)) == len(names) and all(n.startswith(f"Segue {job['id'][:12]}") for n in names)
+    for d in got["dancers"]:
+        assert set(d["deform_bones"]) <= set(d["action"]["driven"]), d["name"]
+    starts = [np.array(d["hips"][0][:2]) for d in got["dancers"]]
+    gaps = [np.linalg.norm(a - b) for i, a in enumerate(starts) for b in starts[i + 1 :]]
+    assert min(gaps) > 0.3  # each dancer in its own place
+    if group == "graph":
+        for d, (start, end) in zip(got["dancers"], goals, strict=True):
+            assert np.hypot(d["hips"][0][0] - start[0], d["hips"][0][1] - start[1]) < GOAL_M, d
+            assert np.hypot(d["hips"][1][0] - end[0], d["hips"][1][1] - end[1]) < GOAL_M, d
+    if group == "couple":
+        assert max(gaps) < 2.0  # partners dance together
+
+
+COUPLES = {
+    "kind": "rhythm",
+    "beats_per_movement": 4,
+    "clips": [{"bvh": "sample:salsa-leader"}, {"bvh": "sample:salsa-follower"}],
+    "partners": [{"leader": "salsa-leader", "follower": "salsa-follower"}],
+}
+
+
+@pytest.mark.slow
+def test_the_preferences_start_a_local_service_that_stops_with_blender(
+    addon_zip: Path, tmp_path: Path
+) -> None:
+    """`segue serve --import DIR` started from the add-on's preferences on a free port, serving a
+    database folder `segue build` wrote; Stop stops it, and one left running stops when Blender
+    exits."""
+    spec = tmp_path / "db.json"
+    spec.write_text(json.dumps({"kind": "clips", "clips": [{"bvh": "sample:walk"}], "fps": 30}))
+    folder = tmp_path / "walk-db"
+    r = subprocess.run([str(SEGUE), "build", str(spec), "--out", str(folder)], capture_output=True, text=True,
+                       timeout=300, check=False)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    db = json.loads((folder / "info.json").read_text())["id"]
+    bpy_python()
+    config = {"zip": str(addon_zip), "url": "", "scenario": "local", "segue": str(SEGUE)}
+    config |= {"tmp": str(tmp_path), "import_dir": str(folder), "database": db}
+    (tmp_path / "config.json").write_text(json.dumps(config))
+    out = tmp_path / "out.json"
+    res = run_blender(SCRIPTS / "scenario.py", str(tmp_path / "config.json"), str(out),
+                      env={"BLENDER_USER_RESOURCES": str(tmp_path / "blender-user")})  # fmt: skip
+    assert res.returncode == 0 and out.is_file(), res.stderr[-3000:]
+    got = json.loads(out.read_text())
+    assert db in got["first"]["databases"]
+    assert got["first"]["job"]["state"] == "done", got["first"]["job"]
+    assert got["first"]["action"]["name"].startswith("Segue ")
+    assert not _alive(got["stopped_pid"])
+    assert not _alive(got["left_running_pid"])  # Blender's exit stopped it

@@ -34,6 +34,11 @@ PATH_FPS = 30.0
 """Points per second of a path sent as a control trajectory."""
 
 
+ENGINE_OF_KIND = {"graph": "graph", "control": "control", "annotated": "annotations", "rhythm": "rhythm",
+                  "clips": "clip"}  # fmt: skip
+"""The engine that answers requests on each database kind."""
+
+
 class AuthoringError(ValueError):
     """Scene constraints that make no request (a goal outside the frame range, no path...)."""
 
@@ -322,6 +327,7 @@ def goal_errors(report: Mapping[str, Any]) -> list[dict[str, Any]]:
                 "index": index,
                 "frame": entry.get("frame"),
                 "error_cm": entry.get("position_cm"),
+                "tolerance_cm": entry.get("tolerance_cm", 5.0),
                 "heading_deg": entry.get("heading_deg"),
                 "satisfied": bool(entry.get("satisfied", False)),
             }

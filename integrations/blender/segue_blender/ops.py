@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import queue
 import re
@@ -511,12 +512,13 @@ def _goal_results(job: _Job, report: Mapping[str, Any]) -> list[GoalResult]:
         k = round(g.frame - job.start_frame)
         if seq and 0 <= k < len(seq):
             reached = seq[k]
-        err = entry["error_cm"]
-        out.append(
-            GoalResult(
-                g.name, g.position, reached, float(err) if err is not None else None, entry["satisfied"]
-            )
-        )
+        report_cm = float(entry["error_cm"]) if entry["error_cm"] is not None else None
+        if reached is None:
+            out.append(GoalResult(g.name, g.position, None, report_cm, entry["satisfied"], report_cm))
+            continue
+        rig_cm = 100.0 * math.hypot(reached[0] - g.position[0], reached[1] - g.position[1])
+        tolerance = float(entry.get("tolerance_cm") or 5.0) * job.frame.scale
+        out.append(GoalResult(g.name, g.position, reached, rig_cm, rig_cm <= tolerance, report_cm))
     return out
 
 
@@ -635,6 +637,9 @@ class SEGUE_OT_generate(bpy.types.Operator):
         if not isinstance(base, dict):
             raise SegueError(0, "bad_request", "the request must be a JSON object")
         base["database"] = db_id
+        engine = authoring.ENGINE_OF_KIND.get(str(db.get("kind")))
+        if engine is not None:
+            base.setdefault("engine", engine)
         dancers = self._dancers(context)
         sc = context.scene
         rigs = [_Rig(o) for o in dancers]

@@ -14,13 +14,17 @@ from .local_service import LocalService
 
 @dataclass(slots=True)
 class GoalResult:
-    """A body goal of the last result: where it is, where the hips were then, its error, met."""
+    """A body goal of the last result: where it is (Blender world), where the character's hips
+    were at its frame, the floor distance between them (cm) and whether that is within the
+    report's tolerance (at the character's scale); ``report_cm`` is the report's own error,
+    measured on the database performers' motion before it was put on the character."""
 
     name: str
     position: tuple[float, float, float]
     reached: tuple[float, float, float] | None
     error_cm: float | None
     satisfied: bool
+    report_cm: float | None = None
 
 
 @dataclass(slots=True)

@@ -12,9 +12,11 @@ import json
 import math
 import sys
 import time
+from itertools import pairwise
 from pathlib import Path
 
 import bpy
+from mathutils import Vector
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import rigs
@@ -37,7 +39,7 @@ def install(zip_path: str, how: str) -> str:
     else:
         assert bpy.ops.preferences.addon_install(filepath=zip_path) == {"FINISHED"}
         assert bpy.ops.preferences.addon_enable(module="segue_blender") == {"FINISHED"}
-    return next(k for k in bpy.context.preferences.addons if k.endswith("segue_blender"))
+    return next(a.module for a in bpy.context.preferences.addons if a.module.endswith("segue_blender"))
 
 
 def goal(
@@ -226,6 +228,233 @@ def scenario_goals() -> dict:
         "wall_s": wall,
         "fps": sc.render.fps,
     }
+
+
+def _walk_action(char: bpy.types.Object, start: tuple, end: tuple) -> None:
+    """Give ``char`` a walk from ``start`` to ``end`` over the scene (a graph job on the walks)."""
+    sc = bpy.context.scene
+    goal("Walk start", sc.frame_start, start)
+    goal("Walk end", sc.frame_end, end)
+    select_only([char])
+    generate(database=CFG["database"], scene_goals=True)
+    for o in [o for o in sc.objects if o.type == "EMPTY"]:
+        bpy.data.objects.remove(o)
+
+
+def scenario_upload_build() -> dict:
+    """An action on the artist's rig (here one Segue made, from the walks) uploaded as a clip, a
+    graph database built from it, and another character generating from that database."""
+    sc = setup_scene(1, 97)
+    courier = rigs.courier()
+    ferry = rigs.ferry(location=(-1.0, 2.0, 0.0))
+    connect()
+    _walk_action(courier, (1.0, -0.5, 0.0), (3.5, -1.5, 0.0))
+    select_only([courier])
+    assert bpy.ops.segue.upload_action(name="courier-walk.bvh") == {"FINISHED"}
+    state = addon_module("state")
+    clip = next(c for c in state.SESSION.clips if c["name"] == "courier-walk.bvh")
+    assert bpy.ops.segue.build_database(
+        kind="graph", clips="courier-walk.bvh", name="courier walks", wait=True
+    ) == {"FINISHED"}
+    db = sc.segue.database
+    select_only([ferry])
+    sc.frame_start, sc.frame_end = 1, 49
+    generate(database=db, request=json.dumps({"frames": 61, "seed": 2}))
+    hips = ferry.segue_roles.Hips
+    heads = heads_at(ferry, [1, 49])
+    return {
+        "clip": clip,
+        "database": db,
+        "action": action_report(ferry),
+        "job": job_report(),
+        "hips_moved": (Vector(heads[1][hips]) - Vector(heads[0][hips])).length,
+        "deform_bones": [b.name for b in ferry.data.bones if b.use_deform],
+    }
+
+
+def _curve(name: str, points: list[tuple[float, float, float]]) -> bpy.types.Object:
+    cu = bpy.data.curves.new(name, "CURVE")
+    cu.dimensions = "3D"
+    sp = cu.splines.new("BEZIER")
+    sp.bezier_points.add(len(points) - 1)
+    for bp, p in zip(sp.bezier_points, points, strict=True):
+        bp.co = p
+        bp.handle_left_type = bp.handle_right_type = "AUTO"
+    ob = bpy.data.objects.new(name, cu)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def _floor_distance(p: list[float], poly: list[tuple[float, float, float]]) -> float:
+    best = 1e9
+    for a, b in pairwise(poly):
+        ax, ay, bx, by = a[0], a[1], b[0], b[1]
+        dx, dy = bx - ax, by - ay
+        L = dx * dx + dy * dy
+        u = 0.0 if L == 0 else max(0.0, min(1.0, ((p[0] - ax) * dx + (p[1] - ay) * dy) / L))
+        best = min(best, math.hypot(p[0] - ax - u * dx, p[1] - ay - u * dy))
+    return best
+
+
+def scenario_path() -> dict:
+    """A curve is the walked path of a walk database (Path tool): the hips follow it."""
+    setup_scene(1, 121)
+    char = rigs.courier()
+    path = _curve("Path", [(0.0, 0.0, 0.0), (1.5, -1.0, 0.0), (2.0, -3.0, 0.0), (3.5, -4.5, 0.0)])
+    select_only([char])
+    connect()
+    generate(database=CFG["database"], scene_goals=True, path=path.name, speed=1.2)
+    scene_mod = addon_module("scene")
+    poly = scene_mod.curve_points(path)
+    hips = char.segue_roles.Hips
+    act = char.animation_data.action
+    last = int(act.frame_range[1])
+    frames = list(range(1, last + 1, 4))
+    heads = heads_at(char, frames)
+    dist = [_floor_distance(h[hips], poly) for h in heads]
+    end = heads[-1][hips]
+    return {
+        "action": action_report(char),
+        "job": job_report(),
+        "distances": dist,
+        "end_to_path_end": math.hypot(end[0] - poly[-1][0], end[1] - poly[-1][1]),
+        "start_to_path_start": math.hypot(heads[0][hips][0] - poly[0][0], heads[0][hips][1] - poly[0][1]),
+    }
+
+
+def scenario_timeline() -> dict:
+    """Timeline markers named after labels paint an annotation timeline (Timeline tool)."""
+    sc = setup_scene(1, 193)  # 8 s at 24 fps
+    char = rigs.courier()
+    sc.timeline_markers.new("walk, !jump", frame=1)
+    sc.timeline_markers.new("run, !jump", frame=121)
+    select_only([char])
+    connect()
+    generate(database=CFG["database"], scene_goals=True, request=json.dumps({"seed": 3}))
+    return {"action": action_report(char), "job": job_report()}
+
+
+def _click_track(path: str, bpm: float, seconds: float, rate: int = 22050) -> None:
+    """A WAV recording of a click on every beat (written here, nothing downloaded)."""
+    import struct
+    import wave
+
+    n = int(seconds * rate)
+    period = 60.0 / bpm
+    frames = bytearray()
+    for k in range(n):
+        t = k / rate
+        phase = t % period
+        v = math.sin(2 * math.pi * 1000 * t) * math.exp(-phase * 40) if phase < 0.08 else 0.0
+        frames += struct.pack("<h", int(20000 * v))
+    with wave.open(path, "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(rate)
+        w.writeframes(bytes(frames))
+
+
+def scenario_music() -> dict:
+    """The scene's sound strip is the music of a rhythm database (Music tool)."""
+    sc = setup_scene(1, 193)
+    char = rigs.courier()
+    wav = str(Path(CFG["tmp"]) / "clicks.wav")
+    _click_track(wav, CFG.get("bpm", 120.0), 8.5)
+    ed = sc.sequence_editor_create()
+    strips = getattr(ed, "strips", None) or ed.sequences
+    strips.new_sound("clicks", wav, 1, 1)
+    select_only([char])
+    connect()
+    generate(database=CFG["database"], scene_goals=True)
+    return {"action": action_report(char), "job": job_report()}
+
+
+def scenario_partner() -> dict:
+    """Another armature's action leads a Partner (control) database: a leader imported with
+    Blender's own BVH importer, a follower generated on the artist's character."""
+    sc = setup_scene(1, 10)
+    bpy.ops.import_anim.bvh(
+        filepath=CFG["leader_bvh"],
+        global_scale=CFG["leader_scale"],
+        update_scene_fps=True,
+        update_scene_duration=True,
+    )
+    leader = bpy.context.active_object
+    leader.name = "Leader"
+    end = min(sc.frame_end, sc.frame_start + 8 * int(sc.render.fps))  # the first 8 s of the dance
+    sc.frame_end = end
+    char = rigs.courier(location=(0.8, 0.0, 0.0))
+    select_only([char])
+    connect()
+    generate(database=CFG["database"], scene_goals=True, leader=leader.name)
+    frames = list(range(sc.frame_start, sc.frame_end + 1, 10))
+    lead_hips = [h["hip"] for h in heads_at(leader, frames)]
+    hips = char.segue_roles.Hips
+    follow = [h[hips] for h in heads_at(char, frames)]
+    gaps = [math.hypot(a[0] - b[0], a[1] - b[1]) for a, b in zip(lead_hips, follow, strict=True)]
+    return {"action": action_report(char), "job": job_report(), "gaps": gaps,
+            "leader_travel": (Vector(lead_hips[-1]) - Vector(lead_hips[0])).length}  # fmt: skip
+
+
+def scenario_dancers() -> dict:
+    """One armature per dancer (crowds, couples, several graph characters): each gets its own
+    action from its own part of the result."""
+    sc = setup_scene(1, CFG.get("end", 97))
+    chars = [rigs.courier(location=(0.0, 0.0, 0.0), turn_deg=0.0, name="Ada"),
+             rigs.ferry(location=(2.0, 0.0, 0.0), name="Bo")]  # fmt: skip
+    if CFG.get("three"):
+        chars.append(rigs.courier(location=(-2.0, 0.0, 0.0), turn_deg=180.0, name="Cy"))
+    for d, (start, end) in enumerate(CFG.get("goals", [])):
+        goal(f"Start {d}", sc.frame_start, tuple(start), dancer=d)
+        goal(f"End {d}", sc.frame_end, tuple(end), dancer=d)
+    select_only(chars)
+    connect()
+    generate(database=CFG["database"], scene_goals=True, request=json.dumps(CFG.get("request", {})),
+             armatures=",".join(c.name for c in chars), bpm=CFG.get("bpm", 0.0))  # fmt: skip
+    frames = [sc.frame_start, sc.frame_end]
+    out = []
+    for c in chars:
+        hips = c.segue_roles.Hips
+        heads = heads_at(c, frames)
+        deform = [b.name for b in c.data.bones if b.use_deform]
+        out.append(
+            {
+                "name": c.name,
+                "action": action_report(c),
+                "hips": [h[hips] for h in heads],
+                "deform_bones": deform,
+            }
+        )
+    return {"dancers": out, "job": job_report()}
+
+
+def scenario_local() -> dict:
+    """The add-on's preferences start a local service (`segue serve --import DIR` on a free port)
+    from a `segue` executable; it serves the imported database; stop stops it; another one is
+    left running for Blender's exit to stop."""
+    setup_scene(1, 31)
+    char = rigs.courier()
+    select_only([char])
+    prefs = bpy.context.preferences.addons[
+        next(a.module for a in bpy.context.preferences.addons if a.module.endswith("segue_blender"))
+    ].preferences
+    prefs.segue_executable = CFG["segue"]
+    prefs.data_dir = str(Path(CFG["tmp"]) / "local-data")
+    prefs.import_dirs = CFG["import_dir"]
+    assert bpy.ops.segue.start_local() == {"FINISHED"}
+    state = addon_module("state")
+    first = {"url": state.SESSION.url, "pid": state.SESSION.local.process.pid,
+             "databases": [d["id"] for d in state.SESSION.databases]}  # fmt: skip
+    generate(
+        database=CFG["database"],
+        request=json.dumps({"engine": "clip", "clip": "walk", "start": 0, "end": 30}),
+    )
+    first["job"] = job_report()
+    first["action"] = action_report(char)
+    assert bpy.ops.segue.stop_local() == {"FINISHED"}
+    stopped_pid = first["pid"]
+    assert bpy.ops.segue.start_local() == {"FINISHED"}
+    return {"first": first, "stopped_pid": stopped_pid, "left_running_pid": state.SESSION.local.process.pid}
 
 
 SCENARIOS = {
