@@ -172,8 +172,9 @@ def test_timeline_markers_paint_the_labels(
     assert job["state"] == "done", job
     report = _report(serve, job["id"], job["shown"])
     labels = {k: v for k, v in report["constraint_errors"].items() if k.startswith("label")}
-    painted = sorted((v["label"], v["value"]) for v in labels.values())
-    assert painted == [("jump", -1), ("jump", -1), ("run", 1), ("walk", 1)], labels
+    painted = sorted((v["label"], v["value"], v["start"], v["end"]) for v in labels.values())
+    # walk for 5 s then run (30 fps, markers at 0 s and 5 s of a 24-fps scene), never jump
+    assert painted == [("jump", -1, 0, 241), ("run", 1, 150, 241), ("walk", 1, 0, 150)], labels
     assert all(v["satisfied"] for v in labels.values()), labels
 
 

@@ -213,10 +213,13 @@ def scene_request(
     summary: Mapping[str, Any],
     scene: SceneInputs,
     frame: SegueFrame,
+    dancer_frames: Sequence[SegueFrame] | None = None,
 ) -> Authored:
     """``base`` (a request as the HTTP API takes it, ``database`` set) completed with what the
     scene authors for the database's kind (``summary``: the database's summary from the API).
-    What ``base`` already says wins; scene constraints are added to its lists."""
+    What ``base`` already says wins; scene constraints are added to its lists. ``dancer_frames``
+    gives each dancer of several its own frame (the same anchor, its own character's scale: each
+    is put on its own character, scaled by its own ratio)."""
     req: dict[str, Any] = copy.deepcopy(dict(base))
     kind = str(summary.get("kind", ""))
     timing = scene.timing
@@ -231,8 +234,9 @@ def scene_request(
             chars += [{"constraints": []} for _ in range(scene.dancers - len(chars))]
             for d in range(scene.dancers):
                 mine = [g for g in goals if g.dancer == d]
+                own = dancer_frames[d] if dancer_frames is not None and d < len(dancer_frames) else frame
                 chars[d].setdefault("constraints", [])
-                chars[d]["constraints"] = [*chars[d]["constraints"], *body_constraints(mine, timing, frame)]
+                chars[d]["constraints"] = [*chars[d]["constraints"], *body_constraints(mine, timing, own)]
             req["characters"] = chars
         else:
             _merge_list(req, "constraints", body_constraints(goals, timing, frame))

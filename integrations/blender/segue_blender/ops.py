@@ -397,6 +397,7 @@ class _Job:
         self.view, self.rigs, self.fps = view, rigs, fps
         self.start_frame = 0
         self.frame = SegueFrame()
+        self.frames: list[SegueFrame] = []
         self.poses: list[dict[str, list[Any]]] = []
         self.goals: list[authoring.Goal] = []
         client = _client()
@@ -517,7 +518,8 @@ def _goal_results(job: _Job, report: Mapping[str, Any]) -> list[GoalResult]:
             out.append(GoalResult(g.name, g.position, None, report_cm, entry["satisfied"], report_cm))
             continue
         rig_cm = 100.0 * math.hypot(reached[0] - g.position[0], reached[1] - g.position[1])
-        tolerance = float(entry.get("tolerance_cm") or 5.0) * job.frame.scale
+        frame = job.frames[entry["dancer"]] if entry["dancer"] < len(job.frames) else job.frame
+        tolerance = float(entry.get("tolerance_cm") or 5.0) * frame.scale
         out.append(GoalResult(g.name, g.position, reached, rig_cm, rig_cm <= tolerance, report_cm))
     return out
 
@@ -694,12 +696,16 @@ class SEGUE_OT_generate(bpy.types.Operator):
                 with open(audio[0], "rb") as fh:
                     info = c.upload_file(fh.read(), os.path.basename(audio[0]))
                 inputs.audio, inputs.audio_start = str(info["id"]), audio[1]
-            own = rigs[0].hip_height
             ref = (summary.get("skeleton") or {}).get("hip_height_m")
-            scale = (own / ref) if (own and ref and leader_bvh is None) else 1.0
-            job.frame = SegueFrame(anchor, scale)
+            frames = [
+                SegueFrame(
+                    anchor, (r.hip_height / ref) if (r.hip_height and ref and leader_bvh is None) else 1.0
+                )
+                for r in rigs
+            ]
+            job.frame, job.frames = frames[0], frames
             job.goals = list(inputs.goals)
-            authored = authoring.scene_request(base, summary, inputs, job.frame)
+            authored = authoring.scene_request(base, summary, inputs, job.frame, frames)
             job.start_frame = authored.start_frame
             return authored.request
 

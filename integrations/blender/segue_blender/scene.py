@@ -288,7 +288,7 @@ def sound_strip(scene: bpy.types.Scene) -> tuple[str, int] | None:
     ed = scene.sequence_editor
     if ed is None:
         return None
-    strips = getattr(ed, "strips_all", None) or getattr(ed, "sequences_all", [])
+    strips = ed.strips_all if hasattr(ed, "strips_all") else ed.sequences_all  # renamed in Blender 5
     for s in strips:
         if s.type == "SOUND" and not s.mute and s.sound is not None:
             return bpy.path.abspath(s.sound.filepath), int(s.frame_final_start)

@@ -361,7 +361,7 @@ def scenario_music() -> dict:
     wav = str(Path(CFG["tmp"]) / "clicks.wav")
     _click_track(wav, CFG.get("bpm", 120.0), 8.5)
     ed = sc.sequence_editor_create()
-    strips = getattr(ed, "strips", None) or ed.sequences
+    strips = ed.strips if hasattr(ed, "strips") else ed.sequences  # Blender 5 renamed them
     strips.new_sound("clicks", wav, 1, 1)
     select_only([char])
     connect()
