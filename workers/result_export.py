@@ -166,9 +166,10 @@ class ExportSpec:
         """The export's name in the store: its result, format and a digest of every option (the
         options added later, at their defaults, are left out: earlier exports keep their keys)."""
         options = {k: v for k, v in self.to_dict().items() if k not in ("job", "result")}
-        for later in ("animation_only", "dancer"):
-            if options[later] in (False, None):
-                del options[later]
+        if options["animation_only"] is False:
+            del options["animation_only"]
+        if options["dancer"] is None:
+            del options["dancer"]
         digest = hashlib.sha256(json.dumps(options, sort_keys=True).encode()).hexdigest()[:24]
         return f"{self.result}-{digest}-{self.format.value}".lower()
 

@@ -47,6 +47,8 @@ def dbs(serve: Serve) -> dict[str, str]:
 def scenario(serve: Serve, addon_zip: Path, tmp_path: Path, name: str, **cfg: Any) -> dict[str, Any]:
     bpy_python()  # skips without a Blender
     config = {"zip": str(addon_zip), "url": serve.url, "scenario": name, **cfg}
+    if "picture" in cfg:
+        config["picture"] = str(tmp_path / cfg["picture"])
     (tmp_path / "config.json").write_text(json.dumps(config))
     out = tmp_path / "out.json"
     res = run_blender(SCRIPTS / "scenario.py", str(tmp_path / "config.json"), str(out),
@@ -55,7 +57,20 @@ def scenario(serve: Serve, addon_zip: Path, tmp_path: Path, name: str, **cfg: An
         raise AssertionError(
             f"Blender scenario {name} failed ({res.returncode}):\n{res.stdout[-4000:]}\n{res.stderr[-4000:]}"
         )
-    return dict(json.loads(out.read_text()))
+    got = dict(json.loads(out.read_text()))
+    if got.get("picture"):
+        _keep_picture(Path(got["picture"]))
+    return got
+
+
+def _keep_picture(path: Path) -> None:
+    """A rendered picture is a PNG of some size; with ``SEGUE_BLENDER_PICTURES=DIR`` it is copied
+    there too (docs/screenshots/ holds the ones docs/blender.md shows)."""
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000, path
+    folder = os.environ.get("SEGUE_BLENDER_PICTURES")
+    if folder:
+        Path(folder, path.name).write_bytes(data)
 
 
 def _segue_positions(
@@ -83,6 +98,7 @@ def test_a_held_out_character_meets_two_goals_with_its_own_bones(
     db = _databases(serve, dbs, "walks", WALKS_GRAPH)
     start, end = (1.0, -0.5, 0.0), (3.3, -2.0, 0.0)
     got = scenario(serve, addon_zip, tmp_path, "goals", install=install, rig=rig, database=db,
+                   picture=f"blender-goals-{rig}.png",
                    goals=[start, end], end_facing=60.0 if rig == "ferry" else None)  # fmt: skip
     assert got["blender"].startswith(("4.", "5."))
     job = got["job"]
@@ -154,7 +170,7 @@ def test_a_curve_is_the_path_a_walk_database_follows(
     serve: Serve, addon_zip: Path, dbs: dict[str, str], tmp_path: Path
 ) -> None:
     db = _databases(serve, dbs, "walk", DEMOS["walk"].spec)
-    got = scenario(serve, addon_zip, tmp_path, "path", database=db)
+    got = scenario(serve, addon_zip, tmp_path, "path", database=db, picture="blender-path.png")
     assert got["job"]["state"] == "done", got["job"]
     d = np.array(got["distances"])
     assert np.median(d) < 0.15 and d.max() < 0.4, d
@@ -218,10 +234,27 @@ def test_one_armature_per_dancer(
     if group == "graph":
         db = _databases(serve, dbs, "walks", WALKS_GRAPH)
         goals = [[(0.0, 0.0, 0.0), (2.5, -1.0, 0.0)], [(2.0, 0.5, 0.0), (0.5, -2.0, 0.0)]]
-        got = scenario(serve, addon_zip, tmp_path, "dancers", database=db, goals=goals)
+        got = scenario(
+            serve,
+            addon_zip,
+            tmp_path,
+            "dancers",
+            database=db,
+            goals=goals,
+            picture="blender-dancers-goals.png",
+        )
     elif group == "crowd":
         db = _databases(serve, dbs, "rhythm", DEMOS["rhythm"].spec)
-        got = scenario(serve, addon_zip, tmp_path, "dancers", database=db, three=True, bpm=120.0)
+        got = scenario(
+            serve,
+            addon_zip,
+            tmp_path,
+            "dancers",
+            database=db,
+            three=True,
+            bpm=120.0,
+            picture="blender-crowd.png",
+        )
     else:
         db = _databases(serve, dbs, "couples", COUPLES)
         got = scenario(

@@ -193,6 +193,95 @@ def generate(**kw: object) -> float:
     return time.perf_counter() - t
 
 
+# -- pictures (Workbench, headless) ---------------------------------------------------------------
+def _material_color(obj: bpy.types.Object, rgba: tuple[float, float, float, float]) -> None:
+    obj.color = rgba
+
+
+def _marker(
+    name: str, at: tuple[float, float, float], rgba: tuple[float, float, float, float], r: float = 0.18
+) -> None:
+    bpy.ops.mesh.primitive_cylinder_add(radius=r, depth=0.02, location=(at[0], at[1], 0.01))
+    ob = bpy.context.active_object
+    ob.name = name
+    _material_color(ob, rgba)
+
+
+def _trail(
+    name: str, points: list[list[float]], rgba: tuple[float, float, float, float], width: float = 0.025
+) -> None:
+    cu = bpy.data.curves.new(name, "CURVE")
+    cu.dimensions = "3D"
+    cu.bevel_depth = width
+    sp = cu.splines.new("POLY")
+    sp.points.add(len(points) - 1)
+    for pt, p in zip(sp.points, points, strict=True):
+        pt.co = (p[0], p[1], 0.05, 1.0)
+    ob = bpy.data.objects.new(name, cu)
+    bpy.context.scene.collection.objects.link(ob)
+    _material_color(ob, rgba)
+
+
+def picture(
+    path: str,
+    frame: int,
+    chars: list[bpy.types.Object],
+    goals: list[dict],
+    trails: list[list[list[float]]],
+    curves: tuple[bpy.types.Object, ...] = (),
+) -> str:
+    """A Workbench render of the scene at ``frame``: the characters (their skinned meshes), each
+    goal a disc (green met, red missed) on a floor, each hips trail a blue line, ``curves`` (an
+    authored path) drawn orange; the camera frames them all."""
+    sc = bpy.context.scene
+    sc.frame_set(frame)
+    for g in goals:
+        _marker(
+            f"goal {g['name']}", g["position"], (0.1, 0.75, 0.25, 1) if g["satisfied"] else (0.9, 0.1, 0.1, 1)
+        )
+    for k, t in enumerate(trails):
+        if len(t) > 1:
+            _trail(f"trail {k}", t, (0.15, 0.35, 0.95, 1), width=0.018)
+    for c in curves:
+        c.data.bevel_depth = 0.045
+        _material_color(c, (1.0, 0.55, 0.0, 1))
+    pts = [Vector(p) for t in trails for p in t] + [Vector(g["position"]) for g in goals]
+    pts += [c.matrix_world @ b.head for c in chars for b in c.pose.bones]
+    lo = Vector((min(p.x for p in pts), min(p.y for p in pts), 0.0))
+    hi = Vector((max(p.x for p in pts), max(p.y for p in pts), 1.8))
+    centre = (lo + hi) / 2
+    size = max(hi.x - lo.x, hi.y - lo.y, 2.0)
+    bpy.ops.mesh.primitive_plane_add(size=size * 3, location=(centre.x, centre.y, 0.0))
+    _material_color(bpy.context.active_object, (0.82, 0.82, 0.80, 1))
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+    cam.data.lens = 35
+    direction = Vector((0.35, -1.0, 0.75)).normalized()
+    cam.location = centre + direction * (size * 1.55 + 2.0)
+    cam.rotation_euler = (centre - cam.location).to_track_quat("-Z", "Y").to_euler()
+    sc.render.engine = "BLENDER_WORKBENCH"
+    shading = sc.display.shading
+    shading.light = "STUDIO"
+    shading.color_type = "OBJECT"
+    shading.show_shadows = True
+    shading.show_cavity = True
+    sc.render.resolution_x, sc.render.resolution_y = 960, 540
+    sc.render.film_transparent = False
+    sc.render.filepath = path
+    for c in chars:
+        for m in sc.objects:
+            if m.type == "MESH" and m.parent == c:
+                _material_color(m, (0.85, 0.62, 0.45, 1))
+    bpy.ops.render.render(write_still=True)
+    return path
+
+
+def _hips_trail(char: bpy.types.Object, start: int, end: int) -> list[list[float]]:
+    hips = char.segue_roles.Hips
+    return [h[hips] for h in heads_at(char, list(range(start, end + 1, 2)))]
+
+
 # -- scenarios ------------------------------------------------------------------------------------
 def scenario_goals() -> dict:
     """The held-out bar: a skinned character of its own, two goal empties on the floor, connect and
@@ -211,7 +300,17 @@ def scenario_goals() -> dict:
     after = rig_state(char)
     frames = [sc.frame_start, (sc.frame_start + sc.frame_end) // 2, sc.frame_end]
     names = addon_module("scene").upload_names(char)
+    report = job_report()
+    heads = heads_at(char, frames)
+    moved = mesh_motion(char, sc.frame_end)
+    shot = None
+    if CFG.get("picture"):
+        trail = _hips_trail(char, sc.frame_start, sc.frame_end)
+        shot = picture(
+            CFG["picture"], (sc.frame_start + 2 * sc.frame_end) // 3, [char], report["goals"], [trail]
+        )
     return {
+        "picture": shot,
         "rig": char.name,
         "roles": roles,
         "upload_names": names,
@@ -221,10 +320,10 @@ def scenario_goals() -> dict:
         "deform_bones": [b.name for b in char.data.bones if b.use_deform],
         "action": action_report(char),
         "frames": frames,
-        "heads": heads_at(char, frames),
+        "heads": heads,
         "hips": roles["Hips"],
-        "mesh_moved_end": mesh_motion(char, sc.frame_end),
-        "job": job_report(),
+        "mesh_moved_end": moved,
+        "job": report,
         "wall_s": wall,
         "fps": sc.render.fps,
     }
@@ -313,7 +412,13 @@ def scenario_path() -> dict:
     heads = heads_at(char, frames)
     dist = [_floor_distance(h[hips], poly) for h in heads]
     end = heads[-1][hips]
+    shot = (
+        picture(CFG["picture"], last * 2 // 3, [char], [], [[h[hips] for h in heads]], (path,))
+        if CFG.get("picture")
+        else None
+    )
     return {
+        "picture": shot,
         "action": action_report(char),
         "job": job_report(),
         "distances": dist,
@@ -425,7 +530,12 @@ def scenario_dancers() -> dict:
                 "deform_bones": deform,
             }
         )
-    return {"dancers": out, "job": job_report()}
+    report = job_report()
+    shot = None
+    if CFG.get("picture"):
+        trails = [_hips_trail(c, sc.frame_start, sc.frame_end) for c in chars]
+        shot = picture(CFG["picture"], (sc.frame_start + sc.frame_end) // 2, chars, report["goals"], trails)
+    return {"dancers": out, "job": report, "picture": shot}
 
 
 def scenario_local() -> dict:
