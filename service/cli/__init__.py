@@ -38,6 +38,7 @@ import json
 import sys
 from collections.abc import Sequence
 
+from .addon import cmd_blender_addon
 from .demo import cmd_demo
 from .files import (
     OUTPUT_SUFFIXES,
@@ -51,7 +52,6 @@ from .files import (
     cmd_samples,
 )
 from .jobs import _validation_message, cmd_build, cmd_graph, cmd_graph_edit, cmd_synth
-from .addon import cmd_blender_addon
 from .serve import cmd_serve, cmd_warm, cmd_worker
 
 __all__ = ["OUTPUT_SUFFIXES", "SAMPLE_PREFIX", "TARGETS", "UNITS", "build_parser", "main"]

@@ -21,6 +21,8 @@ def cmd_blender_addon(args: argparse.Namespace) -> int:
         print(f"segue: error: {out.parent}: no such folder", file=sys.stderr)
         return 2
     names = write_addon_zip(out)
-    print(f"{out}: Segue add-on for Blender 4.2+ ({len(names)} files); install it with Edit > Preferences > "
-          "Get Extensions > Install from Disk (or Add-ons > Install from Disk)")
+    print(
+        f"{out}: Segue add-on for Blender 4.2+ ({len(names)} files); install it with Edit > Preferences > "
+        "Get Extensions > Install from Disk (or Add-ons > Install from Disk)"
+    )
     return 0

@@ -29,8 +29,8 @@ def walks_db(client: TestClient) -> dict[str, Any]:
 @pytest.fixture(scope="module")
 def pair_job(client: TestClient, walks_db: dict[str, Any]) -> str:
     request = {
-        "engine": "graph", "database": walks_db["id"], "frames": 60, "seed": 1, "rounds": 3, "coupling_rounds": 1,
-        "budget_s": 60,
+        "engine": "graph", "database": walks_db["id"], "frames": 60, "seed": 1, "rounds": 3,
+        "coupling_rounds": 1, "budget_s": 60,
         "characters": [
             {"constraints": [{"type": "body", "frame": 0, "position": [0.0, 0.0], "heading_deg": 90}]},
             {"constraints": [{"type": "body", "frame": 0, "position": [4.0, 0.8], "heading_deg": -90}]},
