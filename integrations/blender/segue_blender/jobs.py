@@ -89,9 +89,10 @@ class JobRunner(threading.Thread):
                 Message("error", {"message": f"{type(exc).__name__}: {exc}", "code": "internal"})
             )
 
-    def _show(self, rid: str, data: dict[str, Any]) -> None:
+    def _show(self, rid: str, data: dict[str, Any], seen: float) -> None:
         if self.download is None:
             return
+        data = {**data, "seen_at": seen}
         raw = self.download(rid)
         prepared = self.prepare(raw) if self.prepare is not None else raw
         self.shown = rid
@@ -108,7 +109,8 @@ class JobRunner(threading.Thread):
             info = self.client.submit(req)
             self.job_id = str(info["id"])
             self.messages.put(Message("submitted", dict(info)))
-        after, pending, ended, cancel_sent = 0, None, None, False
+        after, ended, cancel_sent = 0, None, False
+        pending: tuple[str, dict[str, Any], float] | None = None
         while not self._abandoned.is_set():
             if self._cancel_asked.is_set() and not cancel_sent:
                 self.client.cancel(self.job_id)
@@ -119,21 +121,21 @@ class JobRunner(threading.Thread):
                 kind, data = str(ev["type"]), dict(ev.get("data") or {})
                 if kind == "solution" and data.get("result"):
                     self.best = str(data["result"])
-                    pending = (self.best, data)
+                    pending = (self.best, data, time.perf_counter())
                 elif kind in TERMINAL:
                     ended = (kind, data)
                     if data.get("result"):
                         best = str(data["result"])
                         if best != self.shown and (pending is None or pending[0] != best):
-                            pending = (best, data)
+                            pending = (best, data, time.perf_counter())
                         self.best = best
                 elif kind == "started":
                     self.messages.put(Message("started", data))
             if pending is not None and not self._abandoned.is_set():
-                rid, data = pending
+                rid, data, seen = pending
                 pending = None
                 if rid != self.shown:
-                    self._show(rid, data)
+                    self._show(rid, data, seen)
                 continue  # look for newer events before waiting again
             if ended is not None:
                 kind, data = ended

@@ -471,7 +471,8 @@ def handle(job: _Job, msg: Message) -> None:
         view.reasons = [str(r) for r in msg.data.get("reasons") or []]
         if view.first_solution_s is None:
             view.first_solution_s = time.perf_counter() - view.pressed_at
-            view.timings["first_event_s"] = msg.at - view.pressed_at
+            view.timings["solution_seen_s"] = float(msg.data.get("seen_at", msg.at)) - view.pressed_at
+            view.timings["prepared_s"] = msg.at - view.pressed_at
             view.timings["keying_s"] = time.perf_counter() - t0
         if view.state in ("submitting", "queued"):
             view.state = "running"
