@@ -88,8 +88,17 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         port = free_port()
         log = open(Path(tmp) / "serve.log", "wb")  # noqa: SIM115 (open for the server's life)
-        serve = subprocess.Popen([str(SEGUE), "serve", "--port", str(port), "--data", str(Path(tmp) / "data"),
-                                  "--log-level", "warning"], stdout=log, stderr=subprocess.STDOUT)  # fmt: skip
+        cmd = [
+            str(SEGUE),
+            "serve",
+            "--port",
+            str(port),
+            "--data",
+            str(Path(tmp) / "data"),
+            "--log-level",
+            "warning",
+        ]
+        serve = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
         url = f"http://127.0.0.1:{port}"
         try:
             deadline = time.monotonic() + 120
