@@ -109,8 +109,8 @@ def test_a_job_thread_shows_each_new_best_and_ends_with_its_report(serve: Serve,
 def test_cancel_keeps_the_best_so_far(serve: Serve, walks: str) -> None:
     client = SegueClient(serve.url)
     goal = {"type": "body", "frame": 239, "position": [3.0, 6.0]}
-    request = {"engine": "graph", "database": walks, "frames": 240, "seed": 1, "rounds": None, "budget_s": 300,
-               "constraints": [goal]}  # fmt: skip
+    request = {"engine": "graph", "database": walks, "frames": 240, "seed": 1, "rounds": None,
+               "budget_s": 300, "constraints": [goal]}  # fmt: skip
     seen: list[str] = []
 
     def download(rid: str) -> bytes:
