@@ -190,7 +190,8 @@ class SEGUE_PT_quality(_Panel, bpy.types.Panel):
             box = layout.box()
             for g in view.goals:
                 err = f"{g.error_cm:.1f} cm" if g.error_cm is not None else "?"
-                box.label(text=f"{g.name}: {err}", icon="CHECKMARK" if g.satisfied else "CANCEL")
+                own = f" (report: {g.report_cm:.1f} cm)" if g.report_cm is not None else ""
+                box.label(text=f"{g.name}: {err}{own}", icon="CHECKMARK" if g.satisfied else "CANCEL")
 
 
 def _wrap(text: str, width: int = 48) -> list[str]:
