@@ -420,7 +420,7 @@ class _Job:
                                       "animation_only": True, "fps": self.fps}  # fmt: skip
             if len(self.rigs) > 1:
                 params["dancer"] = k
-            parts.append(client.result(self.view.id, **params))
+            parts.append(client.result(self.runner.job_id or "", **params))  # set by this thread
         self.view.timings.setdefault("download_s", time.perf_counter() - t)
         return json.dumps([p.hex() for p in parts]).encode() if len(parts) > 1 else parts[0]
 

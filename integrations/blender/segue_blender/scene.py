@@ -210,6 +210,8 @@ def export_clip(
     frame = scene.frame_current
     try:
         ad.action = action
+        if getattr(ad, "action_slot", "none") is None and len(action.slots):  # Blender 4.4+: slotted
+            ad.action_slot = action.slots[0]
         raw = _export_glb([obj], animations=True)
     finally:
         ad.action = previous
