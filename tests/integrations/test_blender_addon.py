@@ -147,6 +147,24 @@ def _alive(pid: int) -> bool:
 
 
 @pytest.mark.slow
+def test_generate_returns_at_once_and_shows_solutions_as_they_arrive(
+    serve: Serve, addon_zip: Path, dbs: dict[str, str], tmp_path: Path
+) -> None:
+    """Without ``wait`` the operator returns while the job is still being submitted; Blender's
+    timer keys each new best as it arrives; Cancel ends the job keeping the best so far."""
+    db = _databases(serve, dbs, "walks", WALKS_GRAPH)
+    got = scenario(serve, addon_zip, tmp_path, "live", database=db)
+    done = got["done"]
+    assert done["at_return"] == "submitting"  # nothing was waited for
+    assert done["states"][-1] == "done" and done["job"]["solutions"] >= 1
+    assert done["action"]["name"] == f"Segue {done['job']['id'][:12]}"
+    cancelled = got["cancelled"]
+    assert cancelled["job"]["state"] == "cancelled", cancelled["job"]
+    assert cancelled["job"]["solutions"] >= 1
+    assert cancelled["action"]["name"] == f"Segue {cancelled['job']['id'][:12]}"  # the best so far, kept
+
+
+@pytest.mark.slow
 def test_an_uploaded_action_builds_a_database_another_character_generates_from(
     serve: Serve, addon_zip: Path, dbs: dict[str, str], tmp_path: Path
 ) -> None:

@@ -539,6 +539,52 @@ def scenario_dancers() -> dict:
     return {"dancers": out, "job": report, "picture": shot}
 
 
+def _pump(until: float = 120.0) -> list[str]:
+    """Run the add-on's timer as Blender's event loop would (a Python-module Blender has none),
+    until it stops; the job's states seen (a hang guard of ``until`` seconds)."""
+    ops = addon_module("ops")
+    state = addon_module("state")
+    seen = []
+    deadline = time.monotonic() + until
+    while ops._timer() is not None:
+        view = state.SESSION.job
+        if not seen or seen[-1] != view.state:
+            seen.append(view.state)
+        if time.monotonic() > deadline:
+            raise AssertionError("the job did not end (hang guard)")
+        time.sleep(0.02)
+    seen.append(state.SESSION.job.state)  # what the last call applied
+    return seen
+
+
+def scenario_live() -> dict:
+    """Generate without waiting: the operator returns at once and the timer keys each solution as
+    it arrives; Cancel keeps the best so far."""
+    setup_scene(1, 97)
+    char = rigs.courier()
+    goal("Start", 1, (1.0, -0.5, 0.0))
+    goal("End", 97, (3.3, -2.0, 0.0))
+    select_only([char])
+    connect()
+    state = addon_module("state")
+    assert bpy.ops.segue.generate(database=CFG["database"], scene_goals=True) == {"FINISHED"}
+    at_return = state.SESSION.job.state
+    states = _pump()
+    done = {"at_return": at_return, "states": states, "job": job_report(), "action": action_report(char)}
+    # a long search, cancelled once its first solution shows: the best so far stays on the rig
+    long = json.dumps({"rounds": None, "budget_s": 300})
+    assert bpy.ops.segue.generate(database=CFG["database"], scene_goals=True, request=long) == {"FINISHED"}
+    ops = addon_module("ops")
+    deadline = time.monotonic() + 120
+    while state.SESSION.job.solutions == 0:
+        if ops._timer() is None or time.monotonic() > deadline:
+            raise AssertionError(f"no solution before the job ended: {state.SESSION.job.state}")
+        time.sleep(0.02)
+    assert bpy.ops.segue.cancel() == {"FINISHED"}
+    _pump()
+    return {"done": done, "cancelled": {"job": job_report(), "action": action_report(char)}}
+
+
 def scenario_local() -> dict:
     """The add-on's preferences start a local service (`segue serve --import DIR` on a free port)
     from a `segue` executable; it serves the imported database; stop stops it; another one is
