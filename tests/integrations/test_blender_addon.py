@@ -178,6 +178,10 @@ def test_an_uploaded_action_builds_a_database_another_character_generates_from(
     assert {"Hips", "LeftUpperLeg", "LeftLowerLeg", "LeftFoot", "RightFoot", "Head"} <= set(clip["joints"])
     assert "DEF-spine.001" in clip["joints"]  # bones without a role keep their own names
     assert 1.5 < clip["height_m"] < 2.0
+    assert got["labels"] == [  # the action's pose markers, in the clip's frames
+        {"label": "walk", "start": 0, "end": 48, "value": 1},
+        {"label": "run", "start": 48, "end": 97, "value": -1},
+    ]
     assert got["job"]["state"] == "done", got["job"]
     assert set(got["deform_bones"]) <= set(got["action"]["driven"])
     assert got["hips_moved"] > 0.3

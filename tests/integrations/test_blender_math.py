@@ -418,3 +418,15 @@ def test_glb_join_pads_chunks() -> None:
     out = gltf.join_glb({"asset": {"version": "2.0"}}, b"abc")
     assert len(out) % 4 == 0
     assert struct.unpack_from("<I", out, 8)[0] == len(out)
+
+
+def test_pose_markers_label_a_clip_in_its_own_frames() -> None:
+    markers = [authoring.Marker("walk", 10), authoring.Marker("run, !jump", 40), authoring.Marker("-", 70)]
+    assert authoring.label_ranges(markers, 10, 99) == [
+        {"label": "walk", "start": 0, "end": 30, "value": 1},
+        {"label": "run", "start": 30, "end": 60, "value": 1},
+        {"label": "jump", "start": 30, "end": 60, "value": -1},
+    ]
+    assert authoring.label_ranges([authoring.Marker("idle", 5)], 1, 20) == [
+        {"label": "idle", "start": 4, "end": 20, "value": 1}
+    ]

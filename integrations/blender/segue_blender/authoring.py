@@ -204,6 +204,29 @@ def _frames(timing: Timing, summary: Mapping[str, Any]) -> int:
     return max(2, round(timing.duration_s * float(summary.get("fps") or 30.0)) + 1)
 
 
+def label_ranges(markers: Sequence[Marker], first: int, last: int) -> list[dict[str, Any]]:
+    """A clip's labels from its action's pose markers (same names as the timeline's: ``walk``,
+    ``!jump``, ``-`` ends): each holds from its frame to the next marker, in the clip's own
+    frames (0 at the action's ``first`` frame, ``last`` its last), as an annotated database's
+    ``labels`` take them."""
+    ordered = sorted((m for m in markers if first <= m.frame <= last), key=lambda m: m.frame)
+    out: list[dict[str, Any]] = []
+    for i, m in enumerate(ordered):
+        start = m.frame - first
+        end = (ordered[i + 1].frame if i + 1 < len(ordered) else last + 1) - first
+        if end <= start:
+            continue
+        for token in filter(None, _TOKEN.split(m.name.strip())):
+            if token in ("-", "~"):
+                continue
+            label = token.lstrip("!-")
+            if label:
+                out.append(
+                    {"label": label, "start": start, "end": end, "value": -1 if token[0] in "!-" else 1}
+                )
+    return out
+
+
 def _merge_list(request: dict[str, Any], key: str, items: list[dict[str, Any]]) -> None:
     request[key] = [*request.get(key, []), *items]
 

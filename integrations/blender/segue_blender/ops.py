@@ -238,7 +238,9 @@ def _clip_name(obj: bpy.types.Object, action: bpy.types.Action) -> str:
 
 
 class SEGUE_OT_upload_action(bpy.types.Operator):
-    """Upload the active armature's action (or all its actions) as Segue clips (BVH)"""
+    """Upload the active armature's action (or all its actions) as Segue clips (BVH); the action's
+    pose markers (``walk``, ``!jump``) become the clip's labels in an annotated database built from
+    it"""
 
     bl_idname = "segue.upload_action"
     bl_label = "Upload action"
@@ -270,6 +272,11 @@ class SEGUE_OT_upload_action(bpy.types.Operator):
                 name = self.name if (self.name and len(actions) == 1) else _clip_name(obj, act)
                 info = client.upload_clip(text.encode(), name, units="m")
                 names.append(str(info["name"]))
+                first, last = (round(f) for f in act.frame_range)
+                markers = [authoring.Marker(m.name, m.frame) for m in act.pose_markers]
+                labels = authoring.label_ranges(markers, first, last)
+                if labels:
+                    SESSION.clip_labels[str(info["name"])] = labels
                 if info["name"] not in SESSION.uploaded:
                     SESSION.uploaded.append(str(info["name"]))
             refresh_lists()
@@ -357,7 +364,10 @@ class SEGUE_OT_build_database(bpy.types.Operator):
             elif "clips" not in spec:
                 if not names:
                     raise ValueError("no clips: upload an action first, or name clips")
-                spec["clips"] = [{"bvh": n} for n in names]
+                spec["clips"] = [
+                    {"bvh": n, **({"labels": SESSION.clip_labels[n]} if n in SESSION.clip_labels else {})}
+                    for n in names
+                ]
             info = client.build_database(spec)
             if self.wait:
                 info = wait_database(client, info)

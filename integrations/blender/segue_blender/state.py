@@ -63,6 +63,8 @@ class Session:
     databases: list[dict[str, Any]] = field(default_factory=list)
     rig_files: dict[tuple[str, str], str] = field(default_factory=dict)
     uploaded: list[str] = field(default_factory=list)
+    clip_labels: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    """Label ranges of the clips uploaded this session (their actions' pose markers)."""
     job: JobView | None = None
     local: LocalService | None = None
 

@@ -350,6 +350,8 @@ def scenario_upload_build() -> dict:
     connect()
     _walk_action(courier, (1.0, -0.5, 0.0), (3.5, -1.5, 0.0))
     select_only([courier])
+    courier.animation_data.action.pose_markers.new("walk").frame = 1
+    courier.animation_data.action.pose_markers.new("!run").frame = 49
     assert bpy.ops.segue.upload_action(name="courier-walk.bvh") == {"FINISHED"}
     state = addon_module("state")
     clip = next(c for c in state.SESSION.clips if c["name"] == "courier-walk.bvh")
@@ -364,6 +366,7 @@ def scenario_upload_build() -> dict:
     heads = heads_at(ferry, [1, 49])
     return {
         "clip": clip,
+        "labels": state.SESSION.clip_labels.get("courier-walk.bvh"),
         "database": db,
         "action": action_report(ferry),
         "job": job_report(),
