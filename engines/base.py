@@ -41,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from motion import Motion, MotionError, Skeleton
+from motion.errors import ReadWarning
 from motion.plausibility import Reference, reference_from_positions
 from motion.quality import QualityInputs, QualityReport, assess
 from schemas.annotations import ClipLabels, LabelCorrection
@@ -442,8 +443,11 @@ class Engine(ABC, Generic[RequestT, SpecT]):
         """A database of ``spec`` built from ``clips``: its arrays (the motion library, the kind's
         :meth:`build`, the examples' quality reference and foot floor) and its library, with
         progress reported to ``emit``. Raises :class:`InterruptedError` once ``should_stop()``."""
-        emit.progress(0.1, f"reading {len(clips)} clips")
-        library = cls.library_for(spec, build_library(clips, spec.fps))
+        emit.progress(0.1, f"reading {len(clips)} clip{'s' if len(clips) != 1 else ''}")
+        notes: list[ReadWarning] = []
+        library = cls.library_for(spec, build_library(clips, spec.fps, warnings=notes))
+        for note in notes:  # what a clip's file needed to be read (it was read)
+            emit.progress(0.1, f"warning: clip {note.source!r}: {note.message}")
         if should_stop():
             raise InterruptedError("build cancelled")
         emit.progress(0.5, f"{library.total_frames} frames at {library.fps:g} fps")
@@ -492,6 +496,13 @@ class Engine(ABC, Generic[RequestT, SpecT]):
         given its clips' ``frames`` at the database rate (default: the same; ``mirror`` doubles
         them), for the service's size limits before a build."""
         return frames
+
+    @classmethod
+    def spec_problems(cls, spec: SpecT, frames: dict[str, int], fps: float) -> list[str]:
+        """What the build of ``spec`` would refuse, found from its clips' lengths alone: ``frames``
+        by clip name at the database rate ``fps``; one sentence each (none by default). The
+        service refuses such a spec at submission (422) instead of failing its build later."""
+        return []
 
     @classmethod
     def build_work(cls, spec: SpecT, frames: int) -> BuildWork | None:

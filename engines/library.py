@@ -16,7 +16,9 @@ import numpy as np
 import numpy.typing as npt
 
 from motion import Motion, MotionError
-from motion.bvh import BvhLimits, parse_bvh
+from motion.bvh import BvhLimits
+from motion.errors import ReadWarning
+from motion.io import parse_motion
 from motion.motion import check_rate_and_units, checked_arrays
 from motion.resample import resample
 from motion.serialize import skeleton_from_arrays, skeleton_to_arrays
@@ -30,12 +32,14 @@ Arrays = dict[str, npt.NDArray[Any]]
 
 @dataclass(frozen=True, slots=True)
 class ClipInput:
-    """One clip to put in a library: its name, BVH bytes, declared units and labels."""
+    """One clip to put in a library: its name, file bytes (BVH, or glTF with ``animation`` picking
+    one of its animations), declared units and labels."""
 
     name: str
     data: bytes
     units: str | None = None
     labels: list[dict[str, Any]] = field(default_factory=list)
+    animation: str | int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,12 +71,17 @@ class MotionLibrary:
 
 
 def build_library(
-    clips: list[ClipInput], fps: float | None = None, limits: BvhLimits | None = None
+    clips: list[ClipInput],
+    fps: float | None = None,
+    limits: BvhLimits | None = None,
+    warnings: list[ReadWarning] | None = None,
 ) -> MotionLibrary:
     """Parse, resample (to ``fps`` or the first clip's rate) and convert clips to metres.
 
-    Raises :class:`MotionError` (naming the clip) for unreadable clips, duplicate names, differing
-    hierarchies or label ranges past a clip's end.
+    ``warnings``: when given, what each clip's file needed to be read (:func:`motion.io.parse_motion`)
+    is appended to it, its ``source`` the clip's name. Raises :class:`MotionError` (naming the
+    clip) for unreadable clips, duplicate names, differing hierarchies or label ranges past a
+    clip's end.
     """
     if not clips:
         raise MotionError("a database needs at least one clip")
@@ -83,7 +92,15 @@ def build_library(
     motions: list[Motion] = []
     for c in clips:
         try:
-            m = parse_bvh(c.data, units=c.units, limits=limits, source=c.name, name=c.name)
+            m = parse_motion(
+                c.data,
+                units=c.units,
+                limits=limits,
+                source=c.name,
+                name=c.name,
+                animation=c.animation,
+                warnings=warnings,
+            )
         except MotionError as exc:
             raise MotionError(f"clip {c.name!r}: {exc}") from None
         motions.append(m)
@@ -93,8 +110,9 @@ def build_library(
     for c, m in zip(clips, motions, strict=True):
         if not m.skeleton.same_structure(first):
             raise MotionError(
-                f"clip {c.name!r} has a different joint hierarchy from {clips[0].name!r}; "
-                "a database's clips must share one skeleton"
+                f"clip {c.name!r} has a different joint hierarchy from {clips[0].name!r}; a database's clips "
+                f"must share one skeleton: retarget it onto the skeleton of {clips[0].name!r} first (segue "
+                f"retarget FILE_OF_{c.name} --to FILE_OF_{clips[0].name} --out NEW.bvh) and use the new file"
             )
         m = resample(m.to_units("m") if m.units != "unknown" else m.with_units("m"), rate)
         out.append(replace(m, name=c.name))

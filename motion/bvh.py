@@ -2,7 +2,10 @@
 
 The reader accepts any per-joint channel order and count (position channels on any joint), End
 Sites, tabs or spaces, CRLF or LF line ends, and gzip-compressed files (``.bvh.gz``, detected by
-content). Every problem is a :class:`~motion.errors.BvhError` naming the line. The MOTION block is
+content). What common exporters write besides (a ``Frames:`` count that disagrees with the frame
+lines, decimal commas, leaf joints without End Sites) is read and reported as a
+:class:`~motion.errors.ReadWarning` naming the line (:func:`parse_bvh`); every problem that
+cannot be read unambiguously is a :class:`~motion.errors.BvhError` naming the line. The MOTION block is
 parsed by :func:`motion.numparse.parse_decimals` (one compiled pass, exact); files outside its plain
 decimal grammar take a line-by-line path that also pinpoints bad lines.
 
@@ -28,10 +31,10 @@ import numpy as np
 import numpy.typing as npt
 
 from . import rotations as rot
-from .errors import BvhError, ExportError, MotionError
+from .errors import BvhError, ExportError, MotionError, ReadWarning
 from .kinematics import FRAME_BLOCK
 from .motion import Motion
-from .numparse import parse_decimals
+from .numparse import parse_decimals_into
 from .skeleton import VALID_CHANNELS, Skeleton
 from .units import METRES_PER_UNIT, UnitGuess, guess_units, standing_height, up_axis
 
@@ -40,6 +43,9 @@ Array = npt.NDArray[np.float64]
 DEFAULT_MAX_JOINTS = 1024
 DEFAULT_MAX_FRAMES = 2_000_000
 DEFAULT_MAX_BYTES = 1 << 30
+DEFAULT_MAX_JOINT_FRAMES = 20_000_000
+"""Default bound on frames x joints of one file: the reader holds ~100 bytes per joint-frame at
+its peak (the channel table, the quaternions and the text), so ~2 GB here."""
 _FPS_SNAP = 1e-3
 MAX_ABS_VALUE = 1e9
 """Largest magnitude accepted for any channel value (any unit): beyond it a file is corrupt, and
@@ -48,11 +54,21 @@ kinematics would overflow."""  # snap 1/frame_time to an integer rate within thi
 
 @dataclass(frozen=True, slots=True)
 class BvhLimits:
-    """Limits that protect the reader from hostile or absurd files."""
+    """Limits that protect the reader from hostile or absurd files.
+
+    ``max_joint_frames`` bounds frames x joints, what the reader's memory grows with: the header's
+    ``Frames:`` is checked against it before any row is read, and the frame lines actually
+    present (which win over the header) as they are counted, so a file's claim alone never sizes
+    an allocation."""
 
     max_joints: int = DEFAULT_MAX_JOINTS
     max_frames: int = DEFAULT_MAX_FRAMES
     max_bytes: int = DEFAULT_MAX_BYTES
+    max_joint_frames: int = DEFAULT_MAX_JOINT_FRAMES
+
+    def max_rows(self, joints: int) -> int:
+        """Most frames a file of ``joints`` joints may hold under these limits."""
+        return min(self.max_frames, self.max_joint_frames // max(joints, 1))
 
 
 # --------------------------------------------------------------------------------------------
@@ -66,6 +82,7 @@ def read_bvh(
     units: str | None = None,
     limits: BvhLimits | None = None,
     name: str | None = None,
+    warnings: list[ReadWarning] | None = None,
 ) -> Motion:
     """Read a BVH file (plain or gzip-compressed).
 
@@ -80,6 +97,9 @@ def read_bvh(
         Joint, frame and byte limits (defaults: 1024 joints, 2,000,000 frames, 1 GiB).
     name:
         Name recorded on the motion (default: the file name without ``.bvh``/``.gz``).
+    warnings:
+        When given, what the reader accepted from a file that does not follow BVH to the letter
+        is appended to it (:class:`~motion.errors.ReadWarning`, see :func:`parse_bvh`).
 
     Returns
     -------
@@ -103,7 +123,14 @@ def read_bvh(
     stem = p.name
     for suffix in (".gz", ".bvh"):
         stem = stem.removesuffix(suffix)
-    return parse_bvh(raw, units=units, limits=lim, source=str(p), name=name if name is not None else stem)
+    return parse_bvh(
+        raw,
+        units=units,
+        limits=lim,
+        source=str(p),
+        name=name if name is not None else stem,
+        warnings=warnings,
+    )
 
 
 def parse_bvh(
@@ -114,35 +141,50 @@ def parse_bvh(
     source: str = "<bytes>",
     name: str = "",
     joints: Sequence[str] | None = None,
+    warnings: list[ReadWarning] | None = None,
 ) -> Motion:
     """Parse BVH content (bytes, plain or gzip). See :func:`read_bvh` for the parameters.
 
     ``joints``: when given, the motion of only these joints (those the file has) and their
     ancestors, a sub-skeleton without End Sites, for callers that need a few joints of a long clip
     (the other joints' rotations are never computed); the file is checked as a whole and the units
-    are guessed from the whole skeleton, as without ``joints``."""
+    are guessed from the whole skeleton, as without ``joints``.
+
+    What common exporters write is read, and each departure from the format is reported in
+    ``warnings`` (when a list is given) with its line: a ``Frames:`` count that disagrees with the
+    frame lines (the lines present win), decimal commas (``0,5``: read as ``0.5`` when no number
+    of the section uses a point), a leaf joint without an End Site or an End Site beside child
+    joints. Tabs, CRLF line ends, blank lines, trailing spaces and a UTF-8 byte order mark
+    are BVH as usual and read silently. What cannot be read unambiguously (a frame line with
+    another number of values than the channels, a value that is not a number, a broken
+    hierarchy) is a :class:`BvhError` naming the line and what to fix.
+
+    Memory: the header's frames x joints is checked against ``limits.max_joint_frames`` before
+    any row is read (a gzip file is inflated no further than its first 16 MiB then), the frame lines
+    present are counted against it before the table is allocated, and the rows are parsed into
+    that one preallocated ``(F, C)`` array."""
     lim = limits or BvhLimits()
     if units is not None and units not in METRES_PER_UNIT:
         raise BvhError(f"unknown units {units!r}; use one of {', '.join(METRES_PER_UNIT)}", source=source)
+    notes: list[ReadWarning] = [] if warnings is None else warnings
     data = _maybe_gunzip(bytes(data), lim, source)
     if data.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte order mark (Windows editors)
         data = data[3:]
     if len(data) > lim.max_bytes:
         raise BvhError(f"file is larger than the {lim.max_bytes}-byte limit", source=source)
-    m = re.search(rb"(?m)^[ \t]*MOTION\b", data)
+    m = _MOTION.search(data)
     if m is None:
         if not data.strip():
             raise BvhError("file is empty", source=source)
         _parse_hierarchy(_decode(data, source), lim, source)  # a broken hierarchy is the better message
-        raise BvhError("no MOTION section", line=data.count(b"\n") + 1, source=source)
+        raise BvhError("no MOTION section", line=_line_count(data), source=source)
     header_text = _decode(data[: m.start()], source)
-    skeleton = _parse_hierarchy(header_text, lim, source)
+    skeleton = _parse_hierarchy(header_text, lim, source, notes)
     motion_line = data.count(b"\n", 0, m.start()) + 1
-    n_frames, frame_time, data_start, data_line = _parse_motion_header(
-        data, m.end(), motion_line, lim, source
-    )
-    table = _parse_table(data, data_start, data_line, n_frames, skeleton.num_channels, source)
-    fps = 1.0 / frame_time
+    head = _parse_motion_header(data, m.end(), motion_line, lim, source, skeleton.num_joints, notes)
+    table = _parse_table(data, head, skeleton, lim, source, notes)
+    n_frames = table.shape[0]
+    fps = 1.0 / head.frame_time
     if abs(fps - round(fps)) <= _FPS_SNAP * fps:
         fps = float(round(fps))
     if joints is None:
@@ -153,6 +195,14 @@ def parse_bvh(
         units = _units_of_sample(sample)
     sub, columns = _sub_skeleton(skeleton, [skeleton.names.index(j) for j in joints if j in skeleton.names])
     return _motion_from_channels(sub, table[:, columns], fps, name, source).with_units(units)
+
+
+_MOTION = re.compile(rb"(?m)^[ \t]*MOTION\b")
+
+
+def _line_count(data: bytes) -> int:
+    """The line number of the last line of ``data``."""
+    return data.count(b"\n") + 1
 
 
 def _sub_skeleton(skeleton: Skeleton, joints: list[int]) -> tuple[Skeleton, npt.NDArray[np.intp]]:
@@ -194,6 +244,18 @@ def detect_units(motion: Motion, up: int | None = 1) -> UnitGuess:
         return _guess_of_sample(sample)
     points = _frame_points(sample)
     return guess_units(standing_height(points, up_axis(points) if up is None else up))
+
+
+def height_m(motion: Motion, up: int | None = 1) -> float:
+    """The motion's height in metres, Segue's one definition of it (inspect, retarget, a clip's
+    ``height_m``): its standing height (:func:`motion.units.standing_height`: the median over
+    frames of the vertical extent of joints and End Sites, on about 240 frames) along ``up`` (as
+    :func:`detect_units`), converted with the motion's unit (a motion of unknown unit: its
+    guessed one). A one-frame motion (a character's rest pose) is measured on that frame."""
+    guess = detect_units(motion, up)
+    if motion.units == "unknown":
+        return guess.height_m
+    return guess.height * motion.metres_per_unit
 
 
 def detect_up_axis(motion: Motion) -> int:
@@ -248,8 +310,10 @@ def inflate_chunks(data: bytes, limit: int, source: str, chunk: int = INFLATE_CH
                     raise BvhError(f"decompressed file is larger than the {limit}-byte limit", source=source)
                 if piece:
                     yield piece
+                if d.eof:  # the member's end: what follows it is in unused_data (and, once the
+                    break  # output limit has cut a call, still in unconsumed_tail: not to be fed again)
                 pending = d.unconsumed_tail
-                if not pending and (d.eof or not piece):
+                if not pending and not piece:
                     break
             if not d.eof:
                 raise BvhError("gzip stream is truncated", source=source)
@@ -263,10 +327,45 @@ def inflate_chunks(data: bytes, limit: int, source: str, chunk: int = INFLATE_CH
 
 
 def _maybe_gunzip(data: bytes, lim: BvhLimits, source: str) -> bytes:
-    """Decompress gzip content (all members, as ``gzip`` does), within the byte limit."""
+    """Decompress gzip content (all members, as ``gzip`` does), within the byte limit. The
+    header (HIERARCHY and the ``Frames:`` / ``Frame Time:`` lines) is checked once 16 MiB are
+    inflated, so that a file whose header breaks a limit (``Frames: 1900000`` in a 0.9 MB gzip)
+    is refused before the rest of its rows are inflated."""
     if not data.startswith(b"\x1f\x8b"):
         return data
-    return b"".join(inflate_chunks(data, lim.max_bytes, source))
+    pieces: list[bytes] = []
+    size, checked = 0, False
+    for piece in inflate_chunks(data, lim.max_bytes, source):
+        pieces.append(piece)
+        size += len(piece)
+        if not checked and size >= _EARLY_CHECK_BYTES:  # smaller files: the parse checks it
+            checked = _header_checked(b"".join(pieces)[:_HEADER_SCAN_BYTES], lim, source)
+    return b"".join(pieces)
+
+
+_EARLY_CHECK_BYTES = 16 << 20
+"""Inflated bytes after which :func:`_maybe_gunzip` checks a gzip file's header before going on
+(below, inflating it all costs less than parsing the header twice)."""
+
+
+def _header_checked(view: bytes, lim: BvhLimits, source: str) -> bool:
+    """Whether the start of BVH text ``view`` (its first :data:`_HEADER_SCAN_BYTES`) holds its
+    whole header, once checked against the limits (:class:`BvhError` when it breaks one); False
+    while the header is not all there."""
+    if view.startswith(b"\xef\xbb\xbf"):
+        view = view[3:]
+    m = _MOTION.search(view)
+    if m is None or _MOTION_HEADER.match(view, m.end()) is None:
+        return len(view) >= _HEADER_SCAN_BYTES  # no header that early: the parse says what is wrong
+    # the same parsers and text as the whole parse: a header error here is the one it would give
+    skeleton = _parse_hierarchy(_decode(view[: m.start()], source), lim, source)
+    motion_line = view.count(b"\n", 0, m.start()) + 1
+    _parse_motion_header(view, m.end(), motion_line, lim, source, skeleton.num_joints, [])
+    return True
+
+
+_HEADER_SCAN_BYTES = 4 << 20
+"""Inflated bytes of a gzip file in which :func:`_maybe_gunzip` looks for the header."""
 
 
 def _decode(raw: bytes, source: str) -> str:
@@ -294,9 +393,26 @@ def _parse_float(tok: str, lineno: int, what: str, source: str) -> float:
     return v
 
 
-def _parse_hierarchy(text: str, lim: BvhLimits, source: str) -> Skeleton:
-    """The skeleton of a BVH file's HIERARCHY section (:class:`BvhError` naming the line)."""
-    return _HierarchyParser(lim, source).parse(text)
+_DECIMAL_COMMA = re.compile(r"[-+]?[0-9]*,[0-9]+")
+"""A number written with a decimal comma (``-0,5``, ``12,25``): one comma, digits after it."""
+
+
+def _decimal_comma(tok: str) -> float | None:
+    """The value of a token written with a decimal comma, else None."""
+    return float(tok.replace(",", ".")) if _DECIMAL_COMMA.fullmatch(tok) else None
+
+
+def _parse_hierarchy(
+    text: str, lim: BvhLimits, source: str, notes: list[ReadWarning] | None = None
+) -> Skeleton:
+    """The skeleton of a BVH file's HIERARCHY section (:class:`BvhError` naming the line); the
+    departures it reads (decimal commas in OFFSETs, leaf joints without End Sites, End Sites
+    beside child joints) are appended to ``notes``."""
+    parser = _HierarchyParser(lim, source)
+    skeleton = parser.parse(text)
+    if notes is not None:
+        notes.extend(parser.notes(skeleton))
+    return skeleton
 
 
 END_SITE = -2
@@ -320,6 +436,9 @@ class _HierarchyParser:
         self.pending: tuple[str, int | None, int] | None = None  # (kind, joint index, line) awaiting '{'
         self.end_site_offset: list[float] | None = None
         self.it: Iterator[tuple[str, int, list[str]]] = iter(())
+        self.comma_line: int | None = None  # the first OFFSET written with decimal commas
+        self.lines: list[int] = []  # the line of each joint's ROOT/JOINT
+        self.end_site_lines: list[int] = []
 
     def error(self, message: str, lineno: int | None) -> BvhError:
         return BvhError(message, lineno, self.source)
@@ -374,6 +493,7 @@ class _HierarchyParser:
         if len(self.names) >= self.lim.max_joints:
             raise self.error(f"more than the {self.lim.max_joints}-joint limit", lineno)
         self.names.append(name)
+        self.lines.append(lineno)
         self.parents.append(self.stack[-1] if self.stack else -1)
         self.offsets.append(None)
         self.channels.append(None)
@@ -385,6 +505,7 @@ class _HierarchyParser:
         if not self.stack or self.stack[-1] < 0:
             raise self.error("End Site outside a joint block", lineno)
         self.pending = ("End Site", None, lineno)
+        self.end_site_lines.append(lineno)
         self.end_site_offset = None
         _skip(self.it, len(list(takewhile(lambda w: w != "{", rest))))
 
@@ -416,7 +537,12 @@ class _HierarchyParser:
             raise self.error("OFFSET outside a joint block", lineno)
         if len(rest) < 3:
             raise self.error(f"OFFSET needs 3 numbers, found {len(rest)}", lineno)
-        vals = [_parse_float(t, lineno, "OFFSET", self.source) for t in rest[:3]]
+        vals = []
+        for t in rest[:3]:
+            comma = _decimal_comma(t)
+            if comma is not None and self.comma_line is None:
+                self.comma_line = lineno
+            vals.append(comma if comma is not None else _parse_float(t, lineno, "OFFSET", self.source))
         top = self.stack[-1]
         if top == END_SITE:
             self.end_site_offset = vals
@@ -436,6 +562,49 @@ class _HierarchyParser:
             raise self.error(f"second CHANNELS for joint {self.names[j]!r}", lineno)
         self.channels[j] = chans
         _skip(self.it, 1 + len(chans))
+
+    def notes(self, skeleton: Skeleton) -> list[ReadWarning]:
+        """The departures from BVH this hierarchy was read with (see :func:`parse_bvh`)."""
+        out: list[ReadWarning] = []
+        if self.comma_line is not None:
+            out.append(
+                ReadWarning(
+                    "decimal_comma",
+                    "OFFSET numbers are written with decimal commas (0,5): read as decimal points",
+                    self.comma_line,
+                    self.source,
+                )
+            )
+        has_child = np.zeros(len(self.names), dtype=bool)
+        has_child[[p for p in self.parents if p >= 0]] = True
+        sites = np.bincount(np.asarray(self.es_parents, dtype=np.intp), minlength=len(self.names))
+        bare = [j for j in range(len(self.names)) if not has_child[j] and sites[j] == 0]
+        if bare:
+            shown = ", ".join(repr(self.names[j]) for j in bare[:6]) + (", ..." if len(bare) > 6 else "")
+            s = "s" if len(bare) > 1 else ""
+            out.append(
+                ReadWarning(
+                    "missing_end_site",
+                    f"{len(bare)} leaf joint{s} without an End Site ({shown}): read as they are; the last "
+                    "bone of each has no length, so the height may read a little short",
+                    self.lines[bare[0]],
+                    self.source,
+                )
+            )
+        beside = [j for j in range(len(self.names)) if sites[j] > 1 or (sites[j] and has_child[j])]
+        if beside:
+            shown = ", ".join(repr(self.names[j]) for j in beside[:6]) + (", ..." if len(beside) > 6 else "")
+            first = min(ln for p, ln in zip(self.es_parents, self.end_site_lines, strict=True) if p in beside)
+            out.append(
+                ReadWarning(
+                    "extra_end_site",
+                    f"End Sites beside child joints or several under one joint ({shown}): each is kept as "
+                    "the tip of a bone",
+                    first,
+                    self.source,
+                )
+            )
+        return out
 
     def skeleton(self) -> Skeleton:
         """The parsed skeleton, End Sites by parent joint (stable: the order the writer emits them in)."""
@@ -484,13 +653,36 @@ def _skip(it: Iterator[tuple[str, int, list[str]]], n: int) -> None:
 
 
 _MOTION_HEADER = re.compile(
-    rb"[ \t\r]*\n?\s*Frames:[ \t]*(\S*)[^\n]*\n\s*Frame[ \t]+Time:[ \t]*(\S*)[^\n]*(?:\n|\Z)"
+    rb"[ \t\r]*\n?\s*(?i:frames)[ \t]*:[ \t]*(\S*)[^\n]*\n"
+    rb"\s*(?i:frame)[ \t]*(?i:time)[ \t]*:[ \t]*(\S*)[^\n]*(?:\n|\Z)"
 )
+"""The ``Frames: N`` and ``Frame Time: T`` lines after ``MOTION`` (keywords in any case, spaces or
+tabs around the colon, as exporters write them)."""
+
+
+@dataclass(frozen=True, slots=True)
+class _MotionHeader:
+    """What the MOTION section's header says: the declared ``frames`` (on line ``frames_line``),
+    ``frame_time`` (s), and where the frame lines start (byte ``data_start``, line ``data_line``)."""
+
+    frames: int
+    frame_time: float
+    data_start: int
+    data_line: int
+    frames_line: int
 
 
 def _parse_motion_header(
-    data: bytes, pos: int, motion_line: int, lim: BvhLimits, source: str
-) -> tuple[int, float, int, int]:
+    data: bytes,
+    pos: int,
+    motion_line: int,
+    lim: BvhLimits,
+    source: str,
+    n_joints: int,
+    notes: list[ReadWarning],
+) -> _MotionHeader:
+    """The ``Frames:`` and ``Frame Time:`` lines after MOTION (at byte ``pos``), the declared
+    frames checked against the frame and joint-frame limits (:class:`BvhError` naming the line)."""
     m = _MOTION_HEADER.match(data, pos)
     if m is None:
         raise BvhError("expected 'Frames: N' and 'Frame Time: T' after MOTION", motion_line + 1, source)
@@ -502,74 +694,180 @@ def _parse_motion_header(
         n_frames = int(frames_tok)
     except ValueError:
         raise BvhError(f"Frames: {frames_tok!r} is not an integer", frames_line, source) from None
-    if n_frames < 1:
-        raise BvhError(f"Frames: {n_frames}: the file has no motion", frames_line, source)
+    if n_frames < 0:
+        raise BvhError(f"Frames: {n_frames} is negative", frames_line, source)
     if n_frames > lim.max_frames:
         raise BvhError(f"Frames: {n_frames} is over the {lim.max_frames}-frame limit", frames_line, source)
-    frame_time = _parse_float(time_tok, time_line, "Frame Time", source)
+    if n_frames * max(n_joints, 1) > lim.max_joint_frames:
+        raise BvhError(
+            f"Frames: {n_frames} x {n_joints} joints = {n_frames * n_joints:,} joint-frames is over the "
+            f"{lim.max_joint_frames:,} joint-frame limit: split the clip into shorter files",
+            frames_line,
+            source,
+        )
+    comma = _decimal_comma(time_tok)
+    if comma is not None:
+        frame_time = comma
+        notes.append(
+            ReadWarning(
+                "decimal_comma",
+                f"Frame Time {time_tok} is written with a decimal comma: read as {comma:g} s",
+                time_line,
+                source,
+            )
+        )
+    else:
+        frame_time = _parse_float(time_tok, time_line, "Frame Time", source)
     if not 1e-5 <= frame_time <= 10.0:
         raise BvhError(f"Frame Time: {frame_time} s is not a plausible frame interval", time_line, source)
     data_line = time_line + 1 if m.group(0).endswith(b"\n") else time_line
-    return n_frames, frame_time, m.end(), data_line
+    return _MotionHeader(n_frames, frame_time, m.end(), data_line, frames_line)
 
 
 def _parse_table(
-    data: bytes, start: int, first_line: int, n_frames: int, n_channels: int, source: str
+    data: bytes,
+    head: _MotionHeader,
+    skeleton: Skeleton,
+    lim: BvhLimits,
+    source: str,
+    notes: list[ReadWarning],
 ) -> Array:
-    """``(F, C)`` channel values from the MOTION block starting at byte ``start``."""
-    expected = n_frames * n_channels
-    values = parse_decimals(data, start, row_length=n_channels, max_values=expected)
-    if values is None:  # exponents, '+' signs, long mantissas...: the general C parser
-        lines = [line.split() for line in data[start:].split(b"\n")]
-        lines = [t for t in lines if t]
-        if all(len(t) == n_channels for t in lines):
+    """``(F, C)`` channel values of the frame lines after the MOTION header: ``F`` the lines
+    present (blank ones skipped), whatever ``Frames:`` declares (a warning says so when they
+    differ); at most :meth:`BvhLimits.max_rows` of them (else :class:`BvhError`).
+
+    The table is allocated once, ``rows x C`` for the lines counted (newlines: blank lines make
+    it a few rows larger than needed at worst, and a count past the limit is made exact before it
+    is refused), and the values are parsed into it: by the compiled or vectorised decimal parser
+    (:func:`motion.numparse.parse_decimals_into`), by a line-by-line pass for numbers outside its
+    grammar (exponents, ``+`` signs), which also names a bad line."""
+    start, n_channels = head.data_start, skeleton.num_channels
+    max_rows = lim.max_rows(skeleton.num_joints)
+    rows = data.count(b"\n", start) + 1  # lines after the header: frame lines and blank ones
+    if rows > max_rows:
+        rows = _count_rows(data, start)
+        if rows > max_rows:
+            raise BvhError(
+                f"the file holds {rows} frame lines (Frames: says {head.frames}) x {skeleton.num_joints} "
+                f"joints: over the {max_rows}-frame limit of this skeleton (max_frames {lim.max_frames}, "
+                f"max_joint_frames {lim.max_joint_frames:,}); split the clip into shorter files",
+                head.frames_line,
+                source,
+            )
+    if n_channels == 0:  # no values: as many (blank) frames as declared
+        if head.frames == 0:
+            raise BvhError("file ends after 0 of the 0 declared frames", _line_count(data), source)
+        return np.empty((head.frames, 0))
+    table = np.empty((rows, n_channels))
+    flat = table.reshape(-1)
+    block = data
+    count = parse_decimals_into(block, flat, start, row_length=n_channels)
+    if count is None and _uses_decimal_commas(data, start):
+        block = data[:start] + data[start:].replace(b",", b".")  # same length: same lines and offsets
+        notes.append(
+            ReadWarning(
+                "decimal_comma",
+                "frame values are written with decimal commas (0,5): read as decimal points",
+                head.data_line,
+                source,
+            )
+        )
+        count = parse_decimals_into(block, flat, start, row_length=n_channels)
+    found = -1
+    if count is not None:
+        held = table[: count // n_channels]
+        if count == 0 or (float(held.max()) <= MAX_ABS_VALUE and float(held.min()) >= -MAX_ABS_VALUE):
+            found = count // n_channels  # else a huge value: the line-by-line pass names it
+    if found < 0:
+        found = _parse_rows(block, head, table, source)
+    if found == 0:
+        raise BvhError(f"file ends after 0 of the {head.frames} declared frames", _line_count(data), source)
+    if found != head.frames:
+        notes.append(
+            ReadWarning(
+                "frame_count",
+                f"Frames: {head.frames}, but the file holds {found} frame lines: read {found} (the lines "
+                "present win)",
+                head.frames_line,
+                source,
+            )
+        )
+    if found == rows:
+        return table
+    # blank lines were counted: a view of the rows, or a copy when most of the table is unused
+    return table[:found].copy() if 2 * found < rows else table[:found]
+
+
+def _uses_decimal_commas(data: bytes, start: int) -> bool:
+    """Whether the frame lines from byte ``start`` write decimal commas unambiguously: commas and
+    no decimal point anywhere (a section mixing both, or using commas between numbers, is not read
+    this way: the line-by-line pass then names the first bad value)."""
+    return data.find(b",", start) >= 0 and data.find(b".", start) < 0
+
+
+_COUNT_CHUNK = 1 << 20
+
+
+def _count_rows(data: bytes, start: int) -> int:
+    """Non-blank lines of ``data`` from byte ``start`` (counted a MiB at a time)."""
+    count, pos, end = 0, start, len(data)
+    while pos < end:
+        stop = data.find(b"\n", min(pos + _COUNT_CHUNK, end))
+        stop = end if stop < 0 else stop + 1
+        count += sum(1 for line in data[pos:stop].split(b"\n") if line.strip())
+        pos = stop
+    return count
+
+
+def _parse_rows(data: bytes, head: _MotionHeader, table: Array, source: str) -> int:
+    """The frame lines parsed one by one into ``table`` (which has room for them all): the rows
+    written, or :class:`BvhError` naming the first line with the wrong count of values, a value that
+    is not a number or not finite within +-:data:`MAX_ABS_VALUE`."""
+    n_channels = table.shape[1]
+    row, pos, end = 0, head.data_start, len(data)
+    lineno = head.data_line
+    last_line_start = data.rstrip().rfind(b"\n") + 1
+    row_lines: list[int] = []  # only filled when a value is out of range (to name its line)
+    while pos < end:
+        nl = data.find(b"\n", pos)
+        stop = end if nl < 0 else nl
+        toks = data[pos:stop].split()
+        if toks:
+            if len(toks) != n_channels:
+                cut = (
+                    " (the file seems cut short here: delete this line to read the frames before it)"
+                    if pos >= last_line_start and len(toks) < n_channels
+                    else ""
+                )
+                raise BvhError(
+                    f"frame {row} has {len(toks)} values, expected {n_channels} (one per channel){cut}",
+                    lineno,
+                    source,
+                )
             try:
-                values = np.array([v for t in lines for v in t], dtype=np.float64)
+                table[row] = list(map(float, toks))
             except ValueError:
-                values = None
-            if values is not None and not np.all(np.isfinite(values)):
-                values = None
-    if (
-        values is not None
-        and values.size == expected
-        and (values.size == 0 or float(np.abs(values).max()) <= MAX_ABS_VALUE)
-    ):
-        return values.reshape(n_frames, n_channels)
-    return _parse_table_slow(data, start, first_line, n_frames, n_channels, source)
-
-
-def _parse_table_slow(
-    data: bytes, start: int, first_line: int, n_frames: int, n_channels: int, source: str
-) -> Array:
-    rows: list[list[float]] = []  # not preallocated: a file may declare far more frames than it holds
-    row = 0
-    lineno = first_line - 1
-    for lineno, raw in enumerate(data[start:].split(b"\n"), start=first_line):
-        toks = raw.split()
-        if not toks:
-            continue
-        if row >= n_frames:
-            raise BvhError(f"more frame lines than 'Frames: {n_frames}' declares", lineno, source)
-        if len(toks) != n_channels:
-            raise BvhError(
-                f"frame {row} has {len(toks)} values, expected {n_channels} (one per channel)", lineno, source
-            )
-        try:
-            vals = [float(t) for t in toks]
-        except ValueError:
-            bad = next(t for t in toks if not _is_float(t))
-            raise BvhError(
-                f"frame {row}: {bad.decode('latin-1')!r} is not a number", lineno, source
-            ) from None
-        if not all(math.isfinite(v) and abs(v) <= MAX_ABS_VALUE for v in vals):
-            raise BvhError(
-                f"frame {row}: a value is not finite or beyond +-{MAX_ABS_VALUE:g}", lineno, source
-            )
-        rows.append(vals)
-        row += 1
-    if row < n_frames:
-        raise BvhError(f"file ends after {row} of the {n_frames} declared frames", lineno, source)
-    return np.array(rows, dtype=np.float64).reshape(n_frames, n_channels)
+                bad = next(t for t in toks if not _is_float(t))
+                mixed = b"," in bad
+                hint = " (decimal commas beside decimal points: write one or the other)" if mixed else ""
+                raise BvhError(
+                    f"frame {row}: {bad.decode('latin-1')!r} is not a number{hint}", lineno, source
+                ) from None
+            row += 1
+        pos = stop + 1
+        lineno += 1
+    held = table[:row]
+    if row and not (float(held.max()) <= MAX_ABS_VALUE and float(held.min()) >= -MAX_ABS_VALUE):
+        bad_row = int(np.flatnonzero(~np.all(np.abs(held) <= MAX_ABS_VALUE, axis=1))[0])
+        row_lines = [
+            head.data_line + k for k, line in enumerate(data[head.data_start :].split(b"\n")) if line.strip()
+        ]
+        raise BvhError(
+            f"frame {bad_row}: a value is not finite or beyond +-{MAX_ABS_VALUE:g}",
+            row_lines[bad_row],
+            source,
+        )
+    return row
 
 
 def _is_float(tok: bytes) -> bool:

@@ -32,14 +32,23 @@ _MOTION = re.compile(rb"(?m)^[ \t]*MOTION\b")
 @dataclass(frozen=True, slots=True)
 class BvhHeader:
     """A BVH file's shape: ``joints`` (names, file order, End Sites excluded), ``channels`` per frame,
-    ``frames`` (as the ``Frames:`` line declares them; the full parse checks the table holds
-    them), ``fps`` (1 / Frame Time) and ``text_bytes`` (bytes after gunzip)."""
+    ``frames`` (as the ``Frames:`` line declares them; the full parse reads the frame lines
+    present, which win when they differ), ``fps`` (1 / Frame Time), ``text_bytes`` (bytes after
+    gunzip) and ``lines`` (lines after the ``Frame Time:`` line, blank ones included: a bound on
+    the frames the full parse can find)."""
 
     joints: tuple[str, ...]
     channels: int
     frames: int
     fps: float
     text_bytes: int
+    lines: int = 0
+
+    @property
+    def frames_bound(self) -> int:
+        """The most frames the full parse can read: the declared count or the lines present,
+        whichever is larger."""
+        return max(self.frames, self.lines)
 
     @property
     def joint_frames(self) -> int:
@@ -66,9 +75,10 @@ def bvh_header(data: bytes, limits: BvhLimits | None = None, source: str = "<byt
     more bytes (after gunzip) than ``limits.max_bytes``. The table itself is not read."""
     lim = limits or BvhLimits()
     if data.startswith(b"\x1f\x8b"):
-        head, total = bytearray(), 0
+        head, total, newlines = bytearray(), 0, 0
         for chunk in _inflated(data, lim.max_bytes, source):
             total += len(chunk)
+            newlines += chunk.count(b"\n")
             if len(head) < MAX_HEADER_BYTES:
                 head += chunk[: MAX_HEADER_BYTES - len(head)]
         text = bytes(head)
@@ -77,6 +87,7 @@ def bvh_header(data: bytes, limits: BvhLimits | None = None, source: str = "<byt
         if total > lim.max_bytes:
             raise BvhError(f"file is larger than the {lim.max_bytes}-byte limit", source=source)
         text = data[:MAX_HEADER_BYTES]
+        newlines = data.count(b"\n")
     offset = 3 if text.startswith(b"\xef\xbb\xbf") else 0
     if offset:
         text, total = text[offset:], total - offset
@@ -90,11 +101,12 @@ def bvh_header(data: bytes, limits: BvhLimits | None = None, source: str = "<byt
         raise BvhError("no MOTION section", line=text.count(b"\n") + 1, source=source)
     skeleton = _parse_hierarchy(_decode(text[: m.start()], source), lim, source)
     motion_line = text.count(b"\n", 0, m.start()) + 1
-    frames, frame_time, _, _ = _parse_motion_header(text, m.end(), motion_line, lim, source)
-    fps = 1.0 / frame_time
+    mh = _parse_motion_header(text, m.end(), motion_line, lim, source, skeleton.num_joints, [])
+    fps = 1.0 / mh.frame_time
     if abs(fps - round(fps)) <= _FPS_SNAP * fps:  # as parse_bvh snaps it
         fps = float(round(fps))
-    return BvhHeader(tuple(skeleton.names), skeleton.num_channels, frames, fps, total)
+    lines = max(0, newlines - text.count(b"\n", 0, mh.data_start)) + 1
+    return BvhHeader(tuple(skeleton.names), skeleton.num_channels, mh.frames, fps, total, lines)
 
 
 def _head_text(data: bytes, limit: int, source: str) -> bytes:

@@ -1,6 +1,8 @@
 """Reading and writing motions by file extension.
 
-Input: ``.bvh`` and ``.bvh.gz``. Output: ``.bvh`` (``.bvh.gz``), ``.glb``, ``.json``, ``.npz``.
+Input: ``.bvh`` and ``.bvh.gz`` (:mod:`motion.bvh`), ``.glb`` and ``.gltf`` (one animation of a
+skinned glTF file, :mod:`motion.gltf`). Output: ``.bvh`` (``.bvh.gz``), ``.glb``, ``.json``,
+``.npz``. :func:`parse_motion` reads bytes of either input format, told apart by their content.
 """
 
 from __future__ import annotations
@@ -9,15 +11,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from .bvh import BvhLimits, read_bvh, write_bvh
-from .errors import ExportError, MotionError
+from .bvh import BvhLimits, parse_bvh, write_bvh
+from .errors import ExportError, MotionError, ReadWarning
 from .export.arrays import write_json, write_npz
 from .export.events import contact_events_of, sorted_events
 from .export.targets import get_target, output_units, to_target
 from .motion import Motion
 from .samples import declared_units, resolve_path
 
-INPUT_SUFFIXES = (".bvh", ".bvh.gz")
+INPUT_SUFFIXES = (".bvh", ".bvh.gz", ".glb", ".gltf")
 OUTPUT_SUFFIXES = (".bvh", ".bvh.gz", ".glb", ".json", ".npz")
 
 
@@ -29,13 +31,85 @@ def _suffix(path: Path, allowed: tuple[str, ...]) -> str:
     raise MotionError(f"{path}: unsupported file type; expected one of {', '.join(allowed)}")
 
 
-def load_motion(path: str | Path, *, units: str | None = None, limits: BvhLimits | None = None) -> Motion:
-    """Read a motion file (BVH, optionally gzip-compressed; ``sample:NAME`` for a bundled sample);
-    see :func:`motion.bvh.read_bvh`. ``units`` None: a bundled sample in the unit the catalogue
-    declares (:data:`motion.samples.SAMPLE_UNITS`), any other file in its guessed unit."""
+def load_motion(
+    path: str | Path,
+    *,
+    units: str | None = None,
+    limits: BvhLimits | None = None,
+    animation: str | int | None = None,
+    warnings: list[ReadWarning] | None = None,
+) -> Motion:
+    """Read a motion file (BVH, optionally gzip-compressed; a glTF/GLB file's animation;
+    ``sample:NAME`` for a bundled sample); see :func:`parse_motion`. ``units`` None: a bundled
+    sample in the unit the catalogue declares (:data:`motion.samples.SAMPLE_UNITS`), any other
+    BVH file in its guessed unit, glTF in metres."""
     p = resolve_path(path)
     _suffix(p, INPUT_SUFFIXES)
-    return read_bvh(p, units=units if units is not None else declared_units(p), limits=limits)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise MotionError(f"{p}: cannot read file: {exc.strerror or exc}") from None
+    stem = p.name
+    for suffix in (".gz", ".bvh", ".glb", ".gltf"):
+        stem = stem.removesuffix(suffix)
+    return parse_motion(
+        data,
+        units=units if units is not None else declared_units(p),
+        limits=limits,
+        source=str(p),
+        name=stem,
+        animation=animation,
+        warnings=warnings,
+        base_dir=p.parent,
+    )
+
+
+def parse_motion(
+    data: bytes,
+    *,
+    units: str | None = None,
+    limits: BvhLimits | None = None,
+    source: str = "<bytes>",
+    name: str = "",
+    animation: str | int | None = None,
+    warnings: list[ReadWarning] | None = None,
+    base_dir: str | Path | None = None,
+) -> Motion:
+    """A motion from the bytes of a BVH file (plain or gzip) or of a glTF file (GLB, or ``.gltf``
+    JSON with its buffers inline or in ``base_dir``), told apart by content.
+
+    ``units``: a BVH file's declared unit (default: guessed); a glTF file is in metres (any other
+    unit is an error). ``animation``: which animation of a glTF file (name or index; default the
+    first; an error for BVH, which holds one). ``name``: the motion's name (a glTF animation's own
+    name when empty). ``warnings``: when given, the departures from the format the reader accepted
+    (:class:`~motion.errors.ReadWarning`) are appended to it. Raises :class:`MotionError` (a
+    :class:`~motion.errors.BvhError` for BVH) naming ``source``."""
+    from .gltf import is_gltf, parse_gltf
+
+    if is_gltf(data):
+        if units not in (None, "m"):
+            raise MotionError(
+                f"{source}: a glTF file is in metres (glTF's rule); units {units!r} do not apply"
+            )
+        lim = limits or BvhLimits()
+        motion = parse_gltf(
+            data,
+            animation=animation,
+            name=name or None,
+            source=source,
+            base_dir=base_dir,
+            max_joints=lim.max_joints,
+            max_joint_frames=lim.max_joint_frames,
+            warnings=warnings,
+        )
+        if motion.num_frames > lim.max_frames:
+            raise MotionError(
+                f"{source}: {motion.num_frames} frames is over the {lim.max_frames}-frame limit"
+            )
+        return motion
+    if animation is not None:
+        raise MotionError(f"{source}: a BVH file holds one motion; 'animation' is for glTF files")
+    return parse_bvh(data, units=units, limits=limits, source=source, name=name, warnings=warnings)
 
 
 def save_motion(

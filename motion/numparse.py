@@ -135,22 +135,43 @@ def parse_decimals(
     >>> parse_decimals(b"1e3") is None
     True
     """
-    if not (compiled_ready() if compiled is None else compiled):
-        values = _vectorized(data, start, row_length)
-        if values is not None and max_values is not None and values.size > max_values:
-            return None
-        return values
-    b = np.frombuffer(data, dtype=np.uint8)
-    start = min(max(int(start), 0), b.size)
-    capacity = (b.size - start) // 2 + 1  # a number and a separator take two bytes at least
+    start = min(max(int(start), 0), len(data))
+    capacity = (len(data) - start) // 2 + 1  # a number and a separator take two bytes at least
     if max_values is not None:
         capacity = min(capacity, max(int(max_values), 0))
     out = np.empty(capacity)
-    rows = -1 if row_length is None else int(row_length)
-    count = _kernel()(b, start, rows, out, _POW10, _EXACT_LIMIT)
-    if count < 0:
+    count = parse_decimals_into(data, out, start, row_length, compiled)
+    if count is None:
         return None
     return out[:count] if count == capacity else out[:count].copy()
+
+
+def parse_decimals_into(
+    data: bytes,
+    out: npt.NDArray[np.float64],
+    start: int = 0,
+    row_length: int | None = None,
+    compiled: bool | None = None,
+) -> int | None:
+    """:func:`parse_decimals` into a preallocated buffer: the values of ``data[start:]`` are
+    written to ``out[:count]`` (``out``: 1-D float64, C-contiguous) and ``count`` is returned;
+    ``None`` as for :func:`parse_decimals`, or when ``out`` cannot hold them all (what was
+    written is then undefined). No other array of the values' size is made: a caller that knows
+    a bound on the count (a BVH reader: rows x channels) holds the numbers once.
+
+    >>> buf = np.empty(4)
+    >>> parse_decimals_into(b"1 2.5\\n-3 4\\n", buf), buf.tolist()
+    (4, [1.0, 2.5, -3.0, 4.0])
+    """
+    if out.ndim != 1 or out.dtype != np.float64 or not out.flags.c_contiguous:
+        raise ValueError("out must be a 1-D C-contiguous float64 array")
+    start = min(max(int(start), 0), len(data))
+    if not (compiled_ready() if compiled is None else compiled):
+        return _vectorized(data, start, row_length, out)
+    b = np.frombuffer(data, dtype=np.uint8)
+    rows = -1 if row_length is None else int(row_length)
+    count = _kernel()(b, start, rows, out, _POW10, _EXACT_LIMIT)
+    return None if count < 0 else int(count)
 
 
 # ------------------------------------------------------------------ the numpy passes
@@ -190,26 +211,26 @@ def _swar_digits(
 _CHUNK_BYTES = 1 << 19
 
 
-def _vectorized(data: bytes, start: int = 0, row_length: int | None = None) -> npt.NDArray[np.float64] | None:
-    """:func:`parse_decimals` by vectorised numpy passes over ~512 KiB pieces cut at line ends
-    (temporaries small enough to be reused from the allocator's heap)."""
+def _vectorized(data: bytes, start: int, row_length: int | None, out: npt.NDArray[np.float64]) -> int | None:
+    """:func:`parse_decimals_into` by vectorised numpy passes over ~512 KiB pieces cut at line
+    ends (temporaries small enough to be reused from the allocator's heap), each piece's values
+    written into ``out`` in turn."""
     if start < _PAD:  # words are read up to 8 bytes before a token: make room
         data, start = b" " * _PAD + bytes(data[start:]), _PAD
     whole = np.frombuffer(data, dtype=np.uint8)
     words = _byte_words(data)
-    pieces: list[npt.NDArray[np.float64]] = []
+    count = 0
     pos, end = start, len(data)
     while pos < end:
         stop = data.find(b"\n", min(pos + _CHUNK_BYTES, end))
         stop = end if stop < 0 else stop + 1
         piece = _parse_piece(whole, words, pos, stop, row_length)
-        if piece is None:
+        if piece is None or count + piece.size > out.size:
             return None
-        pieces.append(piece)
+        out[count : count + piece.size] = piece
+        count += piece.size
         pos = stop
-    if not pieces:
-        return np.zeros(0)
-    return pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
+    return count
 
 
 def _parse_piece(

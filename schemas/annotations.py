@@ -208,6 +208,16 @@ class AnnotationRequest(JobRequestBase):
         "continues; motion.looping); the report's 'loop' constraint measures it",
     )
 
+    def named_labels(self) -> list[tuple[str, str, bool]]:
+        """Every timeline label: the engine paints each on its vocabulary's columns, so each must
+        be one of the database's labels (:meth:`JobRequestBase.named_labels`)."""
+        return [(f"timeline[{k}]", e.label, True) for k, e in enumerate(self.timeline)]
+
+    def named_clip_frames(self) -> list[tuple[str, str, int]]:
+        return [
+            (f"frame_constraints[{k}]", c.clip, c.clip_frame) for k, c in enumerate(self.frame_constraints)
+        ]
+
     @model_validator(mode="after")
     def _inside(self) -> AnnotationRequest:
         for e in self.timeline:

@@ -73,6 +73,19 @@ class JobRequestBase(Strict):
         skeleton at submission; engines whose requests name joints override this."""
         return []
 
+    def named_labels(self) -> list[tuple[str, str, bool]]:
+        """``(where, label, required)`` of every label the request names, to check against the
+        database's label vocabulary at submission: ``required`` labels must be in it (an unknown
+        one is a 422), others may be absent (asking not to carry a label nobody has is fine).
+        Engines whose requests name labels override this."""
+        return []
+
+    def named_clip_frames(self) -> list[tuple[str, str, int]]:
+        """``(where, clip name, frame)`` of every database clip frame the request names (pose and
+        frame constraints, an excerpt's last frame), frames at the database rate, to check against
+        the database's clips at submission. Engines whose requests name clips override this."""
+        return []
+
     def attach_inputs(self, files: dict[str, bytes]) -> None:
         """Give the request the bytes of its input files, keyed by reference."""
         self._inputs.update(files)

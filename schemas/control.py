@@ -92,6 +92,30 @@ def _ref_to_source(ref: Any, where: str) -> dict[str, Any]:
     raise ValueError(f"{where}: give a file name or a clip object like {{'bvh': 'a.bvh'}}")
 
 
+def unequal_pair_problems(
+    spec: ControlDatabaseSpec, frames: dict[str, int], fps: float
+) -> tuple[list[str], list[str]]:
+    """``(problems, warnings)`` of the pairs whose control and target lengths differ, ``frames``
+    the clips' frames at the database rate ``fps``: problems under ``unequal_pairs = "refuse"``,
+    warnings under ``"trim"``, one sentence per pair naming both lengths."""
+    problems, warnings = [], []
+    for i, p in enumerate(spec.pairs):
+        if p.control is None or p.control not in frames or p.target not in frames:
+            continue
+        c, t = frames[p.control], frames[p.target]
+        if c == t:
+            continue
+        line = f"pairs[{i}]: control {p.control!r} has {c} frames and target {p.target!r} {t} at {fps:g} fps"
+        if spec.unequal_pairs == "trim":
+            warnings.append(f"{line}: both cut to {min(c, t)} frames (unequal_pairs: trim)")
+        else:
+            problems.append(
+                f"{line}: a synchronized pair has equal lengths (is it the right file?); set "
+                '"unequal_pairs": "trim" to cut both to the shorter'
+            )
+    return problems, warnings
+
+
 class ControlDatabaseSpec(DatabaseSpecBase):
     """Control-by-example database: synchronized (control, target) example pairs.
 
@@ -119,6 +143,13 @@ class ControlDatabaseSpec(DatabaseSpecBase):
         "(metres; 0 keeps every instance)",
     )
     handhold_m: float = Field(default=0.2, gt=0, le=2, description="partners' hands closer than this hold")
+    unequal_pairs: Literal["refuse", "trim"] = Field(
+        default="refuse",
+        description="a pair whose control and target differ in length (frames at the database rate): "
+        "refused at submission, naming both lengths (default: synchronized captures have equal "
+        "lengths, so a difference is most often the wrong file), or 'trim': both cut to the shorter, "
+        "with a warning naming both lengths",
+    )
     seed: int = Field(default=0, ge=0, le=2**32 - 1, description="choice of cluster representatives")
 
     @model_validator(mode="before")
@@ -339,6 +370,13 @@ class ControlRequest(JobRequestBase):
         if self.stretch_s is not None and self.stretch_ratio is not None:
             raise ValueError("give at most one of 'stretch_s' or 'stretch_ratio'")
         return self
+
+    def named_clip_frames(self) -> list[tuple[str, str, int]]:
+        return [
+            (f"constraints[{k}]", c.clip, c.clip_frame)
+            for k, c in enumerate(self.constraints)
+            if c.clip is not None and c.clip_frame is not None
+        ]
 
     def input_files(self) -> list[str]:
         """The control BVH, when the control is a motion."""

@@ -7,7 +7,7 @@ The score weights follow the paper: an error of 10 frames, of 30 cm and of 10 de
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, model_validator
 
@@ -238,6 +238,29 @@ class GraphRequest(JobRequestBase):
                 raise ValueError(f"{where}: time {c.time_s:g} s is past the motion's {self.seconds:g} s")
         elif n is not None and (c.start >= n or (c.end is not None and c.end > n)):
             raise ValueError(f"{where}: frames [{c.start}, {c.end}) are past the motion's {n} frames")
+
+    def _constraint_lists(self) -> list[tuple[str, list[Any]]]:
+        return [("", list(self.constraints))] + [
+            (f"characters[{i}].", list(c.constraints)) for i, c in enumerate(self.characters or [])
+        ]
+
+    def named_labels(self) -> list[tuple[str, str, bool]]:
+        """Label constraints: one asking for a label (value 1) needs a clip carrying it; one
+        asking to avoid it may name any label (:meth:`JobRequestBase.named_labels`)."""
+        return [
+            (f"{prefix}constraints[{k}]", c.label, c.value == 1)
+            for prefix, constraints in self._constraint_lists()
+            for k, c in enumerate(constraints)
+            if c.type == "label"
+        ]
+
+    def named_clip_frames(self) -> list[tuple[str, str, int]]:
+        return [
+            (f"{prefix}constraints[{k}]", c.clip, c.clip_frame)
+            for prefix, constraints in self._constraint_lists()
+            for k, c in enumerate(constraints)
+            if c.type == "pose"
+        ]
 
     def named_joints(self) -> list[tuple[str, str]]:
         """``(where, joint name)`` of every joint the request names (joint constraints, of each

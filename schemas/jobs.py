@@ -29,6 +29,13 @@ class ClipRequest(JobRequestBase):
     )
     heading_deg: float | None = Field(default=None, description="facing at the first frame (0 = +Z, 90 = +X)")
 
+    def named_clip_frames(self) -> list[tuple[str, str, int]]:
+        """The excerpt's first frame, and its last when ``end`` is given."""
+        out = [("start", self.clip, self.start)]
+        if self.end is not None:
+            out.append(("end", self.clip, self.end - 1))
+        return out
+
     @model_validator(mode="after")
     def _range(self) -> ClipRequest:
         if self.end is not None and self.end <= self.start:

@@ -11,24 +11,19 @@ if TYPE_CHECKING:
     from schemas import Report
 
 
-def inspect_summary(
-    path: Path,
-    motion: Motion,
-    declared: str | None,
-    up: str = "auto",
-    timing: tuple[int, float] | None = None,
-) -> dict[str, Any]:
+def inspect_summary(path: Path, motion: Motion, declared: str | None, up: str = "auto") -> dict[str, Any]:
     """The facts ``segue inspect`` reports, JSON-ready. ``declared``: the unit the user gave (else
     the sample catalogue's, :func:`motion.samples.declared_units`, else guessed); ``up``: ``y``,
-    ``z`` or ``auto`` (detected: :func:`motion.units.up_axis`); ``timing``: ``(frames, fps)`` of a
-    glTF file's animation (``motion`` is then its one-frame bind pose)."""
+    ``z`` or ``auto`` (detected: :func:`motion.units.up_axis`). ``height_m`` is Segue's one height
+    (:func:`motion.bvh.height_m`: the standing height over the motion's frames; a glTF file without
+    animation: its bind pose), the same for a BVH file and its GLB."""
     from motion.bvh import detect_units, detect_up_axis
     from motion.samples import declared_units
     from motion.units import METRES_PER_UNIT
 
     axis = {"y": 1, "z": 2}.get(up) or detect_up_axis(motion)
     guess = detect_units(motion, axis)
-    frames, fps = timing if timing is not None else (motion.num_frames, motion.fps)
+    frames, fps = motion.num_frames, motion.fps
     source = "declared" if declared else "sample" if declared_units(path) else "guess"
     if path.name.lower().endswith((".glb", ".gltf")):
         source = "gltf"  # metres, by glTF's rule
@@ -40,7 +35,7 @@ def inspect_summary(
         "name": motion.name,
         "frames": frames,
         "fps": fps,
-        "duration_s": round((frames - 1) / fps if timing is not None and fps > 0 else motion.duration_s, 6),
+        "duration_s": round(motion.duration_s, 6),
         "joints": list(motion.skeleton.names),
         "parents": [int(p) for p in motion.skeleton.parents],
         "channels": motion.skeleton.num_channels,
@@ -57,6 +52,11 @@ def inspect_summary(
             "plausible": guess.plausible,
         },
     }
+
+
+def count(n: int, noun: str) -> str:
+    """``n`` and the noun, plural unless one: ``count(1, "clip")`` is ``"1 clip"``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 def quality_summary(report: Report) -> str:

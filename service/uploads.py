@@ -26,6 +26,7 @@ from starlette.requests import Request
 
 from motion import BvhLimits
 from motion.bvh_header import bvh_header
+from motion.gltf import is_gltf
 from schemas import ClipInfo
 from workers.backend import JobBackend
 from workers.store import NotFoundError, Store
@@ -146,7 +147,10 @@ def upload_body(description: str) -> dict[str, Any]:
 
 INLINE_VALUES = 2_000_000
 """Most numbers (frames x channels) of a BVH table parsed in the API process (~16 MB of float64,
-a few tens of milliseconds); larger tables are parsed by a worker (0: every clip)."""
+a few tens of milliseconds); larger tables are parsed by a worker (0: every clip). The bound is
+the larger of the ``Frames:`` line and the lines present (which win when they differ)."""
+INLINE_GLTF_BYTES = 4 << 20
+"""Largest glTF/GLB upload read in the API process; larger ones are read by a worker."""
 
 
 async def parse_upload(
@@ -160,10 +164,14 @@ async def parse_upload(
     runner: TaskRunner,
     limiter: anyio.CapacityLimiter,
 ) -> ClipInfo:
-    """Check and store a new BVH upload (module docstring): 400 ``invalid_bvh`` naming the fault,
-    as :func:`motion.bvh.parse_bvh` words it."""
-    head = await anyio.to_thread.run_sync(bvh_header, data, limits, file_name, limiter=limiter)
-    if head.frames * head.channels <= INLINE_VALUES:
+    """Check and store a new BVH or glTF upload (module docstring): 400 ``invalid_bvh`` naming the
+    fault, as :func:`motion.io.parse_motion` words it."""
+    if is_gltf(data):
+        inline = len(data) <= INLINE_GLTF_BYTES
+    else:
+        head = await anyio.to_thread.run_sync(bvh_header, data, limits, file_name, limiter=limiter)
+        inline = head.frames_bound * head.channels <= INLINE_VALUES
+    if inline:
         return await anyio.to_thread.run_sync(store.put_clip, file_name, data, limits, units, limiter=limiter)
     digest = hashlib.sha256(data).hexdigest()
     await run_in_threadpool(store.put_staged, digest, data)
@@ -173,7 +181,7 @@ async def parse_upload(
         digest=digest,
         name=file_name,
         units=units,
-        limits=[limits.max_joints, limits.max_frames, limits.max_bytes],
+        limits=[limits.max_joints, limits.max_frames, limits.max_bytes, limits.max_joint_frames],
     )
     done = await runner.run(f"clip:{digest}:{units}:{file_name}", payload, store, backend, metrics)
     return ClipInfo.model_validate(done["clip"])

@@ -76,6 +76,19 @@ if command -v npm >/dev/null 2>&1 && ! grep -q "\"version\": \"$GLTF_VALIDATOR_V
     npm install --prefix "$SEGUE_GLTF_VALIDATOR_DIR" --no-audit --no-fund --silent \
         "gltf-validator@$GLTF_VALIDATOR_VERSION" || echo "tests/run.sh: gltf-validator not installed" >&2
 fi
+# The BVH reader's corpus of real files (tests/motion/test_bvh_corpus.py): the test files inside two
+# PyPI packages' sdists (pinned; 8 MB; not vendored: tests/data/bvh-corpus/README.md says why),
+# downloaded once into $SEGUE_BVH_CORPUS_DIR (outside the work tree). The tests read them in place.
+export SEGUE_BVH_CORPUS_DIR="${SEGUE_BVH_CORPUS_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/segue/bvh-corpus}"
+for SDIST in bvhtoolbox==0.1.3 bvhtools==1.6.0; do
+    FILE="${SDIST%%==*}-${SDIST##*==}.tar.gz"
+    if [ ! -f "$SEGUE_BVH_CORPUS_DIR/$FILE" ]; then
+        step "pip download $SDIST (sdist) into $SEGUE_BVH_CORPUS_DIR"
+        mkdir -p "$SEGUE_BVH_CORPUS_DIR"
+        "$PY" -m pip download --quiet --disable-pip-version-check --no-deps --no-binary :all: \
+            -d "$SEGUE_BVH_CORPUS_DIR" "$SDIST" || echo "tests/run.sh: $SDIST not downloaded" >&2
+    fi
+done
 # pip takes 30-70 s even when nothing changed: skip it while this checkout is the editable install,
 # pyproject.toml and the Python are those of the last install, and every requirement is present
 if "$PY" -E tests/install_current.py; then

@@ -246,7 +246,11 @@ def _build(
             labels = [lb.model_dump() for lb in source.labels]
             # the spec's unit, else the clip's own (declared at upload, e.g. a bundled sample's, or guessed)
             units = source.units if source.units is not None else store.clip_info(source.clip).units
-            clips.append(ClipInput(source.display_name(), store.clip_bytes(source.clip), units, labels))
+            clips.append(
+                ClipInput(
+                    source.display_name(), store.clip_bytes(source.clip), units, labels, source.animation
+                )
+            )
         arrays, library = build_database_arrays(spec, clips, publish, should_stop)
         store.put_database_arrays(db_id, arrays)
     except JobFailure as exc:

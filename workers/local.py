@@ -85,6 +85,7 @@ def load_spec_file(path: Path) -> tuple[DatabaseSpecBase, list[ClipInput], list[
                 data,
                 source.units if source.units is not None else declared_units(source.bvh),
                 [lb.model_dump() for lb in source.labels],
+                source.animation,
             )
         )
     return spec, clips, digests

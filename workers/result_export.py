@@ -253,6 +253,7 @@ def _character(
     from motion import BvhError
     from motion.bvh import parse_bvh
     from motion.bvh_header import bvh_first_frames
+    from motion.gltf import is_gltf
     from motion.retarget.character import gltf_character
     from motion.retarget.transfer import zero_pose
 
@@ -260,6 +261,8 @@ def _character(
         raw = store.file_bytes(ref.id)
         return gltf_character(raw, name=ref.name), raw
     data = store.clip_bytes(ref.id)
+    if is_gltf(data):  # a glTF clip: its skin's bind pose, as a glTF file character
+        return gltf_character(data, name=ref.name), data
     motion: Motion | None = None
     head = bvh_first_frames(data, 1, ref.name)
     if head is not None:

@@ -88,7 +88,10 @@ class Settings(BaseSettings):
         default=36_000, ge=1, description="output frames per character of one job (at the output rate)"
     )
     max_joint_frames: int = Field(
-        default=10_000_000, ge=1, description="characters x output frames x joints of one job"
+        default=10_000_000,
+        ge=1,
+        description="characters x output frames x joints of one job; also frames x joints of one uploaded "
+        "clip (its header is checked against it before any row is read)",
     )
     max_job_memory_mb: int = Field(
         default=4096,
@@ -221,7 +224,12 @@ class Settings(BaseSettings):
     @property
     def bvh_limits(self) -> BvhLimits:
         """The reader limits for uploaded clips."""
-        return BvhLimits(max_joints=self.max_joints, max_frames=self.max_frames, max_bytes=self.inflate_limit)
+        return BvhLimits(
+            max_joints=self.max_joints,
+            max_frames=self.max_frames,
+            max_bytes=self.inflate_limit,
+            max_joint_frames=self.max_joint_frames,
+        )
 
 
 @lru_cache

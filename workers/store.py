@@ -4,7 +4,9 @@ The objects live in a local directory (the default) or an S3-compatible bucket
 (:mod:`workers.objects`, chosen by ``SEGUE_STORE_URL``); this class keeps the names and formats.
 Keys::
 
-    clips/<sha256>.bvh            uploaded bytes (as uploaded, possibly gzip)
+    clips/<sha256>.bvh            uploaded bytes (as uploaded: BVH, possibly gzip, or glTF/GLB)
+    clips/<sha256>.read.bvh.gz    the motion as read, as BVH (gzip), for a clip whose file a
+                                  browser cannot read as it is: glTF, or a BVH that needed warnings
     clips/<sha256>.json           ClipInfo
     clips/<sha256>.owners         the principals holding the clip, each with its own record (name,
                                   upload time, build job; :mod:`workers.holders`; likewise files/,
@@ -34,6 +36,7 @@ object store a copy downloaded once into the process's cache directory, evicted 
 
 from __future__ import annotations
 
+import gzip
 import hashlib
 import io
 import json
@@ -48,9 +51,12 @@ import numpy as np
 
 from engines.base import container
 from motion import Motion, MotionError
-from motion.bvh import BvhLimits, detect_units, parse_bvh
+from motion.bvh import BvhLimits, detect_units
+from motion.errors import ReadWarning
+from motion.io import parse_motion
 from motion.serialize import motion_from_arrays, motion_to_arrays
 from schemas import ClipInfo, DatabaseInfo, JobInfo, Report
+from schemas.clips import AnimationInfo
 from schemas.files import FileInfo
 
 from . import holders as holding
@@ -63,6 +69,8 @@ Visible = Callable[[str], bool]
 """``visible(id)``: may the caller see the clip, file or database with this id (ownership filter)."""
 
 LEGACY_NPZ = "data.npz"
+READ_SUFFIX = ".read.bvh.gz"
+"""A clip's motion as read (BVH text, gzip), beside its uploaded bytes: ``clips/<id>.read.bvh.gz``."""
 DEFAULT_DISK_CACHE_BYTES = 8 << 30
 
 
@@ -185,9 +193,12 @@ class Store:
     def put_clip(
         self, name: str, data: bytes, limits: BvhLimits | None = None, units: str | None = None
     ) -> ClipInfo:
-        """Validate and store an uploaded clip; the same bytes are stored once (content address).
+        """Validate and store an uploaded clip (BVH, or a glTF file's first animation); the same
+        bytes are stored once (content address). The info carries the reader's warnings (what the
+        file needed to be read) and a glTF file's animations.
 
-        Raises :class:`motion.MotionError` (a ``BvhError``) for invalid content; nothing is written then.
+        Raises :class:`motion.MotionError` (a ``BvhError`` for BVH) for invalid content; nothing
+        is written then.
         """
         digest = hashlib.sha256(data).hexdigest()
         key = f"clips/{digest}.json"
@@ -195,8 +206,15 @@ class Store:
             return ClipInfo.model_validate_json(self.objects.get(key))
         except ObjectNotFound:
             pass
-        motion = parse_bvh(data, units=units, limits=limits, source=name, name=name)
+        notes: list[ReadWarning] = []
+        motion = parse_motion(data, units=units, limits=limits, source=name, name=name, warnings=notes)
         guess = detect_units(motion)
+        animations: list[AnimationInfo] = []
+        from motion.gltf import gltf_animations, is_gltf
+
+        if is_gltf(data):
+            found = gltf_animations(data, source=name)
+            animations = [AnimationInfo(name=a.name, frames=a.frames, fps=a.fps) for a in found]
         info = ClipInfo(
             id=digest,
             name=name,
@@ -207,7 +225,15 @@ class Store:
             height_m=round(guess.height * motion.metres_per_unit, 4),
             size_bytes=len(data),
             created_at=now(),
+            format="gltf" if animations else "bvh",
+            animations=animations,
+            warnings=[w.message for w in notes],
         )
+        if animations or notes:
+            from motion.bvh import bvh_text
+
+            text = bvh_text(motion).encode()
+            self.objects.put(f"clips/{digest}{READ_SUFFIX}", gzip.compress(text, 6, mtime=0))
         self.objects.put(f"clips/{digest}.bvh", data)
         if not self.objects.put(key, info.model_dump_json().encode(), if_absent=True):
             return ClipInfo.model_validate_json(self.objects.get(key))  # a concurrent upload won
@@ -224,6 +250,15 @@ class Store:
 
     def clip_bytes(self, clip_id: str) -> bytes:
         return self._get(f"clips/{_safe_id(clip_id)}.bvh", f"no clip {clip_id!r}")
+
+    def clip_read_bytes(self, clip_id: str) -> bytes:
+        """The clip's motion as read, as gzip BVH text, for a clip kept so (glTF, or a BVH that
+        needed warnings); the uploaded bytes for any other clip (:class:`NotFoundError` when a
+        kept copy is gone: its bytes were restored after another holder's delete)."""
+        info = self.clip_info(clip_id)
+        if info.format == "bvh" and not info.warnings:
+            return self.clip_bytes(info.id)
+        return self._get(f"clips/{info.id}{READ_SUFFIX}", f"no readable copy of clip {clip_id!r}")
 
     def _infos_under(self, kind: str) -> list[bytes]:
         out = []
@@ -260,7 +295,7 @@ class Store:
 
     def delete_clip(self, clip_id: str) -> None:
         info = self.clip_info(clip_id)
-        for suffix in (".json", ".bvh", ".owners"):
+        for suffix in (".json", ".bvh", READ_SUFFIX, ".owners"):
             self.objects.delete(f"clips/{info.id}{suffix}")
         self._forget(f"clips/{info.id}.json")
 

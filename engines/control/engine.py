@@ -25,18 +25,20 @@ import numpy.typing as npt
 from scipy.ndimage import gaussian_filter1d
 from threadpoolctl import ThreadpoolController, threadpool_limits  # type: ignore[import-untyped]
 
-from motion import BvhError, Motion, MotionError
+from motion import Motion, MotionError
 from motion.bvh import parse_bvh
 from motion.bvh_header import bvh_header
 from motion.compiled import fast_fk
 from motion.floorfit import faded_shifts
+from motion.gltf import gltf_animations, is_gltf
 from motion.goals import BodyGoal, FootplantGoal, Goal, HandholdGoal, LengthGoal, PathGoal, planted_speeds
 from motion.ground import apply_floor_transform, body_root, ground_frames, static_reference_root
+from motion.io import parse_motion
 from motion.quality import QualityInputs
 from motion.reach import reach, smooth_weights
 from motion.samples import declared_units, upload_units
 from motion.vectors import norms
-from schemas.control import ControlDatabaseSpec, ControlRequest
+from schemas.control import ControlDatabaseSpec, ControlRequest, unequal_pair_problems
 
 from ..base import (
     Arrays,
@@ -153,8 +155,11 @@ def _header_frames(request: ControlRequest, ref: str, fps: float) -> int | None:
     not attached or its header is unreadable)."""
     try:
         data = bytes(request.input_bytes(ref))
+        if data and is_gltf(data):  # a glTF file's first animation (its accessors' count and range)
+            anims = gltf_animations(data, source=ref)
+            return round(anims[0].duration_s * fps) + 1 if anims else None
         head = bvh_header(data) if data else None
-    except (KeyError, BvhError):
+    except (KeyError, MotionError):
         return None
     return None if head is None else round(head.duration_s * fps) + 1
 
@@ -269,9 +274,20 @@ class ControlEngine(Engine[ControlRequest, ControlDatabaseSpec]):
         return [i for i, name in enumerate(library.names) if name in targets]
 
     @classmethod
+    def spec_problems(cls, spec: ControlDatabaseSpec, frames: dict[str, int], fps: float) -> list[str]:
+        """Pairs of unequal lengths under ``unequal_pairs = "refuse"`` (:func:`unequal_pair_problems`)."""
+        return unequal_pair_problems(spec, frames, fps)[0]
+
+    @classmethod
     def build(
         cls, spec: ControlDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
     ) -> Arrays:
+        frames = {name: m.num_frames for name, m in zip(library.names, library.motions, strict=True)}
+        problems, warnings = unequal_pair_problems(spec, frames, library.fps)
+        if problems:
+            raise EngineError("; ".join(problems))
+        for line in warnings:
+            emit.progress(0.15, f"warning: {line}")
         try:
             with threadpool_limits(limits=1):
                 db = build_control_database(spec, library, should_stop)
@@ -316,7 +332,10 @@ class ControlEngine(Engine[ControlRequest, ControlDatabaseSpec]):
         # catalogue declares, any other file as declared or guessed
         units = ctl.units if ctl.units is not None else declared_units(bvh) or upload_units(bvh, data)
         try:
-            motion = parse_bvh(data, units=units, source=bvh, name="control", joints=names)
+            if is_gltf(data):  # a glTF file's first animation, in metres
+                motion = parse_motion(data, source=bvh, name="control")
+            else:
+                motion = parse_bvh(data, units=units, source=bvh, name="control", joints=names)
             if names is not None and any(n not in motion.skeleton.names for n in names):
                 motion = parse_bvh(data, units=units, source=bvh, name="control")  # for the message
         except MotionError as exc:

@@ -136,8 +136,18 @@ PRESETS: dict[str, dict[str, str]] = {
         "R",
     ),
 }
+PRESETS["cmu-cgspeed"] = dict(PRESETS["mixamo"])
 """Naming conventions: ``humanoid`` is Unity's Humanoid and Godot's humanoid profile; ``cmu`` the
-CMU BVH conversions with ``LeftHip/LeftKnee/LeftAnkle``; ``cmu-asf`` the ASF bone names."""
+CMU BVH conversions with ``LeftHip/LeftKnee/LeftAnkle``; ``cmu-asf`` the ASF bone names;
+``cmu-cgspeed`` B. Hahne's cgspeed.com conversion of the whole CMU database, whose limb names are
+Mixamo's (``LeftUpLeg``, ``LeftArm``) and which :data:`SIGNATURES` tells apart."""
+
+SIGNATURES: dict[str, tuple[str, ...]] = {
+    "mixamo": ("Spine2", "LeftHandThumb1", "RightHandThumb1"),
+    "cmu-cgspeed": ("LHipJoint", "RHipJoint", "LowerBack", "Neck1", "LeftFingerBase", "RightFingerBase"),
+}
+"""Joints only one of two conventions with the same role names has: the tie-break of
+:func:`detect_roles`."""
 
 _NAMESPACE = re.compile(r"^.*[:|]")
 
@@ -162,14 +172,16 @@ class Roles:
 
 
 def detect_roles(skeleton: Skeleton) -> Roles:
-    """The roles of a skeleton's joints under the preset that matches most of them (ties: the
-    order of :data:`PRESETS`). Exact names first, then case-insensitive unique ones."""
+    """The roles of a skeleton's joints under the preset that matches most of them (ties: the one
+    with more of its :data:`SIGNATURES` joints, then the order of :data:`PRESETS`). Exact names
+    first, then case-insensitive unique ones."""
     bare = [bare_name(n) for n in skeleton.names]
     exact = {n: i for i, n in enumerate(bare)}
     lower: dict[str, list[int]] = {}
     for i, n in enumerate(bare):
         lower.setdefault(n.lower(), []).append(i)
     best = Roles("", {})
+    best_score = (0, 0, 0)
     for preset, table in PRESETS.items():
         found: dict[str, int] = {}
         for role, name in table.items():
@@ -177,9 +189,10 @@ def detect_roles(skeleton: Skeleton) -> Roles:
                 found[role] = exact[name]
             elif len(lower.get(name.lower(), [])) == 1:
                 found[role] = lower[name.lower()][0]
-        score = (sum(r in found for r in REQUIRED), len(found))
-        if score > (sum(r in best.joints for r in REQUIRED), len(best.joints)):
-            best = Roles(preset, found)
+        signed = sum(n in exact for n in SIGNATURES.get(preset, ()))
+        score = (sum(r in found for r in REQUIRED), len(found), signed)
+        if score > best_score:
+            best, best_score = Roles(preset, found), score
     return best
 
 

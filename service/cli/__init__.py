@@ -41,6 +41,7 @@ from collections.abc import Sequence
 from .addon import cmd_blender_addon
 from .demo import cmd_demo
 from .files import (
+    DEFAULT_MAX_JOINT_FRAMES,
     OUTPUT_SUFFIXES,
     SAMPLE_PREFIX,
     TARGETS,
@@ -105,6 +106,19 @@ def build_parser() -> argparse.ArgumentParser:
             "--max-joints", type=int, default=1024, help="refuse files with more joints (default 1024)"
         )
         p.add_argument("--max-frames", type=int, default=2_000_000, help="refuse files with more frames")
+        p.add_argument(
+            "--max-joint-frames",
+            type=int,
+            default=DEFAULT_MAX_JOINT_FRAMES,
+            help=f"refuse files with more frames x joints (default {DEFAULT_MAX_JOINT_FRAMES:,})",
+        )
+
+    def animation(p: argparse.ArgumentParser) -> None:
+        p.add_argument(
+            "--animation",
+            metavar="NAME|INDEX",
+            help="which animation of a glTF/GLB file (default: its first; segue inspect lists them)",
+        )
 
     from ..demos import DEMOS
 
@@ -125,6 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="auto",
         help="the file's vertical axis, for the height (default: detected; Segue's Unreal BVH is Z up)",
     )
+    animation(p)
     limits(p)
     p.set_defaults(func=cmd_inspect)
 
@@ -132,7 +147,12 @@ def build_parser() -> argparse.ArgumentParser:
         "beats",
         help="motion beats of a BVH file (Kim et al. 2003) or music beats of a recording (WAV FLAC Ogg MP3)",
     )
-    p.add_argument("file", help="BVH file (.bvh, .bvh.gz), sample:NAME, or a .wav/.flac/.ogg/.mp3 recording")
+    p.add_argument(
+        "file",
+        help="BVH (.bvh, .bvh.gz) or glTF (.glb, .gltf) file, sample:NAME, or a .wav/.flac/.ogg/.mp3 "
+        "recording",
+    )
+    animation(p)
     p.add_argument(
         "--json",
         action="store_true",
@@ -151,8 +171,13 @@ def build_parser() -> argparse.ArgumentParser:
     limits(p)
     p.set_defaults(func=cmd_beats)
 
-    p = command("convert", help="convert a BVH file by output extension: " + " ".join(OUTPUT_SUFFIXES))
-    p.add_argument("input", help="BVH file (.bvh, .bvh.gz) or sample:NAME")
+    p = command(
+        "convert", help="convert a BVH or glTF/GLB motion by output extension: " + " ".join(OUTPUT_SUFFIXES)
+    )
+    p.add_argument(
+        "input", help="BVH file (.bvh, .bvh.gz), glTF file with an animation (.glb, .gltf) or sample:NAME"
+    )
+    animation(p)
     p.add_argument("output", help="output file: " + ", ".join(OUTPUT_SUFFIXES))
     p.add_argument("--fps", type=float, help="resample to this frame rate (slerp rotations)")
     p.add_argument(
@@ -181,7 +206,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_convert)
 
     p = command("retarget", help="put a motion on another character (BVH or GLB/glTF skin)")
-    p.add_argument("motion", help="the motion: BVH file (.bvh, .bvh.gz) or sample:NAME")
+    p.add_argument(
+        "motion",
+        help="the motion: BVH file (.bvh, .bvh.gz), glTF file with an animation (.glb, .gltf) or sample:NAME",
+    )
+    animation(p)
     p.add_argument(
         "--to", required=True, help="the character: BVH (.bvh, .bvh.gz, sample:NAME) or .glb/.gltf skin"
     )

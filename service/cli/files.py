@@ -26,6 +26,8 @@ TARGETS = ("gltf", "godot", "unity", "unreal")
 """Export conventions (:data:`motion.export.targets.TARGETS`)."""
 OUTPUT_SUFFIXES = (".bvh", ".bvh.gz", ".glb", ".json", ".npz")
 """Output formats by extension (:data:`motion.io.OUTPUT_SUFFIXES`)."""
+DEFAULT_MAX_JOINT_FRAMES = 20_000_000
+"""Default ``--max-joint-frames`` (:data:`motion.bvh.DEFAULT_MAX_JOINT_FRAMES`; a test keeps them equal)."""
 
 
 def _resolve(path: str) -> Path:
@@ -37,7 +39,45 @@ def _resolve(path: str) -> Path:
 def _limits(args: argparse.Namespace) -> BvhLimits:
     from motion.bvh import BvhLimits
 
-    return BvhLimits(max_joints=args.max_joints, max_frames=args.max_frames)
+    return BvhLimits(
+        max_joints=args.max_joints, max_frames=args.max_frames, max_joint_frames=args.max_joint_frames
+    )
+
+
+def _animation(args: argparse.Namespace, name: str = "animation") -> str | int | None:
+    """The ``--animation`` option: an index when it is a number, else a name (None: not given)."""
+    value = getattr(args, name, None)
+    if value is None:
+        return None
+    return int(value) if str(value).isdigit() else str(value)
+
+
+def _read(path: Path, args: argparse.Namespace, units: str | None, animation: str | int | None = None) -> Any:
+    """The motion of a BVH or glTF file (:func:`motion.io.load_motion`), its reader's warnings
+    printed to stderr as ``segue: warning: FILE:LINE: ...``."""
+    from motion.io import load_motion
+
+    warnings: list[Any] = []
+    motion = load_motion(path, units=units, limits=_limits(args), animation=animation, warnings=warnings)
+    print_warnings(warnings)
+    return motion
+
+
+def _picked(animations: list[Any], wanted: str | int | None) -> str:
+    """The name of the animation ``--animation`` reads (the first by default; by name, else index),
+    among those :func:`motion.gltf.gltf_animations` listed (the read itself refused a missing one)."""
+    names = [a.name for a in animations]
+    if wanted is None:
+        return str(names[0])
+    if isinstance(wanted, str) and wanted in names:
+        return wanted
+    return str(names[int(wanted)])
+
+
+def print_warnings(warnings: list[Any]) -> None:
+    """Each reader warning on its own stderr line (what the file needed to be read)."""
+    for w in warnings:
+        print(f"segue: warning: {w}", file=sys.stderr)
 
 
 UNITS_SOURCES = {
@@ -78,8 +118,8 @@ def _inspect_database(db_dir: Path, as_json: bool) -> int:
 
 def cmd_inspect(args: argparse.Namespace) -> int:
     from motion import MotionError
-    from motion.io import load_motion
-    from motion.retarget.character import GLTF_SUFFIXES, gltf_character, gltf_timing
+    from motion.gltf import GLTF_SUFFIXES, gltf_animations
+    from motion.retarget.character import gltf_character
 
     if not args.file.startswith(SAMPLE_PREFIX) and Path(args.file).is_dir():
         db_dir = Path(args.file)
@@ -89,7 +129,8 @@ def cmd_inspect(args: argparse.Namespace) -> int:
             )
         return _inspect_database(db_dir, args.json)
     path = _resolve(args.file)
-    timing = None
+    animations: list[Any] | None = None
+    warnings: list[Any] = []
     if path.name.lower().endswith(GLTF_SUFFIXES):
         if args.units not in (None, "m"):
             raise MotionError(
@@ -99,28 +140,56 @@ def cmd_inspect(args: argparse.Namespace) -> int:
             raw = path.read_bytes()
         except OSError as exc:
             raise MotionError(f"{path}: {exc.strerror or exc}") from None
-        motion = gltf_character(raw, name=path.name.rsplit(".", 1)[0])  # the skin's bind pose
-        timing = gltf_timing(raw)
+        animations = gltf_animations(raw, base_dir=path.parent, source=str(path))
+        if animations:
+            from motion.io import load_motion
+
+            motion = load_motion(path, limits=_limits(args), animation=_animation(args), warnings=warnings)
+        else:
+            if args.animation is not None:
+                raise MotionError(f"{path}: the file has no animation (--animation {args.animation})")
+            motion = gltf_character(raw, name=path.name.rsplit(".", 1)[0])  # the skin's bind pose
     else:
-        motion = load_motion(path, units=args.units, limits=_limits(args))
-    info = inspect_summary(path, motion, args.units, args.up, timing)
+        if args.animation is not None:
+            raise MotionError(f"{path}: --animation is for glTF files; a BVH file holds one motion")
+        from motion.io import load_motion
+
+        motion = load_motion(path, units=args.units, limits=_limits(args), warnings=warnings)
+    info = inspect_summary(path, motion, args.units, args.up)
+    info["warnings"] = [w.message for w in warnings]
+    if animations is not None:
+        info["animations"] = [
+            {"index": a.index, "name": a.name, "frames": a.frames, "fps": a.fps, "duration_s": a.duration_s}
+            for a in animations
+        ]
+        info["animation"] = _picked(animations, _animation(args)) if animations else None
     if args.json:
         print(json.dumps(info))
         return 0
+    print_warnings(warnings)
     joints = info["joints"]
     shown = ", ".join(joints[:12]) + (f", ... (+{len(joints) - 12})" if len(joints) > 12 else "")
     guess = info["units_guess"]
     print(f"{path}")
-    if timing is None and path.name.lower().endswith(GLTF_SUFFIXES):
+    if animations is not None:
+        n = len(animations)
+        print(f"  animations {n}" + (": none (the skin's bind pose is shown)" if not n else ""))
+        for a in animations:
+            mark = "*" if a.name == info["animation"] else " "
+            print(
+                f"   {mark}{a.index:>2} {a.name!r}: {a.frames} frames at {a.fps:g} fps ({a.duration_s:.2f} s)"
+            )
+        if n > 1:
+            print("             (* the one read below; --animation NAME or INDEX reads another)")
+    if animations == []:
         print("  frames     none (no animation): the skin's bind pose")
     else:
         print(f"  frames     {info['frames']} at {info['fps']:g} fps ({info['duration_s']:.2f} s)")
     print(f"  joints     {len(joints)}: {shown}")
     print(f"  channels   {info['channels']}, end sites {info['end_sites']}")
-    where = " (the bind pose)" if timing is not None or info["units_source"] == "gltf" else ""
-    print(
-        f"  height     {info['height']:.4g} file units = {info['height_m']:.2f} m in {info['units']}{where}"
-    )
+    where = " (the bind pose)" if animations == [] else ""
+    in_file = "" if info["units"] == "m" else f" ({info['height']:.4g} {info['units']})"
+    print(f"  height     {info['height_m']:.2f} m{in_file}, standing{where}")
     note = "" if guess["plausible"] else " (implausible: declare --units)"
     src = UNITS_SOURCES.get(info["units_source"], f"guessed from height{note}")
     print(f"  units      {info['units']} ({src})")
@@ -162,7 +231,6 @@ def _beats_audio(path: Path, args: argparse.Namespace) -> int:
 
 def cmd_beats(args: argparse.Namespace) -> int:
     from motion.beats import detect_beats
-    from motion.io import load_motion
     from schemas.rhythm import AUDIO_SUFFIXES
 
     path = _resolve(args.file)
@@ -170,7 +238,7 @@ def cmd_beats(args: argparse.Namespace) -> int:
         return _beats_audio(path, args)
     if args.tempo_bpm is not None:
         raise OSError("--tempo-bpm is a hint for recordings (.wav .flac .ogg .mp3); use --tempo for motion")
-    motion = load_motion(path, limits=_limits(args))
+    motion = _read(path, args, None, _animation(args))
     joints: list[str | int] | None = None
     if args.joints:
         joints = [int(j) if j.strip().isdigit() else j.strip() for j in args.joints.split(",") if j.strip()]
@@ -220,10 +288,10 @@ def _without_reference(motion: Any, source: str, args: argparse.Namespace) -> tu
     found = reference_lead(motion)
     if not found:
         return motion, []
-    s = "s" if found > 1 else ""
+    what = "the first frame looks" if found == 1 else f"the first {found} frames look"
+    them = "it" if found == 1 else "them"
     return motion, [
-        f"the first {found} frame{s} look like a reference pose blending into the capture: kept "
-        "(--drop-reference drops them)"
+        f"{what} like a reference pose blending into the capture: kept (--drop-reference drops {them})"
     ]
 
 
@@ -231,11 +299,11 @@ def cmd_convert(args: argparse.Namespace) -> int:
     from motion import MotionError
     from motion.export.events import parse_kinds
     from motion.ground import add_ground_root
-    from motion.io import load_motion, save_motion
+    from motion.io import save_motion
     from motion.resample import resample
 
     src = _resolve(args.input)
-    motion = load_motion(src, units=args.in_units, limits=_limits(args))
+    motion = _read(src, args, args.in_units, _animation(args))
     reference: list[str] = []
     if not args.frames:
         motion, reference = _without_reference(motion, args.input, args)
@@ -268,10 +336,11 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 def cmd_retarget(args: argparse.Namespace) -> int:
     from motion import MotionError
+    from motion.bvh import height_m
     from motion.export.bind import bound_glb
     from motion.export.events import contact_events, parse_kinds
     from motion.export.glb import write_glb
-    from motion.io import load_motion, save_motion
+    from motion.io import save_motion
     from motion.retarget import correspond, retarget
     from motion.retarget.character import GLTF_SUFFIXES, load_character
     from motion.retarget.rootmotion import default_root_motion
@@ -295,7 +364,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     kinds = parse_kinds(args.events) if args.events else ()
     if set(kinds) - {"contacts"}:
         raise MotionError("a retargeted motion has contact events only; beats and labels come with results")
-    motion = load_motion(_resolve(args.motion), units=args.in_units, limits=_limits(args))
+    motion = _read(_resolve(args.motion), args, args.in_units, _animation(args))
     motion, reference = _without_reference(motion, args.motion, args)
     character = load_character(to, rest=args.rest, limits=_limits(args))
     t0 = time.perf_counter()
@@ -330,12 +399,33 @@ def cmd_retarget(args: argparse.Namespace) -> int:
         print(
             f"wrote {args.out}: {out.num_frames} frames at {out.fps:g} fps on {character.name or args.to} "
             f"({out.num_joints} joints, {len(corr.pairs)} driven; "
-            f"{corr.source_preset} -> {corr.target_preset}, "
+            f"{rig_label(corr.source_preset)} {height_m(motion):.2f} m -> "
+            f"{rig_label(corr.target_preset)} {height_m(character):.2f} m, "
             f"units {out.units}; root motion {mode}"
             + ("" if mode == "none" else f" on {root!r}")
             + f"; {time.perf_counter() - t0:.2f} s)"
         )
     return 0
+
+
+RIG_LABELS = {
+    "humanoid": "Unity/Godot humanoid rig",
+    "mixamo": "Mixamo rig",
+    "unreal": "Unreal mannequin",
+    "bandai-namco": "Bandai-Namco rig",
+    "cmu-daz": "CMU-Daz rig",
+    "cmu": "CMU rig (LeftHip/LeftKnee names)",
+    "cmu-asf": "CMU ASF rig",
+    "cmu-cgspeed": "CMU rig (cgspeed BVH conversion)",
+    "iclone": "iClone/Character Creator rig",
+    "map": "rig named by --map",
+}
+"""How retarget's summary names the naming presets of :mod:`motion.retarget.names`."""
+
+
+def rig_label(preset: str) -> str:
+    """A naming preset as retarget's summary says it (the preset name when it has no label)."""
+    return RIG_LABELS.get(preset, preset)
 
 
 def cmd_samples(args: argparse.Namespace) -> int:

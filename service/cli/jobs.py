@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..summaries import quality_summary
+from ..summaries import count, quality_summary
 
 if TYPE_CHECKING:
     from schemas import JobEvent
@@ -67,7 +67,7 @@ def cmd_build(args: argparse.Namespace) -> int:
         )
     if not args.quiet:
         print(
-            f"built {info.kind} database {info.id[:12]} in {args.out}: {len(info.clips)} clips, "
+            f"built {info.kind} database {info.id[:12]} in {args.out}: {count(len(info.clips), 'clip')}, "
             f"{info.frames} frames at {info.fps:g} fps"
         )
         for line in kept_lines(Path(args.out)):
@@ -86,9 +86,11 @@ def kept_lines(db_dir: Path, limit: int | None = 20, summary: DatabaseSummary | 
         return []
     total = kept.kept_frames + kept.dropped_frames
     lines = [
-        f"graph ({kept.candidates} transitions): kept {kept.kept_clips} clips, {kept.kept_frames} of {total} "
-        f"frames ({kept.moving_frames} in locomotion), {kept.leaf_edges} transitions; "
-        f"left out {len(kept.dropped)} clips, {kept.dropped_frames} frames" + (":" if kept.dropped else "")
+        f"graph ({kept.candidates} transitions): kept {count(kept.kept_clips, 'clip')}, "
+        f"{kept.kept_frames} of {total} frames ({kept.moving_frames} in locomotion), "
+        f"{kept.leaf_edges} transitions; "
+        f"left out {count(len(kept.dropped), 'clip')}, {kept.dropped_frames} frames"
+        + (":" if kept.dropped else "")
     ]
     shown = kept.dropped if limit is None else kept.dropped[:limit]
     lines += [f"  {d.clip} ({d.frames} frames): {d.reason}" for d in shown]

@@ -41,13 +41,16 @@ def import_databases(settings: Any, folders: list[Path]) -> None:
     from workers.imports import import_database_dir
     from workers.store import Store
 
+    from ..summaries import count
+
     store = Store.from_settings(settings)
     owners = [LOCAL, *(name for name, _ in token_table(settings))]
     for folder in folders:
         info, new = import_database_dir(store, folder, owners)
         done = "imported" if new else "already held"
         print(
-            f"segue: {done} {info.kind} database {info.id[:12]} ({len(info.clips)} clips) from {folder}",
+            f"segue: {done} {info.kind} database {info.id[:12]} ({count(len(info.clips), 'clip')}) "
+            f"from {folder}",
             file=sys.stderr,
         )
 

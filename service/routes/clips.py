@@ -1,4 +1,5 @@
-"""``/v1/clips``: upload BVH motions (plain or gzip), list, get and delete them."""
+"""``/v1/clips``: upload motions (BVH, plain or gzip; glTF/GLB with a skin and an animation), list,
+get and delete them."""
 
 from __future__ import annotations
 
@@ -25,8 +26,8 @@ UnitName = StrEnum("UnitName", {u: u for u in METRES_PER_UNIT})  # type: ignore[
 """The length units a clip may declare (:data:`motion.units.METRES_PER_UNIT`)."""
 
 _UPLOAD_BODY = upload_body(
-    "A BVH file (``.bvh`` or gzip ``.bvh.gz``): as multipart field ``file``, or as the "
-    "raw body with ``?name=``."
+    "A BVH file (``.bvh`` or gzip ``.bvh.gz``) or a glTF file with a skin and an animation (``.glb``, "
+    "or ``.gltf`` with its buffers inline): as multipart field ``file``, or as the raw body with ``?name=``."
 )
 
 
@@ -58,8 +59,12 @@ async def upload_clip(
         UnitName | None, Query(description="declared length unit (default: guessed from the height)")
     ] = None,
 ) -> ClipInfo:
-    """Upload a BVH clip; it is parsed and checked against the frame and joint limits (its header
-    here, a large clip's frames by a worker: the answer waits for it).
+    """Upload a clip: a BVH file, or a glTF/GLB file's animation (its first; ``animations`` lists them
+    all, a database spec's ``animation`` picks another). It is parsed and checked against the frame,
+    joint and joint-frame limits (a BVH header here, a large clip's frames by a worker: the answer
+    waits for it). ``warnings`` in the answer say what the file needed to be read (a ``Frames:``
+    count that disagrees with the frame lines, decimal commas, missing End Sites...): it was read,
+    and they say how.
 
     A bundled sample's own file (as ``GET /samples`` serves it) is read in the unit the sample
     catalogue declares unless ``units`` says otherwise. Stored once per content hash: 201 for a
@@ -110,11 +115,23 @@ def get_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> ClipInfo
         extra={200: {"description": "the uploaded file", "content": {"application/octet-stream": {}}}},
     ),
 )
-async def download_clip(clip_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
-    """The bytes of one of your clips as uploaded (BVH text, or gzip-compressed BVH when it was
-    uploaded so), e.g. for a page to draw a leader beside the follower a job made for it."""
+async def download_clip(
+    clip_id: str,
+    store: StoreDep,
+    principal: PrincipalDep,
+    read: Annotated[
+        bool,
+        Query(
+            description="the motion as Segue read it, as gzip BVH text (a glTF clip's animation, a BVH "
+            "that needed warnings read as it was read), instead of the bytes as uploaded"
+        ),
+    ] = False,
+) -> Response:
+    """The bytes of one of your clips as uploaded (BVH text, gzip-compressed BVH when it was
+    uploaded so, or glTF), e.g. for a page to draw a leader beside the follower a job made for it;
+    with ``read=true``, BVH a browser's reader takes as it is."""
     info = clip_for(store, principal, clip_id)
-    data = await run_in_threadpool(store.clip_bytes, info.id)
+    data = await run_in_threadpool(store.clip_read_bytes if read else store.clip_bytes, info.id)
     return Response(
         data,
         media_type="application/octet-stream",

@@ -213,6 +213,54 @@ def check_label_ranges(store: Store, spec: DatabaseSpecBase, hashes: list[str]) 
         raise ApiError(422, "invalid_request", "; ".join(problems), {"problems": problems})
 
 
+def check_clips(store: Store, spec: DatabaseSpecBase, hashes: list[str]) -> None:
+    """422 ``invalid_request`` naming every problem the build would meet that the clips' infos
+    show: an ``animation`` a glTF clip lacks (or given for a BVH clip), clips of different
+    skeletons (with the fix: retarget), and what the kind's engine refuses from the clips' lengths
+    (:meth:`engines.base.Engine.spec_problems`: a control pair of unequal lengths)."""
+    infos = [store.clip_info(h) for h in hashes]
+    problems: list[str] = []
+    lengths: list[tuple[int, float]] = []
+    for i, (source, info) in enumerate(zip(spec.clips, infos, strict=True)):
+        frames, fps = info.frames, info.fps
+        if source.animation is not None:
+            names = [a.name for a in info.animations]
+            if info.format != "gltf":
+                problems.append(
+                    f"clips[{i}] ({source.display_name()}): 'animation' is for glTF clips; a BVH holds one"
+                )
+            else:
+                wanted = source.animation
+                k = names.index(wanted) if isinstance(wanted, str) and wanted in names else None
+                if k is None and isinstance(wanted, int) and 0 <= wanted < len(names):
+                    k = wanted
+                if k is None:
+                    listed = ", ".join(f"{j}: {n!r}" for j, n in enumerate(names))
+                    problems.append(
+                        f"clips[{i}] ({source.display_name()}): no animation {wanted!r}; the file has "
+                        f"{listed}"
+                    )
+                else:
+                    frames, fps = info.animations[k].frames, info.animations[k].fps
+        lengths.append((frames, fps))
+    first = infos[0] if infos else None
+    for i, info in enumerate(infos[1:], start=1):
+        if first is not None and info.joints != first.joints:
+            a, b = spec.clips[i].display_name(), spec.clips[0].display_name()
+            problems.append(
+                f"clips[{i}] ({a}) has another skeleton than clips[0] ({b}) ({len(info.joints)} joints, "
+                f"{len(first.joints)}): a database's clips share one; retarget it onto the skeleton of {b} "
+                f"first (segue retarget FILE_OF_{a} --to FILE_OF_{b} --out NEW.bvh) and upload the new file"
+            )
+    if not problems and lengths:
+        rate = spec.fps or lengths[0][1]
+        names = [c.display_name() for c in spec.clips]
+        frames_at = {n: resampled_frames(f, r, rate) for n, (f, r) in zip(names, lengths, strict=True)}
+        problems += kind_class(spec.kind).spec_problems(spec, frames_at, rate)
+    if problems:
+        raise ApiError(422, "invalid_request", "; ".join(problems), {"problems": problems})
+
+
 async def create_from_spec(
     spec: DatabaseSpecBase,
     response: Response,
@@ -228,6 +276,7 @@ async def create_from_spec(
     require_kind(spec.kind)  # 422 unavailable for kinds whose engine has not landed
     resolved, hashes = await run_in_threadpool(resolve_clips, store, spec, principal, shared)
     await run_in_threadpool(check_database_size, store, resolved, hashes, max_frames, work_limits)
+    await run_in_threadpool(check_clips, store, resolved, hashes)
     await run_in_threadpool(check_label_ranges, store, resolved, hashes)
     db_id = database_id(resolved, hashes)
     # No await between this check and the job being stored (in submit_job, before the backend is
@@ -273,22 +322,30 @@ async def create_from_spec(
     return seen(store, principal, "databases", store.database_info(db_id))
 
 
-def with_summary(state: Any, store: Store, info: DatabaseInfo) -> DatabaseInfo:
-    """``info`` with the summary of a ready database (computed once per process: a ready database
-    never changes)."""
-    if info.status != DatabaseStatus.ready:
-        return info
+def summary_of(state: Any, store: Store, db_id: str) -> DatabaseSummary | None:
+    """The summary of a ready database (computed once per process: a ready database never
+    changes); None when it has no data (deleted meanwhile, or older arrays)."""
     cache: dict[str, DatabaseSummary] | None = getattr(state, "database_summaries", None)
     if cache is None:
         cache = state.database_summaries = {}
-    summary = cache.get(info.id)
+    summary = cache.get(db_id)
     if summary is None:
         try:
-            summary = cache[info.id] = database_summary(store, info.id)
-        except (NotFoundError, KeyError, ValueError, OSError):  # deleted meanwhile, or older arrays
-            return info
+            summary = cache[db_id] = database_summary(store, db_id)
+        except (NotFoundError, KeyError, ValueError, OSError):
+            return None
         while len(cache) > 1024:
             cache.pop(next(iter(cache)))
+    return summary
+
+
+def with_summary(state: Any, store: Store, info: DatabaseInfo) -> DatabaseInfo:
+    """``info`` with the summary of a ready database (:func:`summary_of`)."""
+    if info.status != DatabaseStatus.ready:
+        return info
+    summary = summary_of(state, store, info.id)
+    if summary is None:
+        return info
     return info.model_copy(update={"summary": summary})
 
 

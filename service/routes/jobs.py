@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Annotated
 
 import anyio
-from fastapi import APIRouter, Depends, Query, Response, status
+from fastapi import APIRouter, Depends, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from engines.registry import parse_job_request
@@ -65,11 +65,16 @@ async def submit(
     limiter: ParseLimiterDep,
     principal: PrincipalDep,
     job_request: JobRequestBody,
+    request: Request,
 ) -> JobInfo:
     """Submit a synthesis job against a ready database; follow it with ``/v1/jobs/{id}/events``.
 
     The request's work (output frames x characters x joints, memory, time) is checked against the
-    server's limits first: 413 ``over_budget`` names each number over its limit."""
+    server's limits first: 413 ``over_budget`` names each number over its limit. What it names of
+    the database is checked against the database's summary: 422 ``unknown_joint``,
+    ``unknown_label`` (a timeline or label constraint outside the label vocabulary) or
+    ``unknown_clip`` (a clip the database lacks, or a frame past a clip's end at the database
+    rate), each problem named, before a job is queued."""
     mine = visible(store, principal, "clips", "files")
 
     def prepared() -> Prepared:
@@ -87,6 +92,7 @@ async def submit(
         raise ApiError(exc.status, exc.code, exc.message, exc.details or None) from None
     await _check_budget(settings, store, limiter, job_request)
     await _check_joints(store, job_request)
+    await _check_names(request, store, job_request)
     quota.check(principal.name)
     payload = {"request": job_request.model_dump(mode="json")}
     info = await submit_job(
@@ -120,6 +126,46 @@ async def _check_joints(store: Store, job_request: JobRequestBase) -> None:
             "unknown_joint",
             f"{'; '.join(problems)} (joints: {shown})",
             {"unknown": [f"{where}: {joint!r}" for where, joint in missing], "joints": list(names)},
+        )
+
+
+async def _check_names(request: Request, store: Store, job_request: JobRequestBase) -> None:
+    """422 ``unknown_label`` / ``unknown_clip`` naming every label outside the database's
+    vocabulary and every clip frame it lacks (:meth:`JobRequestBase.named_labels`,
+    :meth:`JobRequestBase.named_clip_frames`; the database's summary)."""
+    labels, frames = job_request.named_labels(), job_request.named_clip_frames()
+    if not labels and not frames:
+        return
+    from .databases import summary_of
+
+    summary = await run_in_threadpool(summary_of, request.app.state, store, str(job_request.database))
+    if summary is None:
+        return
+    vocabulary = set(summary.labels)
+    shown = ", ".join(repr(x) for x in summary.labels[:24]) or "none: no clip of the database is labelled"
+    problems = [
+        f"{where}: label {label!r} is not in the database's vocabulary ({shown})"
+        for where, label, required in labels
+        if required and label not in vocabulary
+    ]
+    code = "unknown_label" if problems else "unknown_clip"
+    counts = {c.name: c.frames for c in summary.clips}
+    names = ", ".join(repr(c) for c in list(counts)[:16]) + (", ..." if len(counts) > 16 else "")
+    for where, clip, frame in frames:
+        n = counts.get(clip)
+        if n is None:
+            problems.append(f"{where}: the database has no clip named {clip!r} (clips: {names})")
+        elif frame >= n:
+            problems.append(
+                f"{where}: frame {frame} is past the end of clip {clip!r}, which has {n} frames at the "
+                f"database rate ({summary.fps:g} fps; frames 0-{n - 1})"
+            )
+    if problems:
+        raise ApiError(
+            422,
+            code,
+            "; ".join(problems),
+            {"problems": problems, "labels": summary.labels, "clips": counts},
         )
 
 

@@ -133,3 +133,25 @@ def test_a_mirrored_database_names_and_labels_its_mirror_images(client: TestClie
     assert follower["labels"] == [{"label": "spin-left", "start": 0, "end": 30, "value": 1}]
     r = client.get(f"/v1/databases/{new['id']}/labels", params={"clip": "follower (mirror)", "end": 30})
     assert ("spin-right", 1) in {(x["label"], x["value"]) for x in r.json()["labels"]}
+
+
+def test_a_timeline_label_outside_the_vocabulary_is_refused_at_submission(
+    client: TestClient, annotated_db: dict[str, Any]
+) -> None:
+    # Regression (issue 39): an unknown label was accepted (202) and the job failed later.
+    db = annotated_db["id"]
+    request = {"engine": "annotations", "database": db, "frames": 60, "passes": 1}
+    r = client.post("/v1/jobs", json={**request, "timeline": [{"label": "dance", "start": 0, "end": 60}]})
+    assert r.status_code == 422, r.text
+    err = r.json()["error"]
+    assert err["code"] == "unknown_label"
+    assert "timeline[0]: label 'dance' is not in the database's vocabulary ('walk')" in err["message"]
+    assert err["details"]["labels"] == ["walk"]
+    # a frame constraint on a clip the database lacks, or past a clip's end
+    for constraint, says in (
+        ({"frame": 0, "clip": "ghost", "clip_frame": 0}, "no clip named 'ghost'"),
+        ({"frame": 0, "clip": "lead", "clip_frame": 10**6}, "past the end of clip 'lead'"),
+    ):
+        r = client.post("/v1/jobs", json={**request, "frame_constraints": [constraint]})
+        assert r.status_code == 422 and r.json()["error"]["code"] == "unknown_clip", r.text
+        assert says in r.json()["error"]["message"]

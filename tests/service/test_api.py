@@ -328,9 +328,10 @@ def test_failed_job_ends_stream_with_failed(client: TestClient, walk_db: dict[st
     )
     events = wait_events(client, job["id"])
     assert events[-1]["type"] == "failed" and "scripted failure" in events[-1]["data"]["error"]["message"]
-    bad_clip = submit(client, {"engine": "clip", "database": walk_db["id"], "clip": "nope"})
-    events = wait_events(client, bad_clip["id"])
-    assert events[-1]["type"] == "failed" and "nope" in events[-1]["data"]["error"]["message"]
+    # a clip the database lacks is refused at submission (issue 39), not a job that fails later
+    bad_clip = client.post("/v1/jobs", json={"engine": "clip", "database": walk_db["id"], "clip": "nope"})
+    assert bad_clip.status_code == 422 and bad_clip.json()["error"]["code"] == "unknown_clip", bad_clip.text
+    assert "no clip named 'nope'" in bad_clip.json()["error"]["message"]
 
 
 def test_ws_resume_replays_only_later_events(client: TestClient, walk_db: dict[str, Any]) -> None:

@@ -36,7 +36,7 @@ def worker_sized(monkeypatch: pytest.MonkeyPatch) -> None:
     full parse or export in this process fails the test)."""
     monkeypatch.setattr("service.uploads.INLINE_VALUES", 0)
     monkeypatch.setattr("workers.result_export.INLINE_JOINT_FRAMES", 0)
-    monkeypatch.setattr("workers.store.parse_bvh", _no_parse_here)
+    monkeypatch.setattr("workers.store.parse_motion", _no_parse_here)
     monkeypatch.setattr("service.exports.make_export", _no_parse_here)
 
 

@@ -46,7 +46,7 @@ def test_build_prints_the_kept_component_and_the_summary_holds_it(
     assert main(["build", str(tmp_path / "db.json"), "--out", str(tmp_path / "db")]) == 0
     out = capsys.readouterr().out
     assert "graph (all_pairs transitions): kept 2 clips, 300 of 450 frames" in out
-    assert "left out 1 clips, 150 frames:" in out
+    assert "left out 1 clip, 150 frames:" in out
     assert "  arms-up (150 frames): no transition below tau" in out
     stored = json.loads((tmp_path / "db" / "spec.json").read_text(encoding="utf-8"))
     summary = summarize(stored, (tmp_path / "db" / "data.npz").read_bytes(), {})

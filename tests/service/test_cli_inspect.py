@@ -52,10 +52,82 @@ def test_glb_is_read_with_its_animation_timing(exports: Path, capsys: pytest.Cap
     # sample:walk's 317 frames less the 4 of its reference-pose lead (dropped from samples on convert)
     assert glb["frames"] == 313 and glb["fps"] == 120.0 and glb["duration_s"] == pytest.approx(312 / 120)
     assert glb["units"] == "m" and glb["units_source"] == "gltf" and glb["up"] == "y"
-    assert glb["joints"][:2] == ["ground", "hip"] and len(glb["joints"]) == 44  # type: ignore[index,arg-type]
-    # the skin's bind pose, standing straight: within a few centimetres of the walk's 1.49 m
-    assert glb["height_m"] == pytest.approx(1.49, abs=0.06)
+    # the animation's own joints: Segue's ground root (for game engines) is folded back into the hips
+    assert glb["joints"][:2] == ["hip", "abdomen"] and len(glb["joints"]) == 43  # type: ignore[index,arg-type]
+    assert glb["animations"] == [
+        {
+            "index": 0,
+            "name": "07_01_walk_daz",
+            "frames": 313,
+            "fps": 120.0,
+            "duration_s": pytest.approx(312 / 120),
+        }
+    ]
+    # one height (issue 39): the motion's standing height, the BVH's and its GLB's alike (it read
+    # the GLB's bind pose, 5 cm taller, before)
+    bvh_out = exports / "walk_again.bvh"
+    assert main(["convert", "sample:walk", str(bvh_out), "-q"]) == 0
+    assert glb["height_m"] == pytest.approx(inspect(capsys, str(bvh_out))["height_m"], abs=1e-4)
     assert main(["inspect", str(exports / "walk.glb")]) == 0
     assert "glTF files are in metres" in capsys.readouterr().out
     assert main(["inspect", str(exports / "walk.glb"), "--units", "cm"]) == 2
     assert "a glTF file is in metres" in capsys.readouterr().err
+
+
+CORPUS = Path(__file__).resolve().parents[1] / "data" / "bvh-corpus"
+
+
+def test_inspect_and_convert_print_what_a_file_needed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Regression (issue 39): a real BVH with Frames: 3069 and 3070 frame lines was refused everywhere.
+    boxing = str(CORPUS / "Boxing_Toes.bvh.gz")
+    said = "segue: warning: " + boxing + ":128: Frames: 3069, but the file holds 3070 frame lines: read 3070"
+    info = inspect(capsys, boxing)
+    assert info["frames"] == 3070 and info["warnings"] == [
+        "line 128: Frames: 3069, but the file holds 3070 frame lines: read 3070 (the lines present win)"
+    ]
+    assert main(["inspect", boxing]) == 0
+    out, err = capsys.readouterr()
+    assert said in err and "frames     3070 at 100 fps" in out
+    assert "height     1.62 m (162.1 cm), standing" in out  # metres first, the file's unit beside
+    assert main(["convert", boxing, str(tmp_path / "boxing.glb"), "-q"]) == 0
+    assert said in capsys.readouterr().err
+
+
+def test_a_metre_file_says_its_height_once(exports: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # Regression (issue 39): "height 1.52 file units = 1.52 m in m"
+    assert main(["inspect", str(exports / "walk.glb")]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.strip().startswith("height"))
+    assert line.split() == ["height", line.split()[1], "m,", "standing"]
+
+
+def test_inspect_lists_every_animation_and_reads_the_one_asked(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Regression (issue 39): segue inspect of a GLB reported only its first animation
+    from motion.export.characters import combine_characters
+    from motion.export.glb import write_glb
+    from motion.io import load_motion
+
+    walk = load_motion("sample:walk-05-01").to_units("m").slice(0, 30)
+    run = load_motion("sample:run-09-01").to_units("m").slice(0, 30)
+    crowd = tmp_path / "crowd.glb"
+    write_glb(combine_characters([walk, run], ["c0_", "c1_"]), crowd)
+    info = inspect(capsys, str(crowd))
+    names = [a["name"] for a in info["animations"]]  # type: ignore[union-attr]
+    assert len(names) == 2 and info["animation"] == names[0]
+    second = inspect(capsys, str(crowd), "--animation", "1")
+    assert second["animation"] == names[1] and second["joints"][0] == "c1_" + run.skeleton.names[0]  # type: ignore[index]
+    assert main(["inspect", str(crowd)]) == 0
+    out = capsys.readouterr().out
+    assert f"* 0 {names[0]!r}: 30 frames at 30 fps" in out and f"  1 {names[1]!r}: 30 frames" in out
+    back = tmp_path / "run.bvh"
+    assert main(["convert", str(crowd), str(back), "--animation", names[1], "-q"]) == 0
+    got = load_motion(back).to_units("m")
+    assert got.num_frames == 30
+    import numpy as np
+
+    assert float(np.abs(got.global_positions() - run.global_positions()).max()) < 1e-4
+    assert main(["inspect", str(crowd), "--animation", "dance"]) == 2
+    assert "no animation named 'dance'" in capsys.readouterr().err

@@ -27,7 +27,7 @@ def test_retarget_to_a_bvh_character(
     out = tmp_path / "out.bvh"
     assert main(["retarget", "sample:walk-05-01", "--to", str(unreal_bvh), "--out", str(out)]) == 0
     said = capsys.readouterr().out
-    assert "cmu-daz -> unreal" in said and "units cm" in said
+    assert "CMU-Daz rig 1.42 m -> Unreal mannequin 1.84 m" in said and "units cm" in said
     got, char = read_bvh(out), read_bvh(unreal_bvh)
     src = load_motion("sample:walk-05-01")
     assert got.skeleton.names == char.skeleton.names and got.skeleton.channels == char.skeleton.channels

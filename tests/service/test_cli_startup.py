@@ -63,3 +63,6 @@ def test_option_choices_are_the_cores() -> None:
     assert set(cli.UNITS) == set(METRES_PER_UNIT)
     assert set(cli.TARGETS) == set(MOTION_TARGETS)
     assert tuple(cli.OUTPUT_SUFFIXES) == tuple(MOTION_SUFFIXES)
+    from motion.bvh import DEFAULT_MAX_JOINT_FRAMES
+
+    assert cli.DEFAULT_MAX_JOINT_FRAMES == DEFAULT_MAX_JOINT_FRAMES

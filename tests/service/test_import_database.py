@@ -64,7 +64,7 @@ def test_serve_import_imports_before_serving(
     )
     assert served and served[0]["port"] == 8123
     folder_id = json.loads((built / "info.json").read_text())["id"]
-    assert f"imported clips database {folder_id[:12]} (1 clips) from {built}" in capsys.readouterr().err
+    assert f"imported clips database {folder_id[:12]} (1 clip) from {built}" in capsys.readouterr().err
     assert Store(data).database_info(folder_id).status == "ready"
     with Store(data).open_database(folder_id) as stored, np.load(built / "data.npz") as written:
         assert sorted(stored) == sorted(written.files)

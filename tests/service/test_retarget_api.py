@@ -92,3 +92,16 @@ def test_character_errors(client: TestClient, walk_job: str) -> None:
     assert "left foot" in err["message"]
     junk = client.post("/v1/files", files={"file": ("junk.glb", b"glTF\x02\x00")}).json()
     error_of(client.get(f"/v1/jobs/{walk_job}/result", params={"character": junk["id"]}), 400)
+
+
+def test_result_on_an_uploaded_glb_clip_character(client: TestClient, walk_job: str) -> None:
+    # a GLB uploaded as a clip (issue 39: a glTF file is an input everywhere a BVH is) is a
+    # character too: its skin's bind pose, and a GLB download is that file with the motion added
+    from motion.io import load_motion
+
+    data = glb_bytes(load_motion("sample:walk-05-01").to_units("m"))
+    clip = client.post("/v1/clips", files={"file": ("walker.glb", data)}).json()
+    assert clip["format"] == "gltf"
+    r = client.get(f"/v1/jobs/{walk_job}/result", params={"format": "bvh", "character": clip["id"]})
+    assert r.status_code == 200, r.text
+    assert parse_bvh(r.content).skeleton.names[1] == "hip"  # under the character's own ground root

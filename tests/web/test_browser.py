@@ -236,15 +236,44 @@ def test_load_clip_and_play(page: Any) -> None:
     assert "broken.bvh" in page.text_content("#err-upload")
     assert state(page, ".errors")[-1]["code"] == "invalid_bvh"
 
-    # a build that fails shows the build job's error next to the Build button
+    # a build the API refuses (clips of two skeletons: 422 at submission, naming the fix) shows
+    # its error next to the Build button
     upload_samples(page, "131_01_start_walk_stop")
     page.select_option("#db-kind", "clips")
     for clip in (WALK, "131_01_start_walk_stop"):
         page.check(f"#db-clips input[value='{clip}']")
     page.click("#db-build")
     page.wait_for_selector("#err-build:not(:empty)", timeout=GUARD_MS)
-    assert "joint hierarchy" in page.text_content("#err-build")
-    assert state(page, ".builds")[-1]["status"] == "failed"
+    assert "another skeleton" in page.text_content("#err-build")
+    assert "segue retarget" in page.text_content("#err-build")
+
+
+def test_upload_a_real_bvh_and_a_glb(page: Any) -> None:
+    """A BVH that needed a warning (assimp's Boxing_Toes: Frames: 3069, 3070 frame lines) shows the
+    warning under the upload button and is drawn as the service read it; a GLB is a clip too."""
+    corpus = Path(__file__).resolve().parents[1] / "data" / "bvh-corpus"
+    boxing = gzip.decompress((corpus / "Boxing_Toes.bvh.gz").read_bytes())
+    page.set_input_files(
+        "#clip-file", files=[{"name": "Boxing_Toes.bvh", "mimeType": "text/plain", "buffer": boxing}]
+    )
+    wait(page, "s.loaded.includes('Boxing_Toes')")
+    assert "Frames: 3069, but the file holds 3070 frame lines" in page.text_content("#warn-upload")
+    assert state(page, ".current.frames") == 3070
+    screenshot(page, "upload-warning")
+    from motion.export.glb import glb_bytes
+    from motion.io import load_motion
+
+    glb = glb_bytes(load_motion("sample:walk-05-01").to_units("m"))
+    page.set_input_files(
+        "#clip-file", files=[{"name": "walk5.glb", "mimeType": "model/gltf-binary", "buffer": glb}]
+    )
+    wait(page, "s.loaded.includes('walk5')")
+    assert page.text_content("#warn-upload") == ""
+    s = state(page)
+    assert s["current"]["frames"] == 150 and s["viewer"]["characters"] == ["clip"]
+    clip = next(c for c in s["clips"] if c["name"] == "walk5.glb")
+    assert clip["format"] == "gltf" and clip["animations"][0]["frames"] == 150
+    screenshot(page, "upload-glb")
 
 
 def test_constraints_build_and_alternatives(page: Any, segue: SegueClient) -> None:

@@ -133,3 +133,16 @@ def test_a_control_bvh_counts_its_frames() -> None:
     assert work.frames == lead.num_frames
     short = estimate_work(request, _facts(lead.fps))
     assert check_work(short, WorkLimits(max_output_frames=lead.num_frames - 1))
+
+
+def test_a_control_glb_counts_its_frames() -> None:
+    # a glTF control motion (issue 39: a GLB is an input everywhere a BVH is): its first
+    # animation's frames, from the accessors' count and range, before the engine runs
+    from motion.export.glb import glb_bytes
+    from motion.io import load_motion
+
+    lead = load_motion("sample:salsa-leader-05").to_units("m")
+    request = parse_job_request({"engine": "control", "database": "d", "control": {"bvh": "lead.glb"}})
+    request.attach_inputs({"lead.glb": glb_bytes(lead)})
+    assert estimate_work(request, _facts(lead.fps)).frames == lead.num_frames
+    assert estimate_work(request, _facts(2 * lead.fps)).frames == 2 * lead.num_frames - 1

@@ -94,8 +94,10 @@ export const api = {
     return (await request('POST', '/v1/clips', { body: form })).json();
   },
   clips: async () => (await request('GET', '/v1/clips')).json(),
-  // a clip's bytes as uploaded (BVH or gzip BVH): draw clips this page did not upload
-  clipBytes: async (id) => (await request('GET', `/v1/clips/${encodeURIComponent(id)}/bvh`)).arrayBuffer(),
+  // a clip's bytes as uploaded (BVH or gzip BVH): draw clips this page did not upload; `read`: the
+  // motion as the service read it, as (gzip) BVH (glTF clips, BVH files that needed warnings)
+  clipBytes: async (id, read = false) =>
+    (await request('GET', `/v1/clips/${encodeURIComponent(id)}/bvh${read ? '?read=true' : ''}`)).arrayBuffer(),
 
   uploadFile: async (name, bytes) => {
     const form = new FormData();

@@ -137,9 +137,16 @@ $('sample-upload').onclick = () =>
     if (file) await uploadClip(file, await api.sampleBytes(file));
   });
 
+// a clip the browser cannot read as uploaded (glTF, or a BVH that needed the service's warnings)
+const readByService = (info) => info.format === 'gltf' || (info.warnings || []).length > 0;
+
 async function uploadClip(name, bytes) {
   const info = await api.uploadClip(name, bytes);
-  const motion = await parseBvh(bytes, info.name, info.units);
+  // what the file needed to be read (it was read): shown under the upload button
+  $('warn-upload').textContent = (info.warnings || []).map((w) => `${info.name}: ${w}`).join('\n');
+  const motion = readByService(info)
+    ? parseBvhText(await bvhText(await api.clipBytes(info.id, true)), info.name, METRES_PER_UNIT[info.units] || 1)
+    : await parseBvh(bytes, info.name, info.units);
   clipMotions.set(clipName(info), motion);
   await refreshClips();
   viewClip(clipName(info));
@@ -147,9 +154,9 @@ async function uploadClip(name, bytes) {
   return info;
 }
 
-// how databases name a clip by default: the file name without .bvh/.gz
+// how databases name a clip by default: the file name without .bvh/.gz/.glb/.gltf
 function clipName(info) {
-  return info.name.replace(/\.gz$/, '').replace(/\.bvh$/, '');
+  return info.name.replace(/\.gz$/, '').replace(/\.(bvh|glb|gltf)$/, '');
 }
 
 function viewClip(name) {
@@ -167,6 +174,7 @@ function viewClip(name) {
 }
 
 $('clip-file').onchange = async (ev) => {
+  $('warn-upload').textContent = '';
   for (const file of ev.target.files) {
     await guarded('upload', async () => uploadClip(file.name, await file.arrayBuffer()));
   }
@@ -937,7 +945,7 @@ tools.partner = (() => {
     const c = info(name);
     if (!motion && c) {
       const scale = METRES_PER_UNIT[c.units] || 1;
-      motion = parseBvhText(await bvhText(await api.clipBytes(c.id)), name, scale);
+      motion = parseBvhText(await bvhText(await api.clipBytes(c.id, readByService(c))), name, scale);
       clipMotions.set(name, motion);
     }
     return motion || null;

@@ -132,3 +132,24 @@ def test_a_longer_spine_pairs_its_ends_and_keeps_the_rest() -> None:
     axis_s = bone_directions(src, (("rCollar", "lCollar"),))
     axis_o = bone_directions(out, (("clavicle_r", "clavicle_l"),))
     assert angle_deg(axis_s, axis_o).max() < 1.0
+
+
+def test_a_cgspeed_cmu_file_is_named_cmu_not_mixamo() -> None:
+    # Regression (issue 39): B. Hahne's CMU conversion shares Mixamo's limb names, and retarget's
+    # summary called a CMU file "mixamo -> ...".
+    from pathlib import Path
+
+    from motion.io import load_motion
+
+    corpus = Path(__file__).resolve().parents[2] / "data" / "bvh-corpus"
+    cmu = load_motion(corpus / "01_01.bvh.gz").skeleton
+    assert detect_roles(cmu).preset == "cmu-cgspeed"
+    from motion.retarget.names import SIGNATURES
+
+    cgspeed_only = SIGNATURES["cmu-cgspeed"]
+    mixamo_names = tuple(
+        n + "_x" if n in cgspeed_only else "Spine2" if n == "Spine1" else n for n in cmu.names
+    )
+    other = Skeleton(mixamo_names, cmu.parents, cmu.offsets, cmu.channels)
+    assert detect_roles(other).preset == "mixamo"
+    assert detect_roles(cmu).joints == detect_roles(other).joints  # the same roles either way
