@@ -230,7 +230,7 @@ def export_bytes(
     return bvh_text(to_target(motion, target.value, unit)).encode()
 
 
-def _character(
+def character_of(
     store: Store, ref: CharacterRef, rest: RestPose, limits: BvhLimits
 ) -> tuple[Motion, bytes | None]:
     """A character's rest pose (a one-frame motion) and, for a glTF/GLB file, the file itself.
@@ -274,7 +274,7 @@ def make_export(store: Store, spec: ExportSpec) -> bytes:
         from motion.retarget.rootmotion import default_root_motion
 
         limits = BvhLimits(*spec.bvh_limits)
-        char, rig = _character(store, spec.character, spec.rest, limits)
+        char, rig = character_of(store, spec.character, spec.rest, limits)
         mode = "none" if in_place else None if spec.root_motion is None else spec.root_motion.value
         in_place = False  # a character's root motion is placed by the retargeting
         try:

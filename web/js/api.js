@@ -97,6 +97,7 @@ export const api = {
   // a clip's bytes as uploaded (BVH or gzip BVH): draw clips this page did not upload
   clipBytes: async (id) => (await request('GET', `/v1/clips/${encodeURIComponent(id)}/bvh`)).arrayBuffer(),
 
+  files: async () => (await request('GET', '/v1/files')).json(),
   uploadFile: async (name, bytes) => {
     const form = new FormData();
     form.append('file', new Blob([bytes]), name);
@@ -118,10 +119,11 @@ export const api = {
   report: async (job, result) => (await request('GET', `/v1/jobs/${job}/report`, { query: { result } })).json(),
   // maxFps: the server resamples faster results down to it (the viewer's previews; downloads keep
   // the full rate)
-  // character: an uploaded clip's id to retarget the result onto (docs/retargeting.md)
-  resultBlob: async (job, result, format, maxFps, character) =>
+  // character: an uploaded clip's or file's id to retarget the result onto (docs/retargeting.md),
+  // or 'mannequin' (the result worn by Segue's mannequin); events: 'contacts' etc. (GLB extras)
+  resultBlob: async (job, result, format, maxFps, character, events) =>
     (await request('GET', `/v1/jobs/${job}/result`, {
-      query: { format, result, max_fps: maxFps, character: character || undefined },
+      query: { format, result, max_fps: maxFps, character: character || undefined, events },
     })).blob(),
 };
 
