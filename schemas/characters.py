@@ -42,7 +42,9 @@ class ExampleFrames(Strict):
     (the hip-height ratio, the floor, how a planted foot lies) is measured on them."""
 
     fps: float = Field(gt=0, le=1000, description="their frame rate")
-    root: list[Vec3] = Field(min_length=2, max_length=MAX_EXAMPLE_FRAMES, description="joint 0's position per frame, metres")
+    root: list[Vec3] = Field(
+        min_length=2, max_length=MAX_EXAMPLE_FRAMES, description="joint 0's position per frame, metres"
+    )
     rotations: list[list[Quat]] = Field(
         min_length=2, max_length=MAX_EXAMPLE_FRAMES, description="per frame, every joint's local rotation"
     )
@@ -54,7 +56,8 @@ class CharacterRequest(Strict):
     character: str | None = Field(
         default=None,
         max_length=255,
-        description="an uploaded glTF/GLB file or BVH clip (id or name); none: Segue's mannequin on the skeleton",
+        description="an uploaded glTF/GLB file or BVH clip (id or name); none: Segue's mannequin "
+        "made on the skeleton",
     )
     skeleton: SourceSkeleton
     example: ExampleFrames | None = Field(default=None, description="frames to measure the retargeting on")

@@ -19,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from motion import BvhLimits, Motion, MotionError, Skeleton
-from motion.retarget.binding import Binding, bind
+from motion.export.mannequin import mannequin_glb
+from motion.retarget.binding import Binding, bind, own_binding, rest_motion
 from motion.retarget.character import gltf_character
 from motion.skeleton import default_channels
 from schemas.characters import (
@@ -108,7 +109,9 @@ def _example(skeleton: Skeleton, frames: ExampleFrames) -> Motion:
     return Motion(skeleton, np.array(frames.root, dtype=np.float64), q / norm, frames.fps, units="m")
 
 
-def _character(store: Store, principal: Principal, ref: str, limits: BvhLimits) -> tuple[CharacterOf, Motion, bytes | None]:
+def _character(
+    store: Store, principal: Principal, ref: str, limits: BvhLimits
+) -> tuple[CharacterOf, Motion, bytes | None]:
     """A named character in metres (its rest pose in frame 0) and, for a glTF file, its bytes."""
     found = character_ref(store, principal, ref)
     try:
@@ -117,7 +120,11 @@ def _character(store: Store, principal: Principal, ref: str, limits: BvhLimits) 
         raise ApiError(
             422, "not_a_character", f"{found.name} is not a character (a skinned glTF/GLB or a BVH): {exc}"
         ) from None
-    return CharacterOf(kind=found.kind, id=found.id, name=found.name), rest.scaled(rest.metres_per_unit, "m"), raw
+    return (
+        CharacterOf(kind=found.kind, id=found.id, name=found.name),
+        rest.scaled(rest.metres_per_unit, "m"),
+        raw,
+    )
 
 
 def _binding_model(of: CharacterOf, b: Binding) -> CharacterBinding:
@@ -131,23 +138,35 @@ def _binding_model(of: CharacterOf, b: Binding) -> CharacterBinding:
     )
 
 
+MANNEQUIN = CharacterOf(kind="mannequin", name="mannequin")
+
+
+def _mannequin(skeleton: Skeleton) -> tuple[Motion, bytes]:
+    """Segue's mannequin made on ``skeleton``: the rest it is made in (the zero pose) and its file."""
+    rest = rest_motion(skeleton, "m")
+    try:
+        return rest, mannequin_glb(rest)
+    except MotionError as exc:
+        raise ApiError(422, "invalid_skeleton", f"the mannequin cannot wear this skeleton: {exc}") from None
+
+
 def character_binding(
     store: Store, principal: Principal, request: CharacterRequest, limits: BvhLimits
 ) -> CharacterBinding:
     """How the requested character follows the request's skeleton frame by frame (404 for a
     character the principal does not hold, 422 ``retarget_failed`` when the two skeletons do not
-    correspond)."""
+    correspond). Without a character, Segue's mannequin made on the skeleton itself: every joint
+    follows itself (:func:`~motion.retarget.binding.own_binding`), no retargeting."""
     skeleton = source_skeleton(request.skeleton)
     example = None if request.example is None else _example(skeleton, request.example)
     if request.character is None:
-        raise ApiError(422, "invalid_request", "name a character: an uploaded glTF/GLB file or BVH clip")
+        rest, raw = _mannequin(skeleton)
+        return _binding_model(MANNEQUIN, own_binding(rest, gltf_character(raw)))
     of, rest, _ = _character(store, principal, request.character, limits)
     try:
         b = bind(skeleton, rest, example=example)
     except MotionError as exc:
-        raise ApiError(
-            422, "retarget_failed", f"{of.name} cannot follow this skeleton: {exc}"
-        ) from None
+        raise ApiError(422, "retarget_failed", f"{of.name} cannot follow this skeleton: {exc}") from None
     return _binding_model(of, b)
 
 
@@ -155,11 +174,14 @@ def character_model(
     store: Store, principal: Principal, request: CharacterRequest, limits: BvhLimits
 ) -> tuple[bytes, str]:
     """The requested character's file to draw and its media type: a glTF/GLB file as uploaded
-    (422 ``not_a_character`` when it holds no skin)."""
+    (422 ``not_a_character`` when it holds no skin), a BVH clip's skeleton wearing the mannequin,
+    or (no character) the mannequin made on the request's skeleton."""
     if request.character is None:
-        raise ApiError(422, "invalid_request", "name a character: an uploaded glTF/GLB file")
-    of, _, raw = _character(store, principal, request.character, limits)
+        return _mannequin(source_skeleton(request.skeleton))[1], GLTF_MEDIA_TYPES[b"glTF"]
+    of, rest, raw = _character(store, principal, request.character, limits)
     if raw is None:
-        raise ApiError(422, "not_a_character", f"{of.name} is a BVH skeleton: it has no mesh to draw")
+        try:
+            raw = mannequin_glb(rest)
+        except MotionError as exc:
+            raise ApiError(422, "not_a_character", f"the mannequin cannot wear {of.name}: {exc}") from None
     return raw, GLTF_MEDIA_TYPES.get(raw[:4], "model/gltf+json")
-

@@ -25,7 +25,7 @@ from motion.export.arrays import motion_json, npz_bytes
 from motion.export.bind import bound_glb
 from motion.export.events import contact_events_of, parse_kinds, sorted_events
 from motion.export.events import result_events as annotation_events
-from motion.export.glb import glb_bytes
+from motion.export.glb import MeshKind, glb_bytes
 from motion.export.targets import to_target
 
 from .store import Store
@@ -57,6 +57,15 @@ class ExportUnits(StrEnum):
     mm = "mm"
     inch = "in"
     ft = "ft"
+
+
+class ResultMesh(StrEnum):
+    """The skinned mesh a GLB download carries (a glTF character's own mesh replaces it): the bone
+    octahedra, Segue's mannequin (:mod:`motion.export.mannequin`) or none."""
+
+    bones = "bones"
+    body = "body"
+    none = "none"
 
 
 class RestPose(StrEnum):
@@ -126,6 +135,7 @@ class ExportSpec:
     in_place: bool = False
     root_motion: RootMotion | None = None
     events: str | None = None
+    mesh: ResultMesh = ResultMesh.bones
     max_frames: int = 36_000
     max_joint_frames: int = 10_000_000
     bvh_limits: tuple[int, int, int] = (1024, 2_000_000, 1 << 30)
@@ -153,14 +163,18 @@ class ExportSpec:
             in_place=bool(d["in_place"]),
             root_motion=None if d.get("root_motion") is None else RootMotion(d["root_motion"]),
             events=d.get("events"),
+            mesh=ResultMesh(d.get("mesh", ResultMesh.bones)),
             max_frames=int(d["max_frames"]),
             max_joint_frames=int(d["max_joint_frames"]),
             bvh_limits=(int(d["bvh_limits"][0]), int(d["bvh_limits"][1]), int(d["bvh_limits"][2])),
         )
 
     def key(self) -> str:
-        """The export's name in the store: its result, format and a digest of every option."""
+        """The export's name in the store: its result, format and a digest of every option (the
+        default mesh left out, so downloads made before there was a choice keep their names)."""
         options = {k: v for k, v in self.to_dict().items() if k not in ("job", "result")}
+        if self.mesh == ResultMesh.bones:
+            del options["mesh"]
         digest = hashlib.sha256(json.dumps(options, sort_keys=True).encode()).hexdigest()[:24]
         return f"{self.result}-{digest}-{self.format.value}".lower()
 
@@ -202,6 +216,7 @@ def export_bytes(
     events: Sequence[dict[str, Any]] | None = None,
     rig: bytes | None = None,
     ground_root: bool = True,
+    mesh: ResultMesh = ResultMesh.bones,
 ) -> bytes:
     """The file content of ``motion`` in ``fmt`` (raises :class:`motion.ExportError`).
 
@@ -209,7 +224,8 @@ def export_bytes(
     them; GLB is metres. ``in_place`` is for GLB; ``events`` go into GLB extras and JSON frames.
     ``rig``: the glTF/GLB file of the character the motion was retargeted onto: a GLB is that file
     with the animation added (:func:`motion.export.bind.bound_glb`). ``ground_root=False`` keeps
-    a GLB's skeleton exactly the motion's (a retargeted BVH character's hierarchy).
+    a GLB's skeleton exactly the motion's (a retargeted BVH character's hierarchy). ``mesh``: what
+    a GLB without ``rig`` wears (:class:`ResultMesh`).
     """
     unit = None if units is None else units.value
     if in_place and fmt != ResultFormat.glb:
@@ -221,7 +237,9 @@ def export_bytes(
             raise ExportError(f"GLB is in metres (glTF 2.0); units={unit} does not apply to it")
         if rig is not None:
             return bound_glb(rig, motion, events=events)
-        return glb_bytes(motion, ground_root=ground_root, in_place=in_place, events=events)
+        shapes: dict[ResultMesh, MeshKind | bool] = {ResultMesh.bones: "bones", ResultMesh.body: "body"}
+        shape = shapes.get(mesh, False)
+        return glb_bytes(motion, ground_root=ground_root, in_place=in_place, events=events, mesh=shape)
     if fmt == ResultFormat.npz:
         return npz_bytes(motion, target.value, unit)
     if fmt == ResultFormat.json:
@@ -313,6 +331,7 @@ def make_export(store: Store, spec: ExportSpec) -> bytes:
             events=evs,
             rig=rig,
             ground_root=spec.character is None,
+            mesh=spec.mesh,
         )
     except (ExportError, MotionError) as exc:
         raise ExportFailure(

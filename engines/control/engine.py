@@ -272,12 +272,13 @@ class ControlEngine(Engine[ControlRequest, ControlDatabaseSpec]):
     def build(
         cls, spec: ControlDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
     ) -> Arrays:
+        emit.progress(0.0, f"segments and instances of {len(library.names)} clips")
         try:
             with threadpool_limits(limits=1):
                 db = build_control_database(spec, library, should_stop)
         except MotionError as exc:
             raise EngineError(str(exc)) from None
-        emit.progress(0.9, f"{db.instances.shape[0]} instances, {db.kept.size} kept after clustering")
+        emit.progress(1.0, f"{db.instances.shape[0]} instances, {db.kept.size} kept after clustering")
         return db.to_arrays()
 
     # ------------------------------------------------------------------------------------ input

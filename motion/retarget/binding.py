@@ -291,4 +291,3 @@ def apply_binding(binding: Binding, motion: Motion, character: Motion) -> Motion
     path = hips * binding.scale
     path[:, 1] = binding.target_floor + binding.scale * (hips[:, 1] - binding.source_floor)
     return place_hips(out, binding.hips, path)
-

@@ -49,9 +49,7 @@ async def binding(
     rest pose, or on ``example`` frames (then exactly what a download's retargeting does without
     its foot planting). 422 ``retarget_failed`` when the skeletons do not correspond."""
     limits = settings.bvh_limits
-    return await anyio.to_thread.run_sync(
-        character_binding, store, principal, body, limits, limiter=limiter
-    )
+    return await anyio.to_thread.run_sync(character_binding, store, principal, body, limits, limiter=limiter)
 
 
 @router.post(

@@ -120,10 +120,11 @@ export const api = {
   // maxFps: the server resamples faster results down to it (the viewer's previews; downloads keep
   // the full rate)
   // character: an uploaded clip's or file's id to retarget the result onto (docs/retargeting.md),
-  // or 'mannequin' (the result worn by Segue's mannequin); events: 'contacts' etc. (GLB extras)
-  resultBlob: async (job, result, format, maxFps, character, events) =>
+  // events: 'contacts' etc. (GLB extras); mesh: what a GLB wears without a glTF character
+  // ('body': Segue's mannequin)
+  resultBlob: async (job, result, format, maxFps, character, events, mesh) =>
     (await request('GET', `/v1/jobs/${job}/result`, {
-      query: { format, result, max_fps: maxFps, character: character || undefined, events },
+      query: { format, result, max_fps: maxFps, character: character || undefined, events, mesh },
     })).blob(),
 };
 

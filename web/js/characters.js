@@ -4,8 +4,8 @@
 // and BVH clips (a skeleton, worn by Segue's mannequin), beside "Segue's mannequin" (the default:
 // the motion's own skeleton wearing the mannequin). Whatever the viewer shows is drawn on it:
 // * a result: the result downloaded as GLB on the character (GET /v1/jobs/{id}/result?format=glb
-//   &character=...&events=contacts): the retargeting every download uses, done by the service,
-//   with the foot contacts it measured on the character's own feet;
+//   &character=...&events=contacts, with mesh=body for the mannequin): the retargeting every
+//   download uses, done by the service, with the foot contacts it measured on the body's feet;
 // * a clip or a live session's frames: the character's model (POST /v1/characters/model) moved
 //   frame by frame by its binding to the motion's skeleton (POST /v1/characters/binding: the
 //   retargeting's own transfer, measured by the service once; web/js/body.js applies it).
@@ -46,13 +46,12 @@ export function setupCharacters({ state, $, api, viewer, guarded, clearError, sh
     const sel = $('character');
     const keep = sel.value;
     sel.textContent = '';
-    sel.add(new Option(mannequinLabel(), ''));
+    sel.add(new Option("Segue's mannequin", ''));
     for (const f of c.files) sel.add(new Option(`${f.name} (glTF)`, f.id));
     for (const clip of state.clips) sel.add(new Option(`${clip.name} (BVH skeleton)`, clip.id));
     if ([...sel.options].some((o) => o.value === keep)) sel.value = keep;
     c.options = [...sel.options].map((o) => ({ value: o.value, label: o.textContent }));
   };
-  const mannequinLabel = () => (state.health && state.health.mannequin === false ? 'stick figure (as computed)' : "Segue's mannequin");
 
   $('character-file').onchange = (ev) =>
     guarded('character', async () => {
@@ -99,16 +98,11 @@ export function setupCharacters({ state, $, api, viewer, guarded, clearError, sh
     try {
       let body;
       const skeleton = skeletonPayload(what.motion);
-      if (kind === 'mannequin' && state.health && state.health.mannequin === false) {
-        viewer.removeBody(key);
-        delete c.shown[key];
-        return null;
-      }
       if (what.kind === 'result') {
         // the download itself: the result retargeted by the service onto the character (or worn
         // by the mannequin), with the foot contacts measured on it
         const hips = kind === 'mannequin' ? what.hips : (await binding(id, skeleton, null, '')).hips.joint;
-        const blob = await api.resultBlob(what.job, what.result, 'glb', 30, id || 'mannequin', 'contacts');
+        const blob = await api.resultBlob(what.job, what.result, 'glb', 30, id, 'contacts', kind === 'file' ? undefined : 'body');
         if (tokens[key] !== token) return null;
         body = new Body(await loadGltf(await blob.arrayBuffer()), label());
         body.hipsJoint = hips;

@@ -42,7 +42,10 @@ def test_bound_to_a_few_frames_it_stays_within_centimetres(hero) -> None:  # typ
     """A live session's first seconds as the example: the rest of the dance follows within a few cm."""
     m = _metres("sample:salsa-leader")
     b = bind(m.skeleton, hero, example=m.slice(0, 120))
-    err = np.linalg.norm(apply_binding(b, m, hero).global_positions() - retarget(m, hero, plant=False).global_positions(), axis=-1)
+    err = np.linalg.norm(
+        apply_binding(b, m, hero).global_positions() - retarget(m, hero, plant=False).global_positions(),
+        axis=-1,
+    )
     assert np.percentile(err, 95) < 0.04 and err.max() < 0.06
 
 
@@ -100,7 +103,17 @@ def test_skeletons_that_do_not_correspond_are_refused(hero) -> None:  # type: ig
     legless = character("mixamo")
     with pytest.raises(MotionError, match="the example frames are not on the source skeleton"):
         bind(m.skeleton, hero, example=legless)
-    arm = rest_motion(m.skeleton.__class__(("a", "b"), np.array([-1, 0]), np.zeros((2, 3)), (("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"), ("Zrotation", "Yrotation", "Xrotation"))))
+    arm = rest_motion(
+        m.skeleton.__class__(
+            ("a", "b"),
+            np.array([-1, 0]),
+            np.zeros((2, 3)),
+            (
+                ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"),
+                ("Zrotation", "Yrotation", "Xrotation"),
+            ),
+        )
+    )
     with pytest.raises(MotionError, match="no joint for"):
         bind(arm.skeleton, hero)
     with pytest.raises(MotionError, match="other skeletons"):
