@@ -114,6 +114,7 @@ export function setupCharacters({ state, $, api, viewer, guarded, clearError, sh
         body = new Body(await loadGltf(bytes.slice(0)), label());
         body.bind(b, what.motion);
         body.hipsJoint = b.hips.joint;
+        c.bindings = { ...c.bindings, [key]: b };
       }
       if (tokens[key] !== token) { body.dispose(); return null; }
       viewer.setBody(key, body, body.hipsJoint);
@@ -143,8 +144,16 @@ export function setupCharacters({ state, $, api, viewer, guarded, clearError, sh
       return show(key, { kind: 'motion', motion, hips: null, live: true });
     }
     if (now) now.motion = motion;
-    if (body) body.extend(motion);
-    const l = c.live[key] || (c.live[key] = { refined: false });
+    const l = c.live[key] || (c.live[key] = { refined: false, measured: 0 });
+    if (body) {
+      body.extend(motion);
+      if (c.shown[key]) Object.assign(c.shown[key], { duration: body.duration, frames: motion.frames });
+      // the trail and the floor follow the session (measured again every second of frames)
+      if (motion.frames - (l.measured || 0) >= motion.fps) {
+        l.measured = motion.frames;
+        viewer.setBody(key, body, body.hipsJoint);
+      }
+    }
     if (!l.refined && motion.frames >= LIVE_EXAMPLE_FRAMES && body && pickedKind() !== 'mannequin') {
       l.refined = true;
       const example = examplePayload(motion, LIVE_EXAMPLE_FRAMES);
@@ -156,6 +165,16 @@ export function setupCharacters({ state, $, api, viewer, guarded, clearError, sh
       }
     }
     return body;
+  };
+
+  // test hook: where the body's joints are at time t (world, metres), by joint name
+  c.joints = (key, t, names) => {
+    const body = viewer.bodies.get(key);
+    if (!body) return null;
+    const out = {};
+    for (const n of names) { const p = body.jointAt(n, t); out[n] = p ? [p.x, p.y, p.z] : null; }
+    body.pose(viewer.time);
+    return out;
   };
 
   const forget = (key) => {

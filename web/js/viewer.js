@@ -219,6 +219,7 @@ export class Viewer {
   set(key, motion, color = COLORS[key] || 0xdddddd, { frame = true, root } = {}) {
     this.removeStick(key);
     this.characters.set(key, new Character(this.scene, motion, color, root));
+    this.applyVisibility();
     this.placeFloor();
     if (frame) this.frameAll();
     this.seek(Math.min(this.time, this.duration));
@@ -235,7 +236,8 @@ export class Viewer {
 
   // a body for a character (a Body of body.js, posed already); `hips`: its hips joint's name
   setBody(key, body, hips) {
-    this.removeBody(key, false);
+    if (this.bodies.get(key) !== body) this.removeBody(key, false);
+    else this.dropTrail(body);
     body.hipsName = hips;
     this.scene.add(body.root);
     body.measure(hips, this.time);
@@ -251,10 +253,18 @@ export class Viewer {
     this.emit();
   }
 
+  dropTrail(body) {
+    if (!body.trailLine) return;
+    this.marks.remove(body.trailLine);
+    body.trailLine.geometry.dispose();
+    body.trailLine.material.dispose();
+    body.trailLine = null;
+  }
+
   removeBody(key, notify = true) {
     const b = this.bodies.get(key);
     if (b) {
-      if (b.trailLine) { this.marks.remove(b.trailLine); b.trailLine.geometry.dispose(); b.trailLine.material.dispose(); }
+      this.dropTrail(b);
       b.dispose();
       this.bodies.delete(key);
     }
