@@ -4,7 +4,8 @@ own (nothing in Segue made it, and nothing in Segue was tuned to it).
 Mixamo joint names (``mixamorig:Hips``, ``mixamorig:LeftUpLeg``...), 1.85 m tall with long legs,
 standing in an A-pose (arms 40 degrees down, not Segue's T-pose), its joints in centimetres under
 an ``Armature`` node scaled 0.01 and each turned about its bone (no identity rest rotations). The
-mesh is a tapered eight-sided tube per bone with outward normals, each vertex bound to its bone,
+mesh is an eight-sided tube per bone (tapered; rounder for the head) with outward normals, each
+vertex bound to its bone,
 in two primitives with two named materials: ``skin`` (head, neck, hands) and ``suit`` (the rest).
 """
 
@@ -62,6 +63,11 @@ TIPS = {
     "RightToeBase": (-0.1, 0.025, 0.21),
 }
 SKIN = {"Head", "Neck", "LeftHand", "RightHand"}
+PROFILES = {  # rings along a bone: (fraction of its length, fraction of its radius)
+    "Head": ((0.0, 0.55), (0.2, 0.9), (0.55, 1.0), (0.85, 0.8), (1.0, 0.3)),
+    "Hips": ((0.0, 1.0), (1.0, 0.9)),
+}
+LIMB = ((0.0, 1.0), (0.5, 0.95), (1.0, 0.78))
 NAMES = tuple(P + j[0] for j in JOINTS)
 PARENTS = tuple(-1 if p is None else [j[0] for j in JOINTS].index(p) for _, p, _, _ in JOINTS)
 ARMATURE_SCALE = 0.01
@@ -102,21 +108,25 @@ def _tubes() -> dict[str, tuple[Array, Array, npt.NDArray[np.uint16], npt.NDArra
         if name == "Hips":
             ends = [pos[NAMES.index(P + "Spine")], pos[NAMES.index(P + "LeftUpLeg")], pos[NAMES.index(P + "RightUpLeg")]]
         verts, norms, joints, tris = parts["skin" if name in SKIN else "suit"]
+        profile = PROFILES.get(name, LIMB)
         for end in ends:
             f = _frame(end - pos[k])
             length = float(np.linalg.norm(end - pos[k]))
             base = len(verts)
-            for a, r in ((0.0, radius), (length, 0.8 * radius)):
+            for a, r in profile:
                 for s in range(SIDES):
                     t = 2 * np.pi * s / SIDES
                     radial = f @ np.array([0.0, np.cos(t), np.sin(t)])
-                    verts.append(pos[k] + f[:, 0] * a + radial * r)
+                    verts.append(pos[k] + f[:, 0] * a * length + radial * r * radius)
                     norms.append(radial)
                     joints.append(k)
-            for s in range(SIDES):
-                a0, a1, b0, b1 = base + s, base + (s + 1) % SIDES, base + SIDES + s, base + SIDES + (s + 1) % SIDES
-                tris += [a0, b0, a1, a1, b0, b1]
-            for a, sign, ring in ((0.0, -1.0, base), (length, 1.0, base + SIDES)):  # caps
+            for ring in range(len(profile) - 1):
+                lo, hi = base + ring * SIDES, base + (ring + 1) * SIDES
+                for s in range(SIDES):
+                    a0, a1, b0, b1 = lo + s, lo + (s + 1) % SIDES, hi + s, hi + (s + 1) % SIDES
+                    tris += [a0, b0, a1, a1, b0, b1]
+            last = base + (len(profile) - 1) * SIDES
+            for a, sign, ring in ((0.0, -1.0, base), (length, 1.0, last)):  # caps
                 centre = len(verts)
                 verts.append(pos[k] + f[:, 0] * a)
                 norms.append(sign * f[:, 0])

@@ -46,6 +46,20 @@ state.dropEvents = () => {
 };
 
 const viewer = new Viewer($('viewer'));
+// test hook: the viewer's pixels lit by the characters, drawn as bodies and as stick figures at
+// the same moment: pixels brighter (luminance, 0-255) by more than `by` than the same view without
+// characters (the floor, its marks and trails, which both share, cancel out)
+state.litPixels = (by = 20) => {
+  viewer.pause();
+  const lum = (px, i) => 0.2126 * px[i] + 0.7152 * px[i + 1] + 0.0722 * px[i + 2];
+  const floor = viewer.capture('hidden');
+  const count = (px) => {
+    let n = 0;
+    for (let i = 0; i < px.length; i += 4) if (lum(px, i) - lum(floor, i) > by) n += 1;
+    return n;
+  };
+  return { bodies: count(viewer.capture({ bodies: true, bones: false })), sticks: count(viewer.capture({ bodies: false, bones: true })), pixels: floor.length / 4 };
+};
 let music = null; // the Music tool (set up below)
 let timeline = null; // the Timeline tool (set up below)
 const clipMotions = new Map(); // clip name -> parsed motion (metres)
@@ -501,12 +515,15 @@ function dbOf(selectId) {
   const id = sel.value;
   if (id) return id;
   const kind = sel.dataset.kind;
-  const building = state.databases.filter((d) => d.kind === kind && ['queued', 'building'].includes(d.status));
-  if (building.length) {
-    const d = building[building.length - 1];
-    const build = [...state.builds].reverse().find((b) => b.database === d.id);
+  // a build of this kind on its way: one the service lists, or one this page is submitting
+  const listed = state.databases.filter((d) => d.kind === kind && ['queued', 'building'].includes(d.status));
+  const mine = [...state.builds].reverse().find((b) => b.kind === kind && ['submitting', 'queued', 'building'].includes(b.status));
+  if (listed.length || mine) {
+    const d = listed.length ? listed[listed.length - 1] : state.databases.find((x) => mine && x.id === mine.database);
+    const build = (d && [...state.builds].reverse().find((b) => b.database === d.id)) || mine;
     const progress = build && build.status === 'building' ? ` (${Math.round(build.fraction * 100)}%${build.phase ? `: ${build.phase}` : ''})` : '';
-    throw new ApiError(0, 'database_building', `the ${kind} database ${dbLabel(d)} is still building${progress}: this runs when it is ready`);
+    const name = d ? ` ${dbLabel(d)}` : '';
+    throw new ApiError(0, 'database_building', `the ${kind} database${name} is still building${progress}: this runs when it is ready`);
   }
   throw new ApiError(0, 'no_database', `choose a ready ${kind} database first (build one in the library)`);
 }
@@ -750,6 +767,14 @@ for (const b of document.querySelectorAll('#tabs button')) {
 }
 // Each tool shows only its own results: switching tools stops following another tool's job (and
 // cancels it when it still runs) and clears its drawing, its solutions and its quality badge.
+// what the download and cancel buttons say while they cannot act
+function explainButtons() {
+  for (const id of ['dl-bvh', 'dl-glb']) $(id).title = $(id).disabled ? 'no result to download yet: run a tool (a clip is downloaded as uploaded)' : `download the shown result (${id === 'dl-glb' ? 'GLB' : 'BVH'}) on the chosen character`;
+  $('cancel-job').title = $('cancel-job').disabled ? 'no job running' : 'stop the job (its best result so far stays)';
+}
+new MutationObserver(explainButtons).observe($('solution-bar'), { attributes: true, subtree: true, attributeFilter: ['disabled'] });
+explainButtons();
+
 function clearResults() {
   runSeq += 1; // a submission on its way is cancelled when it returns
   if (active) {

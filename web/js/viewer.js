@@ -309,7 +309,7 @@ export class Viewer {
   applyVisibility() {
     for (const [key, c] of this.characters) {
       const body = this.bodies.get(key);
-      const stick = !body || !this.showBodies || this.showBones;
+      const stick = !this.hidden && (!body || !this.showBodies || this.showBones);
       c.lines.visible = stick;
       c.points.visible = stick;
       // over a body, the bones draw through it
@@ -318,10 +318,31 @@ export class Viewer {
       c.marker.visible = !(body && this.showBodies);
     }
     for (const [key, b] of this.bodies) {
-      b.root.visible = this.showBodies;
+      b.root.visible = this.showBodies && !this.hidden;
       if (b.trailLine) b.trailLine.visible = this.showBodies && this.trails !== false;
       for (const m of this.contacts.get(key) || []) m.mesh.visible = true;
     }
+  }
+
+  // The viewer's pixels now (RGBA, row by row) as drawn with the characters shown as `display`
+  // ({bodies, bones}, or hidden: the floor and its marks alone); the display is restored after.
+  capture(display) {
+    const keep = { bodies: this.showBodies, bones: this.showBones, hidden: this.hidden };
+    if (display === 'hidden') this.hidden = true;
+    else Object.assign(this, { showBodies: display.bodies, showBones: display.bones });
+    this.applyVisibility();
+    this.draw();
+    this.renderer.render(this.scene, this.camera);
+    const canvas = this.renderer.domElement;
+    const copy = document.createElement('canvas');
+    copy.width = canvas.width;
+    copy.height = canvas.height;
+    const ctx = copy.getContext('2d');
+    ctx.drawImage(canvas, 0, 0);
+    const pixels = ctx.getImageData(0, 0, copy.width, copy.height).data;
+    Object.assign(this, { showBodies: keep.bodies, showBones: keep.bones, hidden: keep.hidden });
+    this.applyVisibility();
+    return pixels;
   }
 
   // the floor at the soles: the lowest of the shown characters' soles (a body's measured on its
