@@ -106,7 +106,11 @@ def _tubes() -> dict[str, tuple[Array, Array, npt.NDArray[np.uint16], npt.NDArra
         kids = [c for c, p in enumerate(PARENTS) if p == k]
         ends = [np.array(TIPS[name])] if name in TIPS else [pos[c] for c in kids]
         if name == "Hips":
-            ends = [pos[NAMES.index(P + "Spine")], pos[NAMES.index(P + "LeftUpLeg")], pos[NAMES.index(P + "RightUpLeg")]]
+            ends = [
+                pos[NAMES.index(P + "Spine")],
+                pos[NAMES.index(P + "LeftUpLeg")],
+                pos[NAMES.index(P + "RightUpLeg")],
+            ]
         verts, norms, joints, tris = parts["skin" if name in SKIN else "suit"]
         profile = PROFILES.get(name, LIMB)
         for end in ends:
@@ -144,14 +148,23 @@ def held_out_character_glb() -> bytes:
     """The held-out character as GLB bytes (module docstring)."""
     pos, g = _world()
     arm = ARMATURE_SCALE
-    world = np.array([np.block([[rot.to_matrix(g[k]) * arm, pos[k][:, None]], [np.zeros((1, 3)), np.ones((1, 1))]]) for k in range(len(NAMES))])
+    world = np.array(
+        [
+            np.block([[rot.to_matrix(g[k]) * arm, pos[k][:, None]], [np.zeros((1, 3)), np.ones((1, 1))]])
+            for k in range(len(NAMES))
+        ]
+    )
     arm_m = np.diag([arm, arm, arm, 1.0])
     nodes: list[dict[str, Any]] = [{"name": "Armature", "scale": [arm] * 3, "children": [1]}]
     for k, name in enumerate(NAMES):
         parent = world[PARENTS[k]] if PARENTS[k] >= 0 else arm_m
         local = np.linalg.inv(parent) @ world[k]
         q = rot.multiply(rot.inverse(g[PARENTS[k]]), g[k]) if PARENTS[k] >= 0 else g[k]
-        node: dict[str, Any] = {"name": name, "translation": [float(x) for x in local[:3, 3]], "rotation": [float(x) for x in rot.normalize(q)]}
+        node: dict[str, Any] = {
+            "name": name,
+            "translation": [float(x) for x in local[:3, 3]],
+            "rotation": [float(x) for x in rot.normalize(q)],
+        }
         kids = [c + 1 for c, p in enumerate(PARENTS) if p == k]
         if kids:
             node["children"] = kids
@@ -161,14 +174,21 @@ def held_out_character_glb() -> bytes:
     views: list[dict[str, Any]] = []
     accessors: list[dict[str, Any]] = []
 
-    def put(arr: npt.NDArray[Any], kind: str, component: int, target: int | None, bounds: bool = False) -> int:
+    def put(
+        arr: npt.NDArray[Any], kind: str, component: int, target: int | None, bounds: bool = False
+    ) -> int:
         blob = np.ascontiguousarray(arr).tobytes()
         view: dict[str, Any] = {"buffer": 0, "byteOffset": len(data), "byteLength": len(blob)}
         if target is not None:
             view["target"] = target
         views.append(view)
         data.extend(blob + b"\0" * (-len(blob) % 4))
-        acc: dict[str, Any] = {"bufferView": len(views) - 1, "componentType": component, "count": len(arr), "type": kind}
+        acc: dict[str, Any] = {
+            "bufferView": len(views) - 1,
+            "componentType": component,
+            "count": len(arr),
+            "type": kind,
+        }
         if bounds:
             acc["min"] = [float(x) for x in arr.min(0)]
             acc["max"] = [float(x) for x in arr.max(0)]
@@ -204,8 +224,22 @@ def held_out_character_glb() -> bytes:
         "skins": [{"name": "rig", "joints": list(range(1, len(NAMES) + 1)), "inverseBindMatrices": ibm_acc}],
         "meshes": [{"name": "body", "primitives": primitives}],
         "materials": [
-            {"name": "skin", "pbrMetallicRoughness": {"baseColorFactor": [0.93, 0.72, 0.58, 1], "metallicFactor": 0.0, "roughnessFactor": 0.7}},
-            {"name": "suit", "pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.45, 0.85, 1], "metallicFactor": 0.0, "roughnessFactor": 0.6}},
+            {
+                "name": "skin",
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": [0.93, 0.72, 0.58, 1],
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": 0.7,
+                },
+            },
+            {
+                "name": "suit",
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": [0.2, 0.45, 0.85, 1],
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": 0.6,
+                },
+            },
         ],
         "accessors": accessors,
         "bufferViews": views,

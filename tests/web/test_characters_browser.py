@@ -38,14 +38,22 @@ def upload_character(page: Any, name: str = HELD_OUT) -> str:
     the picker offers it and picks it. Returns its file id (the sha256 of its bytes)."""
     data = held_out_character_glb()
     file_id = hashlib.sha256(data).hexdigest()
-    page.set_input_files("#character-file", files=[{"name": name, "mimeType": "model/gltf-binary", "buffer": data}])
-    wait(page, f"s.characters.files.some((f) => f.id === '{file_id}') && document.querySelector('#character').value === '{file_id}'")
+    page.set_input_files(
+        "#character-file", files=[{"name": name, "mimeType": "model/gltf-binary", "buffer": data}]
+    )
+    wait(
+        page,
+        f"s.characters.files.some((f) => f.id === '{file_id}') && document.querySelector('#character').value === '{file_id}'",
+    )
     return file_id
 
 
 def shown(page: Any, key: str, kind: str) -> dict[str, Any]:
     """Wait until viewer key ``key`` is drawn as a body of ``kind`` (file, clip or mannequin)."""
-    wait(page, f"s.characters.shown['{key}'] && s.characters.shown['{key}'].kind === '{kind}' && !s.characters.loading['{key}']")
+    wait(
+        page,
+        f"s.characters.shown['{key}'] && s.characters.shown['{key}'].kind === '{kind}' && !s.characters.loading['{key}']",
+    )
     return dict(state(page, f".characters.shown['{key}']"))
 
 
@@ -79,8 +87,12 @@ def test_a_held_out_character_shows_the_graph_demos_result_on_its_mesh(
     wait(page, "s.goals && s.goals.length === 2")
     report = segue.report(state(page, ".job.id"), current["result"])
     goals = state(page, ".goals")
-    assert [g["met"] for g in goals] == [report.constraint_errors[f"body[{i}]"]["satisfied"] for i in range(2)]
+    assert [g["met"] for g in goals] == [
+        report.constraint_errors[f"body[{i}]"]["satisfied"] for i in range(2)
+    ]
     assert goals[1]["position"] == pytest.approx([0.2, 4], abs=0.05)
+    page.locator("#scrub").fill("0.4")
+    screenshot(page, "constraints-mannequin")
 
     file_id = upload_character(page)
     files = httpx.get(f"{server}/v1/files", timeout=30).json()
@@ -139,7 +151,10 @@ def test_a_clip_plays_on_the_character_as_the_service_binds_it(page: Any) -> Non
     for frame in (0, 100, 250):
         got = page.evaluate(f"window.__segue.characters.joints('clip', {frame / walk.fps}, {names})")
         for n in names:
-            assert got[n] == pytest.approx(want[frame, hero.skeleton.names.index(n)].tolist(), abs=1e-3), (frame, n)
+            assert got[n] == pytest.approx(want[frame, hero.skeleton.names.index(n)].tolist(), abs=1e-3), (
+                frame,
+                n,
+            )
     # the floor is at the character's soles: the lowest sole point while standing
     assert abs(state(page, ".viewer.floorY") - info["floor"]) < 1e-6 and -0.08 < info["floor"] < 0.08
 

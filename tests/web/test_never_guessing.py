@@ -23,7 +23,16 @@ from service.demos import DEMOS
 from tests.live_server import live_server
 
 from .conftest import screenshot
-from .test_browser import BEST_DRAWN, GUARD_MS, drag, needs_engine, reload_databases, select_database, state, wait
+from .test_browser import (
+    BEST_DRAWN,
+    GUARD_MS,
+    drag,
+    needs_engine,
+    reload_databases,
+    select_database,
+    state,
+    wait,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -55,7 +64,14 @@ def _clear(page: Any) -> dict[str, Any]:
     }
 
 
-NOTHING = {"info": "no result yet", "solutions": [], "job_state": "", "badge": False, "characters": [], "downloads": False}
+NOTHING = {
+    "info": "no result yet",
+    "solutions": [],
+    "job_state": "",
+    "badge": False,
+    "characters": [],
+    "downloads": False,
+}
 
 
 def test_switching_tools_clears_the_other_tools_job(page: Any, segue: SegueClient, server: str) -> None:
@@ -105,7 +121,9 @@ def test_a_finished_job_says_so_with_its_verdict(page: Any, segue: SegueClient) 
     s = state(page)
     report = segue.report(s["job"]["id"], s["job"]["end"]["result"])
     verdict = "ok" if report.ok else "not ok"
-    assert re.match(rf"done · best {s['job']['end']['result']} · {verdict}( ·|$)", page.text_content("#job-state"))
+    assert re.match(
+        rf"done · best {s['job']['end']['result']} · {verdict}( ·|$)", page.text_content("#job-state")
+    )
 
 
 def test_search_without_an_arrow_says_why(page: Any, segue: SegueClient, server: str) -> None:
@@ -167,13 +185,17 @@ def test_a_build_moves_forward_and_search_says_it_waits(browser: Any, tmp_path: 
             page.click("#cons-go")
             page.wait_for_function("window.__shown.error.some((m) => m !== '')", timeout=GUARD_MS)
             page.wait_for_function("window.__segue.welcome.built.length === 1", timeout=GUARD_MS)
-            page.wait_for_function("document.querySelector('#err-constraints').textContent === ''", timeout=GUARD_MS)
+            page.wait_for_function(
+                "document.querySelector('#err-constraints').textContent === ''", timeout=GUARD_MS
+            )
             shown = page.evaluate("window.__shown.status")
             progress = [m for m in shown if re.match(r"^\d+% ", m)]
             assert len(progress) >= 3, shown
             percents = [int(m.split("%", 1)[0]) for m in progress]
             assert percents == sorted(percents), progress
-            assert all(re.match(r"^\d+% [a-z][a-z ]*: ", m) or m.endswith("% built") for m in progress), progress
+            assert all(
+                re.match(r"^\d+% [a-z][a-z ]*: ", m) or m.endswith("% built") for m in progress
+            ), progress
             phases = {m.split("% ", 1)[1].split(":", 1)[0] for m in progress}
             assert {"motion library", "graph"} <= phases, progress
             message = next(m for m in page.evaluate("window.__shown.error") if m)
