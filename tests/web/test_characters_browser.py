@@ -43,7 +43,8 @@ def upload_character(page: Any, name: str = HELD_OUT) -> str:
     )
     wait(
         page,
-        f"s.characters.files.some((f) => f.id === '{file_id}') && document.querySelector('#character').value === '{file_id}'",
+        f"s.characters.files.some((f) => f.id === '{file_id}') "
+        f"&& document.querySelector('#character').value === '{file_id}'",
     )
     return file_id
 
@@ -52,7 +53,8 @@ def shown(page: Any, key: str, kind: str) -> dict[str, Any]:
     """Wait until viewer key ``key`` is drawn as a body of ``kind`` (file, clip or mannequin)."""
     wait(
         page,
-        f"s.characters.shown['{key}'] && s.characters.shown['{key}'].kind === '{kind}' && !s.characters.loading['{key}']",
+        f"s.characters.shown['{key}'] && s.characters.shown['{key}'].kind === '{kind}' "
+        f"&& !s.characters.loading['{key}']",
     )
     return dict(state(page, f".characters.shown['{key}']"))
 
