@@ -8,6 +8,8 @@ skeleton itself. Lengths are metres, rotations unit quaternions ``(x, y, z, w)``
 
 from __future__ import annotations
 
+from typing import Annotated
+
 from pydantic import BaseModel, Field
 
 from .common import Strict
@@ -17,8 +19,10 @@ MAX_JOINTS = 1024
 MAX_EXAMPLE_FRAMES = 240
 """Most example frames a binding request carries (a viewer sends at most 240, evenly spaced)."""
 
-Vec3 = tuple[float, float, float]
-Quat = tuple[float, float, float, float]
+Metres = Annotated[float, Field(ge=-1e4, le=1e4)]
+Unit = Annotated[float, Field(ge=-1.0, le=1.0)]
+Vec3 = tuple[Metres, Metres, Metres]
+Quat = tuple[Unit, Unit, Unit, Unit]
 
 
 class EndSite(Strict):
@@ -77,7 +81,7 @@ class BoundJoint(BaseModel):
 
     joint: str
     source: str
-    offset: Quat
+    offset: tuple[float, float, float, float]
 
 
 class BoundHips(BaseModel):

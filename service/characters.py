@@ -50,6 +50,8 @@ __all__ = [
 ]
 
 GLTF_MEDIA_TYPES = {b"glTF": "model/gltf-binary"}
+MIN_EXTENT_M = 0.01
+"""The least a source skeleton's bone lengths may add up to (metres)."""
 """A character file's media type by its first bytes (``model/gltf+json`` otherwise)."""
 
 
@@ -82,7 +84,7 @@ def source_skeleton(body: SourceSkeleton) -> Skeleton:
     if any(site.parent >= j for site in body.end_sites):
         raise ApiError(422, "invalid_skeleton", f"an End Site's parent is not one of the {j} joints")
     try:
-        return Skeleton(
+        skeleton = Skeleton(
             tuple(body.names),
             np.array(body.parents, dtype=np.intp),
             np.array(body.offsets, dtype=np.float64).reshape(j, 3),
@@ -92,6 +94,14 @@ def source_skeleton(body: SourceSkeleton) -> Skeleton:
         )
     except MotionError as exc:
         raise ApiError(422, "invalid_skeleton", f"the skeleton is not a joint tree: {exc}") from None
+    bones = np.linalg.norm(skeleton.offsets[1:], axis=1)
+    if not bones.size or float(bones.sum()) < MIN_EXTENT_M:
+        raise ApiError(
+            422,
+            "invalid_skeleton",
+            f"the skeleton's bones add up to less than {100 * MIN_EXTENT_M:g} cm: it has no body to bind",
+        )
+    return skeleton
 
 
 def _example(skeleton: Skeleton, frames: ExampleFrames) -> Motion:
@@ -146,7 +156,7 @@ def _mannequin(skeleton: Skeleton) -> tuple[Motion, bytes]:
     rest = rest_motion(skeleton, "m")
     try:
         return rest, mannequin_glb(rest)
-    except MotionError as exc:
+    except ValueError as exc:  # MotionError, or numbers the mesh cannot be made of
         raise ApiError(422, "invalid_skeleton", f"the mannequin cannot wear this skeleton: {exc}") from None
 
 
@@ -161,11 +171,16 @@ def character_binding(
     example = None if request.example is None else _example(skeleton, request.example)
     if request.character is None:
         rest, raw = _mannequin(skeleton)
-        return _binding_model(MANNEQUIN, own_binding(rest, gltf_character(raw)))
+        try:
+            return _binding_model(MANNEQUIN, own_binding(rest, gltf_character(raw)))
+        except MotionError as exc:
+            raise ApiError(
+                422, "invalid_skeleton", f"the mannequin cannot wear this skeleton: {exc}"
+            ) from None
     of, rest, _ = _character(store, principal, request.character, limits)
     try:
         b = bind(skeleton, rest, example=example)
-    except MotionError as exc:
+    except ValueError as exc:  # MotionError, or numbers the transfer cannot use
         raise ApiError(422, "retarget_failed", f"{of.name} cannot follow this skeleton: {exc}") from None
     return _binding_model(of, b)
 
@@ -182,6 +197,6 @@ def character_model(
     if raw is None:
         try:
             raw = mannequin_glb(rest)
-        except MotionError as exc:
+        except ValueError as exc:  # MotionError, or numbers the mesh cannot be made of
             raise ApiError(422, "not_a_character", f"the mannequin cannot wear {of.name}: {exc}") from None
     return raw, GLTF_MEDIA_TYPES.get(raw[:4], "model/gltf+json")

@@ -116,6 +116,19 @@ def test_what_is_not_a_character_is_refused_by_name(client: TestClient, hero_fil
     cycle = dict(arm, parents=[-1, 1])
     r = client.post("/v1/characters/binding", json={"character": hero_file["id"], "skeleton": cycle})
     assert "not a joint tree" in error_of(r, 422, "invalid_skeleton")["message"]
+    # degenerate skeletons the mannequin cannot wear: 422 naming why, never a 500
+    point = {"names": ["a"], "parents": [-1], "offsets": [[0, 0, 0]]}
+    for route in ("binding", "model"):
+        r = client.post(f"/v1/characters/{route}", json={"skeleton": point})
+        assert "less than 1 cm" in error_of(r, 422, "invalid_skeleton")["message"]
+    far = dict(arm, offsets=[[0, 0, 0], [0, 1e5, 0]])
+    r = client.post("/v1/characters/model", json={"skeleton": far})
+    error_of(r, 422, "invalid_request")
+    zero = {"fps": 30, "root": [[0, 0, 0]] * 2, "rotations": [[[0, 0, 0, 0]] * len(sk["names"])] * 2}
+    r = client.post(
+        "/v1/characters/binding", json={"character": hero_file["id"], "skeleton": sk, "example": zero}
+    )
+    assert "not a quaternion" in error_of(r, 422, "invalid_skeleton")["message"]
 
 
 def test_without_a_character_the_mannequin_wears_the_skeleton(client: TestClient) -> None:
