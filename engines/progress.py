@@ -11,10 +11,15 @@ earlier one ended, holds the fraction where it was). Messages are ``"<phase>: <d
 
 from __future__ import annotations
 
+import re
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from .base import Emitter, Solution
+
+
+_NAMED = re.compile(r"^[a-z][a-z ]*: ")
+"""A progress message that starts with the name of its step."""
 
 
 class PhasedProgress:
@@ -52,8 +57,9 @@ class PhasedProgress:
 
 class Phase:
     """One phase of a :class:`PhasedProgress`: ``progress(fraction, message)`` with the phase's
-    own ``fraction`` in [0, 1]; a message already naming the phase (``"graph: ..."``) is kept as
-    it is, any other gets the phase's name in front."""
+    own ``fraction`` in [0, 1]; a message that names its step already (``"graph: features"``,
+    ``"movement graph: 12 groups"``: lower-case words and a colon) is kept as it is, any other gets
+    the phase's name in front (``"motion beats"`` -> ``"rhythm: motion beats"``)."""
 
     def __init__(self, owner: PhasedProgress, name: str, start: float, end: float) -> None:
         self.owner, self.name, self.start, self.end = owner, name, start, end
@@ -63,7 +69,7 @@ class Phase:
 
     def progress(self, fraction: float, message: str = "") -> None:
         f = self.start + (self.end - self.start) * min(max(float(fraction), 0.0), 1.0)
-        if message.startswith(f"{self.name}: ") or message == self.name:
+        if _NAMED.match(message) or message == self.name:
             self.owner.progress(f, message)
         else:
             self.owner.report(f, self.name, message)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -23,6 +24,7 @@ from motion.retarget.character import gltf_character
 from motion.samples import sample_path
 from service.client import SegueClient
 from service.demos import DEMOS
+from tests.motion.retarget.gltf_rig import unreal_character_glb
 
 from .conftest import screenshot
 from .held_out_character import held_out_character_glb
@@ -161,7 +163,7 @@ def test_a_clip_plays_on_the_character_as_the_service_binds_it(page: Any) -> Non
     assert abs(state(page, ".viewer.floorY") - info["floor"]) < 1e-6 and -0.08 < info["floor"] < 0.08
 
 
-def test_every_tool_on_a_character(page: Any, segue: SegueClient) -> None:
+def test_every_tool_on_a_character(page: Any, segue: SegueClient, tmp_path: Path) -> None:
     """Path (a result and a live walk), Partner (leader and follower), Timeline and Music (a live
     dance) on the held-out character, each saved as a screenshot; frame steps, speed and the
     camera that follows."""
@@ -170,6 +172,11 @@ def test_every_tool_on_a_character(page: Any, segue: SegueClient) -> None:
     partner = segue.build_database(DEMOS["control"].spec).id
     segue.upload_clip(sample_path("salsa-leader-12"))
     reload_databases(page)
+    # a character another client uploads (POST /v1/files) is offered without a reload
+    rig = tmp_path / "api-rig.glb"
+    rig.write_bytes(unreal_character_glb())
+    api_rig = segue.upload_file(rig).id
+    wait(page, f"s.characters.options.some((o) => o.value === '{api_rig}')")
     upload_character(page)
 
     # Path: a result on the character, the path's ends drawn as goals

@@ -1460,4 +1460,4 @@ async function boot() {
   state.ready = true;
 }
 boot();
-setInterval(() => { if (state.ready) refreshDatabases().catch(() => {}); }, 5000);
+setInterval(() => { if (state.ready) { refreshDatabases().catch(() => {}); characters.refresh().catch(() => {}); } }, 5000);

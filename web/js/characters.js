@@ -39,10 +39,15 @@ export function setupCharacters({ state, $, api, viewer, guarded, clearError, sh
     return opt ? opt.textContent : 'mannequin';
   };
 
-  // the picker: Segue's mannequin, then the uploaded glTF/GLB files, then the BVH clips
+  // the picker: Segue's mannequin, then the uploaded glTF/GLB files, then the BVH clips (files any
+  // client uploads are offered at the page's next refresh); left alone while nothing changed
+  let signature = '';
   const refresh = async () => {
     const files = await api.files();
     c.files = files.filter(isCharacterFile);
+    const now = JSON.stringify([c.files.map((f) => [f.id, f.name]), state.clips.map((x) => [x.id, x.name])]);
+    if (now === signature) return;
+    signature = now;
     const sel = $('character');
     const keep = sel.value;
     sel.textContent = '';
