@@ -20,7 +20,9 @@ MAX_EXAMPLE_FRAMES = 240
 """Most example frames a binding request carries (a viewer sends at most 240, evenly spaced)."""
 
 Metres = Annotated[float, Field(ge=-1e4, le=1e4)]
-Unit = Annotated[float, Field(ge=-1.0, le=1.0)]
+Unit = Annotated[
+    float, Field(ge=-2.0, le=2.0, description="a quaternion component (normalized by the service)")
+]
 Vec3 = tuple[Metres, Metres, Metres]
 Quat = tuple[Unit, Unit, Unit, Unit]
 

@@ -587,6 +587,7 @@ export async function runJob(tool, request) {
         message: ev.type === 'failed' ? `${error.message || 'the job failed'} [${error.code || 'failed'}]` : ev.data.message || '' };
       showJobState(state.job);
       $('cancel-job').disabled = true;
+      flushBody();
       if (ev.type === 'failed') showError(tool, new ApiError(422, ev.data.error.code, ev.data.error.message));
       if (!state.solutions.length && ev.type !== 'failed') $('sol-info').textContent = `${ev.type} without a result`;
     }
@@ -631,8 +632,26 @@ async function drawSolution(run, sol) {
   if (first) { viewer.seek(0); viewer.play(); }
   tools[run.tool]?.onResult?.(motion, root);
   // the body (the picked character, or the mannequin) and the goals, once the service has them
-  characters.show('result', { kind: 'result', job: sol.job, result: sol.result, motion, hips: motion.joints[root] });
+  settleBody(run, () => characters.show('result', { kind: 'result', job: sol.job, result: sol.result, motion, hips: motion.joints[root] }));
   showGoals(run, sol, motion, root).catch((exc) => showError(run.tool, exc));
+}
+
+// A running search may find a better solution every few hundred ms: its body (a GLB the service
+// exports, parsed and measured here) is fetched once the solutions settle (BODY_SETTLE_MS without
+// a better one) or the job ends, not for every one; the stick figure shows each at once.
+const BODY_SETTLE_MS = 500;
+let bodyPending = null; // {timer, load}
+function settleBody(run, load) {
+  if (bodyPending) clearTimeout(bodyPending.timer);
+  const running = state.job && !['done', 'failed', 'cancelled'].includes(state.job.status);
+  const fire = () => { bodyPending = null; if (active === run) load(); };
+  if (!running) { bodyPending = null; load(); return; }
+  bodyPending = { timer: setTimeout(fire, BODY_SETTLE_MS), fire };
+}
+function flushBody() {
+  if (!bodyPending) return;
+  clearTimeout(bodyPending.timer);
+  bodyPending.fire();
 }
 
 // The request's goals drawn where they were asked, met or missed as the result's report says
@@ -777,6 +796,7 @@ explainButtons();
 
 function clearResults() {
   runSeq += 1; // a submission on its way is cancelled when it returns
+  if (bodyPending) { clearTimeout(bodyPending.timer); bodyPending = null; }
   if (active) {
     active.handle.stop();
     if (state.job && !['done', 'failed', 'cancelled'].includes(state.job.status)) api.cancel(state.job.id).catch(() => {});

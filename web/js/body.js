@@ -13,8 +13,8 @@
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 
-const SAMPLES = 90; // frames sampled to measure a body's sole, trail and bounds
-const LOW_BAND_M = 0.25; // vertices this close above the bind pose's lowest point are the soles
+const SAMPLES = 60; // frames sampled to measure a body's sole, trail and bounds
+const LOW_BAND_M = 0.15; // vertices this close above the bind pose's lowest point are the soles
 
 // the skin's joint name of a bone: glTF names as written (GLTFLoader sanitizes bone.name)
 const jointName = (bone) => (bone.userData && bone.userData.name) || bone.name;
@@ -166,7 +166,7 @@ export class Body {
         v.applyMatrix4(m.matrixWorld);
         if (v.y < lowest + LOW_BAND_M) idx.push(i);
       }
-      out.push({ mesh: m, idx: idx.length > 400 ? idx.filter((_, k) => k % Math.ceil(idx.length / 400) === 0) : idx });
+      out.push({ mesh: m, idx: idx.length > 300 ? idx.filter((_, k) => k % Math.ceil(idx.length / 300) === 0) : idx });
     }
     return out;
   }
@@ -270,6 +270,7 @@ export function examplePayload(motion, max = 240, start = 0) {
       g.fromArray(motion.rotations, o);
       const p = motion.parents[j];
       if (p >= 0) g.premultiply(pg.fromArray(motion.rotations, (f * J + p) * 4).invert());
+      g.normalize();
       return [g.x, g.y, g.z, g.w].map((x) => +x.toFixed(6));
     }));
   }

@@ -95,6 +95,7 @@ export function setupCharacters({ state, $, api, viewer, guarded, clearError, sh
   // drawn as the stick figure (its skeleton is what the body binds to).
   const show = async (key, what) => {
     sources.set(key, what);
+    const t0 = performance.now();
     const token = (tokens[key] = (tokens[key] || 0) + 1);
     const kind = pickedKind();
     const id = picked();
@@ -123,7 +124,9 @@ export function setupCharacters({ state, $, api, viewer, guarded, clearError, sh
       }
       if (tokens[key] !== token) { body.dispose(); return null; }
       viewer.setBody(key, body, body.hipsJoint);
-      c.shown[key] = { ...body.info(), character: id || 'mannequin', kind, what: what.kind, live: Boolean(what.live), floor: body.floor };
+      // ms: from asking for the body to its drawing (the service's export or binding, the download,
+      // three.js's parse, measuring the soles)
+      c.shown[key] = { ...body.info(), character: id || 'mannequin', kind, what: what.kind, live: Boolean(what.live), floor: body.floor, ms: performance.now() - t0 };
       c.errors = [];
       return body;
     } catch (exc) {
