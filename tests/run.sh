@@ -95,7 +95,7 @@ mkdir -p "$MYPY_CACHE_DIR"
 MYPY_LOG=$(mktemp)
 trap 'rm -f "$MYPY_LOG"' EXIT
 step "mypy (in the background; cache $MYPY_CACHE_DIR)"
-"$PY" -m mypy --strict motion engines schemas service workers >"$MYPY_LOG" 2>&1 &
+"$PY" -m mypy --strict motion engines schemas service workers integrations >"$MYPY_LOG" 2>&1 &
 MYPY_PID=$!
 
 SELECT=(-m "not slow")
