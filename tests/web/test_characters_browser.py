@@ -28,7 +28,16 @@ from tests.motion.retarget.gltf_rig import unreal_character_glb
 
 from .conftest import screenshot
 from .held_out_character import held_out_character_glb
-from .test_browser import BEST_DRAWN, drag, needs_engine, reload_databases, select_database, state, wait
+from .test_browser import (
+    BEST_DRAWN,
+    drag,
+    needs_engine,
+    record_timing,
+    reload_databases,
+    select_database,
+    state,
+    wait,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -108,6 +117,9 @@ def test_a_held_out_character_shows_the_graph_demos_result_on_its_mesh(
     page.uncheck("#trail")
     page.locator("#scrub").fill("0.4")
     lit = page.evaluate("window.__segue.litPixels()")
+    record_timing(
+        {"tool": "character-lit", **lit, "body_ms": round(hero["ms"]), "mannequin_ms": round(mannequin["ms"])}
+    )
     assert lit["sticks"] > 100, lit  # the stick figure is drawn at all
     assert lit["bodies"] >= 3 * lit["sticks"], lit
     assert [e for e in page.errors if "pageerror" in e or "console" in e] == []
