@@ -53,6 +53,12 @@ from . import container as container  # the database file format, for the store
 from .library import ClipInput as ClipInput  # a clip as read, for the runtime that reads them
 from .library import MotionLibrary as MotionLibrary  # what a database is built from
 from .library import build_library, clip_sources, library_from_arrays, library_to_arrays
+from .progress import PhasedProgress
+
+BUILD_PHASES = {"library": 0.1, "kind": 0.95}
+"""Where a database build's phases end, as overall fractions: reading the clips into the motion
+library up to 0.1, the kind's own build (named after the kind) up to 0.95, then the examples'
+quality reference (the runtime reports 1.0, "built", once the arrays are stored)."""
 
 Arrays = dict[str, npt.NDArray[Any]]
 ShouldStop = Callable[[], bool]
@@ -442,16 +448,21 @@ class Engine(ABC, Generic[RequestT, SpecT]):
     ) -> tuple[Arrays, MotionLibrary]:
         """A database of ``spec`` built from ``clips``: its arrays (the motion library, the kind's
         :meth:`build`, the examples' quality reference and foot floor) and its library, with
-        progress reported to ``emit``. Raises :class:`InterruptedError` once ``should_stop()``."""
-        emit.progress(0.1, f"reading {len(clips)} clip{'s' if len(clips) != 1 else ''}")
+        progress reported to ``emit`` by phase (:data:`BUILD_PHASES`: one overall fraction that
+        only moves forward, messages ``"phase: detail"``). Raises :class:`InterruptedError` once
+        ``should_stop()``."""
+        progress = PhasedProgress.of(emit)
+        progress.report(0.0, "reading clips", f"{len(clips)} clip{'s' if len(clips) != 1 else ''}")
         notes: list[ReadWarning] = []
         library = cls.library_for(spec, build_library(clips, spec.fps, warnings=notes))
         for note in notes:  # what a clip's file needed to be read (it was read)
-            emit.progress(0.1, f"warning: clip {note.source!r}: {note.message}")
+            progress.progress(0.0, f"warning: clip {note.source!r}: {note.message}")
         if should_stop():
             raise InterruptedError("build cancelled")
-        emit.progress(0.5, f"{library.total_frames} frames at {library.fps:g} fps")
-        return cls.library_arrays(spec, library, emit, should_stop), library
+        progress.report(
+            BUILD_PHASES["library"], "motion library", f"{library.total_frames} frames at {library.fps:g} fps"
+        )
+        return cls.library_arrays(spec, library, progress, should_stop), library
 
     @classmethod
     def library_arrays(
@@ -460,13 +471,20 @@ class Engine(ABC, Generic[RequestT, SpecT]):
         """The arrays of a database of ``spec`` on ``library`` (as :meth:`library_for` gives it):
         the library's, the kind's :meth:`build`, the examples' quality reference and foot floor
         (what :meth:`build_database` stores; the benches build libraries of their own with it).
-        Raises :class:`InterruptedError` once ``should_stop()``."""
-        extra = cls.build(spec, library, emit, should_stop)
+        Raises :class:`InterruptedError` once ``should_stop()``. The kind's build reports its own
+        fractions, 0 to 1, as the phase named after the kind (:data:`BUILD_PHASES`)."""
+        progress = PhasedProgress.of(emit)
+        extra = cls.build(
+            spec,
+            library,
+            progress.phase(cls.name, BUILD_PHASES["library"], BUILD_PHASES["kind"]),
+            should_stop,
+        )
         if should_stop():
             raise InterruptedError("build cancelled")
         arrays = library_to_arrays(library)
         arrays.update(extra)
-        emit.progress(0.99, "measuring the examples (quality reference)")
+        progress.report(BUILD_PHASES["kind"], "quality reference", "measuring the examples")
         arrays.update(cls.quality_reference_of(library, arrays).to_arrays())
         arrays.update(foot_floor_arrays(library, cls.example_clips(library, arrays)))
         return arrays

@@ -23,6 +23,7 @@ from fastapi.openapi.utils import get_openapi
 from pydantic import TypeAdapter
 
 from engines.registry import load_plugins, request_union, spec_union
+from schemas.characters import CharacterRequest
 from schemas.movement_graph import GraphEdits
 from workers.backend import JobBackend
 from workers.embedded import EmbeddedBackend
@@ -35,7 +36,18 @@ from .limits import JobQuota, SessionQuota
 from .links import add_links
 from .metrics import HttpMetricsMiddleware, Metrics, observe_terminal_events
 from .routes import annotations as annotation_routes
-from .routes import clips, control_sessions, databases, events, files, health, jobs, movement_graphs, sessions
+from .routes import (
+    characters,
+    clips,
+    control_sessions,
+    databases,
+    events,
+    files,
+    health,
+    jobs,
+    movement_graphs,
+    sessions,
+)
 from .routes.annotations import Corrections
 from .settings import Settings, get_settings
 from .web import mount_web
@@ -91,6 +103,7 @@ BODY_SCHEMAS: dict[str, Any] = {
     "DatabaseSpec": spec_union(),
     "LabelCorrections": Corrections,
     "GraphEdits": GraphEdits,
+    "CharacterRequest": CharacterRequest,
 }
 """Request bodies the routes parse themselves (:mod:`service.jsonbody`), documented as components."""
 
@@ -116,6 +129,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             {"name": "clips", "description": "uploaded motions"},
             {"name": "databases", "description": "clips + a build spec, built by a job"},
             {"name": "files", "description": "other input files of requests (e.g. MIDI music)"},
+            {"name": "characters", "description": "characters for a viewer: bindings and models"},
             {"name": "jobs", "description": "synthesis requests, results and reports"},
             {"name": "events", "description": "job events (WebSocket stream, HTTP fallback)"},
             {"name": "health", "description": "liveness and metrics"},
@@ -131,6 +145,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (
         clips,
         files,
+        characters,
         databases,
         annotation_routes,
         movement_graphs,

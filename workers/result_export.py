@@ -25,7 +25,7 @@ from motion.export.arrays import motion_json, npz_bytes
 from motion.export.bind import bound_glb
 from motion.export.events import contact_events_of, parse_kinds, sorted_events
 from motion.export.events import result_events as annotation_events
-from motion.export.glb import glb_bytes
+from motion.export.glb import MeshKind, glb_bytes
 from motion.export.targets import to_target
 
 from .store import Store
@@ -57,6 +57,15 @@ class ExportUnits(StrEnum):
     mm = "mm"
     inch = "in"
     ft = "ft"
+
+
+class ResultMesh(StrEnum):
+    """The skinned mesh a GLB download carries (a glTF character's own mesh replaces it): the bone
+    octahedra, Segue's mannequin (:mod:`motion.export.mannequin`) or none."""
+
+    bones = "bones"
+    body = "body"
+    none = "none"
 
 
 class RestPose(StrEnum):
@@ -126,6 +135,7 @@ class ExportSpec:
     in_place: bool = False
     root_motion: RootMotion | None = None
     events: str | None = None
+    mesh: ResultMesh = ResultMesh.bones
     animation_only: bool = False
     dancer: int | None = None
     max_frames: int = 36_000
@@ -155,6 +165,7 @@ class ExportSpec:
             in_place=bool(d["in_place"]),
             root_motion=None if d.get("root_motion") is None else RootMotion(d["root_motion"]),
             events=d.get("events"),
+            mesh=ResultMesh(d.get("mesh", ResultMesh.bones)),
             animation_only=bool(d.get("animation_only", False)),
             dancer=None if d.get("dancer") is None else int(d["dancer"]),
             max_frames=int(d["max_frames"]),
@@ -170,6 +181,8 @@ class ExportSpec:
             del options["animation_only"]
         if options["dancer"] is None:
             del options["dancer"]
+        if self.mesh == ResultMesh.bones:
+            del options["mesh"]
         digest = hashlib.sha256(json.dumps(options, sort_keys=True).encode()).hexdigest()[:24]
         return f"{self.result}-{digest}-{self.format.value}".lower()
 
@@ -211,6 +224,7 @@ def export_bytes(
     events: Sequence[dict[str, Any]] | None = None,
     rig: bytes | None = None,
     ground_root: bool = True,
+    mesh: ResultMesh = ResultMesh.bones,
     animation_only: bool = False,
 ) -> bytes:
     """The file content of ``motion`` in ``fmt`` (raises :class:`motion.ExportError`).
@@ -220,7 +234,8 @@ def export_bytes(
     ``rig``: the glTF/GLB file of the character the motion was retargeted onto: a GLB is that file
     with the animation added (:func:`motion.export.bind.bound_glb`), or with ``animation_only``
     just its skeleton and the animation. ``ground_root=False`` keeps a GLB's skeleton exactly the
-    motion's (a retargeted BVH character's hierarchy).
+    motion's (a retargeted BVH character's hierarchy). ``mesh``: what a GLB without ``rig`` wears
+    (:class:`ResultMesh`).
     """
     unit = None if units is None else units.value
     if in_place and fmt != ResultFormat.glb:
@@ -234,7 +249,9 @@ def export_bytes(
             raise ExportError(f"GLB is in metres (glTF 2.0); units={unit} does not apply to it")
         if rig is not None:
             return bound_glb(rig, motion, animation_only=animation_only, events=events)
-        return glb_bytes(motion, ground_root=ground_root, in_place=in_place, events=events)
+        shapes: dict[ResultMesh, MeshKind | bool] = {ResultMesh.bones: "bones", ResultMesh.body: "body"}
+        shape = shapes.get(mesh, False)
+        return glb_bytes(motion, ground_root=ground_root, in_place=in_place, events=events, mesh=shape)
     if fmt == ResultFormat.npz:
         return npz_bytes(motion, target.value, unit)
     if fmt == ResultFormat.json:
@@ -243,7 +260,7 @@ def export_bytes(
     return bvh_text(to_target(motion, target.value, unit)).encode()
 
 
-def _character(
+def character_of(
     store: Store, ref: CharacterRef, rest: RestPose, limits: BvhLimits
 ) -> tuple[Motion, bytes | None]:
     """A character's rest pose (a one-frame motion) and, for a glTF/GLB file, the file itself.
@@ -292,7 +309,7 @@ def make_export(store: Store, spec: ExportSpec) -> bytes:
         from motion.retarget.rootmotion import default_root_motion
 
         limits = BvhLimits(*spec.bvh_limits)
-        char, rig = _character(store, spec.character, spec.rest, limits)
+        char, rig = character_of(store, spec.character, spec.rest, limits)
         mode = "none" if in_place else None if spec.root_motion is None else spec.root_motion.value
         in_place = False  # a character's root motion is placed by the retargeting
         try:
@@ -331,6 +348,7 @@ def make_export(store: Store, spec: ExportSpec) -> bytes:
             events=evs,
             rig=rig,
             ground_root=spec.character is None,
+            mesh=spec.mesh,
             animation_only=spec.animation_only,
         )
     except (ExportError, MotionError) as exc:

@@ -282,18 +282,19 @@ class ControlEngine(Engine[ControlRequest, ControlDatabaseSpec]):
     def build(
         cls, spec: ControlDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
     ) -> Arrays:
+        emit.progress(0.0, f"segments and instances of {len(library.names)} clips")
         frames = {name: m.num_frames for name, m in zip(library.names, library.motions, strict=True)}
         problems, warnings = unequal_pair_problems(spec, frames, library.fps)
         if problems:
             raise EngineError("; ".join(problems))
         for line in warnings:
-            emit.progress(0.15, f"warning: {line}")
+            emit.progress(0.0, f"warning: {line}")
         try:
             with threadpool_limits(limits=1):
                 db = build_control_database(spec, library, should_stop)
         except MotionError as exc:
             raise EngineError(str(exc)) from None
-        emit.progress(0.9, f"{db.instances.shape[0]} instances, {db.kept.size} kept after clustering")
+        emit.progress(1.0, f"{db.instances.shape[0]} instances, {db.kept.size} kept after clustering")
         return db.to_arrays()
 
     # ------------------------------------------------------------------------------------ input

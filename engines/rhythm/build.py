@@ -182,14 +182,14 @@ def build_rhythm(
     spec: RhythmDatabaseSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop
 ) -> Arrays:
     """The ``rhythm.*`` arrays of a database (module doc)."""
-    emit.progress(0.55, "motion beats")
+    emit.progress(0.0, "motion beats")
     try:
         examples, lead_names, follow_names = _examples(spec, library)
     except MotionError as exc:
         raise EngineError(f"beat analysis failed: {exc}") from None
     if should_stop():
         raise InterruptedError
-    emit.progress(0.7, "basic movements")
+    emit.progress(0.3, "basic movements")
     try:
         mv = extract_movements(examples, spec.beats_per_movement)
     except MotionError as exc:
@@ -206,7 +206,7 @@ def build_rhythm(
     centre = medoids(d, labels)
     if should_stop():
         raise InterruptedError
-    emit.progress(0.85, "transition graph")
+    emit.progress(0.7, "transition graph")
     td = transition_differences(mv, spec.velocity_weight)
     clip_of = mv.src_clip
     sequences = consecutive_runs(clip_of, mv.index_in_clip)

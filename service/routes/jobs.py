@@ -30,7 +30,7 @@ from ..deps import (
     StoreDep,
 )
 from ..errors import ApiError, conflict, responses
-from ..exports import MEDIA_TYPES, ExportTarget, ExportUnits, ResultFormat, result_download
+from ..exports import MEDIA_TYPES, ExportTarget, ExportUnits, ResultFormat, ResultMesh, result_download
 from ..jobs_common import submit_job
 from ..jsonbody import BodylessWrite, delete_route, json_body, json_body_doc
 from ..owners import database_for, job_for, visible
@@ -335,6 +335,10 @@ async def download_result(
         str | None,
         Query(max_length=40, description="glb/json: contacts,beats,labels or all (glTF extras / events)"),
     ] = None,
+    mesh: Annotated[
+        ResultMesh | None,
+        Query(description="glb: the mesh it wears: bones, body (Segue's mannequin) or none (default bones)"),
+    ] = None,
     animation_only: Annotated[
         bool,
         Query(description="glb onto a glTF/GLB character: its skeleton and the animation only, no mesh"),
@@ -357,6 +361,12 @@ async def download_result(
     char = None
     if character is not None:
         char = await run_in_threadpool(character_ref, store, principal, character)
+    if mesh is not None and (format != ResultFormat.glb or (char is not None and char.kind == "file")):
+        raise ApiError(
+            422,
+            "invalid_request",
+            "mesh= is for format=glb without a glTF character (a glTF character wears its own mesh)",
+        )
     limits = settings.bvh_limits
     spec = ExportSpec(
         job=job_id,
@@ -371,6 +381,7 @@ async def download_result(
         in_place=in_place,
         root_motion=root_motion,
         events=events,
+        mesh=mesh or ResultMesh.bones,
         animation_only=animation_only,
         dancer=dancer,
         max_frames=settings.max_output_frames,

@@ -370,7 +370,10 @@ def test_constraints_build_and_alternatives(page: Any, segue: SegueClient) -> No
     press_again(page, "#cons-go", "constraints")
 
     # the event stream drops mid-job: the page reconnects with after=<last id> and misses nothing
-    page.fill("#cons-budget", "1.5")
+    # (a 20-s motion: a search that runs to its 3-s budget, so the job is still running when the
+    # page, busy drawing the last result's body on a loaded machine, gets to drop its stream)
+    page.fill("#cons-length", "20")
+    page.fill("#cons-budget", "3")
     page.click("#cons-go")
     wait(page, "s.job && s.job.events.length >= 2 && s.job.status === 'running'")
     assert page.evaluate("window.__segue.dropEvents()")

@@ -99,6 +99,7 @@ export const api = {
   clipBytes: async (id, read = false) =>
     (await request('GET', `/v1/clips/${encodeURIComponent(id)}/bvh${read ? '?read=true' : ''}`)).arrayBuffer(),
 
+  files: async () => (await request('GET', '/v1/files')).json(),
   uploadFile: async (name, bytes) => {
     const form = new FormData();
     form.append('file', new Blob([bytes]), name);
@@ -120,10 +121,12 @@ export const api = {
   report: async (job, result) => (await request('GET', `/v1/jobs/${job}/report`, { query: { result } })).json(),
   // maxFps: the server resamples faster results down to it (the viewer's previews; downloads keep
   // the full rate)
-  // character: an uploaded clip's id to retarget the result onto (docs/retargeting.md)
-  resultBlob: async (job, result, format, maxFps, character) =>
+  // character: an uploaded clip's or file's id to retarget the result onto (docs/retargeting.md),
+  // events: 'contacts' etc. (GLB extras); mesh: what a GLB wears without a glTF character
+  // ('body': Segue's mannequin)
+  resultBlob: async (job, result, format, maxFps, character, events, mesh) =>
     (await request('GET', `/v1/jobs/${job}/result`, {
-      query: { format, result, max_fps: maxFps, character: character || undefined },
+      query: { format, result, max_fps: maxFps, character: character || undefined, events, mesh },
     })).blob(),
 };
 

@@ -8,6 +8,7 @@ import { FloorPad, headingDeg } from './pad.js';
 import { setupMusic } from './music.js';
 import { setupGraph } from './graph.js';
 import { startLiveWalk } from './livewalk.js';
+import { setupCharacters } from './characters.js';
 
 const $ = (id) => document.getElementById(id);
 const VIEW_FPS = 30; // results are drawn at most at this rate (the server resamples; downloads are full rate)
@@ -45,6 +46,20 @@ state.dropEvents = () => {
 };
 
 const viewer = new Viewer($('viewer'));
+// test hook: the viewer's pixels lit by the characters, drawn as bodies and as stick figures at
+// the same moment: pixels brighter (luminance, 0-255) by more than `by` than the same view without
+// characters (the floor, its marks and trails, which both share, cancel out)
+state.litPixels = (by = 20) => {
+  viewer.pause();
+  const lum = (px, i) => 0.2126 * px[i] + 0.7152 * px[i + 1] + 0.0722 * px[i + 2];
+  const floor = viewer.capture('hidden');
+  const count = (px) => {
+    let n = 0;
+    for (let i = 0; i < px.length; i += 4) if (lum(px, i) - lum(floor, i) > by) n += 1;
+    return n;
+  };
+  return { bodies: count(viewer.capture({ bodies: true, bones: false })), sticks: count(viewer.capture({ bodies: false, bones: true })), pixels: floor.length / 4 };
+};
 let music = null; // the Music tool (set up below)
 let timeline = null; // the Timeline tool (set up below)
 const clipMotions = new Map(); // clip name -> parsed motion (metres)
@@ -73,7 +88,7 @@ export function clearError(where) {
 // A tool's "no database" / "database not ready" error is stale once its picker holds a ready
 // database (built since, or picked): it goes, instead of staying beside a tool that now works.
 const TOOL_SELECTS = { path: 'path-db', partner: 'partner-db', constraints: 'cons-db', timeline: 'tl-db', music: 'music-db' };
-const DATABASE_ERRORS = new Set(['no_database', 'database_not_ready']);
+const DATABASE_ERRORS = new Set(['no_database', 'database_not_ready', 'database_building']);
 function clearStaleDatabaseErrors() {
   for (const [where, select] of Object.entries(TOOL_SELECTS)) {
     if (DATABASE_ERRORS.has(errorCodes[where]) && $(select).value) clearError(where);
@@ -91,6 +106,9 @@ async function guarded(where, fn) {
   }
 }
 
+// the character picker and the bodies it draws (web/js/characters.js)
+const characters = setupCharacters({ state, $, api, viewer, guarded, clearError, showError, clipName });
+
 // ---------------------------------------------------------------- viewer transport
 let scrubbing = false;
 function fmt(t) {
@@ -98,9 +116,12 @@ function fmt(t) {
 }
 viewer.onChange((v) => {
   const d = v.duration;
-  state.viewer = { playing: v.playing, time: v.time, duration: d, characters: [...v.characters.keys()], frames: { ...(v.frames || {}) },
-    roots: Object.fromEntries([...v.characters].map(([k, c]) => [k, c.motion.joints ? c.motion.joints[c.root] : c.root])) };
+  state.viewer = { playing: v.playing, time: v.time, duration: d, characters: [...new Set([...v.characters.keys(), ...v.bodies.keys()])], frames: { ...(v.frames || {}) },
+    roots: Object.fromEntries([...v.characters].map(([k, c]) => [k, c.motion.joints ? c.motion.joints[c.root] : c.root])),
+    bodies: [...v.bodies.keys()], showBodies: v.showBodies, showBones: v.showBones, floorY: v.floorY, speed: v.speed, follow: v.followMode, fps: v.fps,
+    contacts: Object.fromEntries([...v.contacts].map(([k, marks]) => [k, marks.length])), goals: v.goals ? v.goals.children.length : 0 };
   $('play').textContent = v.playing ? 'Pause' : 'Play';
+  $('frame').textContent = `f ${Math.round(v.time * v.fps)}`;
   if (!scrubbing) $('scrub').value = d > 0 ? String(v.time / d) : '0';
   $('time').textContent = `${fmt(v.time)} / ${fmt(d)} s`;
   if (music) music.onTime(v.time, v.playing);
@@ -110,14 +131,23 @@ $('play').onclick = () => (viewer.playing ? viewer.pause() : viewer.play());
 $('scrub').addEventListener('pointerdown', () => { scrubbing = true; viewer.pause(); });
 $('scrub').addEventListener('pointerup', () => { scrubbing = false; });
 $('scrub').addEventListener('input', () => viewer.seek(Number($('scrub').value) * viewer.duration));
-$('speed').onchange = () => { viewer.speed = Number($('speed').value); };
+$('speed').onchange = () => { viewer.speed = Number($('speed').value); viewer.emit(); };
+$('step-back').onclick = () => viewer.step(-1);
+$('step-fwd').onclick = () => viewer.step(1);
 document.addEventListener('keydown', (ev) => {
-  // space plays / pauses, unless typing in a field
-  if (ev.code !== 'Space' || ['INPUT', 'TEXTAREA', 'SELECT', 'BUTTON'].includes(document.activeElement.tagName)) return;
-  ev.preventDefault();
-  if (viewer.playing) viewer.pause(); else viewer.play();
+  // space plays / pauses, "," and "." step a frame, unless typing in a field
+  if (['INPUT', 'TEXTAREA', 'SELECT', 'BUTTON'].includes(document.activeElement.tagName)) return;
+  if (ev.code === 'Space') {
+    ev.preventDefault();
+    if (viewer.playing) viewer.pause(); else viewer.play();
+  } else if (ev.key === ',' || ev.key === '.') {
+    viewer.step(ev.key === '.' ? 1 : -1);
+  }
 });
 $('trail').onchange = () => viewer.setTrails($('trail').checked);
+$('show-body').onchange = () => viewer.setDisplay({ bodies: $('show-body').checked });
+$('show-bones').onchange = () => viewer.setDisplay({ bones: $('show-bones').checked });
+$('follow').onchange = () => viewer.setFollow($('follow').value);
 
 // ---------------------------------------------------------------- library
 function sampleLabel(file) {
@@ -162,9 +192,11 @@ function clipName(info) {
 function viewClip(name) {
   const motion = clipMotions.get(name);
   if (!motion) return false;
-  viewer.clear();
+  clearResults();
   viewer.set('clip', motion);
+  characters.show('clip', { kind: 'motion', motion, hips: motion.joints[placeJoint(motion)] });
   state.current = { tool: 'library', clip: name, frames: motion.frames, fps: motion.fps };
+  state.shownTool = 'library';
   $('sol-info').textContent = `clip ${name} · ${motion.frames} frames at ${motion.fps.toFixed(0)} fps`;
   $('sol-quality').hidden = true;
   for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = true;
@@ -199,11 +231,8 @@ async function refreshClips() {
     }
     list.appendChild(li);
   }
-  // the character picker beside the downloads: any uploaded clip's skeleton
-  const picker = $('character');
-  const picked = picker.value;
-  picker.length = 1;
-  for (const c of state.clips) picker.add(new Option(c.name, c.id, false, c.id === picked));
+  // the character picker beside the downloads: glTF/GLB files and any uploaded clip's skeleton
+  await characters.refresh();
   const checks = $('db-clips');
   const checked = new Set([...checks.querySelectorAll('input:checked')].map((i) => i.value));
   checks.textContent = '';
@@ -286,8 +315,14 @@ async function refreshDatabases() {
     const keep = sel.value;
     sel.textContent = '';
     const ready = state.databases.filter((d) => fits(d, sel));
-    if (!ready.length) sel.add(new Option(sel.dataset.hint || `(build a ${sel.dataset.kind} database)`, ''));
+    const building = state.databases.filter((d) => d.kind === sel.dataset.kind && ['queued', 'building'].includes(d.status));
+    if (!ready.length) sel.add(new Option(building.length ? `(${dbLabel(building[building.length - 1])} is building…)` : sel.dataset.hint || `(build a ${sel.dataset.kind} database)`, ''));
     for (const d of ready.slice().reverse()) sel.add(new Option(`${dbLabel(d)} · ${d.clips.length} clip${d.clips.length === 1 ? '' : 's'}`, d.id));
+    for (const d of building) {
+      const o = new Option(`${dbLabel(d)} (building…)`, d.id);
+      o.disabled = true;
+      sel.add(o);
+    }
     if (keep && ready.some((d) => d.id === keep)) sel.value = keep;
   }
   timeline.refreshTracks();
@@ -416,12 +451,19 @@ async function trackBuild(kind, start) {
     return info;
   }
   refreshDatabases();
+  build.progress = []; // every progress event, as it came: (fraction, phase, message)
   const follow = followJob(info.build_job, (ev) => {
     if (ev.type === 'progress') {
+      // the service's build progress: an overall fraction that only moves forward, its message
+      // "phase: detail"
+      const message = ev.data.message || '';
+      const cut = message.indexOf(': ');
       build.fraction = ev.data.fraction;
-      build.message = ev.data.message || '';
+      build.phase = cut > 0 ? message.slice(0, cut) : message;
+      build.message = message;
+      build.progress.push({ fraction: ev.data.fraction, phase: build.phase, message });
       $('db-progress').value = ev.data.fraction;
-      $('db-status').textContent = `${Math.round(ev.data.fraction * 100)}% ${build.message}`;
+      $('db-status').textContent = `${Math.round(ev.data.fraction * 100)}% ${message}`;
     } else if (ev.type === 'started') {
       build.status = 'building';
       $('db-status').textContent = 'building';
@@ -450,6 +492,7 @@ $('db-build').onclick = () =>
 
 // ---------------------------------------------------------------- jobs and solutions
 let active = null; // the running tool's job: {tool, t0, jobId, handle}
+let runSeq = 0; // bumped by every submission and by clearing: a submission answered late is dropped
 let drawing = null; // the draw in flight
 let pending = null; // the newest solution waiting for it: {run, sol}
 
@@ -473,10 +516,24 @@ function requestDraw(run, sol) {
   return drawing;
 }
 
+// The database a tool's picker holds, or why there is none: one of its kind still building (with
+// how far its build is), or none built yet.
 function dbOf(selectId) {
-  const id = $(selectId).value;
-  if (!id) throw new ApiError(0, 'no_database', `choose a ready ${$(selectId).dataset.kind} database first (build one in the library)`);
-  return id;
+  const sel = $(selectId);
+  const id = sel.value;
+  if (id) return id;
+  const kind = sel.dataset.kind;
+  // a build of this kind on its way: one the service lists, or one this page is submitting
+  const listed = state.databases.filter((d) => d.kind === kind && ['queued', 'building'].includes(d.status));
+  const mine = [...state.builds].reverse().find((b) => b.kind === kind && ['submitting', 'queued', 'building'].includes(b.status));
+  if (listed.length || mine) {
+    const d = listed.length ? listed[listed.length - 1] : state.databases.find((x) => mine && x.id === mine.database);
+    const build = (d && [...state.builds].reverse().find((b) => b.database === d.id)) || mine;
+    const progress = build && build.status === 'building' ? ` (${Math.round(build.fraction * 100)}%${build.phase ? `: ${build.phase}` : ''})` : '';
+    const name = d ? ` ${dbLabel(d)}` : '';
+    throw new ApiError(0, 'database_building', `the ${kind} database${name} is still building${progress}: this runs when it is ready`);
+  }
+  throw new ApiError(0, 'no_database', `choose a ready ${kind} database first (build one in the library)`);
 }
 
 // Submit a job for a tool; draw every better solution as it streams in (other characters, e.g.
@@ -495,13 +552,22 @@ export async function runJob(tool, request) {
   $('alternatives').textContent = '';
   for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = true;
   $('sol-info').textContent = 'submitting…';
+  state.shownTool = tool;
+  const seq = ++runSeq;
   const info = await api.submit(request);
+  if (seq !== runSeq) {
+    // another tool was chosen (or another request made) while this one was on its way
+    api.cancel(info.id).catch(() => {});
+    return null;
+  }
   state.job = { id: info.id, tool, status: info.status, submitted_ms: performance.now() - t0, events: [], reconnects: 0 };
   $('cancel-job').disabled = false;
   showJobState(state.job);
   let best = Infinity;
-  const run = { tool, t0, jobId: info.id, db: request.database };
+  const run = { tool, t0, jobId: info.id, db: request.database, request };
+  active = run;
   run.handle = followJob(info.id, (ev) => {
+    if (active !== run) return; // cleared, or replaced by another request
     state.job.events.push(ev.id);
     state.job.reconnects = run.handle ? run.handle.reconnects : 0;
     if (ev.type === 'progress') {
@@ -529,6 +595,7 @@ export async function runJob(tool, request) {
         message: ev.type === 'failed' ? `${error.message || 'the job failed'} [${error.code || 'failed'}]` : ev.data.message || '' };
       showJobState(state.job);
       $('cancel-job').disabled = true;
+      flushBody();
       if (ev.type === 'failed') showError(tool, new ApiError(422, ev.data.error.code, ev.data.error.message));
       if (!state.solutions.length && ev.type !== 'failed') $('sol-info').textContent = `${ev.type} without a result`;
     }
@@ -572,6 +639,63 @@ async function drawSolution(run, sol) {
   for (const id of ['dl-bvh', 'dl-glb']) $(id).disabled = false;
   if (first) { viewer.seek(0); viewer.play(); }
   tools[run.tool]?.onResult?.(motion, root);
+  // the body (the picked character, or the mannequin) and the goals, once the service has them
+  settleBody(run, () => characters.show('result', { kind: 'result', job: sol.job, result: sol.result, motion, hips: motion.joints[root] }));
+  showGoals(run, sol, motion, root).catch((exc) => showError(run.tool, exc));
+}
+
+// A running search may find a better solution every few hundred ms: its body (a GLB the service
+// exports, parsed and measured here) is fetched once the solutions settle (BODY_SETTLE_MS without
+// a better one) or the job ends, not for every one; the stick figure shows each at once.
+const BODY_SETTLE_MS = 500;
+let bodyPending = null; // {timer, load}
+function settleBody(run, load) {
+  if (bodyPending) clearTimeout(bodyPending.timer);
+  const running = state.job && !['done', 'failed', 'cancelled'].includes(state.job.status);
+  const fire = () => { bodyPending = null; if (active === run) load(); };
+  if (!running) { bodyPending = null; load(); return; }
+  bodyPending = { timer: setTimeout(fire, BODY_SETTLE_MS), fire };
+}
+function flushBody() {
+  if (!bodyPending) return;
+  clearTimeout(bodyPending.timer);
+  bodyPending.fire();
+}
+
+// The request's goals drawn where they were asked, met or missed as the result's report says
+// (its constraint_errors): body arrows (Constraints), the follower's spots (Partner), the path
+// (Path); a missed one with a line to where the body was at its frame.
+async function showGoals(run, sol, motion, root) {
+  const req = run.request;
+  const wanted = [];
+  if (Array.isArray(req.constraints)) {
+    req.constraints.forEach((c, i) => { if (c.type === 'body') wanted.push({ name: `body[${i}]`, frame: c.frame, position: c.position, heading_deg: c.heading_deg }); });
+  }
+  if (Array.isArray(req.bodies)) {
+    req.bodies.forEach((b, i) => wanted.push({ name: `body[${i}]`, frame: Math.round(b.time_s * motion.fps), position: b.position }));
+  }
+  const path = req.control && req.control.trajectory ? req.control.trajectory.points : null;
+  if (!wanted.length && !path) { viewer.setGoals(null); return; }
+  const report = await api.report(sol.job, sol.result);
+  if (active !== run || !state.current || state.current.result !== sol.result) return;
+  const errors = report.constraint_errors || {};
+  const J = motion.joints.length;
+  const at = (frame) => {
+    const f = Math.min(Math.max(frame ?? 0, 0), motion.frames - 1);
+    return [motion.positions[(f * J + root) * 3], motion.positions[(f * J + root) * 3 + 2]];
+  };
+  const goals = wanted.map((g) => {
+    const e = errors[g.name] || {};
+    const frame = e.frame ?? g.frame;
+    return { ...g, met: e.satisfied, reached: at(Math.round((frame * motion.fps) / (sol.fps || motion.fps))), error_cm: e.position_cm };
+  });
+  if (path && path.length > 1) {
+    const e = errors.path || {};
+    goals.push({ name: 'path', position: path[0], met: e.satisfied });
+    goals.push({ name: 'path', position: path[path.length - 1], met: e.satisfied });
+  }
+  viewer.setGoals(goals);
+  state.goals = goals.map(({ name, position, met, error_cm }) => ({ name, position, met, error_cm }));
 }
 
 // Where the job stands, in words beside Cancel: queued, running, then how it ended (done,
@@ -583,9 +707,13 @@ function showJobState(job) {
   let text = { queued: 'queued…', running: 'running…' }[job.status] || job.status;
   if (end) {
     const best = end.result ? ` · best ${end.result}` : '';
+    // the best result's quality verdict, as its report says (the badge has its reasons)
+    const sol = end.result ? state.solutions.find((x) => x.result === end.result) : null;
+    const verdict = sol && sol.ok !== undefined && sol.ok !== null ? ` · ${sol.ok ? 'ok' : 'not ok'}` : '';
     const stopped = end.stopped ? ` · stopped: ${end.stopped}` : '';
     const short = end.short ? ` · short: ${end.short.frames} of ${end.short.requested_frames} frames` : '';
-    text = end.type === 'failed' ? `failed: ${end.message}` : `${end.type}${best}${stopped}${short}`;
+    text = end.type === 'failed' ? `failed: ${end.message}` : `${end.type}${best}${verdict}${stopped}${short}`;
+    if (!end.result && end.type !== 'failed') text = `${end.type} without a result`;
   }
   el.hidden = false;
   el.className = `job-state ${job.status}`;
@@ -666,14 +794,28 @@ for (const b of document.querySelectorAll('#tabs button')) {
 }
 // Each tool shows only its own results: switching tools stops following another tool's job (and
 // cancels it when it still runs) and clears its drawing, its solutions and its quality badge.
+// what the download and cancel buttons say while they cannot act
+function explainButtons() {
+  for (const id of ['dl-bvh', 'dl-glb']) $(id).title = $(id).disabled ? 'no result to download yet: run a tool (a clip is downloaded as uploaded)' : `download the shown result (${id === 'dl-glb' ? 'GLB' : 'BVH'}) on the chosen character`;
+  $('cancel-job').title = $('cancel-job').disabled ? 'no job running' : 'stop the job (its best result so far stays)';
+}
+new MutationObserver(explainButtons).observe($('solution-bar'), { attributes: true, subtree: true, attributeFilter: ['disabled'] });
+explainButtons();
+
 function clearResults() {
+  runSeq += 1; // a submission on its way is cancelled when it returns
+  if (bodyPending) { clearTimeout(bodyPending.timer); bodyPending = null; }
   if (active) {
     active.handle.stop();
     if (state.job && !['done', 'failed', 'cancelled'].includes(state.job.status)) api.cancel(state.job.id).catch(() => {});
     active = null;
   }
   pending = null;
+  for (const t of Object.values(tools)) t.stopLive?.();
   viewer.clear();
+  state.job = null;
+  state.goals = null;
+  state.shownTool = null;
   state.current = null;
   state.solutions = [];
   state.quality = null;
@@ -686,8 +828,10 @@ function clearResults() {
   for (const t of Object.values(tools)) t.clearResult?.();
 }
 
+// The solution bar, the job state and the viewer belong to the tool that made them
+// (state.shownTool: a job, a live session, or 'library' for a clip): any other tool starts clear.
 export function selectTool(name) {
-  if (name !== state.tool && state.current && state.current.tool !== 'library' && state.current.tool !== name) clearResults();
+  if (name !== state.tool && state.shownTool && state.shownTool !== 'library' && state.shownTool !== name) clearResults();
   state.tool = name;
   for (const b of document.querySelectorAll('#tabs button')) b.classList.toggle('active', b.dataset.tool === name);
   for (const t of document.querySelectorAll('.tool')) t.classList.toggle('active', t.id === `tool-${name}`);
@@ -760,7 +904,8 @@ tools.path = (() => {
     const database = dbOf('path-db');
     const latencyS = numberOf('path-latency', 'latency', 0.5, 5);
     if (live) live.close();
-    viewer.clear();
+    clearResults();
+    state.shownTool = 'path';
     let first = true;
     const t0 = performance.now();
     live = startLiveWalk({
@@ -768,10 +913,12 @@ tools.path = (() => {
       latencyS,
       ApiError,
       onStatus: (text) => { $('sol-info').textContent = text; },
-      onFrames: (positions, frames, fps, names, parents) => {
+      onFrames: (positions, frames, fps, names, parents, rotations, offsets) => {
         viewer.loop = false;
         viewer.follow = 'result';
-        viewer.set('result', { name: 'live walk', fps, joints: names, parents, frames, positions }, undefined, { frame: first });
+        const motion = { name: 'live walk', fps, joints: names, parents, frames, positions, rotations, offsets: new Float32Array(offsets.flat()) };
+        viewer.set('result', motion, undefined, { frame: first });
+        characters.live('result', motion);
         const J = names.length;
         result = [];
         for (let f = 0; f < frames; f++) result.push([positions[f * J * 3], positions[f * J * 3 + 2]]);
@@ -859,7 +1006,12 @@ tools.path = (() => {
       });
     });
   redraw();
-  return { redraw, onResult: (motion, root) => { result = rootPath(motion, root); redraw(); }, clearResult: () => { result = []; redraw(); } };
+  return {
+    redraw,
+    onResult: (motion, root) => { result = rootPath(motion, root); redraw(); },
+    clearResult: () => { result = []; redraw(); },
+    stopLive: () => { if (live) { live.close(); live = null; } },
+  };
 })();
 
 // -- Partner: a leader clip -> the follower (control engine with the leader as the control motion)
@@ -1037,6 +1189,7 @@ tools.partner = (() => {
       const motion = await leaderMotion(leader);
       if (motion) {
         viewer.set('leader', motion, undefined, { frame: !viewer.has('result') });
+        characters.show('leader', { kind: 'motion', motion, hips: motion.joints[placeJoint(motion)] });
       } else {
         $('err-partner').textContent = `(the leader ${leader} is not an uploaded clip: it is not drawn)`;
       }
@@ -1134,6 +1287,7 @@ tools.constraints = (() => {
   $('cons-go').onclick = () =>
     guarded('constraints', async () => {
       const db = dbOf('cons-db');
+      if (!state.constraints.length) throw new ApiError(0, 'no_constraints', 'place at least one body arrow first: click the pad where the body should be, drag to aim it');
       const F = frameCount();
       const at = frames(state.constraints.length, F);
       viewer.clear();
@@ -1232,7 +1386,14 @@ timeline = tools.timeline = (() => {
     tl.tracks.push({ label, values: new Int8Array(nFrames()) });
     redraw();
   };
-  $('tl-add').onclick = () => { addTrack($('tl-new').value.trim()); $('tl-new').value = ''; };
+  $('tl-add').onclick = () =>
+    guarded('timeline', async () => {
+      const label = $('tl-new').value.trim();
+      if (!label) throw new ApiError(0, 'invalid_input', 'name the label track to add (type it in the box beside Add)');
+      if (tl.tracks.some((t) => t.label === label)) throw new ApiError(0, 'invalid_input', `there is a ${label} track already`);
+      addTrack(label);
+      $('tl-new').value = '';
+    });
   $('tl-frames').oninput = redraw;
   $('tl-clear').onclick = () => { for (const t of tl.tracks) t.values.fill(0); redraw(); };
   // tracks: the chosen database's label vocabulary (its summary from the API, whoever built it);
@@ -1304,7 +1465,7 @@ timeline = tools.timeline = (() => {
 })();
 
 // -- Music: BPM or MIDI, steer with the mouse -> rhythmic synthesis; beat flashes
-music = setupMusic({ state, $, api, runJob, guarded, dbOf, numberOf, viewer, ApiError, FloorPad, headingDeg, showError, framesText });
+music = setupMusic({ state, $, api, runJob, guarded, dbOf, numberOf, viewer, ApiError, FloorPad, headingDeg, showError, framesText, characters });
 tools.music = music;
 // -- the rhythm database's movement graph (choreographic edits -> a derived database): graph.js
 setupGraph({ state, $, guarded, clearError, refreshDatabases });
@@ -1327,4 +1488,4 @@ async function boot() {
   state.ready = true;
 }
 boot();
-setInterval(() => { if (state.ready) refreshDatabases().catch(() => {}); }, 5000);
+setInterval(() => { if (state.ready) { refreshDatabases().catch(() => {}); characters.refresh().catch(() => {}); } }, 5000);

@@ -1,5 +1,7 @@
 // BVH (plain or gzip) -> the viewer's motion, with three.js's BVHLoader: per-frame global joint
-// positions (F*J*3, metres, Y up) by forward kinematics of the loader's bones.
+// positions (F*J*3, metres, Y up) and rotations (F*J*4, x y z w) by forward kinematics of the
+// loader's bones, and the skeleton's offsets (J*3, metres).
+import { Quaternion } from 'three';
 import { BVHLoader } from 'three/addons/loaders/BVHLoader.js';
 
 // metres per file unit, as motion/units.py (the service reports a clip's guessed unit in ClipInfo.units)
@@ -42,7 +44,11 @@ export async function parseBvh(bytes, name, units) {
   const F = times.length;
   const fps = F > 1 ? 1 / (times[1] - times[0]) : 30;
   const positions = new Float32Array(F * J * 3);
+  const rotations = new Float32Array(F * J * 4);
+  const offsets = new Float32Array(J * 3);
+  bones.forEach((b, j) => b.position.toArray(offsets, j * 3));
   const root = bones[0];
+  const q = new Quaternion();
   for (let f = 0; f < F; f++) {
     for (const t of tracks) {
       if (t.prop === 'position') t.bone.position.fromArray(t.values, f * 3);
@@ -55,6 +61,7 @@ export async function parseBvh(bytes, name, units) {
       positions[o] = e[12];
       positions[o + 1] = e[13];
       positions[o + 2] = e[14];
+      q.setFromRotationMatrix(bones[j].matrixWorld).toArray(rotations, (f * J + j) * 4);
     }
   }
   let scale = METRES_PER_UNIT[units];
@@ -70,7 +77,8 @@ export async function parseBvh(bytes, name, units) {
     scale = GUESSED_UNITS.map((u) => METRES_PER_UNIT[u]).reduce((best, s) => (Math.abs(Math.log((h * s) / 1.7)) < Math.abs(Math.log((h * best) / 1.7)) ? s : best), 1);
   }
   for (let i = 0; i < positions.length; i++) positions[i] *= scale;
-  return { name, fps, joints, parents, frames: F, positions, sites };
+  for (let i = 0; i < offsets.length; i++) offsets[i] *= scale;
+  return { name, fps, joints, parents, frames: F, positions, rotations, offsets, sites };
 }
 
 // A fast BVH reader for the service's results (thousands of frames): the same motion as parseBvh
@@ -133,6 +141,7 @@ export function parseBvhText(text, name, scale = 1) {
   const dt = Number(tok[i++]);
   const J = joints.length;
   const positions = new Float32Array(F * J * 3);
+  const rotations = new Float32Array(F * J * 4);
   const gq = new Float64Array(J * 4);
   const gp = new Float64Array(J * 3);
   const values = new Float64Array(slots);
@@ -182,14 +191,18 @@ export function parseBvhText(text, name, scale = 1) {
       positions[o] = gp[j * 3] * scale;
       positions[o + 1] = gp[j * 3 + 1] * scale;
       positions[o + 2] = gp[j * 3 + 2] * scale;
+      rotations.set(gq.subarray(j * 4, j * 4 + 4), (f * J + j) * 4);
     }
   }
-  return { name, fps: dt > 0 ? 1 / dt : 30, joints, parents, frames: F, positions, sites };
+  const offsetsM = new Float32Array(J * 3);
+  offsets.forEach((o, j) => offsetsM.set(o.map((v) => v * scale), j * 3));
+  return { name, fps: dt > 0 ? 1 / dt : 30, joints, parents, frames: F, positions, rotations, offsets: offsetsM, sites };
 }
 
 // Global joint positions of frames given as root positions (n, 3) and local rotations (n, J, 4)
-// (x, y, z, w) on a skeleton (parents (J,), offsets (J, 3) metres): Float32Array n*J*3.
-export function forwardKinematics(parents, offsets, root, rotations) {
+// (x, y, z, w) on a skeleton (parents (J,), offsets (J, 3) metres): Float32Array n*J*3; with
+// `globals` (a Float32Array n*J*4), the global rotations are written there too.
+export function forwardKinematics(parents, offsets, root, rotations, globals = null) {
   const J = parents.length;
   const n = root.length;
   const out = new Float32Array(n * J * 3);
@@ -216,6 +229,7 @@ export function forwardKinematics(parents, offsets, root, rotations) {
         gq[j * 4 + 3] = aw * qw - ax * qx - ay * qy - az * qz;
       }
       out.set([gp[j * 3], gp[j * 3 + 1], gp[j * 3 + 2]], (f * J + j) * 3);
+      if (globals) globals.set(gq.subarray(j * 4, j * 4 + 4), (f * J + j) * 4);
     }
   }
   return out;

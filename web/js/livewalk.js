@@ -17,7 +17,8 @@ const SEND_MS = 100; // a path message every 0.1 s (3 frames at 30 fps)
 // Opens a session and returns a controller: push(points) queues the path sampled so far (at
 // `fps()` frames per second, [x, z] metres), stop(pathAt) ends the control after queueing
 // pathAt(fps), the whole path at the session's fps (called once the session has told its fps, so
-// a path drawn before the session opened is sent, not lost); `done` settles when the session closes. onFrames(positions, frames, fps, names, parents) draws the walker so far;
+// a path drawn before the session opened is sent, not lost); `done` settles when the session closes. onFrames(positions, frames, fps, names, parents, rotations, offsets) draws the walker so far
+// (positions F*J*3 and global rotations F*J*4);
 // `info` collects what the tests and the status line read.
 export function startLiveWalk({ database, latencyS, onFrames, onStatus, ApiError }) {
   const info = { mode: 'live', latency_s: latencyS, sent: 0, frames: 0, framesBeforeStop: 0, maxAhead: -Infinity, stopped: false, end: null, skeleton: null, errors: [] };
@@ -25,6 +26,7 @@ export function startLiveWalk({ database, latencyS, onFrames, onStatus, ApiError
   let skeleton = null;
   let pending = [];
   let chunks = [];
+  let rotChunks = [];
   let stopAsked = false;
   let finalPath = null;
   let timer = null;
@@ -60,19 +62,25 @@ export function startLiveWalk({ database, latencyS, onFrames, onStatus, ApiError
         if (stopAsked) finish();
       } else if (data.type === 'frames' && skeleton) {
         if (!data.root.length) return;
-        chunks.push(forwardKinematics(skeleton.parents, skeleton.offsets, data.root, data.rotations));
+        const J = skeleton.parents.length;
+        const globals = new Float32Array(data.root.length * J * 4);
+        chunks.push(forwardKinematics(skeleton.parents, skeleton.offsets, data.root, data.rotations, globals));
+        rotChunks.push(globals);
         info.frames += data.root.length;
         if (!info.stopped) {
           info.framesBeforeStop = info.frames;
           // walker frames beyond what the latency allows for the path sent so far (never > 0)
           info.maxAhead = Math.max(info.maxAhead, info.frames - (info.sent - skeleton.latency_frames));
         }
-        const J = skeleton.parents.length;
         const positions = new Float32Array(info.frames * J * 3);
+        const rotations = new Float32Array(info.frames * J * 4);
         let at = 0;
         for (const c of chunks) { positions.set(c, at); at += c.length; }
+        at = 0;
+        for (const c of rotChunks) { rotations.set(c, at); at += c.length; }
         chunks = [positions];
-        onFrames(positions, info.frames, data.fps, skeleton.names, skeleton.parents);
+        rotChunks = [rotations];
+        onFrames(positions, info.frames, data.fps, skeleton.names, skeleton.parents, rotations, skeleton.offsets);
         onStatus(`live · walker ${info.frames} frames, ${(info.sent - info.frames) / data.fps >= 0 ? ((info.sent - info.frames) / data.fps).toFixed(1) : '0.0'} s behind the pointer`);
       } else if (data.type === 'error') {
         info.errors.push(data.message);

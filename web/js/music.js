@@ -20,7 +20,7 @@ const AUDIO = /\.(wav|flac|ogg|mp3)$/i;
 const DRIFT_S = 0.08; // the song restarts at the viewer's time when it drifts further
 
 export function setupMusic(ctx) {
-  const { state, $, api, runJob, guarded, dbOf, numberOf, viewer, ApiError, FloorPad, headingDeg, showError, framesText } = ctx;
+  const { state, $, api, runJob, guarded, dbOf, numberOf, viewer, ApiError, FloorPad, headingDeg, showError, framesText, characters } = ctx;
   const m = state.music;
   const pad = new FloorPad($('music-pad'), 2.2);
   const canvas = $('music-pad');
@@ -158,6 +158,7 @@ export function setupMusic(ctx) {
       live = ws;
       let skeleton = null;
       let chunks = [];
+      let rotChunks = [];
       let frames = 0;
       const send = (msg) => { if (ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(msg)); };
       ws.onmessage = (msg) => {
@@ -171,20 +172,28 @@ export function setupMusic(ctx) {
           stopTimer = setTimeout(() => send({ type: 'stop' }), seconds * 1000);
           m.finish = () => send({ type: 'stop' });
         } else if (data.type === 'frames' && skeleton) {
-          chunks.push(forwardKinematics(skeleton.parents, skeleton.offsets, data.root, data.rotations));
-          frames += data.root.length;
           const J = skeleton.parents.length;
+          const globals = new Float32Array(data.root.length * J * 4);
+          chunks.push(forwardKinematics(skeleton.parents, skeleton.offsets, data.root, data.rotations, globals));
+          rotChunks.push(globals);
+          frames += data.root.length;
           const positions = new Float32Array(frames * J * 3);
+          const rotations = new Float32Array(frames * J * 4);
           let at = 0;
           for (const c of chunks) { positions.set(c, at); at += c.length; }
+          at = 0;
+          for (const c of rotChunks) { rotations.set(c, at); at += c.length; }
           chunks = [positions];
+          rotChunks = [rotations];
           const first = m.frames === 0;
           m.frames = frames;
           m.serverBeat = data.beat;
           flash();
           viewer.loop = false;
           viewer.follow = 'result';
-          viewer.set('result', { name: 'live dance', fps: data.fps, joints: skeleton.names, parents: skeleton.parents, frames, positions }, undefined, { frame: first });
+          const motion = { name: 'live dance', fps: data.fps, joints: skeleton.names, parents: skeleton.parents, frames, positions, rotations, offsets: new Float32Array(skeleton.offsets.flat()) };
+          viewer.set('result', motion, undefined, { frame: first });
+          characters.live('result', motion);
           state.current = { tool: 'music', live: true, frames, fps: data.fps, beat: data.beat };
           if (first) {
             state.timings.music = performance.now() - t0;
@@ -213,22 +222,32 @@ export function setupMusic(ctx) {
 
   $('music-go').onclick = () =>
     guarded('music', async () => {
-      if (m.running) return;
+      if (m.running) throw new ApiError(0, 'already_running', 'the music is playing: press Stop first');
       const db = dbOf('music-db');
       const bpm = numberOf('music-bpm', 'BPM', 30, 300);
       const seconds = numberOf('music-seconds', 'length', 1, 600);
       viewer.clear();
+      state.shownTool = 'music';
       m.started = performance.now();
       recorded = '';
       ended = null;
       if ($('music-mode').value === 'live' && !$('music-midi').files.length) await session(db, bpm, seconds);
       else await record(db, bpm, seconds);
     });
-  $('music-stop').onclick = () => { if (m.finish) m.finish(); };
+  $('music-stop').onclick = () =>
+    guarded('music', async () => {
+      if (!m.running || !m.finish) throw new ApiError(0, 'not_running', 'nothing is playing: Start first');
+      m.finish();
+    });
   redraw();
 
   return {
     redraw,
+    // another tool was chosen: the session (or the recording) stops
+    stopLive() {
+      if (live && live.readyState <= WebSocket.OPEN) live.close(1000, 'another tool');
+      if (metronome) stopMetronome();
+    },
     // beats flash in time with the playback of a rhythm result: on the music's beats as the
     // engine placed them (its report's annotations.music_beats_s), BPM or MIDI alike
     onTime(t, isPlaying) {
