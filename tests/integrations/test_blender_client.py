@@ -134,7 +134,13 @@ def test_a_job_thread_reports_a_refused_request(serve: Serve, walks: str) -> Non
     assert msg.kind == "error" and msg.data["status"] == 422 and "frames" in msg.data["message"]
 
 
-def test_a_local_service_starts_on_a_free_port_and_stops(tmp_path: Path) -> None:
+def test_a_local_service_starts_on_a_free_port_and_stops(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Blender's environment, not the test session's: the service tests' session-wide fixture sets
+    # SEGUE_ENGINE_PLUGINS to a test module the service could not import without their PYTHONPATH
+    for var in ("SEGUE_ENGINE_PLUGINS", "SEGUE_API_TOKENS", "SEGUE_REDIS_URL"):
+        monkeypatch.delenv(var, raising=False)
     with pytest.raises(SegueError, match="no segue executable"):
         LocalService(tmp_path / "nothing", tmp_path / "data").start()
     service = LocalService(SEGUE, tmp_path / "data")
