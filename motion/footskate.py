@@ -586,6 +586,8 @@ def solve_foot_skate(
     heights: Array | None = None,
     floor: Array | None = None,
     fk: tuple[Array, Array] | None = None,
+    horizontal: bool = True,
+    vertical: bool = True,
 ) -> FootSkateResult:
     """Pin feet during contacts by leg IK; the full result (see :func:`remove_foot_skate`).
 
@@ -616,6 +618,12 @@ def solve_foot_skate(
     fk:
         The motion's :meth:`Motion.fk` (``positions (F, J, 3)``, ``rotations (F, J, 4)``) when the
         caller has it already.
+    horizontal, vertical:
+        Which parts of a pin apply: both by default. ``horizontal=False`` pins the height only,
+        so that planted feet rest on their floor but keep their own path over it ("grounding");
+        ``vertical=False`` holds planted feet in place on the floor's plane and leaves their
+        height to the caller (a retargeting puts the character's sole on its floor,
+        :mod:`motion.retarget.grounding`). ``floor`` applies either way.
     """
     if not (np.isfinite(blend_s) and blend_s >= 0):
         raise MotionError(f"blend_s must be a non-negative number of seconds, got {blend_s}")
@@ -640,7 +648,7 @@ def solve_foot_skate(
     if not legs:
         return FootSkateResult(motion, legs, np.zeros(flags.shape), no_shift)
     blend = int(round(blend_s * motion.fps))
-    corr, weight = _pin_targets(motion, pos, joints, flags, blend, heights, floor)
+    corr, weight = _pin_targets(motion, pos, joints, flags, blend, heights, floor, horizontal, vertical)
     forward = _forward(motion, pos)
     local, residual, errors = _solve_all(motion, legs, pos, grot, corr, weight, forward, floor)
     root_shift = no_shift
@@ -663,10 +671,13 @@ def _pin_targets(
     blend: int,
     heights: Array | None,
     floor: Array | None,
+    horizontal: bool = True,
+    vertical: bool = True,
 ) -> tuple[Array, Array]:
     """Where each contact joint should be: ``(F, K, 3)`` corrections of its global position
     (motion units) and their ``(F, K)`` weights, pinned over its contact runs (jumps widened,
-    faded over ``blend`` frames) and lifted above ``floor``."""
+    faded over ``blend`` frames; the floor's plane unless ``horizontal`` is off, height unless
+    ``vertical`` is) and lifted above ``floor``."""
     n = motion.num_frames
     corr = np.zeros((n, joints.size, 3))
     weight = np.zeros((n, joints.size))
@@ -675,6 +686,10 @@ def _pin_targets(
         runs = widen_jumps(pos[:, j], flags[:, slot], frames_per_unit, 2 * blend)
         rest = None if heights is None else heights[:, slot]
         corr[:, slot], weight[:, slot] = pin_corrections(pos[:, j], runs, blend, rest)
+        if not horizontal:
+            corr[:, slot, 0] = corr[:, slot, 2] = 0.0
+        if not vertical:
+            corr[:, slot, 1] = 0.0
         if floor is not None:
             # never below the floor: lift the joint (height only) wherever it would sink under it
             lift = np.maximum(float(floor[slot]) - (pos[:, j, 1] + corr[:, slot, 1]), 0.0)
@@ -709,6 +724,8 @@ def remove_foot_skate(
     heights: Array | None = None,
     floor: Array | None = None,
     fk: tuple[Array, Array] | None = None,
+    horizontal: bool = True,
+    vertical: bool = True,
 ) -> Motion:
     """The motion with planted feet kept in place (a pure function; the input is not modified).
 
@@ -732,6 +749,9 @@ def remove_foot_skate(
         :func:`solve_foot_skate`).
     fk:
         The motion's :meth:`Motion.fk` when the caller has it already.
+    horizontal, vertical:
+        Which parts of the pins apply (:func:`solve_foot_skate`): ``horizontal=False`` keeps
+        planted feet's own floor path and pins their height only.
 
     Raises
     ------
@@ -754,4 +774,37 @@ def remove_foot_skate(
         heights=heights,
         floor=floor,
         fk=fk,
+        horizontal=horizontal,
+        vertical=vertical,
     ).motion
+
+
+def move_feet(
+    motion: Motion,
+    ankles: npt.NDArray[np.intp],
+    shifts: Array,
+    *,
+    fk: tuple[Array, Array] | None = None,
+) -> Motion:
+    """``motion`` with each ankle ``ankles (L,)`` moved by ``shifts (F, L, 3)`` (world, motion
+    units) by its leg's two-bone IK (knee and hip, as :func:`solve_foot_skate` solves them): the
+    foot keeps its world orientation, so everything below the ankle moves by the same shift. A
+    leg keeps its exact rotations in frames where its shift is zero; a shift out of the leg's
+    reach is eased towards full extension (soft IK) and the rest left undone.
+
+    ``fk``: the motion's :meth:`Motion.fk` when the caller has it already. Raises
+    :class:`MotionError` for an ankle with no hip-knee-ankle chain or shifts of the wrong shape."""
+    joints = np.asarray(ankles, dtype=np.intp).reshape(-1)
+    if np.shape(shifts) != (motion.num_frames, joints.size, 3):
+        raise MotionError(
+            f"foot shifts must be (F, L, 3) = ({motion.num_frames}, {joints.size}, 3), got {np.shape(shifts)}"
+        )
+    weight = (np.abs(shifts).max(axis=-1) > 0).astype(np.float64)
+    if not weight.any():
+        return motion
+    pos, grot = motion.fk() if fk is None else fk
+    legs = leg_chains(motion, joints, pos[0])
+    if any(leg.toe >= 0 for leg in legs):
+        raise MotionError("move_feet moves ankles: pass no toe joints")
+    local, _, _ = _solve_all(motion, legs, pos, grot, np.asarray(shifts, dtype=np.float64), weight, _forward(motion, pos))
+    return replace(motion, rotations=local)

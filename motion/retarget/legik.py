@@ -23,8 +23,10 @@ import numpy as np
 import numpy.typing as npt
 
 from ..contacts import detect_contacts
-from ..footskate import solve_foot_skate
 from ..motion import Motion
+from ..skinning import SkinnedMesh
+from .grounding import ground_feet
+from .sole import Sole, bone_soles, mesh_soles, soles_floor
 from .transfer import place_hips
 
 FOOT_ROLES = ("LeftFoot", "LeftToes", "RightFoot", "RightToes")
@@ -68,30 +70,74 @@ def rest_floor(rest: Motion, roles: dict[str, int]) -> npt.NDArray[np.float64] |
     return floor_heights(roles, rest.global_positions())
 
 
-def settle(motion: Motion, roles: dict[str, int], rest: Motion) -> Motion:
-    """``motion`` moved up or down so that its flat planted feet sit, over the clip, at the rest
-    pose's ankle height (:func:`rest_ankle_height`): the median ankle height over the frames where
-    an ankle and its toe (when the skeleton has toes) are both planted. A vertical shift of the
-    whole body: no limb turns. Unchanged when the rest pose does not stand or no foot is planted."""
+def settle(
+    motion: Motion,
+    roles: dict[str, int],
+    rest: Motion,
+    soles: tuple[Sole, ...] | None = None,
+    floor: float | None = None,
+) -> Motion:
+    """``motion`` moved up or down so that its flat planted feet sit, over the clip, on the
+    floor: the median ankle height over the frames where an ankle and its toe (when the skeleton
+    has toes) are both planted is the rest pose's (:func:`rest_ankle_height`), or with ``soles``
+    and their ``floor`` the median lowest sole point on those frames is the floor. A vertical
+    shift of the whole body: no limb turns. Unchanged when the rest pose does not stand or no
+    foot is planted."""
     target = rest_ankle_height(rest, roles)
     if target is None:
         return motion
     pos = np.ascontiguousarray(motion.global_positions())
+    by_side = {s.side: s for s in soles or ()}
+    lowest = None
+    if soles is not None and floor is not None:
+        _, grot = motion.fk()
+        lowest = {s.side: s.positions(pos, grot)[:, :, 1].min(axis=1) for s in soles}
     heights = []
     for side in ("Left", "Right"):
         joints = np.array([roles[side + p] for p in ("Foot", "Toes") if side + p in roles], dtype=np.intp)
         _, flags = detect_contacts(motion, joints, positions=pos)
-        heights.append(pos[flags.all(axis=1), joints[0], 1])
-    flat = np.concatenate(heights)
-    if flat.size == 0:
+        flat = flags.all(axis=1)
+        if lowest is not None and side in by_side and floor is not None:
+            heights.append(lowest[side][flat] - floor)
+        else:
+            heights.append(pos[flat, joints[0], 1] - target)
+    flat_heights = np.concatenate(heights)
+    if flat_heights.size == 0:
         return motion
-    shift = float(np.median(flat)) - target
+    shift = float(np.median(flat_heights))
     hips = roles["Hips"]
     return place_hips(motion, hips, pos[:, hips] - np.array([0.0, shift, 0.0]))
 
 
-def plant_feet(motion: Motion, roles: dict[str, int], rest: Motion | None = None) -> Motion:
-    """``motion`` with planted feet pinned and no ankle or toe under its floor.
+def character_soles(
+    rest: Motion, roles: dict[str, int], mesh: SkinnedMesh | None = None
+) -> tuple[Sole, ...]:
+    """The character's soles (:mod:`motion.retarget.sole`): from its skinned mesh when it has one,
+    else from its bones."""
+    return mesh_soles(mesh, rest, roles) if mesh is not None else bone_soles(rest, roles)
+
+
+def sole_floor(motion: Motion, soles: tuple[Sole, ...], rest: Motion, roles: dict[str, int]) -> float:
+    """The floor the soles stand on: the rest pose's lowest sole point when that pose stands
+    (:func:`rest_ankle_height`), else the usual lowest level of the soles in ``motion`` (the 5th
+    percentile over frames of the lower sole's lowest point)."""
+    if rest_ankle_height(rest, roles) is not None:
+        return soles_floor(soles)
+    pos, grot = motion.fk()
+    low = np.min([s.positions(pos, grot)[:, :, 1].min(axis=1) for s in soles], axis=0)
+    return float(np.percentile(low, FLOOR_PERCENTILE))
+
+
+def plant_feet(
+    motion: Motion,
+    roles: dict[str, int],
+    rest: Motion | None = None,
+    *,
+    soles: tuple[Sole, ...] | None = None,
+    mode: str = "lock",
+) -> Motion:
+    """``motion`` with planted feet pinned (``mode="lock"``) and its soles on the floor
+    (:func:`motion.retarget.grounding.ground_feet`).
 
     Parameters
     ----------
@@ -100,15 +146,13 @@ def plant_feet(motion: Motion, roles: dict[str, int], rest: Motion | None = None
     roles:
         Role -> joint index of the character (:class:`motion.retarget.names.Correspondence`).
     rest:
-        The character in its rest pose: when that pose stands, the floor of each ankle and toe
-        is its flat-foot rest height (:func:`rest_floor`) instead of its usual lowest level.
+        The character in its rest pose (default: ``motion``'s first frame): its soles and floor.
+    soles:
+        The character's soles (default: from its bones, :func:`character_soles`).
+    mode:
+        ``"lock"``, ``"grounding"`` or ``"free"`` (:data:`motion.retarget.grounding.FEET_MODES`).
     """
-    joints = foot_joints(roles)
-    pos = np.ascontiguousarray(motion.global_positions())
-    floor = floor_heights(roles, pos)
-    flat = None if rest is None else rest_floor(rest, roles)
-    if flat is not None:
-        floor = flat
-    joints, flags = detect_contacts(motion, joints, positions=pos)
-    result = solve_foot_skate(motion, (joints, flags), blend_s=0.1, floor=floor)
-    return result.motion
+    rest = motion.slice(0, 1) if rest is None else rest
+    soles = character_soles(rest, roles) if soles is None else soles
+    floor = sole_floor(motion, soles, rest, roles)
+    return ground_feet(motion, soles, floor, mode=mode)

@@ -41,6 +41,7 @@ from .demo import cmd_demo
 from .files import (
     OUTPUT_SUFFIXES,
     SAMPLE_PREFIX,
+    FEET_MODES,
     TARGETS,
     UNITS,
     cmd_beats,
@@ -52,7 +53,7 @@ from .files import (
 from .jobs import _validation_message, cmd_build, cmd_graph, cmd_graph_edit, cmd_synth
 from .serve import cmd_serve, cmd_warm, cmd_worker
 
-__all__ = ["OUTPUT_SUFFIXES", "SAMPLE_PREFIX", "TARGETS", "UNITS", "build_parser", "main"]
+__all__ = ["FEET_MODES", "OUTPUT_SUFFIXES", "SAMPLE_PREFIX", "TARGETS", "UNITS", "build_parser", "main"]
 
 
 class _Version(argparse.Action):
@@ -96,6 +97,16 @@ def build_parser() -> argparse.ArgumentParser:
             action="store_true",
             help="drop the reference-pose frames a file starts with (a file keeps its frame count by "
             "default; a note says when it starts with such frames)",
+        )
+
+    def feet_option(p: argparse.ArgumentParser, default: str | None, what: str = "") -> None:
+        p.add_argument(
+            "--feet",
+            choices=FEET_MODES,
+            default=default,
+            help="lock: planted feet held in place, soles on the floor; grounding: soles on the floor "
+            f"only (no sole under it, planted soles on it); free: feet left as they are{what}"
+            + (f" (default {default})" if default else ""),
         )
 
     def limits(p: argparse.ArgumentParser) -> None:
@@ -194,7 +205,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="the BVH character's rest pose: its first frame (default) or zero rotations",
     )
     p.add_argument("--in-units", choices=units, help="declare the motion's length unit instead of guessing")
-    p.add_argument("--no-plant", action="store_true", help="skip the leg IK that keeps planted feet planted")
+    feet_option(p, "lock")
+    p.add_argument("--no-plant", action="store_true", help=argparse.SUPPRESS)  # before --feet free
     p.add_argument(
         "--target",
         default="gltf",

@@ -26,6 +26,8 @@ TARGETS = ("gltf", "godot", "unity", "unreal")
 """Export conventions (:data:`motion.export.targets.TARGETS`)."""
 OUTPUT_SUFFIXES = (".bvh", ".bvh.gz", ".glb", ".json", ".npz")
 """Output formats by extension (:data:`motion.io.OUTPUT_SUFFIXES`)."""
+FEET_MODES = ("lock", "grounding", "free")
+"""What ``--feet`` does to the feet (:data:`motion.retarget.grounding.FEET_MODES`)."""
 
 
 def _resolve(path: str) -> Path:
@@ -301,7 +303,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     corr = correspond(motion.skeleton, character.skeleton, name_map)
     mode = args.root_motion or default_root_motion(args.target, corr.target_roles["Hips"])
-    out = retarget(motion, character, name_map=name_map, plant=not args.no_plant, root_motion=mode)
+    out = retarget(motion, character, name_map=name_map, feet="free" if args.no_plant else args.feet, root_motion=mode)
     notes: list[str] = []
     if glb_out:
         events = contact_events(out) if kinds else None

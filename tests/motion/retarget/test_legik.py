@@ -16,7 +16,7 @@ def test_planted_feet_stay_planted_and_above_the_floor() -> None:
     char = character("unreal", scale=0.9, shin=1.25)  # longer shins than the source's
     roles = correspond(src.skeleton, char.skeleton).target_roles
     joints = foot_joints(roles)
-    raw = settle(retarget(src, char, plant=False), roles, char)  # the body's height as planted
+    raw = settle(retarget(src, char, feet="free"), roles, char)  # the body's height as planted
     out = retarget(src, char)
     raw_pos, pos = raw.global_positions(), out.global_positions()
     _, flags = detect_contacts(raw, joints, positions=raw_pos)

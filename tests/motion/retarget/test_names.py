@@ -24,7 +24,7 @@ def test_each_preset_is_recognised_and_drives_the_limbs(convention: str) -> None
     assert roles.preset == convention
     assert set(REQUIRED) <= set(roles.joints)
     src = walk(120)
-    out = retarget(src, char, plant=False)
+    out = retarget(src, char, feet="free")
     assert out.skeleton is char.skeleton and out.units == char.units
     err = angle_deg(
         bone_directions(src, renamed_limbs(None)), bone_directions(out, renamed_limbs(convention))
@@ -83,8 +83,8 @@ def test_map_pairs_extra_joints() -> None:
     # a joint no preset knows (a finger) is driven when mapped, else it keeps its rest rotation
     src = walk(60)
     char = character("unreal")
-    plain = retarget(src, char, plant=False)
-    mapped = retarget(src, char, name_map={"lIndex2": "lIndex2"}, plant=False)
+    plain = retarget(src, char, feet="free")
+    mapped = retarget(src, char, name_map={"lIndex2": "lIndex2"}, feet="free")
     j = char.skeleton.index("lIndex2")
     assert np.allclose(plain.rotations[:, j], char.rotations[0, j])  # unmapped: rest rotation
     assert not np.allclose(mapped.rotations[:, j], char.rotations[0, j])
@@ -125,7 +125,7 @@ def test_a_longer_spine_pairs_its_ends_and_keeps_the_rest() -> None:
     named = {char.skeleton.names[t]: src.skeleton.names[s] for t, s in corr.pairs.items()}
     assert named["spine_01"] == "abdomen" and named["spine_05"] == "chest"
     assert not {"spine_02", "spine_03", "spine_04"} & set(named)
-    out = retarget(src, char, plant=False)
+    out = retarget(src, char, feet="free")
     err = angle_deg(bone_directions(src, renamed_limbs(None)), bone_directions(out, renamed_limbs("unreal")))
     assert err.max() < 0.5
     # the shoulders face where the source's do: the clavicle-to-clavicle axis follows the source's
