@@ -72,7 +72,9 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     ]
     couple = combine_characters(people, ["c0_", "c1_"])
     (folder / "couple.glb").write_bytes(glb_bytes(couple))
-    return {"folder": folder, "moved": moved, "events": events, "couple": people}
+    body_walk = walk.slice(0, 100)
+    (folder / "body_walk.glb").write_bytes(glb_bytes(body_walk, mesh="body"))
+    return {"folder": folder, "moved": moved, "events": events, "couple": people, "body_walk": body_walk}
 
 
 def _segue_positions(moved: Any) -> np.ndarray:
@@ -120,6 +122,17 @@ def test_blender_gives_each_dancer_an_armature_and_an_action(files: dict[str, An
         assert set(action["driven"]) == set(arm["bones"])  # its own bones, all of them
         assert all(b.startswith(arm["name"] + "_") for b in arm["bones"])
     assert sum(m["armature"] is not None for m in got["meshes"]) == 2
+
+
+def test_blender_deforms_the_mannequin_with_its_soles_on_the_floor(files: dict[str, Any]) -> None:
+    got = _blender(files["folder"] / "body_walk.glb", files["folder"] / "blender_body.json")
+    (arm,) = got["armatures"]
+    (mesh,) = got["meshes"]
+    assert mesh["armature"] == arm["name"] and mesh["vertices"] > 1000 and max(mesh["moved"]) > 0.5
+    walk = files["body_walk"]
+    feet = walk.global_positions()[:, [walk.skeleton.index("lFoot"), walk.skeleton.index("rFoot")], 1]
+    ankle = float(feet.min()) * walk.metres_per_unit  # the lowest an ankle comes in the walk (m)
+    assert all(-0.03 < low < ankle for low in mesh["lowest"])  # the sole, below the ankles, near the floor
 
 
 # -- Godot -----------------------------------------------------------------------------------------
