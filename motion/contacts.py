@@ -130,7 +130,9 @@ def foot_groups(skeleton: Skeleton) -> list[tuple[int, ...]]:
     return groups
 
 
-def _plant_flags(positions: Array, fps: float, height: float, height_tol: float, speed_tol: float) -> Array:
+def _plant_flags(
+    positions: Array, fps: float, height: float, height_tol: float, speed_tol: float
+) -> npt.NDArray[np.bool_]:
     """``(F, K)`` whether each foot joint (``positions (F, K, 3)``) is low and slow, in body
     heights (``height``, the positions' units)."""
     floor = np.percentile(positions[:, :, 1], 5, axis=0)
@@ -151,6 +153,54 @@ def bool_runs(flags: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
+def _debounced(stay: npt.NDArray[np.bool_], enter: npt.NDArray[np.bool_], fps: float) -> list[tuple[int, int]]:
+    """Runs of ``stay (F, K)`` (any of the K columns) that contain an ``enter`` frame of the same
+    column, lifts shorter than :data:`PLANT_GAP_S` bridged and runs shorter than
+    :data:`PLANT_MIN_S` dropped."""
+    runs: list[tuple[int, int]] = []
+    for k in range(stay.shape[1]):
+        runs += [(a, b) for a, b in bool_runs(stay[:, k]) if enter[a:b, k].any()]
+    runs.sort()
+    joined: list[tuple[int, int]] = []
+    for a, b in runs:
+        if joined and (a - joined[-1][1]) / fps < PLANT_GAP_S:
+            joined[-1] = (joined[-1][0], max(b, joined[-1][1]))
+        else:
+            joined.append((a, b))
+    return [(a, b) for a, b in joined if (b - a) / fps >= PLANT_MIN_S - 1e-9]
+
+
+def _plant_tests(motion: Motion, joints: npt.NDArray[np.intp], pos: Array) -> tuple[Array, Array] | None:
+    """``(enter, stay)`` flags ``(F, K)`` of ``joints`` (None for a motion too short or flat)."""
+    height = standing_height(pos)
+    if motion.num_frames < 2 or height <= 0:
+        return None
+    feet = pos[:, joints]
+    return (
+        _plant_flags(feet, motion.fps, height, *PLANT_ENTER),
+        _plant_flags(feet, motion.fps, height, *PLANT_STAY),
+    )
+
+
+def joint_plants(
+    motion: Motion, joints: npt.NDArray[np.intp], *, positions: Array | None = None
+) -> npt.NDArray[np.bool_]:
+    """``(F, K)`` the frames each of ``joints (K,)`` is planted, as :func:`foot_plants` finds a
+    plant (hysteresis, bridged lifts, no blips), each joint on its own: a heel planted while its
+    toe is, or a toe planted on its own at push-off."""
+    idx = np.asarray(joints, dtype=np.intp).reshape(-1)
+    out = np.zeros((motion.num_frames, idx.size), dtype=bool)
+    pos = motion.global_positions() if positions is None else positions
+    tests = _plant_tests(motion, idx, pos)
+    if tests is None:
+        return out
+    enter, stay = tests
+    for k in range(idx.size):
+        for a, b in _debounced(stay[:, k : k + 1], enter[:, k : k + 1], motion.fps):
+            out[a:b, k] = True
+    return out
+
+
 def foot_plants(
     motion: Motion, groups: list[tuple[int, ...]] | None = None, *, positions: Array | None = None
 ) -> list[tuple[int, int, int]]:
@@ -164,32 +214,18 @@ def foot_plants(
     :data:`PLANT_MIN_S` dropped. ``groups``: the feet (:func:`foot_groups` by default);
     ``positions``: :meth:`Motion.global_positions` when the caller has them."""
     feet = foot_groups(motion.skeleton) if groups is None else groups
-    if motion.num_frames < 2 or not feet:
+    if not feet:
         return []
     pos = motion.global_positions() if positions is None else positions
-    height = standing_height(pos)
-    if height <= 0:
-        return []
     joints = np.array([j for g in feet for j in g], dtype=np.intp)
-    enter = _plant_flags(pos[:, joints], motion.fps, height, *PLANT_ENTER)
-    stay = _plant_flags(pos[:, joints], motion.fps, height, *PLANT_STAY)
+    tests = _plant_tests(motion, joints, pos)
+    if tests is None:
+        return []
+    enter, stay = tests
     out: list[tuple[int, int, int]] = []
     col = 0
     for g, group in enumerate(feet):
         cols = slice(col, col + len(group))
         col += len(group)
-        stay_g, enter_g = stay[:, cols], enter[:, cols]
-        merged: list[tuple[int, int]] = []
-        for k in range(len(group)):
-            for a, b in bool_runs(stay_g[:, k]):
-                if enter_g[a:b, k].any():
-                    merged.append((a, b))
-        merged.sort()
-        joined: list[tuple[int, int]] = []
-        for a, b in merged:
-            if joined and (a - joined[-1][1]) / motion.fps < PLANT_GAP_S:
-                joined[-1] = (joined[-1][0], max(b, joined[-1][1]))
-            else:
-                joined.append((a, b))
-        out += [(g, a, b) for a, b in joined if (b - a) / motion.fps >= PLANT_MIN_S - 1e-9]
+        out += [(g, a, b) for a, b in _debounced(stay[:, cols], enter[:, cols], motion.fps)]
     return out

@@ -789,8 +789,10 @@ def move_feet(
     """``motion`` with each ankle ``ankles (L,)`` moved by ``shifts (F, L, 3)`` (world, motion
     units) by its leg's two-bone IK (knee and hip, as :func:`solve_foot_skate` solves them): the
     foot keeps its world orientation, so everything below the ankle moves by the same shift. A
-    leg keeps its exact rotations in frames where its shift is zero; a shift out of the leg's
-    reach is eased towards full extension (soft IK) and the rest left undone.
+    leg keeps its exact rotations in frames where its shift is zero. A target out of the leg's
+    reach in that frame (beyond its own extension or 97 % of its full length, where soft IK
+    would ease it) is brought back within reach vertically, so that the ankle still keeps its
+    place on the floor's plane: what the leg cannot reach is left undone, in height.
 
     ``fk``: the motion's :meth:`Motion.fk` when the caller has it already. Raises
     :class:`MotionError` for an ankle with no hip-knee-ankle chain or shifts of the wrong shape."""
@@ -806,5 +808,19 @@ def move_feet(
     legs = leg_chains(motion, joints, pos[0])
     if any(leg.toe >= 0 for leg in legs):
         raise MotionError("move_feet moves ankles: pass no toe joints")
-    local, _, _ = _solve_all(motion, legs, pos, grot, np.asarray(shifts, dtype=np.float64), weight, _forward(motion, pos))
+    corr = np.array(shifts, dtype=np.float64, copy=True)
+    for leg in legs:
+        slot = leg.ankle_slot
+        h, k, a = pos[:, leg.hip], pos[:, leg.knee], pos[:, leg.ankle]
+        full = (norms(k - h) + norms(a - k)) * (1.0 - 1e-6)
+        reach = np.minimum(np.maximum(norms(a - h), SOFT_IK_START * full), full) * (1.0 - 1e-9)
+        d = a + corr[:, slot] - h
+        flat = np.hypot(d[:, 0], d[:, 2])
+        far = (norms(d) > reach) & (flat < reach)
+        if far.any():  # the lower point of the vertical line through the target within reach
+            low = h[far, 1] - np.sqrt(reach[far] ** 2 - flat[far] ** 2)
+            high = h[far, 1] + np.sqrt(reach[far] ** 2 - flat[far] ** 2)
+            y = a[far, 1] + corr[far, slot, 1]
+            corr[far, slot, 1] = np.clip(y, low, high) - a[far, 1]
+    local, _, _ = _solve_all(motion, legs, pos, grot, corr, weight, _forward(motion, pos))
     return replace(motion, rotations=local)

@@ -34,7 +34,7 @@ from .motion import Motion
 
 Array = npt.NDArray[np.float64]
 
-__all__ = ["SkinnedMesh", "read_skinned_mesh", "skin", "skin_motion"]
+__all__ = ["BoundMesh", "read_skinned_mesh", "skin", "skin_motion"]
 
 _COMPONENTS: dict[int, tuple[str, float]] = {  # componentType -> dtype, normalised divisor
     5120: ("<i1", 127.0),
@@ -48,7 +48,7 @@ _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
 
 @dataclass(frozen=True)
-class SkinnedMesh:
+class BoundMesh:
     """The skinned mesh of a character, in its bind pose.
 
     Attributes
@@ -77,7 +77,7 @@ class SkinnedMesh:
     def num_vertices(self) -> int:
         return int(self.vertices.shape[0])
 
-    def reindexed(self, names: tuple[str, ...]) -> SkinnedMesh:
+    def reindexed(self, names: tuple[str, ...]) -> BoundMesh:
         """The same mesh with joints indexed by ``names`` (a character skeleton's order); every
         skin joint must be there."""
         where = {n: i for i, n in enumerate(names)}
@@ -88,7 +88,7 @@ class SkinnedMesh:
         rots = np.tile(rot.IDENTITY, (len(names), 1))
         pos = np.zeros((len(names), 3))
         rots[order], pos[order] = self.bind_rotations, self.bind_positions
-        return SkinnedMesh(self.vertices, order[self.joints], self.weights, names, rots, pos)
+        return BoundMesh(self.vertices, order[self.joints], self.weights, names, rots, pos)
 
 
 def _accessor(doc: dict[str, Any], data: bytes | bytearray, index: int) -> Array:
@@ -133,9 +133,9 @@ def _node_world(doc: dict[str, Any]) -> list[Array]:
     return [of(i) for i in range(len(nodes))]
 
 
-def read_skinned_mesh(raw: bytes, base_dir: str | Path | None = None) -> SkinnedMesh | None:
+def read_skinned_mesh(raw: bytes, base_dir: str | Path | None = None) -> BoundMesh | None:
     """The mesh primitives bound to the first skin of a glTF/GLB file, as one
-    :class:`SkinnedMesh` (triangles are not needed: only vertices touch the floor); ``None`` when
+    :class:`BoundMesh` (triangles are not needed: only vertices touch the floor); ``None`` when
     no mesh is bound to that skin or its primitives have no ``JOINTS_0``/``WEIGHTS_0``.
 
     Raises :class:`MotionError` for a file that is not glTF or whose skin data is malformed."""
@@ -188,7 +188,7 @@ def read_skinned_mesh(raw: bytes, base_dir: str | Path | None = None) -> Skinned
     lin = bind[:, :3, :3]
     u, _, vt = np.linalg.svd(lin)
     polar = u @ vt
-    return SkinnedMesh(
+    return BoundMesh(
         np.concatenate(verts)[keep],
         j_all[keep],
         w_all,
@@ -198,12 +198,12 @@ def read_skinned_mesh(raw: bytes, base_dir: str | Path | None = None) -> Skinned
     )
 
 
-def skin(mesh: SkinnedMesh, positions: Array, rotations: Array, vertices: npt.NDArray[np.intp] | None = None) -> Array:
+def skin(mesh: BoundMesh, positions: Array, rotations: Array, vertices: npt.NDArray[np.intp] | None = None) -> Array:
     """``(F, V, 3)`` the mesh's vertices (or those indexed by ``vertices``) deformed by linear
     blend skinning (module docstring), metres.
 
     ``positions (F, J, 3)`` metres and ``rotations (F, J, 4)``: the world positions and rotations
-    of the skeleton's joints, in the order ``mesh.joints`` indexes (:meth:`SkinnedMesh.reindexed`).
+    of the skeleton's joints, in the order ``mesh.joints`` indexes (:meth:`BoundMesh.reindexed`).
     """
     sel = slice(None) if vertices is None else vertices
     v = mesh.vertices[sel]
@@ -221,7 +221,7 @@ def skin(mesh: SkinnedMesh, positions: Array, rotations: Array, vertices: npt.ND
     return out
 
 
-def skin_motion(mesh: SkinnedMesh, motion: Motion, vertices: npt.NDArray[np.intp] | None = None) -> Array:
+def skin_motion(mesh: BoundMesh, motion: Motion, vertices: npt.NDArray[np.intp] | None = None) -> Array:
     """:func:`skin` on ``motion`` (a character in its own joints: the skin's joint names, any
     units, converted to metres)."""
     m = mesh.reindexed(motion.skeleton.names)

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import MotionError
 from ..motion import Motion
-from ..skinning import SkinnedMesh
+from ..skinning import BoundMesh
 from .grounding import FEET_MODES, ground_feet
 from .legik import character_soles, settle, sole_floor
 from .names import PRESETS, ROLES, Correspondence, correspond, detect_roles
@@ -60,7 +60,7 @@ def retarget(
     name_map: Mapping[str, str] | None = None,
     feet: str = "lock",
     root_motion: str | None = None,
-    mesh: SkinnedMesh | None = None,
+    mesh: BoundMesh | None = None,
 ) -> Motion:
     """``motion`` played by ``character``.
 

@@ -33,7 +33,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import rotations as rot
-from ..contacts import detect_contacts, foot_plants
+from ..contacts import bool_runs, detect_contacts, foot_plants
 from ..errors import MotionError
 from ..footskate import move_feet, solve_foot_skate
 from ..motion import Motion
@@ -46,6 +46,12 @@ FEET_MODES = ("lock", "grounding", "free")
 on the floor only; left as the transfer made them."""
 TOE_ROLL_MAX_DEG = 70.0
 """The toes bend up at most this far to stay on the floor (a foot's toes reach 60-90 degrees)."""
+FOOT_PITCH_MAX_DEG = 30.0
+"""A planted foot pitches about its ankle at most this far to reach the floor."""
+PLANT_ROUNDS = 3
+"""The passes run again (at most this many times in all) when a plant found on their result lasts
+longer than they held it (a foot brought onto the floor becomes planted a little earlier): the
+plants a result's contact events show are those whose soles were put on the floor."""
 BLEND_S = 0.1
 """Seconds over which a plant's pull onto the floor fades in and out."""
 
@@ -88,6 +94,18 @@ def _plant_flags(motion: Motion, soles: tuple[Sole, ...], pos: Array) -> npt.NDA
     return flags
 
 
+def _extensions(found: npt.NDArray[np.bool_], held: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+    """``(F, S)`` the runs of ``found`` that overlap a run of ``held`` (a plant found longer on
+    the result than it was held), not plants found anew (a foot hovering where the source plants
+    none stays off the floor)."""
+    out = np.zeros_like(found)
+    for k in range(found.shape[1]):
+        for a, b in bool_runs(found[:, k]):
+            if held[a:b, k].any():
+                out[a:b, k] = True
+    return out
+
+
 def _lowest(sole: Sole, points: Array, part: npt.NDArray[np.bool_] | None) -> Array:
     """``(F,)`` height of the lowest of ``points (F, P, 3)`` (those in ``part`` when given)."""
     sel = points if part is None else points[:, part]
@@ -114,50 +132,51 @@ def _heights(motion: Motion, soles: tuple[Sole, ...], floor: float, plants: Arra
     return out
 
 
-def _roll_toes(motion: Motion, soles: tuple[Sole, ...], floor: float, rate: float) -> Motion:
-    """Pass 2: each toe bent up about its joint (the ball) by the smallest angle that keeps its
-    sole points on or above ``floor``, at most :data:`TOE_ROLL_MAX_DEG`, enveloped in time."""
-    pos, grot = motion.fk()
+def _circle(points: Array, pivot: Array, axis: Array) -> tuple[Array, Array]:
+    """How the heights of ``points (F, P, 3)`` change as they turn about ``pivot (F, 3)`` by an
+    angle ``t`` about the horizontal unit ``axis (F, 3)``: ``y(t) = pivot_y + radius cos(t - phase)``;
+    returns ``radius (F, P)`` and ``phase (F, P)``."""
+    rel = points - pivot[:, None]
+    along = np.sum(rel * axis[:, None], axis=-1, keepdims=True)
+    perp = rel - along * axis[:, None]
+    a = perp[:, :, 1]
+    b = np.cross(np.broadcast_to(axis[:, None], perp.shape), perp)[:, :, 1]
+    return np.hypot(a, b), np.arctan2(b, a)
+
+
+def lift_angles(points: Array, pivot: Array, axis: Array, floor: float) -> Array:
+    """``(F,)`` the smallest angle ``t >= 0`` turning ``points (F, P, 3)`` about ``pivot (F, 3)``
+    and the horizontal ``axis (F, 3)`` that leaves none of them under ``floor`` (points it cannot
+    raise are left out; where the floor is out of a point's reach, the angle that raises it most)."""
+    radius, phase = _circle(points, pivot, axis)
+    c = (floor - pivot[:, 1])[:, None] / np.maximum(radius, 1e-300)
+    need = np.where(c <= 1.0, phase - np.arccos(np.clip(c, -1.0, 1.0)), phase)
+    below = radius * np.cos(phase) + pivot[:, 1, None] < floor
+    helps = (phase > 0) & (radius > 1e-9)  # turning up raises it at first
+    return np.asarray(np.where(below & helps, np.clip(need, 0.0, None), 0.0).max(axis=1))
+
+
+def reach_angles(points: Array, pivot: Array, axis: Array, floor: float) -> Array:
+    """``(F,)`` the smallest angle ``t >= 0`` turning ``points (F, P, 3)`` about ``pivot (F, 3)``
+    and the horizontal ``axis (F, 3)`` that brings one of them down onto ``floor`` (0 where one is
+    already at or under it; ``inf`` where none can reach it)."""
+    radius, phase = _circle(points, pivot, axis)
+    c = (floor - pivot[:, 1])[:, None] / np.maximum(radius, 1e-300)
+    start = np.mod(phase + np.arccos(np.clip(c, -1.0, 1.0)), 2.0 * np.pi)
+    need = np.where(c >= 1.0, 0.0, np.where(c < -1.0, np.inf, start))
+    need = np.where(radius * np.cos(phase) + pivot[:, 1, None] <= floor, 0.0, need)
+    return np.asarray(need.min(axis=1))
+
+
+def _with_turns(motion: Motion, grot: Array, turns: dict[int, Array]) -> Motion:
+    """``motion`` with joints ``turns`` keys turned in the world by the ``(F, 4)`` rotations
+    (``grot (F, J, 4)``: the motion's global rotations); their children follow."""
     local = np.array(motion.rotations, copy=True)
     parents = motion.skeleton.parents
-    up = np.array([0.0, 1.0, 0.0])
-    changed = False
-    for sole in soles:
-        if sole.toe < 0 or not sole.on_toe.any():
-            continue
-        pts = sole.positions(pos, grot)[:, sole.on_toe]  # (F, P, 3)
-        ball = pos[:, sole.toe]
-        rel = pts - ball[:, None]
-        ahead = rel.mean(axis=1) * [1.0, 0.0, 1.0]
-        ahead_n = np.linalg.norm(ahead, axis=-1, keepdims=True)
-        if not np.all(ahead_n > 1e-12):
-            ahead = np.where(ahead_n > 1e-12, ahead, rot.rotate(grot[:, sole.ankle], np.array([0.0, 0.0, 1.0])) * [1, 0, 1])
-            ahead_n = np.linalg.norm(ahead, axis=-1, keepdims=True)
-        fwd = ahead / np.maximum(ahead_n, 1e-300)
-        axis = np.cross(fwd, up)  # turning about it by a positive angle lifts points ahead
-        along = np.sum(rel * axis[:, None], axis=-1, keepdims=True)
-        perp = rel - along * axis[:, None]
-        a = perp[:, :, 1]
-        b = np.cross(np.broadcast_to(axis[:, None], perp.shape), perp)[:, :, 1]
-        radius = np.hypot(a, b)
-        phi = np.arctan2(b, a)
-        c = (floor - ball[:, 1])[:, None] / np.maximum(radius, 1e-300)
-        need = np.where(c <= 1.0, phi - np.arccos(np.clip(c, -1.0, 1.0)), phi)
-        helps = (phi > 0) & (radius > 1e-9)  # points behind the ball only go lower
-        below = np.cos(phi) * radius + ball[:, None, 1] < floor  # ... at angle 0: under the floor
-        need = np.where(helps & below, np.clip(need, 0.0, None), 0.0)
-        theta = np.minimum(need.max(axis=1), np.radians(TOE_ROLL_MAX_DEG))
-        if not theta.any():
-            continue
-        reach = float(np.max(np.linalg.norm(sole.local[sole.on_toe, 0], axis=-1), initial=0.0))
-        theta = np.minimum(upper_envelope(theta, rate / max(reach, 1e-9)), np.radians(TOE_ROLL_MAX_DEG))
-        turn = rot.from_axis_angle(axis, theta)
-        g_new = rot.multiply(turn, grot[:, sole.toe])
-        parent = int(parents[sole.toe])
-        local[:, sole.toe] = rot.multiply(rot.inverse(grot[:, parent]), g_new)
-        changed = True
-    if not changed:
-        return motion
+    for j, q in turns.items():
+        g_new = rot.multiply(q, grot[:, j])
+        p = int(parents[j])
+        local[:, j] = g_new if p < 0 else rot.multiply(rot.inverse(grot[:, p]), g_new)
     return Motion(
         motion.skeleton,
         motion.root_positions,
@@ -167,6 +186,70 @@ def _roll_toes(motion: Motion, soles: tuple[Sole, ...], floor: float, rate: floa
         motion.units,
         motion.name,
     )
+
+
+_UP = np.array([0.0, 1.0, 0.0])
+
+
+def _ahead(points: Array, pivot: Array, fallback: Array) -> Array:
+    """``(F, 3)`` unit floor direction from ``pivot (F, 3)`` to the mean of ``points (F, P, 3)``
+    (``fallback (F, 3)``'s floor direction where they are above it)."""
+    ahead = (points.mean(axis=1) - pivot) * [1.0, 0.0, 1.0]
+    norm = np.linalg.norm(ahead, axis=-1, keepdims=True)
+    other = fallback * [1.0, 0.0, 1.0]
+    ahead = np.where(norm > 1e-9, ahead, other)
+    return np.asarray(ahead / np.maximum(np.linalg.norm(ahead, axis=-1, keepdims=True), 1e-300))
+
+
+def _pitch_feet(motion: Motion, soles: tuple[Sole, ...], floor: float, plants: Array, rate: float) -> Motion:
+    """Pass 1b: a planted foot the leg could not bring down (a straight leg at push-off or at a
+    heel strike) pitches about its ankle, toes down or heel down, whichever reaches the floor
+    with less turn (at most :data:`FOOT_PITCH_MAX_DEG`), weighted by the plant and enveloped."""
+    pos, grot = motion.fk()
+    turns: dict[int, Array] = {}
+    limit = np.radians(FOOT_PITCH_MAX_DEG)
+    for k, sole in enumerate(soles):
+        w = plants[:, k]
+        if not w.any():
+            continue
+        pts = sole.positions(pos, grot)
+        ankle = pos[:, sole.ankle]
+        fwd = _ahead(pts, ankle, rot.rotate(grot[:, sole.ankle], np.array([0.0, 0.0, 1.0])))
+        axis = np.cross(_UP, fwd)  # a positive turn about it lowers points ahead of the ankle
+        down = reach_angles(pts, ankle, axis, floor)
+        back = reach_angles(pts, ankle, -axis, floor)
+        signed = np.where(down <= back, np.minimum(down, limit), -np.minimum(back, limit))
+        signed = np.where(np.isfinite(signed), signed, 0.0) * w
+        reach = float(np.max(np.linalg.norm(sole.local[:, 0], axis=-1), initial=0.0))
+        step = rate / max(reach, 1e-9)
+        toe_down = upper_envelope(np.maximum(signed, 0.0), step)
+        heel_down = upper_envelope(np.maximum(-signed, 0.0), step)
+        angle = np.minimum(toe_down, limit) - np.minimum(heel_down, limit)
+        if angle.any():
+            turns[sole.ankle] = rot.from_axis_angle(axis, angle)
+    return _with_turns(motion, grot, turns) if turns else motion
+
+
+def _roll_toes(motion: Motion, soles: tuple[Sole, ...], floor: float, rate: float) -> Motion:
+    """Pass 2: each toe bent up about its joint (the ball) by the smallest angle that keeps its
+    sole points on or above ``floor``, at most :data:`TOE_ROLL_MAX_DEG`, enveloped in time."""
+    pos, grot = motion.fk()
+    turns: dict[int, Array] = {}
+    limit = np.radians(TOE_ROLL_MAX_DEG)
+    for sole in soles:
+        if sole.toe < 0 or not sole.on_toe.any():
+            continue
+        pts = sole.positions(pos, grot)[:, sole.on_toe]  # (F, P, 3)
+        ball = pos[:, sole.toe]
+        fwd = _ahead(pts, ball, rot.rotate(grot[:, sole.ankle], np.array([0.0, 0.0, 1.0])))
+        axis = np.cross(fwd, _UP)  # a positive turn about it raises points ahead of the ball
+        theta = np.minimum(lift_angles(pts, ball, axis, floor), limit)
+        if not theta.any():
+            continue
+        reach = float(np.max(np.linalg.norm(sole.local[sole.on_toe, 0], axis=-1), initial=0.0))
+        theta = np.minimum(upper_envelope(theta, rate / max(reach, 1e-9)), limit)
+        turns[sole.toe] = rot.from_axis_angle(axis, theta)
+    return _with_turns(motion, grot, turns) if turns else motion
 
 
 def _residual(motion: Motion, soles: tuple[Sole, ...], floor: float, rate: float) -> Array:
@@ -223,14 +306,22 @@ def ground_feet(
         max_speed = standing_height(pos)
     rate = max_speed / motion.fps
     flags = _plant_flags(motion, soles, pos)
-    if mode == "lock":
+    if mode == "lock":  # the quality report's contacts, each joint on its own (a toe at push-off)
         joints = np.array([j for s in soles for j in ((s.ankle, s.toe) if s.toe >= 0 else (s.ankle,))], dtype=np.intp)
         joints, contacts = detect_contacts(motion, joints, positions=pos)
         motion = solve_foot_skate(motion, (joints, contacts), blend_s=blend_s, vertical=False).motion
-    plants = np.stack([plant_weights(flags[:, k], blend) for k in range(len(soles))], axis=1)
-    motion = _lift_feet(motion, soles, _heights(motion, soles, floor, plants, rate))
-    motion = _roll_toes(motion, soles, floor, rate)
-    lift = _residual(motion, soles, floor, rate)
-    if lift.any():
-        motion = _lift_feet(motion, soles, lift)
+    placed = motion
+    for _ in range(PLANT_ROUNDS):
+        plants = np.stack([plant_weights(flags[:, k], blend) for k in range(len(soles))], axis=1)
+        motion = _lift_feet(placed, soles, _heights(placed, soles, floor, plants, rate))
+        motion = _pitch_feet(motion, soles, floor, plants, rate)
+        motion = _roll_toes(motion, soles, floor, rate)
+        lift = _residual(motion, soles, floor, rate)
+        if lift.any():
+            motion = _lift_feet(motion, soles, lift)
+        found = _plant_flags(motion, soles, np.ascontiguousarray(motion.global_positions()))
+        longer = _extensions(found, flags)
+        if not (longer & ~flags).any():
+            break
+        flags |= longer  # a plant the result shows longer than the passes held it: hold it all
     return motion

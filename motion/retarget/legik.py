@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 from ..contacts import detect_contacts
 from ..motion import Motion
-from ..skinning import SkinnedMesh
+from ..skinning import BoundMesh
 from .grounding import ground_feet
 from .sole import Sole, bone_soles, mesh_soles, soles_floor
 from .transfer import place_hips
@@ -110,7 +110,7 @@ def settle(
 
 
 def character_soles(
-    rest: Motion, roles: dict[str, int], mesh: SkinnedMesh | None = None
+    rest: Motion, roles: dict[str, int], mesh: BoundMesh | None = None
 ) -> tuple[Sole, ...]:
     """The character's soles (:mod:`motion.retarget.sole`): from its skinned mesh when it has one,
     else from its bones."""

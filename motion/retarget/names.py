@@ -354,8 +354,8 @@ def undriven_warnings(
         if lacking:
             parts = ", ".join(role_label(r) for r in lacking)
             missing.append(label if parts == label else f"{label} ({parts})")
-    t_torso, _ = _chain_of(target, target_roles)
-    s_torso, _ = _chain_of(source, source_roles)
+    t_torso, _ = torso_chain(target, target_roles)
+    s_torso, _ = torso_chain(source, source_roles)
     if s_torso and not t_torso:
         missing.append("spine and neck (paired only when the head and both arms are known)")
     if missing:

@@ -15,8 +15,9 @@ a viewer deforms the mesh (linear blend skinning on those points):
 * **from the bones** (:func:`bone_soles`, a BVH character, a glTF skin without a mesh): a heel
   behind the ankle, the ball under the toe joint (or 70 % of the way from the heel to the tip
   without one) and the toe tip (the toe's End Site or child), each with an inner and an outer
-  point half a foot width apart (:data:`FOOT_WIDTH` of its length), all at the rest pose's floor:
-  the lowest of the feet's joints and tips.
+  point half a foot width apart (:data:`FOOT_WIDTH` of its length), all at the height of the
+  foot's lowest joint or tip in the rest pose (each foot its own: a rest pose taken from a clip
+  may lift one foot; the rest foot is what the transfer plants flat).
 
 Points are split into the heel part (moving with the foot bone) and the toe part (``on_toe``:
 moving mostly with the toe bone, which bends at the ball when the heel lifts).
@@ -32,7 +33,7 @@ import numpy.typing as npt
 from .. import rotations as rot
 from ..errors import MotionError
 from ..motion import Motion
-from ..skinning import SkinnedMesh
+from ..skinning import BoundMesh
 from .transfer import Pose, tip_positions
 
 Array = npt.NDArray[np.float64]
@@ -65,7 +66,8 @@ class Sole:
     local:
         ``(P, K, 3)`` each point in the rest frame of each of its joints (character units).
     on_toe:
-        ``(P,)`` the point moves mostly with the toe (at least half its weight below the foot).
+        ``(P,)`` the point moves mostly with the toe (more than half its weight below the foot; a
+        vertex shared half and half across the ball moves with the foot).
     rest:
         ``(P, 3)`` the points in the rest pose (character units).
     """
@@ -142,7 +144,7 @@ def _foot_length(rest: Pose, tips: Array, ankle: int, toe: int) -> float:
     return float(np.linalg.norm((tip - rest.positions[0, ankle])[[0, 2]]))
 
 
-def mesh_soles(mesh: SkinnedMesh, character: Motion, roles: dict[str, int]) -> tuple[Sole, ...]:
+def mesh_soles(mesh: BoundMesh, character: Motion, roles: dict[str, int]) -> tuple[Sole, ...]:
     """Each foot's sole from the character's skinned mesh (module docstring), ``character`` in
     its rest pose (frame 0, the skin's joints, metres) and ``roles`` its role -> joint index.
 
@@ -177,7 +179,7 @@ def mesh_soles(mesh: SkinnedMesh, character: Motion, roles: dict[str, int]) -> t
         low = placed[idx, 1] <= placed[idx, 1].min() + SOLE_BAND * length
         idx = idx[low]
         toe_share = np.where(below[m.joints[idx]], m.weights[idx], 0.0).sum(axis=1)
-        on_toe = toe_share >= 0.5
+        on_toe = toe_share > 0.5 + 1e-6
         keep = []
         for part in (~on_toe, on_toe):
             sel = idx[part]
@@ -185,7 +187,7 @@ def mesh_soles(mesh: SkinnedMesh, character: Motion, roles: dict[str, int]) -> t
                 keep.append(sel[_hull_corners(placed[sel])])
         chosen = np.concatenate(keep)
         joints, weights, local = _bound(placed[chosen], m.joints[chosen], m.weights[chosen], rest)
-        toe_part = np.where(below[m.joints[chosen]], m.weights[chosen], 0.0).sum(axis=1) >= 0.5
+        toe_part = np.where(below[m.joints[chosen]], m.weights[chosen], 0.0).sum(axis=1) > 0.5 + 1e-6
         out.append(Sole(side, ankle, toe, joints, weights, local, toe_part, placed[chosen]))
     return tuple(out)
 
@@ -197,19 +199,14 @@ def bone_soles(character: Motion, roles: dict[str, int]) -> tuple[Sole, ...]:
     rest = Pose.of(first)
     tips = tip_positions(first, rest)
     p = rest.positions[0]
-    feet = []
+    up = np.array([0.0, 1.0, 0.0])
+    out = []
     for side in SIDES:
         ankle = roles[f"{side}Foot"]
         toe = roles.get(f"{side}Toes", -1)
-        feet.append((side, ankle, toe))
-    heights = [p[a, 1] for _, a, _ in feet]
-    heights += [tips[0, t if t >= 0 else a, 1] for _, a, t in feet]
-    heights += [p[t, 1] for _, _, t in feet if t >= 0]
-    floor = float(min(heights))
-    up = np.array([0.0, 1.0, 0.0])
-    out = []
-    for side, ankle, toe in feet:
         tip = tips[0, toe if toe >= 0 else ankle]
+        # the foot's own lowest joint or tip: a rest pose taken from a clip may lift one foot
+        floor = float(min(p[ankle, 1], tip[1], p[toe, 1] if toe >= 0 else np.inf))
         ahead = (tip - p[ankle]) * [1.0, 0.0, 1.0]
         length = float(np.linalg.norm(ahead))
         if length < 1e-9:  # a foot with no length ahead of the ankle: a point under the ankle

@@ -11,6 +11,12 @@ from __future__ import annotations
 import json
 import struct
 
+import numpy as np
+
+from motion import Motion, Skeleton
+from motion import rotations as rot
+from motion.skeleton import default_channels
+
 NAMINGS = ("unreal", "mixamo", "own")
 
 _SIDES = {"l": ("Left", "L"), "r": ("Right", "R")}
@@ -85,3 +91,37 @@ def renamed_glb(raw: bytes, naming: str) -> bytes:
     rest = raw[20 + n :]
     total = 12 + 8 + len(text) + len(rest)
     return b"".join((struct.pack("<4sII", b"glTF", 2, total), struct.pack("<II", len(text), 0x4E4F534A), text, rest))
+
+
+def game_rig() -> Motion:
+    """The skeleton of :mod:`tests.motion.retarget.gltf_rig` (Unreal names, a root at the floor, a
+    ball joint per foot, End Sites at the head's, hands' and toes' tips) as a one-frame motion in
+    metres, standing in its rest pose (zero rotations: legs down, arms out)."""
+    from .gltf_rig import JOINTS, PARENTS, TIPS
+
+    names = tuple(j[0] for j in JOINTS)
+    pos = np.array([j[2] for j in JOINTS])
+    parents = np.array(PARENTS, dtype=np.intp)
+    offsets = np.array([pos[k] - (pos[p] if p >= 0 else 0.0) for k, p in enumerate(parents)])
+    tips = [(names.index(n), np.array(t) - pos[names.index(n)]) for n, t in TIPS.items()]
+    skeleton = Skeleton(
+        names,
+        parents,
+        offsets,
+        default_channels(len(names)),
+        np.array([k for k, _ in tips], dtype=np.intp),
+        np.array([o for _, o in tips]),
+    )
+    q = np.tile(rot.IDENTITY, (1, len(names), 1))
+    return Motion(skeleton, offsets[:1].copy(), q, 30.0, units="m", name="game_rig")
+
+
+def mannequin_character(naming: str = "unreal", rest: Motion | None = None) -> bytes:
+    """A skinned character GLB: Segue's mannequin (:func:`motion.export.mannequin.mannequin_glb`:
+    smooth weights, a heel behind the ankle, a ball and toes, soles flat on the rest floor) on
+    ``rest`` (default :func:`game_rig`, in Unreal names), its joints named after ``naming``."""
+    from motion.export.mannequin import mannequin_glb
+
+    rest = game_rig() if rest is None else rest
+    names = [name_in(naming, n) for n in rest.skeleton.names]
+    return mannequin_glb(rest, names=names)
