@@ -34,7 +34,7 @@ from .motion import Motion
 
 Array = npt.NDArray[np.float64]
 
-__all__ = ["BoundMesh", "read_skinned_mesh", "skin", "skin_motion"]
+__all__ = ["BoundMesh", "animation_pose", "read_skinned_mesh", "skin", "skin_motion"]
 
 _COMPONENTS: dict[int, tuple[str, float]] = {  # componentType -> dtype, normalised divisor
     5120: ("<i1", 127.0),
@@ -227,3 +227,79 @@ def skin_motion(mesh: BoundMesh, motion: Motion, vertices: npt.NDArray[np.intp] 
     m = mesh.reindexed(motion.skeleton.names)
     pos, grot = motion.fk()
     return skin(m, pos * motion.metres_per_unit, grot, vertices)
+
+
+def _interpolate(times: Array, keys: Array, values: Array, rotation: bool) -> Array:
+    """``values (K, W)`` keyed at ``keys (K,)`` sampled at ``times (T,)`` (LINEAR: lerp, or slerp
+    for rotations; held before the first key and after the last)."""
+    if keys.size == 1:
+        return np.repeat(values[:1], times.size, axis=0)
+    i = np.clip(np.searchsorted(keys, times, side="right") - 1, 0, keys.size - 2)
+    span = np.maximum(keys[i + 1] - keys[i], 1e-12)
+    t = np.clip((times - keys[i]) / span, 0.0, 1.0)
+    if rotation:
+        return np.asarray(rot.slerp(rot.normalize(values[i]), rot.normalize(values[i + 1]), t))
+    return np.asarray(values[i] + t[:, None] * (values[i + 1] - values[i]))
+
+
+def animation_pose(
+    raw: bytes, animation: int = -1, base_dir: str | Path | None = None
+) -> tuple[tuple[str, ...], Array, Array, Array]:
+    """The first skin's joints posed by one animation of a glTF/GLB file, as a viewer plays it.
+
+    Returns the joint names, ``positions (F, J, 3)`` (metres) and ``rotations (F, J, 4)`` of the
+    joints in the world (nodes above the skin included, their scale in the bind transforms) at
+    the animation's key times ``times (F,)`` (the sampler input with the most keys, seconds); other
+    channels are interpolated there (LINEAR; STEP and CUBICSPLINE samplers are refused)."""
+    from .export.gltf_doc import read_gltf
+    from .retarget.character import _node_matrix
+
+    try:
+        doc, data = read_gltf(raw, base_dir)
+    except ExportError as exc:
+        raise MotionError(str(exc)) from None
+    try:
+        anim = doc["animations"][animation]
+        nodes = doc["nodes"]
+        inputs = {int(s["input"]) for s in anim["samplers"]}
+        main = max(inputs, key=lambda a: int(doc["accessors"][a]["count"]))
+        times = _accessor(doc, data, main)[:, 0]
+        count = times.size
+        trs = []
+        for nd in nodes:
+            m = _node_matrix(nd)
+            scale = np.linalg.norm(m[:3, :3], axis=0)
+            q = rot.from_matrix(m[:3, :3] / np.where(scale > 0, scale, 1.0))
+            trs.append([np.tile(m[:3, 3], (count, 1)), np.tile(q, (count, 1)), scale])
+        for ch in anim["channels"]:
+            sampler = anim["samplers"][int(ch["sampler"])]
+            if sampler.get("interpolation", "LINEAR") != "LINEAR":
+                raise MotionError(f"{sampler['interpolation']} animation samplers are not read here")
+            path = ch["target"]["path"]
+            if path not in ("translation", "rotation"):
+                continue
+            keys = _accessor(doc, data, int(sampler["input"]))[:, 0]
+            values = _accessor(doc, data, int(sampler["output"]))
+            trs[int(ch["target"]["node"])][0 if path == "translation" else 1] = _interpolate(
+                times, keys, values, path == "rotation"
+            )
+        parent = {int(c): i for i, nd in enumerate(nodes) for c in nd.get("children", [])}
+        world: dict[int, Array] = {}
+
+        def of(i: int) -> Array:
+            if i not in world:
+                t, q, s = trs[i]
+                m = np.tile(np.eye(4), (count, 1, 1))
+                m[:, :3, :3] = rot.to_matrix(rot.normalize(q)) * s
+                m[:, :3, 3] = t
+                world[i] = of(parent[i]) @ m if i in parent else m
+            return world[i]
+
+        joints = [int(j) for j in doc["skins"][0]["joints"]]
+        mats = np.stack([of(j) for j in joints], axis=1)  # (F, J, 4, 4)
+        names = tuple(str(nodes[j].get("name") or f"joint{j}") for j in joints)
+    except (IndexError, KeyError, TypeError, ValueError) as exc:
+        raise MotionError(f"malformed glTF animation: {exc}") from None
+    u, _, vt = np.linalg.svd(mats[..., :3, :3])
+    rotations = rot.normalize(rot.from_matrix(u @ vt))
+    return names, mats[..., :3, 3].copy(), np.asarray(rotations), times

@@ -33,6 +33,16 @@ FOOT_ROLES = ("LeftFoot", "LeftToes", "RightFoot", "RightToes")
 FLOOR_PERCENTILE = 5.0
 
 
+def foot_groups_of(roles: dict[str, int]) -> list[tuple[int, ...]]:
+    """The character's feet as :func:`motion.contacts.foot_plants` and the contact events take
+    them: per side, the ankle then the toe (when it has one), by role (a role map's names count)."""
+    return [
+        tuple(roles[side + part] for part in ("Foot", "Toes") if side + part in roles)
+        for side in ("Left", "Right")
+        if side + "Foot" in roles
+    ]
+
+
 def foot_joints(roles: dict[str, int]) -> npt.NDArray[np.intp]:
     """The character's ankle and toe joints (those it has), ``(K,)``."""
     return np.array([roles[r] for r in FOOT_ROLES if r in roles], dtype=np.intp)

@@ -276,7 +276,9 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     from motion.io import load_motion, save_motion
     from motion.retarget import correspond, retarget
     from motion.retarget.character import GLTF_SUFFIXES, load_character
+    from motion.retarget.legik import foot_groups_of
     from motion.retarget.rootmotion import default_root_motion
+    from motion.skinning import read_skinned_mesh
     from motion.units import METRES_PER_UNIT
 
     name_map = None
@@ -300,13 +302,18 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     motion = load_motion(_resolve(args.motion), units=args.in_units, limits=_limits(args))
     motion, reference = _without_reference(motion, args.motion, args)
     character = load_character(to, rest=args.rest, limits=_limits(args))
+    mesh = read_skinned_mesh(to.read_bytes(), base_dir=to.parent) if gltf_character else None
     t0 = time.perf_counter()
     corr = correspond(motion.skeleton, character.skeleton, name_map)
+    for warning in corr.warnings:
+        print(f"segue: warning: {warning}", file=sys.stderr)
     mode = args.root_motion or default_root_motion(args.target, corr.target_roles["Hips"])
-    out = retarget(motion, character, name_map=name_map, feet="free" if args.no_plant else args.feet, root_motion=mode)
+    feet = "free" if args.no_plant else args.feet
+    out = retarget(motion, character, name_map=name_map, feet=feet, root_motion=mode, mesh=mesh)
+    groups = foot_groups_of(corr.target_roles)
     notes: list[str] = []
     if glb_out:
-        events = contact_events(out) if kinds else None
+        events = contact_events(out, feet=groups) if kinds else None
         if gltf_character:  # the character's own file, with the animation added
             data = bound_glb(
                 to.read_bytes(), out, animation_only=args.animation_only, events=events, base_dir=to.parent
@@ -320,7 +327,14 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     else:
         # the character's own units, exactly
         keep = out.units in METRES_PER_UNIT
-        notes = save_motion(out, args.out, units=out.units if keep else None, events=kinds)
+        extra = contact_events(out, feet=groups) if kinds else None
+        notes = save_motion(
+            out,
+            args.out,
+            units=out.units if keep else None,
+            events=kinds if not extra else (),  # no contact found: as any file (.bvh refuses events)
+            extra_events=extra or (),
+        )
     for note in reference + notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
