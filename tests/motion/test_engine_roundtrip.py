@@ -74,7 +74,19 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     (folder / "couple.glb").write_bytes(glb_bytes(couple))
     body_walk = walk.slice(0, 100)
     (folder / "body_walk.glb").write_bytes(glb_bytes(body_walk, mesh="body"))
-    return {"folder": folder, "moved": moved, "events": events, "couple": people, "body_walk": body_walk}
+    dancers = [
+        replace(base, root_positions=base.root_positions + np.array([k * 80.0, 0.0, k * 40.0])) for k in range(3)
+    ]
+    crowd = combine_characters(dancers, ["c0_", "c1_", "c2_"])
+    (folder / "crowd.glb").write_bytes(glb_bytes(crowd, mesh="body"))
+    return {
+        "folder": folder,
+        "moved": moved,
+        "events": events,
+        "couple": people,
+        "body_walk": body_walk,
+        "crowd": dancers,
+    }
 
 
 def _segue_positions(moved: Any) -> np.ndarray:
@@ -211,6 +223,25 @@ def test_godot_binds_the_walk_and_its_root_motion_recipe_ends_where_root_ends(
     assert got["events"] == files["events"]  # read from the file by the documented GDScript
     # the recipe the docs gave before (each step turned by the body's heading) ends elsewhere
     assert np.abs(np.array(recipe["end_turned_each_step"]) - travel).max() > 0.1
+
+
+def test_godot_deforms_each_dancer_of_a_crowd_with_its_own_skin(
+    files: dict[str, Any], godot: dict[str, dict[str, Any]]
+) -> None:
+    """Godot 3.2 merges skins whose bind poses are equal: with every dancer bound at the origin,
+    dancers 1 and 2 were deformed by dancer 0's skin (their meshes collapsed onto it). Each
+    dancer is now bound where it stands in its first frame."""
+    got = godot["crowd.glb"]
+    assert len(got["skeletons"]) == 3
+    meshes = got["meshes"]
+    assert len(meshes) == 3 and all(m["skin"] for m in meshes)
+    assert len({m["skin_ref"] for m in meshes}) == 3  # three skins, none merged
+    assert sorted(m["skeleton_path"].split("/")[0] for m in meshes) == ["c0", "c1", "c2"]  # its own Skeleton
+    for k, dancer in enumerate(files["crowd"]):
+        (mesh,) = [m for m in meshes if m["skeleton_path"].startswith(f"c{k}/")]
+        # a bind pose is the inverse of the joint's rest: its origin is minus the root's place
+        root = -np.array(mesh["binds"][0])
+        assert np.allclose(root[[0, 2]], dancer.root_positions[0, [0, 2]] * 0.01, atol=1e-3)
 
 
 def test_godot_gives_each_dancer_a_skeleton_and_an_animation(godot: dict[str, dict[str, Any]]) -> None:

@@ -194,8 +194,17 @@ def test_crowd_has_one_skin_per_character_and_grows_linearly() -> None:
     skins = gltf["skins"]
     assert len(skins) == 3
     assert len({j for s in skins for j in s["joints"]}) == sum(len(s["joints"]) for s in skins)
-    assert len(gltf["meshes"]) == 1  # same bind pose: one bone mesh, one set of bind matrices
-    assert len({s["inverseBindMatrices"] for s in skins}) == 1
+    # each character bound where it stands in its first frame (Godot 3.2 merges equal skins): its
+    # own bind matrices and vertex positions; the same body shares its other vertex attributes
+    assert len({s["inverseBindMatrices"] for s in skins}) == 3
+    prims = [m["primitives"][0] for m in gltf["meshes"]]
+    assert len({p["attributes"]["POSITION"] for p in prims}) == 3
+    for key in ("NORMAL", "JOINTS_0", "WEIGHTS_0"):
+        assert len({p["attributes"][key] for p in prims}) == 1
+    ibms = [glb.accessor(s["inverseBindMatrices"]) for s in skins]
+    for k, (ibm, person) in enumerate(zip(ibms, people, strict=True)):
+        root = np.linalg.inv(ibm[0])[:3, 3]
+        np.testing.assert_allclose(root[[0, 2]], person.root_positions[0, [0, 2]] * 0.01, atol=1e-5)
     mesh_nodes = [n for n in gltf["nodes"] if "mesh" in n]
     assert sorted(n["skin"] for n in mesh_nodes) == [0, 1, 2]
     nodes = gltf["nodes"]
@@ -222,6 +231,13 @@ def test_crowd_has_one_skin_per_character_and_grows_linearly() -> None:
     assert per == pytest.approx(sizes[1] - sizes[0], rel=0.02)  # linear in the number of characters
     heights = rest_heights(data)
     assert min(heights.values()) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_characters_at_one_place_still_have_skins_of_their_own() -> None:
+    base = motion.read_bvh(sample_path("walk-05-01")).slice(0, 30)
+    glb = read_glb(glb_bytes(combine_characters([base, base, base], ["c0_", "c1_", "c2_"])))
+    roots = [np.linalg.inv(glb.accessor(s["inverseBindMatrices"])[0])[:3, 3] for s in glb.gltf["skins"]]
+    assert np.diff(np.array(roots)[:, 0]) == pytest.approx([0.001, 0.001], abs=2e-6)  # 1 mm apart
 
 
 def test_crowd_contact_events_name_their_character() -> None:

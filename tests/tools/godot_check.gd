@@ -68,7 +68,15 @@ func _check(path, times, root_track):
 	var meshes = []
 	_find(scene, "MeshInstance", meshes)
 	for m in meshes:
-		out["meshes"].append({"name": m.name, "skeleton": str(m.skeleton), "skin": m.skin != null})
+		var binds = []
+		if m.skin != null:
+			for i in range(m.skin.get_bind_count()):
+				var o = m.skin.get_bind_pose(i).origin
+				binds.append([o.x, o.y, o.z])
+		var skel = m.get_node_or_null(m.skeleton)
+		out["meshes"].append({"name": m.name, "skeleton": str(m.skeleton), "skin": m.skin != null,
+			"skin_ref": str(m.skin), "binds": binds,
+			"skeleton_path": str(scene.get_path_to(skel)) if skel != null else ""})
 	var players = []
 	_find(scene, "AnimationPlayer", players)
 	if players.empty():
