@@ -93,16 +93,20 @@ def renamed_glb(raw: bytes, naming: str) -> bytes:
     return b"".join((struct.pack("<4sII", b"glTF", 2, total), struct.pack("<II", len(text), 0x4E4F534A), text, rest))
 
 
-def game_rig() -> Motion:
+def game_rig(root: bool = True) -> Motion:
     """The skeleton of :mod:`tests.motion.retarget.gltf_rig` (Unreal names, a root at the floor, a
     ball joint per foot, End Sites at the head's, hands' and toes' tips) as a one-frame motion in
-    metres, standing in its rest pose (zero rotations: legs down, arms out)."""
-    from .gltf_rig import JOINTS, PARENTS, TIPS
+    metres, standing in its rest pose (zero rotations: legs down, arms out). ``root=False``: the
+    skeleton starts at its hips (as Mixamo's does), without ``root`` and ``ik_foot_root``."""
+    from .gltf_rig import JOINTS
 
-    names = tuple(j[0] for j in JOINTS)
-    pos = np.array([j[2] for j in JOINTS])
-    parents = np.array(PARENTS, dtype=np.intp)
+    joints = [j for j in JOINTS if root or j[0] not in ("root", "ik_foot_root")]
+    names = tuple(j[0] for j in joints)
+    pos = np.array([j[2] for j in joints])
+    parents = np.array([names.index(p) if p in names else -1 for _, p, _ in joints], dtype=np.intp)
     offsets = np.array([pos[k] - (pos[p] if p >= 0 else 0.0) for k, p in enumerate(parents)])
+    from .gltf_rig import TIPS
+
     tips = [(names.index(n), np.array(t) - pos[names.index(n)]) for n, t in TIPS.items()]
     skeleton = Skeleton(
         names,
