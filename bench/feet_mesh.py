@@ -121,7 +121,9 @@ def _load_source(path: Path) -> Motion:
     return m
 
 
-def _retarget(code: Path, src: Path, char: Path, out: Path, role_map: dict[str, str] | None) -> tuple[bool, str]:
+def _retarget(
+    code: Path, src: Path, char: Path, out: Path, role_map: dict[str, str] | None
+) -> tuple[bool, str]:
     cmd = [sys.executable, "-m", "service.cli", "retarget", str(src), "--to", str(char), "--out", str(out),
            "--events", "contacts", "--quiet"]  # fmt: skip
     if role_map is not None:
@@ -176,7 +178,9 @@ def measure(out_glb: bytes, source: Motion, rest: Motion, naming: str) -> dict[s
     foot_vertices = {}
     for side, joints in sides.items():
         inside = _subtree(parents, joints[0])
-        foot_vertices[side] = np.flatnonzero(np.where(inside[mesh.joints], mesh.weights, 0.0).sum(axis=1) >= 0.5)
+        foot_vertices[side] = np.flatnonzero(
+            np.where(inside[mesh.joints], mesh.weights, 0.0).sum(axis=1) >= 0.5
+        )
     bind = skin(mesh, mesh.bind_positions[None], mesh.bind_rotations[None])[0]
     floor = float(bind[:, 1].min())
     n = pos.shape[0]

@@ -153,7 +153,9 @@ def bool_runs(flags: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
-def _debounced(stay: npt.NDArray[np.bool_], enter: npt.NDArray[np.bool_], fps: float) -> list[tuple[int, int]]:
+def _debounced(
+    stay: npt.NDArray[np.bool_], enter: npt.NDArray[np.bool_], fps: float
+) -> list[tuple[int, int]]:
     """Runs of ``stay (F, K)`` (any of the K columns) that contain an ``enter`` frame of the same
     column, lifts shorter than :data:`PLANT_GAP_S` bridged and runs shorter than
     :data:`PLANT_MIN_S` dropped."""
@@ -170,7 +172,9 @@ def _debounced(stay: npt.NDArray[np.bool_], enter: npt.NDArray[np.bool_], fps: f
     return [(a, b) for a, b in joined if (b - a) / fps >= PLANT_MIN_S - 1e-9]
 
 
-def _plant_tests(motion: Motion, joints: npt.NDArray[np.intp], pos: Array) -> tuple[Array, Array] | None:
+def _plant_tests(
+    motion: Motion, joints: npt.NDArray[np.intp], pos: Array
+) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]] | None:
     """``(enter, stay)`` flags ``(F, K)`` of ``joints`` (None for a motion too short or flat)."""
     height = standing_height(pos)
     if motion.num_frames < 2 or height <= 0:
@@ -180,25 +184,6 @@ def _plant_tests(motion: Motion, joints: npt.NDArray[np.intp], pos: Array) -> tu
         _plant_flags(feet, motion.fps, height, *PLANT_ENTER),
         _plant_flags(feet, motion.fps, height, *PLANT_STAY),
     )
-
-
-def joint_plants(
-    motion: Motion, joints: npt.NDArray[np.intp], *, positions: Array | None = None
-) -> npt.NDArray[np.bool_]:
-    """``(F, K)`` the frames each of ``joints (K,)`` is planted, as :func:`foot_plants` finds a
-    plant (hysteresis, bridged lifts, no blips), each joint on its own: a heel planted while its
-    toe is, or a toe planted on its own at push-off."""
-    idx = np.asarray(joints, dtype=np.intp).reshape(-1)
-    out = np.zeros((motion.num_frames, idx.size), dtype=bool)
-    pos = motion.global_positions() if positions is None else positions
-    tests = _plant_tests(motion, idx, pos)
-    if tests is None:
-        return out
-    enter, stay = tests
-    for k in range(idx.size):
-        for a, b in _debounced(stay[:, k : k + 1], enter[:, k : k + 1], motion.fps):
-            out[a:b, k] = True
-    return out
 
 
 def foot_plants(

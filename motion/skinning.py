@@ -177,9 +177,8 @@ def read_skinned_mesh(raw: bytes, base_dir: str | Path | None = None) -> BoundMe
     if not verts:
         return None
     width = max(j.shape[1] for j in vj)
-    pad = [(np.pad(j, ((0, 0), (0, width - j.shape[1]))), np.pad(w, ((0, 0), (0, width - w.shape[1])))) for j, w in zip(vj, vw, strict=True)]
-    j_all = np.concatenate([p[0] for p in pad]).astype(np.intp)
-    w_all = np.maximum(np.concatenate([p[1] for p in pad]), 0.0)
+    j_all = np.concatenate([np.pad(j, ((0, 0), (0, width - j.shape[1]))) for j in vj]).astype(np.intp)
+    w_all = np.maximum(np.concatenate([np.pad(w, ((0, 0), (0, width - w.shape[1]))) for w in vw]), 0.0)
     if j_all.size and (j_all.min() < 0 or j_all.max() >= len(joints)):
         raise MotionError("a vertex of the skinned mesh names a joint the skin does not have")
     total = w_all.sum(axis=1, keepdims=True)
@@ -194,11 +193,13 @@ def read_skinned_mesh(raw: bytes, base_dir: str | Path | None = None) -> BoundMe
         w_all,
         names,
         rot.normalize(rot.from_matrix(polar)),
-        bind[:, :3, 3].copy(),
+        np.asarray(bind[:, :3, 3], dtype=np.float64).copy(),
     )
 
 
-def skin(mesh: BoundMesh, positions: Array, rotations: Array, vertices: npt.NDArray[np.intp] | None = None) -> Array:
+def skin(
+    mesh: BoundMesh, positions: Array, rotations: Array, vertices: npt.NDArray[np.intp] | None = None
+) -> Array:
     """``(F, V, 3)`` the mesh's vertices (or those indexed by ``vertices``) deformed by linear
     blend skinning (module docstring), metres.
 
@@ -216,7 +217,9 @@ def skin(mesh: BoundMesh, positions: Array, rotations: Array, vertices: npt.NDAr
             continue
         j = js[used, k]
         local = rot.rotate(rot.inverse(mesh.bind_rotations[j]), v[used] - mesh.bind_positions[j])  # (U, 3)
-        world = positions[:, j] + rot.rotate(rotations[:, j], np.broadcast_to(local, (positions.shape[0], *local.shape)))
+        world = positions[:, j] + rot.rotate(
+            rotations[:, j], np.broadcast_to(local, (positions.shape[0], *local.shape))
+        )
         out[:, used] += w[used, None] * world
     return out
 

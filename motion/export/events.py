@@ -20,8 +20,6 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import numpy as np
-
 from ..contacts import (  # noqa: F401  (the plant thresholds, re-exported)
     PLANT_ENTER,
     PLANT_GAP_S,
@@ -39,6 +37,7 @@ Event = dict[str, Any]
 
 EVENT_KINDS = ("contacts", "beats", "labels")
 """What ``events`` may ask for (CLI ``--events``, HTTP ``events=``)."""
+
 
 def contact_runs(motion: Motion, feet: Sequence[tuple[int, ...]] | None = None) -> list[tuple[int, int, int]]:
     """The foot plants of ``motion``: ``(joint, start frame, end frame exclusive)`` per plant, the

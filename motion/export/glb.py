@@ -439,8 +439,12 @@ class _Geometry:
                 "JOINTS_0": b.accessor(
                     b.view(m.joints.astype(np.uint16), ARRAY_BUFFER), 0, UNSIGNED_SHORT, n, "VEC4"
                 ),
-                "WEIGHTS_0": b.accessor(b.view(m.weights.astype(np.float32), ARRAY_BUFFER), 0, FLOAT, n, "VEC4"),
-                "indices": b.accessor(b.view(index, ELEMENT_ARRAY_BUFFER), 0, index_type, len(index), "SCALAR"),
+                "WEIGHTS_0": b.accessor(
+                    b.view(m.weights.astype(np.float32), ARRAY_BUFFER), 0, FLOAT, n, "VEC4"
+                ),
+                "indices": b.accessor(
+                    b.view(index, ELEMENT_ARRAY_BUFFER), 0, index_type, len(index), "SCALAR"
+                ),
             }
         attributes = {"POSITION": position, **{k: v for k, v in self.shared.items() if k != "indices"}}
         return {"attributes": attributes, "indices": self.shared["indices"], "material": 0, "mode": 4}
@@ -469,7 +473,9 @@ def _moved(rest: _Rest, m: Motion, at: Array) -> _Rest:
     t = np.array(rest.translations, copy=True)
     t[0] = t[0] + at
     sk = m.skeleton
-    g, ends = _rest_fk(sk.parents, t, rest.rotations, sk.end_site_parents, sk.end_site_offsets * m.metres_per_unit)
+    g, ends = _rest_fk(
+        sk.parents, t, rest.rotations, sk.end_site_parents, sk.end_site_offsets * m.metres_per_unit
+    )
     return _Rest(rest.rotations, t, g, ends)
 
 

@@ -307,7 +307,9 @@ def ground_feet(
     rate = max_speed / motion.fps
     flags = _plant_flags(motion, soles, pos)
     if mode == "lock":  # the quality report's contacts, each joint on its own (a toe at push-off)
-        joints = np.array([j for s in soles for j in ((s.ankle, s.toe) if s.toe >= 0 else (s.ankle,))], dtype=np.intp)
+        joints = np.array(
+            [j for s in soles for j in ((s.ankle, s.toe) if s.toe >= 0 else (s.ankle,))], dtype=np.intp
+        )
         joints, contacts = detect_contacts(motion, joints, positions=pos)
         motion = solve_foot_skate(motion, (joints, contacts), blend_s=blend_s, vertical=False).motion
     placed = motion

@@ -119,9 +119,7 @@ def settle(
     return place_hips(motion, hips, pos[:, hips] - np.array([0.0, shift, 0.0]))
 
 
-def character_soles(
-    rest: Motion, roles: dict[str, int], mesh: BoundMesh | None = None
-) -> tuple[Sole, ...]:
+def character_soles(rest: Motion, roles: dict[str, int], mesh: BoundMesh | None = None) -> tuple[Sole, ...]:
     """The character's soles (:mod:`motion.retarget.sole`): from its skinned mesh when it has one,
     else from its bones."""
     return mesh_soles(mesh, rest, roles) if mesh is not None else bone_soles(rest, roles)
@@ -165,4 +163,56 @@ def plant_feet(
     rest = motion.slice(0, 1) if rest is None else rest
     soles = character_soles(rest, roles) if soles is None else soles
     floor = sole_floor(motion, soles, rest, roles)
+    return ground_feet(motion, soles, floor, mode=mode)
+
+
+def feet_on_floor(motion: Motion, mode: str) -> Motion:
+    """A motion's own feet (not retargeted) kept on its floor (:func:`motion.retarget.grounding.ground_feet`):
+    ``"lock"`` holds planted feet in place and keeps soles on the floor, ``"grounding"`` keeps
+    soles on the floor only, ``"free"`` returns ``motion`` as it is. Its roles are found by name
+    (:func:`motion.retarget.names.detect_roles`); its soles are made from its bones in a standing
+    pose (its zero pose when that stands, else its first frame); its floor is the soles' usual
+    lowest level (the 5th percentile over frames of the lower sole's lowest point). A combined
+    motion of several characters (a crowd) has each character's feet kept on its floor.
+
+    Raises :class:`MotionError` naming the missing joints when the skeleton's hips, legs and feet
+    are not found under any naming convention."""
+    from ..errors import MotionError
+    from ..export.characters import combine_characters, split_characters, without_prefix
+    from .names import REQUIRED, detect_roles, role_label
+    from .transfer import zero_pose
+
+    if mode == "free" or motion.num_frames < 2:
+        return motion
+    chars = split_characters(motion)
+    if chars is not None:
+        done = []
+        for c in chars:
+            plain, pre = without_prefix(c)
+            moved = feet_on_floor(plain, mode)
+            kept = Motion(
+                c.skeleton,
+                moved.root_positions,
+                moved.rotations,
+                c.fps,
+                moved.joint_translations,
+                c.units,
+                c.name,
+            )
+            done.append((kept, pre))
+        return combine_characters([m for m, _ in done], [p for _, p in done])
+    roles = detect_roles(motion.skeleton).joints
+    missing = [r for r in REQUIRED if r not in roles]
+    if missing:
+        raise MotionError(
+            "cannot keep the feet on the floor: no joint found for "
+            f"{', '.join(role_label(r) for r in missing)} (joint names of a known convention are "
+            "needed; --feet free leaves the motion as it is)"
+        )
+    zero = zero_pose(motion)
+    rest = zero if rest_ankle_height(zero, roles) is not None else motion.slice(0, 1)
+    soles = bone_soles(rest, roles)
+    pos, grot = motion.fk()
+    low = np.min([s.positions(pos, grot)[:, :, 1].min(axis=1) for s in soles], axis=0)
+    floor = float(np.percentile(low, FLOOR_PERCENTILE))
     return ground_feet(motion, soles, floor, mode=mode)

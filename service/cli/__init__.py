@@ -7,16 +7,19 @@ Commands::
                                                   labels, skeleton; what a graph build left out)
     segue beats FILE [--json] [--joints A,B] [--positions] [--tempo LO:HI]   motion beats (Kim et al. 2003)
     segue beats SONG.wav [--json] [--tempo-bpm X]      music beats of a recording (WAV, FLAC, Ogg, MP3)
-    segue convert IN OUT [--fps N] [--target T]   BVH -> .bvh/.bvh.gz/.glb/.json/.npz
+    segue convert IN OUT [--fps N] [--target T] [--feet lock|grounding|free]
+                                                  BVH -> .bvh/.bvh.gz/.glb/.json/.npz
     segue retarget MOTION --to CHARACTER --out OUT [--map MAP.json] [--rest first|zero]
            [--target T] [--root-motion root|hips|none] [--animation-only] [--events contacts]
+           [--feet lock|grounding|free] [--report FEET.json]
                                                   the motion on another character (BVH or GLB/glTF skin;
                                                   a GLB character's own file with the animation added)
     segue samples                                 list the bundled samples (clips and a MIDI song)
     segue demo [--out DIR]                        convert a bundled clip and dance it (rhythm)
     segue demo ENGINE [--out DIR]                 one engine end to end on bundled clips (service.demos)
     segue build SPEC.json --out DIR               build a database (same JSON as POST /v1/databases)
-    segue synth REQUEST.json --db DIR --out OUT   run a job in-process (same JSON as POST /v1/jobs)
+    segue synth REQUEST.json --db DIR --out OUT [--feet lock|grounding|free]
+                                                  run a job in-process (same JSON as POST /v1/jobs)
     segue graph DIR [--json]                      a rhythm database's movement transition graph
     segue graph-edit DIR EDITS.json --out DIR2    derive a database with an edited movement graph
     segue serve [--host H] [--port P] [--redis URL] [--import DIR]   the HTTP/WebSocket API (+ embedded
@@ -39,9 +42,9 @@ from collections.abc import Sequence
 
 from .demo import cmd_demo
 from .files import (
+    FEET_MODES,
     OUTPUT_SUFFIXES,
     SAMPLE_PREFIX,
-    FEET_MODES,
     TARGETS,
     UNITS,
     cmd_beats,
@@ -184,6 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
         help=".glb: the body stays over the origin; the root motion stays on the ground joint",
     )
     p.add_argument("--events", help="contacts: foot-contact events in .glb extras / .json events")
+    feet_option(p, "free", "; the motion's own feet, soles from its bones")
     reference_options(p)
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
@@ -207,6 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--in-units", choices=units, help="declare the motion's length unit instead of guessing")
     feet_option(p, "lock")
     p.add_argument("--no-plant", action="store_true", help=argparse.SUPPRESS)  # before --feet free
+    p.add_argument("--report", help="write the feet's figures (motion.retarget.report) to this JSON file")
     p.add_argument(
         "--target",
         default="gltf",
@@ -273,6 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         help="time cap of the search, seconds (overrides the request's budget_s; the request sets the work)",
     )
+    feet_option(p, None, "; overrides the request's feet (graph, annotations, control, rhythm)")
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     p.set_defaults(func=cmd_synth)
 

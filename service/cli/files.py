@@ -249,6 +249,10 @@ def cmd_convert(args: argparse.Namespace) -> int:
             raise MotionError(f"--frames {args.frames!r}: expected START:STOP frame numbers") from None
     if args.fps is not None:
         motion = resample(motion, args.fps)
+    if args.feet != "free":
+        from motion.retarget.legik import feet_on_floor
+
+        motion = feet_on_floor(motion, args.feet)
     if args.ground_root and not args.output.lower().endswith(".glb"):
         motion = add_ground_root(motion)
     t0 = time.perf_counter()
@@ -276,7 +280,8 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     from motion.io import load_motion, save_motion
     from motion.retarget import correspond, retarget
     from motion.retarget.character import GLTF_SUFFIXES, load_character
-    from motion.retarget.legik import foot_groups_of
+    from motion.retarget.legik import character_soles, foot_groups_of, sole_floor
+    from motion.retarget.report import feet_report
     from motion.retarget.rootmotion import default_root_motion
     from motion.skinning import read_skinned_mesh
     from motion.units import METRES_PER_UNIT
@@ -311,6 +316,15 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     feet = "free" if args.no_plant else args.feet
     out = retarget(motion, character, name_map=name_map, feet=feet, root_motion=mode, mesh=mesh)
     groups = foot_groups_of(corr.target_roles)
+    soles = character_soles(character, corr.target_roles, mesh)
+    report = feet_report(
+        motion, out, character, corr, soles, sole_floor(out, soles, character, corr.target_roles)
+    )
+    if args.report:
+        try:
+            Path(args.report).write_text(json.dumps({"feet": feet, **report.as_dict()}, indent=1) + "\n")
+        except OSError as exc:
+            raise MotionError(f"cannot write {args.report}: {exc.strerror or exc}") from None
     notes: list[str] = []
     if glb_out:
         events = contact_events(out, feet=groups) if kinds else None
@@ -351,6 +365,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
             + ("" if mode == "none" else f" on {root!r}")
             + f"; {time.perf_counter() - t0:.2f} s)"
         )
+        print(f"feet ({feet}): {report.summary()}")
     return 0
 
 

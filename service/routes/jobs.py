@@ -11,6 +11,7 @@ from starlette.concurrency import run_in_threadpool
 from engines.registry import parse_job_request
 from schemas import JobInfo, Report
 from schemas.bases import JobRequestBase
+from schemas.common import FeetMode
 from schemas.jobs import JobKind, JobStatus
 from workers.backend import JobBackend, JobNotFinished
 from workers.budget import check_work, database_facts, estimate_work
@@ -289,6 +290,13 @@ async def download_result(
         str | None,
         Query(max_length=40, description="glb/json: contacts,beats,labels or all (glTF extras / events)"),
     ] = None,
+    feet: Annotated[
+        FeetMode | None,
+        Query(
+            description="lock: planted feet held in place and on the floor; grounding: on the floor "
+            "only; free: as they are (default: lock with character, free without)"
+        ),
+    ] = None,
 ) -> Response:
     """Download a result motion (default: the job's best result so far), optionally resampled or
     retargeted onto a character; 409 ``result_not_ready`` while the job has none yet, 422
@@ -312,6 +320,7 @@ async def download_result(
         in_place=in_place,
         root_motion=root_motion,
         events=events,
+        feet=feet,
         max_frames=settings.max_output_frames,
         max_joint_frames=settings.max_joint_frames,
         bvh_limits=(limits.max_joints, limits.max_frames, limits.max_bytes),

@@ -77,7 +77,8 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     body_walk = walk.slice(0, 100)
     (folder / "body_walk.glb").write_bytes(glb_bytes(body_walk, mesh="body"))
     dancers = [
-        replace(base, root_positions=base.root_positions + np.array([k * 80.0, 0.0, k * 40.0])) for k in range(3)
+        replace(base, root_positions=base.root_positions + np.array([k * 80.0, 0.0, k * 40.0]))
+        for k in range(3)
     ]
     rootless = game_rig(root=False)  # a skeleton that starts at its hips (Mixamo names)
     rig = mannequin_glb(rootless, names=[name_in("mixamo", n) for n in rootless.skeleton.names])

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from motion import Motion
 from motion.export.bind import bound_glb
 from motion.io import load_motion
 from motion.refpose import without_reference_lead
@@ -46,7 +47,9 @@ def blender(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     out = folder / "skin.json"
     res = run_blender(TOOLS / "blender_skin.py", str(path), str(out), times)
     if not out.is_file():
-        raise AssertionError(f"Blender did not import {path.name}:\n{res.stdout[-3000:]}\n{res.stderr[-2000:]}")
+        raise AssertionError(
+            f"Blender did not import {path.name}:\n{res.stdout[-3000:]}\n{res.stderr[-2000:]}"
+        )
     return {"report": json.loads(out.read_text()), "data": data, "moved": moved}
 
 
@@ -68,6 +71,6 @@ def test_numpy_skinning_is_blenders_deformation(blender: dict[str, object]) -> N
 
 def test_blender_plays_segues_animation_on_a_character_that_had_one(blender: dict[str, object]) -> None:
     report, moved = blender["report"], blender["moved"]
-    assert isinstance(report, dict)
+    assert isinstance(report, dict) and isinstance(moved, Motion)
     (active,) = report["active"]  # Blender makes the file's first animation the active action
-    assert active is not None and active.startswith(getattr(moved, "name")), active  # not "idle"
+    assert active is not None and active.startswith(moved.name), active  # not "idle"

@@ -202,7 +202,7 @@ def test_crowd_has_one_skin_per_character_and_grows_linearly() -> None:
     for key in ("NORMAL", "JOINTS_0", "WEIGHTS_0"):
         assert len({p["attributes"][key] for p in prims}) == 1
     ibms = [glb.accessor(s["inverseBindMatrices"]) for s in skins]
-    for k, (ibm, person) in enumerate(zip(ibms, people, strict=True)):
+    for ibm, person in zip(ibms, people, strict=True):
         root = np.linalg.inv(ibm[0])[:3, 3]
         np.testing.assert_allclose(root[[0, 2]], person.root_positions[0, [0, 2]] * 0.01, atol=1e-5)
     mesh_nodes = [n for n in gltf["nodes"] if "mesh" in n]

@@ -19,7 +19,9 @@ fps = scene.render.fps / scene.render.fps_base
 arms = [o for o in scene.objects if o.type == "ARMATURE"]
 report = {
     "fps": fps,
-    "active": [o.animation_data.action.name if o.animation_data and o.animation_data.action else None for o in arms],
+    "active": [
+        o.animation_data.action.name if o.animation_data and o.animation_data.action else None for o in arms
+    ],
     "meshes": [],
 }
 meshes = [o for o in scene.objects if o.type == "MESH" and any(m.type == "ARMATURE" for m in o.modifiers)]

@@ -90,7 +90,9 @@ def renamed_glb(raw: bytes, naming: str) -> bytes:
     text += b" " * (-len(text) % 4)
     rest = raw[20 + n :]
     total = 12 + 8 + len(text) + len(rest)
-    return b"".join((struct.pack("<4sII", b"glTF", 2, total), struct.pack("<II", len(text), 0x4E4F534A), text, rest))
+    return b"".join(
+        (struct.pack("<4sII", b"glTF", 2, total), struct.pack("<II", len(text), 0x4E4F534A), text, rest)
+    )
 
 
 def game_rig(root: bool = True) -> Motion:
