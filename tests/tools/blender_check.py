@@ -6,7 +6,8 @@ For each armature: its bones (name -> parent), the action active after the impor
 (the active one and those stashed in NLA tracks) with the bones their channels drive, and, for
 each action at each time (seconds, comma separated), the world position of every bone's head in
 glTF axes (Y up, metres); for each mesh object, how far its evaluated (deformed) vertices move
-from the rest pose at each time and their lowest height; and the scene's and the armatures' custom properties named ``events``.
+from the rest pose at each time and their lowest height; and the scene's and the armatures'
+custom properties named ``events``.
 """
 
 import json
