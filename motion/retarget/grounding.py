@@ -21,9 +21,11 @@ for keep their rest bend and plunge into it at push-off, and a foot the source p
 3. **What is left** (a toe that cannot bend further, a character without toe bones) lifts the
    whole foot, enveloped likewise.
 
-In ``"lock"`` mode the planted feet are first held in place on the floor's plane by
-:func:`motion.footskate.solve_foot_skate` (contacts of the ankle and toe joints, horizontal pins
-only: the height is the soles' business). ``"grounding"`` does the three passes only (planted
+In ``"lock"`` mode the planted feet are then held in place on the floor's plane by
+:func:`motion.footskate.solve_foot_skate` (the quality report's contacts of the ankle and toe
+joints, detected on the transferred motion; horizontal pins only: the height is the soles'
+business), keeping the foot's turn, and the passes run again without the pitch (which would move
+a held toe) to make the height right. ``"grounding"`` does the three passes only (planted
 feet keep the source's path over the floor); ``"free"`` leaves the motion as it is.
 """
 
@@ -306,24 +308,34 @@ def ground_feet(
         max_speed = standing_height(pos)
     rate = max_speed / motion.fps
     flags = _plant_flags(motion, soles, pos)
+    pins: tuple[npt.NDArray[np.intp], npt.NDArray[np.bool_]] | None = None
     if mode == "lock":  # the quality report's contacts, each joint on its own (a toe at push-off)
         joints = np.array(
             [j for s in soles for j in ((s.ankle, s.toe) if s.toe >= 0 else (s.ankle,))], dtype=np.intp
         )
-        joints, contacts = detect_contacts(motion, joints, positions=pos)
-        motion = solve_foot_skate(motion, (joints, contacts), blend_s=blend_s, vertical=False).motion
+        pins = detect_contacts(motion, joints, positions=pos)
     placed = motion
     for _ in range(PLANT_ROUNDS):
         plants = np.stack([plant_weights(flags[:, k], blend) for k in range(len(soles))], axis=1)
-        motion = _lift_feet(placed, soles, _heights(placed, soles, floor, plants, rate))
-        motion = _pitch_feet(motion, soles, floor, plants, rate)
-        motion = _roll_toes(motion, soles, floor, rate)
-        lift = _residual(motion, soles, floor, rate)
-        if lift.any():
-            motion = _lift_feet(motion, soles, lift)
+        motion = _on_floor(placed, soles, floor, plants, rate, pitch=True)
+        if pins is not None:  # held in place as it now stands, then its height made right again
+            held = solve_foot_skate(motion, pins, blend_s=blend_s, vertical=False).motion
+            motion = _on_floor(held, soles, floor, plants, rate, pitch=False)
         found = _plant_flags(motion, soles, np.ascontiguousarray(motion.global_positions()))
         longer = _extensions(found, flags)
         if not (longer & ~flags).any():
             break
         flags |= longer  # a plant the result shows longer than the passes held it: hold it all
     return motion
+
+
+def _on_floor(
+    motion: Motion, soles: tuple[Sole, ...], floor: float, plants: Array, rate: float, *, pitch: bool
+) -> Motion:
+    """Passes 1 to 3 of the module docstring (the pitch of pass 1 only with ``pitch``)."""
+    motion = _lift_feet(motion, soles, _heights(motion, soles, floor, plants, rate))
+    if pitch:
+        motion = _pitch_feet(motion, soles, floor, plants, rate)
+    motion = _roll_toes(motion, soles, floor, rate)
+    lift = _residual(motion, soles, floor, rate)
+    return _lift_feet(motion, soles, lift) if lift.any() else motion

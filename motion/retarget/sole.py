@@ -218,10 +218,8 @@ def bone_soles(character: Motion, roles: dict[str, int]) -> tuple[Sole, ...]:
         heel = p[ankle] * ground - HEEL_BACK * length * fwd
         ball = p[toe] * ground if toe >= 0 else heel + BALL_AT * (length * (1 + HEEL_BACK)) * fwd
         end = tip * ground
-        side = half * lateral
-        pts = np.array(
-            [heel + side, heel - side, ball + side, ball - side, end + 0.6 * side, end - 0.6 * side]
-        )
+        w = half * lateral
+        pts = np.array([heel + w, heel - w, ball + w, ball - w, end + 0.6 * w, end - 0.6 * w])
         pts[:, 1] = floor
         on_toe = np.array([False, False, False, False, toe >= 0, toe >= 0])
         bone = np.where(on_toe, toe, ankle).astype(np.intp)[:, None]

@@ -92,3 +92,24 @@ def test_character_errors(client: TestClient, walk_job: str) -> None:
     assert "left foot" in err["message"]
     junk = client.post("/v1/files", files={"file": ("junk.glb", b"glTF\x02\x00")}).json()
     error_of(client.get(f"/v1/jobs/{walk_job}/result", params={"character": junk["id"]}), 400)
+
+
+def test_feet_of_a_download(client: TestClient, walk_job: str) -> None:
+    """``feet=lock|grounding|free``: lock (the default on a character) holds planted feet in place
+    on the floor, grounding keeps them on it along their own path, free leaves the transfer; a
+    download without a character is as computed unless it asks."""
+    data = _bvh_bytes("unreal", scale=0.9, shin=1.25)
+    clip = client.post("/v1/clips", files={"file": ("feet-char.bvh", data)}).json()
+
+    def get(**params: Any) -> bytes:
+        r = client.get(f"/v1/jobs/{walk_job}/result", params={"format": "bvh", **params})
+        assert r.status_code == 200, r.text
+        return bytes(r.content)
+
+    on_char = {feet: get(character=clip["id"], feet=feet) for feet in ("lock", "grounding", "free")}
+    assert get(character=clip["id"]) == on_char["lock"]
+    assert len(set(on_char.values())) == 3
+    plain = get()
+    assert get(feet="free") == plain and get(feet="grounding") != plain
+    bad = client.get(f"/v1/jobs/{walk_job}/result", params={"feet": "stomp"})
+    assert bad.status_code == 422

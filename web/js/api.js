@@ -118,10 +118,11 @@ export const api = {
   report: async (job, result) => (await request('GET', `/v1/jobs/${job}/report`, { query: { result } })).json(),
   // maxFps: the server resamples faster results down to it (the viewer's previews; downloads keep
   // the full rate)
-  // character: an uploaded clip's id to retarget the result onto (docs/retargeting.md)
-  resultBlob: async (job, result, format, maxFps, character) =>
+  // character: an uploaded clip's id to retarget the result onto (docs/retargeting.md); feet: lock,
+  // grounding or free (the server's default when empty)
+  resultBlob: async (job, result, format, maxFps, character, feet) =>
     (await request('GET', `/v1/jobs/${job}/result`, {
-      query: { format, result, max_fps: maxFps, character: character || undefined },
+      query: { format, result, max_fps: maxFps, character: character || undefined, feet: feet || undefined },
     })).blob(),
 };
 
