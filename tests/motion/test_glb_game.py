@@ -322,3 +322,23 @@ def test_contact_count_of_a_dance_barely_depends_on_the_frame_rate() -> None:
     m = motion.read_bvh(sample_path("salsa-follower-02"))
     counts = [len(contact_events(resample(m, fps))) for fps in (24.0, 30.0, 60.0, 120.0)]
     assert max(counts) - min(counts) <= 0.05 * max(counts), counts
+
+
+def test_one_contact_per_plant_whatever_the_names() -> None:
+    """A foot's ankle and toe planting together are one plant: under Mixamo names (``LeftFoot``,
+    ``LeftToeBase``, both found by name) a walk gave two events per plant, 10 where Unreal names
+    (``ball_l`` is not named like a toe) gave 5."""
+    from motion.refpose import without_reference_lead
+    from motion.retarget import retarget
+    from motion.retarget.character import gltf_character
+
+    from .retarget.gltf_rig import unreal_character_glb
+    from .retarget.namings import renamed_glb
+
+    walk, _ = without_reference_lead(motion.io.load_motion("sample:walk"))
+    events = {}
+    for naming in ("unreal", "mixamo"):
+        out = retarget(walk, gltf_character(renamed_glb(unreal_character_glb(), naming)))
+        events[naming] = contact_events(out)
+    assert len(events["unreal"]) == len(events["mixamo"]) == 5
+    assert {e["joint"] for e in events["mixamo"]} == {"mixamorig:LeftFoot", "mixamorig:RightFoot"}

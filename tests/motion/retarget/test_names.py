@@ -132,3 +132,40 @@ def test_a_longer_spine_pairs_its_ends_and_keeps_the_rest() -> None:
     axis_s = bone_directions(src, (("rCollar", "lCollar"),))
     axis_o = bone_directions(out, (("clavicle_r", "clavicle_l"),))
     assert angle_deg(axis_s, axis_o).max() < 1.0
+
+
+def test_a_map_may_name_toes_the_source_lacks() -> None:
+    """A role map naming the character's toes (CMU-Daz sources have none) was an error; now the
+    character knows them (its feet stand on them) and the result is the preset-named rig's."""
+    from motion.retarget.character import gltf_character
+
+    from .gltf_rig import unreal_character_glb
+    from .namings import renamed_glb, role_map
+
+    src = walk(120)
+    preset = gltf_character(unreal_character_glb())
+    own = gltf_character(renamed_glb(unreal_character_glb(), "own"))
+    corr = correspond(src.skeleton, own.skeleton, role_map("own"))
+    assert own.skeleton.names[corr.target_roles["LeftToes"]] == "L_digiti"
+    assert "LeftToes" not in corr.source_roles and corr.target_roles["LeftToes"] not in corr.pairs
+    assert not corr.warnings
+    a, b = retarget(src, preset), retarget(src, own, name_map=role_map("own"))
+    np.testing.assert_allclose(a.global_positions(), b.global_positions(), atol=1e-9)
+
+
+def test_a_map_that_leaves_limbs_undriven_names_them() -> None:
+    """A map naming only the roles the missing-joint error lists drove 7 joints and silently froze
+    the upper body; the correspondence now says which limbs keep their rest pose."""
+    from motion.retarget.character import gltf_character
+
+    from .gltf_rig import unreal_character_glb
+    from .namings import renamed_glb, role_map
+
+    own = gltf_character(renamed_glb(unreal_character_glb(), "own"))
+    legs = {r: j for r, j in role_map("own").items() if r in REQUIRED}
+    corr = correspond(walk(2).skeleton, own.skeleton, legs)
+    assert len(corr.pairs) == 7
+    (warning,) = corr.warnings
+    for limb in ("head", "left arm (left shoulder", "right arm", "spine and neck"):
+        assert limb in warning
+    assert "7 of 24 joints driven" in warning and "--map" in warning
