@@ -587,7 +587,6 @@ def solve_foot_skate(
     floor: Array | None = None,
     fk: tuple[Array, Array] | None = None,
     horizontal: bool = True,
-    vertical: bool = True,
 ) -> FootSkateResult:
     """Pin feet during contacts by leg IK; the full result (see :func:`remove_foot_skate`).
 
@@ -618,12 +617,10 @@ def solve_foot_skate(
     fk:
         The motion's :meth:`Motion.fk` (``positions (F, J, 3)``, ``rotations (F, J, 4)``) when the
         caller has it already.
-    horizontal, vertical:
-        Which parts of a pin apply: both by default. ``horizontal=False`` pins the height only,
-        so that planted feet rest on their floor but keep their own path over it ("grounding");
-        ``vertical=False`` holds planted feet in place on the floor's plane and leaves their
-        height to the caller (a retargeting puts the character's sole on its floor,
-        :mod:`motion.retarget.grounding`). ``floor`` applies either way.
+    horizontal:
+        Pin planted feet in place (the default, "lock"); ``False`` pins their height only, so that
+        planted feet rest on their floor but keep their own path over it ("grounding"). ``floor``
+        applies either way.
     """
     if not (np.isfinite(blend_s) and blend_s >= 0):
         raise MotionError(f"blend_s must be a non-negative number of seconds, got {blend_s}")
@@ -648,7 +645,7 @@ def solve_foot_skate(
     if not legs:
         return FootSkateResult(motion, legs, np.zeros(flags.shape), no_shift)
     blend = int(round(blend_s * motion.fps))
-    corr, weight = _pin_targets(motion, pos, joints, flags, blend, heights, floor, horizontal, vertical)
+    corr, weight = _pin_targets(motion, pos, joints, flags, blend, heights, floor, horizontal)
     forward = _forward(motion, pos)
     local, residual, errors = _solve_all(motion, legs, pos, grot, corr, weight, forward, floor)
     root_shift = no_shift
@@ -672,12 +669,10 @@ def _pin_targets(
     heights: Array | None,
     floor: Array | None,
     horizontal: bool = True,
-    vertical: bool = True,
 ) -> tuple[Array, Array]:
     """Where each contact joint should be: ``(F, K, 3)`` corrections of its global position
     (motion units) and their ``(F, K)`` weights, pinned over its contact runs (jumps widened,
-    faded over ``blend`` frames; the floor's plane unless ``horizontal`` is off, height unless
-    ``vertical`` is) and lifted above ``floor``."""
+    faded over ``blend`` frames; height only without ``horizontal``) and lifted above ``floor``."""
     n = motion.num_frames
     corr = np.zeros((n, joints.size, 3))
     weight = np.zeros((n, joints.size))
@@ -688,8 +683,6 @@ def _pin_targets(
         corr[:, slot], weight[:, slot] = pin_corrections(pos[:, j], runs, blend, rest)
         if not horizontal:
             corr[:, slot, 0] = corr[:, slot, 2] = 0.0
-        if not vertical:
-            corr[:, slot, 1] = 0.0
         if floor is not None:
             # never below the floor: lift the joint (height only) wherever it would sink under it
             lift = np.maximum(float(floor[slot]) - (pos[:, j, 1] + corr[:, slot, 1]), 0.0)
@@ -725,7 +718,6 @@ def remove_foot_skate(
     floor: Array | None = None,
     fk: tuple[Array, Array] | None = None,
     horizontal: bool = True,
-    vertical: bool = True,
 ) -> Motion:
     """The motion with planted feet kept in place (a pure function; the input is not modified).
 
@@ -749,9 +741,9 @@ def remove_foot_skate(
         :func:`solve_foot_skate`).
     fk:
         The motion's :meth:`Motion.fk` when the caller has it already.
-    horizontal, vertical:
-        Which parts of the pins apply (:func:`solve_foot_skate`): ``horizontal=False`` keeps
-        planted feet's own floor path and pins their height only.
+    horizontal:
+        ``False``: planted feet keep their own floor path, only their height is pinned
+        (:func:`solve_foot_skate`).
 
     Raises
     ------
@@ -775,7 +767,6 @@ def remove_foot_skate(
         floor=floor,
         fk=fk,
         horizontal=horizontal,
-        vertical=vertical,
     ).motion
 
 

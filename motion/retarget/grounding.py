@@ -21,11 +21,12 @@ for keep their rest bend and plunge into it at push-off, and a foot the source p
 3. **What is left** (a toe that cannot bend further, a character without toe bones) lifts the
    whole foot, enveloped likewise.
 
-In ``"lock"`` mode the planted feet are then held in place on the floor's plane by
+In ``"lock"`` mode the planted feet are then held in place by
 :func:`motion.footskate.solve_foot_skate` (the quality report's contacts of the ankle and toe
-joints, detected on the transferred motion; horizontal pins only: the height is the soles'
-business), keeping the foot's turn, and the passes run again without the pitch (which would move
-a held toe) to make the height right. ``"grounding"`` does the three passes only (planted
+joints, detected on the transferred motion; each pinned where it stands over its run, so that a
+flat foot's toe lands where it stood), and the passes run again without the pitch (which would
+move a held toe) to put the soles back on the floor: they move the feet up or down only, so the
+held places on the floor's plane stay. ``"grounding"`` does the three passes only (planted
 feet keep the source's path over the floor); ``"free"`` leaves the motion as it is.
 """
 
@@ -319,7 +320,7 @@ def ground_feet(
         plants = np.stack([plant_weights(flags[:, k], blend) for k in range(len(soles))], axis=1)
         motion = _on_floor(placed, soles, floor, plants, rate, pitch=True)
         if pins is not None:  # held in place as it now stands, then its height made right again
-            held = solve_foot_skate(motion, pins, blend_s=blend_s, vertical=False).motion
+            held = solve_foot_skate(motion, pins, blend_s=blend_s).motion
             motion = _on_floor(held, soles, floor, plants, rate, pitch=False)
         found = _plant_flags(motion, soles, np.ascontiguousarray(motion.global_positions()))
         longer = _extensions(found, flags)
