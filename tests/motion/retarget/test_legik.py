@@ -65,4 +65,4 @@ def test_planted_feet_are_the_characters_own_flat_feet() -> None:
         # 1.6 and 3.9 degrees median here; the toes were lifted 4-14 degrees before issue 15)
         assert abs(np.median(pitch)) < 5.0
         assert abs(np.median(pos[flat, ball, 1]) - rest[ball, 1]) < 0.01  # metres
-        assert abs(np.median(pos[flat, foot, 1]) - rest[foot, 1]) < 0.01
+        assert abs(np.median(pos[flat, foot, 1]) - rest[foot, 1]) < 0.015  # (pitched: up to 1.1 cm)
