@@ -88,16 +88,11 @@ def detect_contacts(
 
 
 # Foot plants, in body heights and seconds (so that a plant is one event at any frame rate)
-PLANT_RISE = 0.15
-"""A plant also ends where its foot rises or sinks faster than 0.15 body heights per second (a
-heel lifting off: 26 cm/s for a 1.7 m body), not only where it is high or fast: a foot lifting
-off slowly is no longer planted (``sample:walk``: its 5 plants at every frame rate)."""
 PLANT_ENTER = (0.05, 0.35)
 """A plant starts where a foot is within 5 % of the body height of its floor and moves slower than
 0.35 body heights per second horizontally (the quality report's contact thresholds)..."""
-PLANT_STAY = (0.075, 0.6, PLANT_RISE)
-"""... and lasts while it stays within 7.5 % and under 0.6 body heights per second on the floor and
-:data:`PLANT_RISE` up or down (hysteresis)."""
+PLANT_STAY = (0.075, 0.6)
+"""... and lasts while it stays within 7.5 % and under 0.6 body heights per second (hysteresis)."""
 PLANT_SPEED_WINDOW_S = 0.1
 """Foot speed: the displacement over this span (centred), not frame to frame (mocap jitter)."""
 PLANT_GAP_S = 0.12
@@ -136,16 +131,10 @@ def foot_groups(skeleton: Skeleton) -> list[tuple[int, ...]]:
 
 
 def _plant_flags(
-    positions: Array,
-    fps: float,
-    height: float,
-    height_tol: float,
-    speed_tol: float,
-    rise_tol: float = np.inf,
+    positions: Array, fps: float, height: float, height_tol: float, speed_tol: float
 ) -> npt.NDArray[np.bool_]:
     """``(F, K)`` whether each foot joint (``positions (F, K, 3)``) is low and slow, in body
-    heights (``height``, the positions' units): within ``height_tol`` of its floor, slower than
-    ``speed_tol`` per second on the floor and than ``rise_tol`` per second up or down."""
+    heights (``height``, the positions' units)."""
     floor = np.percentile(positions[:, :, 1], 5, axis=0)
     low = positions[:, :, 1] - floor < height_tol * height
     f = positions.shape[0]
@@ -154,8 +143,7 @@ def _plant_flags(
     a, b = np.clip(i - half, 0, f - 1), np.clip(i + half, 0, f - 1)
     span = np.maximum(b - a, 1) / fps
     speed = np.linalg.norm(positions[b][:, :, [0, 2]] - positions[a][:, :, [0, 2]], axis=-1) / span[:, None]
-    rise = np.abs(positions[b][:, :, 1] - positions[a][:, :, 1]) / span[:, None]
-    return np.asarray(low & (speed < speed_tol * height) & (rise < rise_tol * height))
+    return np.asarray(low & (speed < speed_tol * height))
 
 
 def bool_runs(flags: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
