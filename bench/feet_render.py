@@ -1,13 +1,13 @@
-"""Pictures of a character's feet at one frame, rendered by Blender (run with Blender's Python:
+"""Pictures of a character's feet at one moment, rendered by Blender (run with Blender's Python:
 ``$SEGUE_BPY_PYTHON bench/feet_render.py -- FILE.glb TIME_S OUT.png [LABEL]``; tests/blender.py
 makes such a Python).
 
-Imports the GLB with Blender's glTF importer, plays its active action at ``TIME_S`` seconds, puts a floor at the rest floor (height 0, a checker of 10 cm
-squares, so a foot under it is cut off by it) and renders, with Cycles on the CPU, the deformed
-mesh seen from the side 22 cm above the floor, aimed at the lowest vertex of the mesh (the foot
-that touches or sinks), 1.1 m away, 640 x 400; the floor is half transparent, so what sinks shows
-through it, dimmed. ``LABEL`` is written in the picture's corner with the
-lowest vertex's height.
+The GLB is imported with Blender's glTF importer and its active action played at ``TIME_S``
+seconds. A floor at the rest floor (height 0, a checker of 10 cm squares, half transparent, so
+that what sinks shows through it, dimmed) is added, and Cycles renders on the CPU, 640 x 400, the
+deformed mesh seen from the side, 1.1 m away and 22 cm above the floor, aimed at the mesh's
+lowest vertex (the foot that touches or sinks). ``LABEL`` and the lowest vertex's height are
+written in the picture's corner.
 """
 
 import sys
