@@ -191,19 +191,6 @@ def _with_turns(motion: Motion, grot: Array, turns: dict[int, Array]) -> Motion:
     )
 
 
-_UP = np.array([0.0, 1.0, 0.0])
-
-
-def _ahead(points: Array, pivot: Array, fallback: Array) -> Array:
-    """``(F, 3)`` unit floor direction from ``pivot (F, 3)`` to the mean of ``points (F, P, 3)``
-    (``fallback (F, 3)``'s floor direction where they are above it)."""
-    ahead = (points.mean(axis=1) - pivot) * [1.0, 0.0, 1.0]
-    norm = np.linalg.norm(ahead, axis=-1, keepdims=True)
-    other = fallback * [1.0, 0.0, 1.0]
-    ahead = np.where(norm > 1e-9, ahead, other)
-    return np.asarray(ahead / np.maximum(np.linalg.norm(ahead, axis=-1, keepdims=True), 1e-300))
-
-
 def _pitch_feet(motion: Motion, soles: tuple[Sole, ...], floor: float, plants: Array, rate: float) -> Motion:
     """Pass 1b: a planted foot the leg could not bring down (a straight leg at push-off or at a
     heel strike) pitches about its ankle, toes down or heel down, whichever reaches the floor
@@ -217,8 +204,7 @@ def _pitch_feet(motion: Motion, soles: tuple[Sole, ...], floor: float, plants: A
             continue
         pts = sole.positions(pos, grot)
         ankle = pos[:, sole.ankle]
-        fwd = _ahead(pts, ankle, rot.rotate(grot[:, sole.ankle], np.array([0.0, 0.0, 1.0])))
-        axis = np.cross(_UP, fwd)  # a positive turn about it lowers points ahead of the ankle
+        axis = sole.across_world(grot)  # up x forward: a positive turn lowers points ahead
         down = reach_angles(pts, ankle, axis, floor)
         back = reach_angles(pts, ankle, -axis, floor)
         signed = np.where(down <= back, np.minimum(down, limit), -np.minimum(back, limit))
@@ -244,8 +230,7 @@ def _roll_toes(motion: Motion, soles: tuple[Sole, ...], floor: float, rate: floa
             continue
         pts = sole.positions(pos, grot)[:, sole.on_toe]  # (F, P, 3)
         ball = pos[:, sole.toe]
-        fwd = _ahead(pts, ball, rot.rotate(grot[:, sole.ankle], np.array([0.0, 0.0, 1.0])))
-        axis = np.cross(fwd, _UP)  # a positive turn about it raises points ahead of the ball
+        axis = -sole.across_world(grot, toe=True)  # forward x up: a positive turn raises points ahead
         theta = np.minimum(lift_angles(pts, ball, axis, floor), limit)
         if not theta.any():
             continue

@@ -70,6 +70,11 @@ class Sole:
         vertex shared half and half across the ball moves with the foot).
     rest:
         ``(P, 3)`` the points in the rest pose (character units).
+    across, toe_across:
+        ``(3,)`` the foot's axis across it (``up x forward``, forward from the ankle to the sole's
+        middle in the rest pose) in the foot joint's and in the toe joint's own frames: the axis
+        the foot pitches and the toes roll about, turning with them (a direction from the ankle
+        to the sole flips as the foot points down; this does not).
     """
 
     side: str
@@ -80,6 +85,16 @@ class Sole:
     local: Array
     on_toe: npt.NDArray[np.bool_]
     rest: Array
+    across: Array
+    toe_across: Array
+
+    def across_world(self, rotations: Array, toe: bool = False) -> Array:
+        """``(F, 3)`` the unit axis across the foot (or its toes) in the world, on the floor's
+        plane, in each frame of ``rotations (F, J, 4)``."""
+        joint, axis = (self.toe, self.toe_across) if toe else (self.ankle, self.across)
+        turned = rot.rotate(rotations[:, joint], np.broadcast_to(axis, (rotations.shape[0], 3)))
+        flat = turned * np.array([1.0, 0.0, 1.0])
+        return np.asarray(flat / np.maximum(np.linalg.norm(flat, axis=-1, keepdims=True), 1e-300))
 
     @property
     def size(self) -> int:
@@ -123,6 +138,17 @@ def _bound(
     g = rest.rotations[0][j]  # (P, K, 4)
     local = rot.rotate(rot.inverse(g), points[:, None, :] - rest.positions[0][j])
     return j.astype(np.intp), w, np.asarray(local)
+
+
+def _across(rest: Pose, ankle: int, toe: int, points: Array) -> tuple[Array, Array]:
+    """The foot's axis across it (:attr:`Sole.across`) in the foot's and the toe's rest frames."""
+    ahead = (points.mean(axis=0) - rest.positions[0, ankle]) * np.array([1.0, 0.0, 1.0])
+    if np.linalg.norm(ahead) < 1e-12:
+        ahead = rot.rotate(rest.rotations[0, ankle], np.array([0.0, 0.0, 1.0])) * np.array([1.0, 0.0, 1.0])
+    axis = np.cross(np.array([0.0, 1.0, 0.0]), ahead / max(float(np.linalg.norm(ahead)), 1e-300))
+    foot = rot.rotate(rot.inverse(rest.rotations[0, ankle]), axis)
+    toes = rot.rotate(rot.inverse(rest.rotations[0, toe]), axis) if toe >= 0 else foot
+    return np.asarray(foot), np.asarray(toes)
 
 
 def _hull_corners(points: Array) -> npt.NDArray[np.intp]:
@@ -188,7 +214,8 @@ def mesh_soles(mesh: BoundMesh, character: Motion, roles: dict[str, int]) -> tup
         chosen = np.concatenate(keep)
         joints, weights, local = _bound(placed[chosen], m.joints[chosen], m.weights[chosen], rest)
         toe_part = np.where(below[m.joints[chosen]], m.weights[chosen], 0.0).sum(axis=1) > 0.5 + 1e-6
-        out.append(Sole(side, ankle, toe, joints, weights, local, toe_part, placed[chosen]))
+        across = _across(rest, ankle, toe, placed[chosen])
+        out.append(Sole(side, ankle, toe, joints, weights, local, toe_part, placed[chosen], *across))
     return tuple(out)
 
 
@@ -224,7 +251,9 @@ def bone_soles(character: Motion, roles: dict[str, int]) -> tuple[Sole, ...]:
         on_toe = np.array([False, False, False, False, toe >= 0, toe >= 0])
         bone = np.where(on_toe, toe, ankle).astype(np.intp)[:, None]
         joints, weights, local = _bound(pts, bone, np.ones((6, 1)), rest)
-        out.append(Sole(side, ankle, toe, joints, weights, local, on_toe, pts))
+        out.append(
+            Sole(side, ankle, toe, joints, weights, local, on_toe, pts, *_across(rest, ankle, toe, pts))
+        )
     return tuple(out)
 
 
