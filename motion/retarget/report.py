@@ -6,8 +6,9 @@ prints and writes with ``--report``.
 * ``planted_lift_cm``: how far a planted sole (a plant of :func:`motion.contacts.foot_plants`, the
   contact events' detector, on the result) is above the floor, at worst;
 * ``foot_speed_m_s``: the fastest foot joint (ankle or toe) of the result, frame to frame, against
-  ``source_foot_speed_m_s``, the source's fastest foot scaled to the character (by the ratio of
-  the two skeletons' legs, thigh plus shin, in their rest poses), and their ``foot_speed_ratio``;
+  ``source_foot_speed_m_s``, the source's fastest foot (:func:`fastest_foot`: its ankle and toe,
+  or the foot's tip where it has no toe joint) scaled to the character (by the ratio of the two
+  skeletons' legs, thigh plus shin, in their rest poses), and their ``foot_speed_ratio``;
 * ``contacts``: the result's foot plants (one per plant, whichever of the foot's joints
   touches: its contact events) and ``source_plants``, the source's.
 """
@@ -24,7 +25,7 @@ from ..motion import Motion
 from .legik import foot_groups_of
 from .names import Correspondence
 from .sole import Sole
-from .transfer import leg_length, zero_pose
+from .transfer import Pose, leg_length, tip_positions, zero_pose
 
 Array = npt.NDArray[np.float64]
 
@@ -55,10 +56,27 @@ class FeetReport:
         )
 
 
-def _fastest_foot(motion: Motion, joints: list[int]) -> float:
-    pos = motion.global_positions()[:, joints] * motion.metres_per_unit
-    if motion.num_frames < 2 or not joints:
+def fastest_foot(motion: Motion, roles: dict[str, int]) -> float:
+    """The fastest foot of ``motion``, m/s frame to frame: its ankle and toe joints (roles
+    ``LeftFoot``, ``LeftToes``, ...) and, for a foot without a toe joint (CMU motions), the tip of
+    the foot (its End Site or child: where a toe joint would be, and beyond)."""
+    if motion.num_frames < 2:
         return 0.0
+    pose = Pose.of(motion)
+    tips = None
+    points = []
+    for side in ("Left", "Right"):
+        if side + "Foot" not in roles:
+            continue
+        points.append(pose.positions[:, roles[side + "Foot"]])
+        if side + "Toes" in roles:
+            points.append(pose.positions[:, roles[side + "Toes"]])
+        else:
+            tips = tip_positions(motion, pose) if tips is None else tips
+            points.append(tips[:, roles[side + "Foot"]])
+    if not points:
+        return 0.0
+    pos = np.stack(points, axis=1) * motion.metres_per_unit
     return float((np.linalg.norm(np.diff(pos, axis=0), axis=-1) * motion.fps).max())
 
 
@@ -80,13 +98,11 @@ def feet_report(
     sink = max(0.0, -float(min(v.min() for v in lowest.values()))) * m
     plants = foot_plants(result, groups, positions=pos)
     lifts = [lowest[("Left", "Right")[g]][a:b].max() for g, a, b in plants if ("Left", "Right")[g] in lowest]
-    out_feet = [j for g in groups for j in g]
-    src_feet = [sr[r] for r in ("LeftFoot", "LeftToes", "RightFoot", "RightToes") if r in sr]
     scale = (leg_length(character.global_positions()[0], tr) * character.metres_per_unit) / max(
         leg_length(zero_pose(source).global_positions()[0], sr) * source.metres_per_unit, 1e-300
     )
-    fastest = _fastest_foot(result, out_feet)
-    src = _fastest_foot(source, src_feet) * scale
+    fastest = fastest_foot(result, tr)
+    src = fastest_foot(source, sr) * scale
     return FeetReport(
         sink_cm=round(100.0 * sink, 2),
         planted_lift_cm=round(100.0 * m * max(0.0, float(max(lifts))), 2) if lifts else None,

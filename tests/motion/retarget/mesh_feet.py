@@ -14,6 +14,7 @@ import numpy as np
 from motion import Motion
 from motion.contacts import foot_plants
 from motion.retarget import detect_roles
+from motion.retarget.report import fastest_foot
 from motion.retarget.transfer import leg_length, zero_pose
 from motion.skinning import animation_pose, read_skinned_mesh, skin
 
@@ -48,7 +49,8 @@ def measure(out_glb: bytes, source: Motion, rest: Motion, naming: str) -> dict[s
       vertex (vertices weighted at least half to that foot and its toes) is above the rest floor,
       at worst (``lift_frame``), and ``lift_p95_cm``;
     * ``foot_speed_ratio``: the fastest foot joint (ankle or toe, frame to frame) over the source's
-      fastest scaled by the leg-length ratio (thigh plus shin in the rest poses);
+      fastest (:func:`motion.retarget.report.fastest_foot`: ankle and toe, or the foot's tip
+      without a toe joint) scaled by the leg-length ratio (thigh plus shin in the rest poses);
     * ``contacts`` (and ``contacts_off_feet``, events naming no foot), ``source_plants``,
       ``contacts_per_plant``.
     """
@@ -107,9 +109,7 @@ def measure(out_glb: bytes, source: Motion, rest: Motion, naming: str) -> dict[s
     feet = [j for joints in sides.values() for j in joints]
     speed = np.linalg.norm(np.diff(pos[:, feet], axis=0), axis=-1) * fps  # metres
     src_roles = detect_roles(source.skeleton).joints
-    src_feet = [src_roles[r] for r in ("LeftFoot", "LeftToes", "RightFoot", "RightToes") if r in src_roles]
-    sp = source.global_positions() * source.metres_per_unit
-    src_speed = float((np.linalg.norm(np.diff(sp[:, src_feet], axis=0), axis=-1) * source.fps).max())
+    src_speed = fastest_foot(source, src_roles)  # its ankles and toes (a foot's tip without a toe)
     rest_roles = {ROLE_OF_UNREAL[u]: k for k, u in enumerate(rest.skeleton.names) if u in ROLE_OF_UNREAL}
     scale = leg_length(rest.global_positions()[0] * rest.metres_per_unit, rest_roles) / leg_length(
         zero_pose(source).global_positions()[0] * source.metres_per_unit, src_roles
