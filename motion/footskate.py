@@ -586,6 +586,7 @@ def solve_foot_skate(
     heights: Array | None = None,
     floor: Array | None = None,
     fk: tuple[Array, Array] | None = None,
+    horizontal: bool = True,
 ) -> FootSkateResult:
     """Pin feet during contacts by leg IK; the full result (see :func:`remove_foot_skate`).
 
@@ -616,6 +617,10 @@ def solve_foot_skate(
     fk:
         The motion's :meth:`Motion.fk` (``positions (F, J, 3)``, ``rotations (F, J, 4)``) when the
         caller has it already.
+    horizontal:
+        Pin planted feet in place (the default, "lock"); ``False`` pins their height only, so that
+        planted feet rest on their floor but keep their own path over it ("grounding"). ``floor``
+        applies either way.
     """
     if not (np.isfinite(blend_s) and blend_s >= 0):
         raise MotionError(f"blend_s must be a non-negative number of seconds, got {blend_s}")
@@ -640,7 +645,7 @@ def solve_foot_skate(
     if not legs:
         return FootSkateResult(motion, legs, np.zeros(flags.shape), no_shift)
     blend = int(round(blend_s * motion.fps))
-    corr, weight = _pin_targets(motion, pos, joints, flags, blend, heights, floor)
+    corr, weight = _pin_targets(motion, pos, joints, flags, blend, heights, floor, horizontal)
     forward = _forward(motion, pos)
     local, residual, errors = _solve_all(motion, legs, pos, grot, corr, weight, forward, floor)
     root_shift = no_shift
@@ -663,10 +668,11 @@ def _pin_targets(
     blend: int,
     heights: Array | None,
     floor: Array | None,
+    horizontal: bool = True,
 ) -> tuple[Array, Array]:
     """Where each contact joint should be: ``(F, K, 3)`` corrections of its global position
     (motion units) and their ``(F, K)`` weights, pinned over its contact runs (jumps widened,
-    faded over ``blend`` frames) and lifted above ``floor``."""
+    faded over ``blend`` frames; height only without ``horizontal``) and lifted above ``floor``."""
     n = motion.num_frames
     corr = np.zeros((n, joints.size, 3))
     weight = np.zeros((n, joints.size))
@@ -675,6 +681,8 @@ def _pin_targets(
         runs = widen_jumps(pos[:, j], flags[:, slot], frames_per_unit, 2 * blend)
         rest = None if heights is None else heights[:, slot]
         corr[:, slot], weight[:, slot] = pin_corrections(pos[:, j], runs, blend, rest)
+        if not horizontal:
+            corr[:, slot, 0] = corr[:, slot, 2] = 0.0
         if floor is not None:
             # never below the floor: lift the joint (height only) wherever it would sink under it
             lift = np.maximum(float(floor[slot]) - (pos[:, j, 1] + corr[:, slot, 1]), 0.0)
@@ -709,6 +717,7 @@ def remove_foot_skate(
     heights: Array | None = None,
     floor: Array | None = None,
     fk: tuple[Array, Array] | None = None,
+    horizontal: bool = True,
 ) -> Motion:
     """The motion with planted feet kept in place (a pure function; the input is not modified).
 
@@ -732,6 +741,9 @@ def remove_foot_skate(
         :func:`solve_foot_skate`).
     fk:
         The motion's :meth:`Motion.fk` when the caller has it already.
+    horizontal:
+        ``False``: planted feet keep their own floor path, only their height is pinned
+        (:func:`solve_foot_skate`).
 
     Raises
     ------
@@ -754,4 +766,52 @@ def remove_foot_skate(
         heights=heights,
         floor=floor,
         fk=fk,
+        horizontal=horizontal,
     ).motion
+
+
+def move_feet(
+    motion: Motion,
+    ankles: npt.NDArray[np.intp],
+    shifts: Array,
+    *,
+    fk: tuple[Array, Array] | None = None,
+) -> Motion:
+    """``motion`` with each ankle ``ankles (L,)`` moved by ``shifts (F, L, 3)`` (world, motion
+    units) by its leg's two-bone IK (knee and hip, as :func:`solve_foot_skate` solves them): the
+    foot keeps its world orientation, so everything below the ankle moves by the same shift. A
+    leg keeps its exact rotations in frames where its shift is zero. A target out of the leg's
+    reach in that frame (beyond its own extension or 97 % of its full length, where soft IK
+    would ease it) is brought back within reach vertically, so that the ankle still keeps its
+    place on the floor's plane: what the leg cannot reach is left undone, in height.
+
+    ``fk``: the motion's :meth:`Motion.fk` when the caller has it already. Raises
+    :class:`MotionError` for an ankle with no hip-knee-ankle chain or shifts of the wrong shape."""
+    joints = np.asarray(ankles, dtype=np.intp).reshape(-1)
+    if np.shape(shifts) != (motion.num_frames, joints.size, 3):
+        raise MotionError(
+            f"foot shifts must be (F, L, 3) = ({motion.num_frames}, {joints.size}, 3), got {np.shape(shifts)}"
+        )
+    weight = (np.abs(shifts).max(axis=-1) > 0).astype(np.float64)
+    if not weight.any():
+        return motion
+    pos, grot = motion.fk() if fk is None else fk
+    legs = leg_chains(motion, joints, pos[0])
+    if any(leg.toe >= 0 for leg in legs):
+        raise MotionError("move_feet moves ankles: pass no toe joints")
+    corr = np.array(shifts, dtype=np.float64, copy=True)
+    for leg in legs:
+        slot = leg.ankle_slot
+        h, k, a = pos[:, leg.hip], pos[:, leg.knee], pos[:, leg.ankle]
+        full = (norms(k - h) + norms(a - k)) * (1.0 - 1e-6)
+        reach = np.minimum(np.maximum(norms(a - h), SOFT_IK_START * full), full) * (1.0 - 1e-9)
+        d = a + corr[:, slot] - h
+        flat = np.hypot(d[:, 0], d[:, 2])
+        far = (norms(d) > reach) & (flat < reach)
+        if far.any():  # the lower point of the vertical line through the target within reach
+            low = h[far, 1] - np.sqrt(reach[far] ** 2 - flat[far] ** 2)
+            high = h[far, 1] + np.sqrt(reach[far] ** 2 - flat[far] ** 2)
+            y = a[far, 1] + corr[far, slot, 1]
+            corr[far, slot, 1] = np.clip(y, low, high) - a[far, 1]
+    local, _, _ = _solve_all(motion, legs, pos, grot, corr, weight, _forward(motion, pos))
+    return replace(motion, rotations=local)

@@ -15,6 +15,9 @@ examples and the output:
   the same window, degrees per second.
 * **planted-foot slide** — per frame, the floor speed of the *lowest* foot joint (the foot in
   contact by height, whatever its speed: a dragged body scores its drag), median over frames.
+* **foot speed** — the fastest foot joint (ankle or toe), frame to frame, against the examples'
+  fastest: a foot that snaps (a clean-up or a blend moving it in one frame) moves faster than any
+  foot of the examples (reported with its ratio, not gated: :data:`FOOT_SPEED_MARGIN`).
 * **floor penetration** — how far the lowest foot joint (any joint for skeletons without feet)
   goes below the examples' floor level.
 * **joint step** — the largest frame-to-frame displacement of any joint (a teleport).
@@ -42,7 +45,7 @@ from .vectors import norms
 
 Array = npt.NDArray[np.float64]
 
-REFERENCE_VERSION = 1
+REFERENCE_VERSION = 2
 """Version of the figures a stored :class:`Reference` holds; a database built with another one
 is measured again when loaded."""
 SPEED_WINDOW_S = 1.0 / 6.0
@@ -65,6 +68,10 @@ STEP_MARGIN, STEP_FLOOR_M = 1.5, 0.02
 JOIN_MARGIN = 2.0
 """Joint acceleration at joins may reach this factor of the examples' 99.9th percentile (a toe
 pushing off at a cut reaches 1.5 times it without a visible pop; a pop is 3-5 times it)."""
+FOOT_SPEED_MARGIN = 1.3
+"""A foot faster than this factor of the examples' fastest foot (frame to frame) snaps: the
+report's ``foot_speed`` gives it as ``snap_limit`` (reported, not gated: engine results still
+reach it at some movement joins, e.g. 1.45 on the rhythm example of docs/rhythm.md at 90 BPM)."""
 FLOOR_MARGIN_M = 0.02
 """The lowest joint may sink this much deeper below the floor than the examples ever do."""
 
@@ -76,7 +83,8 @@ class Profile:
     ``root_speed (F - w,)`` m/s, ``turn_rate (F - w,)`` rad/s (empty without left/right joints),
     ``joint_speed (F - 1,)`` fastest joint per frame m/s and ``step_joint (F - 1,)`` which joint,
     ``accel (F,)`` largest joint acceleration m/s^2 (NaN where undefined), ``foot_speed (F - 1,)``
-    lowest foot m/s (empty without feet), ``lowest (F,)`` lowest foot joint's height m (any
+    lowest foot m/s and ``fastest_foot (F - 1,)`` fastest foot m/s (empty without feet),
+    ``lowest (F,)`` lowest foot joint's height m (any
     joint's without feet: a static reference joint such as Bandai-Namco's ``joint_Root`` on the
     floor would otherwise hide every foot that sinks), ``jerk`` m/s^3,
     ``height`` m (standing), ``fps``.
@@ -90,6 +98,7 @@ class Profile:
     step_joint: npt.NDArray[np.intp]
     accel: Array
     foot_speed: Array
+    fastest_foot: Array
     lowest: Array
     jerk: float
 
@@ -130,8 +139,9 @@ def profile(positions: Array, skeleton: Skeleton, fps: float) -> Profile:
         fxz = pos[:, feet][:, :, [0, 2]]
         speed = norms(np.diff(fxz, axis=0)) * fps  # (F-1, K)
         foot_speed = speed[np.arange(n - 1), low]
+        fastest_foot = norms(np.diff(pos[:, feet], axis=0)).max(axis=1) * fps
     else:
-        foot_speed = np.zeros(0)
+        foot_speed = fastest_foot = np.zeros(0)
     return Profile(
         fps=float(fps),
         height=standing_height(pos),
@@ -141,6 +151,7 @@ def profile(positions: Array, skeleton: Skeleton, fps: float) -> Profile:
         step_joint=step_joint,
         accel=accel,
         foot_speed=foot_speed,
+        fastest_foot=fastest_foot,
         lowest=(pos[:, feet, 1] if feet.size else pos[:, :, 1]).min(axis=1),
         jerk=points_jerk(pos, fps),
     )
@@ -161,6 +172,7 @@ class Reference:
     joint_speed_max: float
     accel_p999: float
     planted_slide: float
+    foot_speed_max: float
     floor_y: float
     floor_depth: float
     jerk: float
@@ -216,6 +228,7 @@ def reference_from_profiles(profiles: Sequence[Profile]) -> Reference:
         joint_speed_max=max(_max(p.joint_speed) for p in profiles),
         accel_p999=float(np.percentile(accel, 99.9)) if accel.size else 0.0,
         planted_slide=max(slides) if slides else 0.0,
+        foot_speed_max=max(_max(p.fastest_foot) for p in profiles),
         floor_y=floor_y,
         floor_depth=max(floor_y - lowest, 0.0),
         jerk=float(np.average([p.jerk for p in profiles], weights=frames)),
@@ -259,6 +272,7 @@ def plausibility_checks(
     out.update(_speed_checks(profiles, reference, fps))
     out.update(_turn_check(profiles, reference))
     out.update(_slide_check(profiles, reference))
+    out.update(_foot_speed_check(profiles, reference))
     out.update(_floor_check(profiles, reference))
     out["joint_step"] = _step_check(profiles, reference, fps, joint_names)
     if joins is not None and joins.size:
@@ -333,6 +347,30 @@ def _slide_check(profiles: Sequence[Profile], ref: Reference | None) -> dict[str
             "m/s",
             None if ref is None else ref.planted_slide,
             character=c,
+        )
+    }
+
+
+def _foot_speed_check(profiles: Sequence[Profile], ref: Reference | None) -> dict[str, dict[str, Any]]:
+    """The fastest foot (m/s, frame to frame) against the examples' fastest (none without feet)."""
+    if not any(p.fastest_foot.size for p in profiles):
+        return {}
+    v, c = _worst([_max(p.fastest_foot) for p in profiles])
+    pc = profiles[c]
+    frame = int(np.argmax(pc.fastest_foot)) + 1 if pc.fastest_foot.size else 0
+    known = ref is not None and ref.foot_speed_max > 0
+    return {
+        "foot_speed": _check(
+            v,
+            None,
+            "m/s",
+            ref.foot_speed_max if ref is not None else None,
+            ratio=round(v / ref.foot_speed_max, 3) if ref is not None and known else None,
+            snap_limit=round(FOOT_SPEED_MARGIN * ref.foot_speed_max, 4)
+            if ref is not None and known
+            else None,
+            character=c,
+            frame=frame,
         )
     }
 

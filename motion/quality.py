@@ -44,6 +44,7 @@ _CHECK_NAMES = {
     "root_speed_p99": "the body's speed (99th percentile)",
     "turn_rate": "the peak turn rate",
     "foot_slide": "the planted foot's slide",
+    "foot_speed": "the fastest foot",
     "floor_penetration": "floor penetration",
     "joint_step": "the largest one-frame joint step",
     "join_spikes": "joint acceleration at joins",
@@ -149,6 +150,7 @@ def _headline(checks: dict[str, dict[str, Any]], errors: dict[str, Any]) -> dict
         "root_speed_p99": "root_speed_p99",
         "turn_rate": "turn_rate_max",
         "foot_slide": "foot_slide",
+        "foot_speed": "foot_speed_max",
         "floor_penetration": "floor_penetration",
         "joint_step": "joint_step_max",
         "join_spikes": "join_accel_max",
@@ -158,6 +160,8 @@ def _headline(checks: dict[str, dict[str, Any]], errors: dict[str, Any]) -> dict
         out[f"{names.get(key, key)}_{units.get(check['unit'], 'x')}"] = float(check["value"])
     if checks.get("root_speed", {}).get("ratio") is not None:
         out["root_speed_ratio"] = float(checks["root_speed"]["ratio"])
+    if checks.get("foot_speed", {}).get("ratio") is not None:
+        out["foot_speed_ratio"] = float(checks["foot_speed"]["ratio"])
     meets = [float(e["error_cm"]) for e in errors.values() if isinstance(e, dict) and "wanted_cm" in e]
     aparts = [float(e["min_distance_cm"]) for e in errors.values() if isinstance(e, dict) and "min_cm" in e]
     if meets:

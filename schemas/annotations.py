@@ -21,7 +21,7 @@ from pydantic import Field, model_validator
 
 from .bases import DatabaseSpecBase, JobRequestBase
 from .clips import LabelRange
-from .common import Strict
+from .common import FEET_DESCRIPTION, FeetMode, Strict, feet_mode_of
 
 
 class AnnotatedDatabaseSpec(DatabaseSpecBase):
@@ -202,6 +202,12 @@ class AnnotationRequest(JobRequestBase):
         ),
     )
     footskate: bool = Field(default=True, description="remove foot skate from the result (motion.footskate)")
+    feet: FeetMode | None = Field(default=None, description=FEET_DESCRIPTION)
+
+    def feet_mode(self) -> FeetMode:
+        """The clean-up this request asks for (:func:`schemas.common.feet_mode_of`)."""
+        return feet_mode_of(self.footskate, self.feet)
+
     loop: bool = Field(
         default=False,
         description="a looping clip: the end is blended so the last pose is the first (root travel "

@@ -23,7 +23,7 @@ from pydantic import Field, field_validator, model_validator
 
 from .bases import DatabaseSpecBase, JobRequestBase
 from .clips import ClipSource
-from .common import Strict
+from .common import FEET_DESCRIPTION, FeetMode, Strict, feet_mode_of
 
 
 class ControlPair(Strict):
@@ -359,6 +359,12 @@ class ControlRequest(JobRequestBase):
     )
     smoothing_s: float = Field(default=0.15, ge=0, le=2, description="blend half-width across boundaries")
     footskate: bool = Field(default=True, description="clean up foot skate where a cleanup is available")
+    feet: FeetMode | None = Field(default=None, description=FEET_DESCRIPTION)
+
+    def feet_mode(self) -> FeetMode:
+        """The clean-up this request asks for (:func:`schemas.common.feet_mode_of`)."""
+        return feet_mode_of(self.footskate, self.feet)
+
     hold_hands: bool = Field(
         default=True,
         description="where the chosen examples hold hands, put the output's hand on the control's hand "

@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, model_validator
 
 from .bases import JobRequestBase
-from .common import Strict
+from .common import FEET_DESCRIPTION, FeetMode, Strict, feet_mode_of
 
 
 class _Timed(Strict):
@@ -194,6 +194,12 @@ class GraphRequest(JobRequestBase):
     footskate: bool = Field(
         default=True, description="pin planted feet with the source clips' contacts (motion.footskate)"
     )
+    feet: FeetMode | None = Field(default=None, description=FEET_DESCRIPTION)
+
+    def feet_mode(self) -> FeetMode:
+        """The clean-up this request asks for (:func:`schemas.common.feet_mode_of`)."""
+        return feet_mode_of(self.footskate, self.feet)
+
     loop: bool = Field(
         default=False,
         description="a looping clip: the end is blended so the last pose is the first (root travel "

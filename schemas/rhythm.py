@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 from pydantic import Field, field_validator, model_validator
 
 from .bases import DatabaseSpecBase, JobRequestBase
-from .common import Strict
+from .common import FEET_DESCRIPTION, FeetMode, Strict, feet_mode_of
 
 AUDIO_SUFFIXES = (".wav", ".flac", ".ogg", ".mp3")
 """File name endings of the recordings ``music.audio`` accepts."""
@@ -222,6 +222,12 @@ class RhythmRequest(JobRequestBase):
     )
     fps: float | None = Field(default=None, gt=0, le=240, description="output rate (default: the database's)")
     footskate: bool = Field(default=True, description="keep planted feet still (motion.footskate)")
+    feet: FeetMode | None = Field(default=None, description=FEET_DESCRIPTION)
+
+    def feet_mode(self) -> FeetMode:
+        """The clean-up this request asks for (:func:`schemas.common.feet_mode_of`)."""
+        return feet_mode_of(self.footskate, self.feet)
+
     hand_hold: HandHold | None = Field(
         default=None, description="couples: a hand hold the quality report measures (needs 'couples')"
     )

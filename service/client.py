@@ -249,11 +249,15 @@ class SegueClient:
         result: str | None = None,
         target: str = "gltf",
         character: str | None = None,
+        feet: str | None = None,
     ) -> bytes:
         """A result motion as ``bvh``, ``glb``, ``json`` or ``npz`` bytes (also written to ``path``);
-        ``character``: an uploaded clip or file id to retarget it onto (docs/retargeting.md)."""
+        ``character``: an uploaded clip or file id to retarget it onto (docs/retargeting.md);
+        ``feet``: ``lock``, ``grounding`` or ``free`` (the server's default: lock on a character,
+        free without)."""
         params = {"format": format, "target": target} | ({"result": result} if result else {})
         params |= {"character": character} if character else {}
+        params |= {"feet": feet} if feet else {}
         data = self._request("GET", f"/v1/jobs/{job_id}/result", params=params).content
         if path is not None:
             Path(path).write_bytes(data)

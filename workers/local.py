@@ -118,14 +118,28 @@ def build_to_dir(spec_path: Path, out_dir: Path, publish: Publish) -> DatabaseIn
 
 
 def synth_from_dir(
-    request_path: Path, db_dir: Path, publish: Publish, budget_s: float | None = None
+    request_path: Path,
+    db_dir: Path,
+    publish: Publish,
+    budget_s: float | None = None,
+    feet: str | None = None,
 ) -> tuple[Motion, Report] | None:
     """Run a request file against a database directory; returns the best motion and its report
-    (``None`` if the engine found nothing, after a ``failed`` event)."""
+    (``None`` if the engine found nothing, after a ``failed`` event). ``budget_s`` and ``feet``
+    override the request's (the CLI's ``--budget`` and ``--feet``)."""
     publish(EventType.started, {})
     request = parse(json.loads(request_path.read_bytes()))
     if budget_s is not None:
         request = request.with_budget(budget_s)
+    if feet is not None:
+        if "feet" not in type(request).model_fields:
+            raise JobFailure(
+                "invalid_request",
+                f"the {request.engine!r} engine has no foot clean-up: --feet does not apply",
+            )
+        copy = request.model_copy()
+        request.__pydantic_validator__.validate_assignment(copy, "feet", feet)
+        request = copy
     try:
         prepared = prepare_in_dir(request, request_path.resolve().parent, db_dir)
         arrays = load_npz((db_dir / "data.npz").read_bytes())

@@ -27,6 +27,7 @@ from motion.export.events import contact_events_of, parse_kinds, sorted_events
 from motion.export.events import result_events as annotation_events
 from motion.export.glb import MeshKind, glb_bytes
 from motion.export.targets import to_target
+from schemas.common import FeetMode
 
 from .store import Store
 
@@ -121,7 +122,8 @@ class ExportSpec:
     """One download of a result (the query of ``GET /v1/jobs/{id}/result``; ``character`` resolved).
 
     ``max_frames`` and ``max_joint_frames`` bound a resampling (the server's ``max_output_frames``
-    and ``max_joint_frames``); ``bvh_limits`` reads a BVH character."""
+    and ``max_joint_frames``); ``bvh_limits`` reads a BVH character. ``feet`` (``None``: lock with
+    a character, free without) is what happens to the feet (:data:`schemas.common.FeetMode`)."""
 
     job: str
     result: str
@@ -138,6 +140,7 @@ class ExportSpec:
     mesh: ResultMesh = ResultMesh.bones
     animation_only: bool = False
     dancer: int | None = None
+    feet: FeetMode | None = None
     max_frames: int = 36_000
     max_joint_frames: int = 10_000_000
     bvh_limits: tuple[int, int, int] = (1024, 2_000_000, 1 << 30)
@@ -168,6 +171,7 @@ class ExportSpec:
             mesh=ResultMesh(d.get("mesh", ResultMesh.bones)),
             animation_only=bool(d.get("animation_only", False)),
             dancer=None if d.get("dancer") is None else int(d["dancer"]),
+            feet=None if d.get("feet") is None else FeetMode(d["feet"]),
             max_frames=int(d["max_frames"]),
             max_joint_frames=int(d["max_joint_frames"]),
             bvh_limits=(int(d["bvh_limits"][0]), int(d["bvh_limits"][1]), int(d["bvh_limits"][2])),
@@ -183,6 +187,8 @@ class ExportSpec:
             del options["dancer"]
         if self.mesh == ResultMesh.bones:
             del options["mesh"]
+        if options["feet"] is None:
+            del options["feet"]
         digest = hashlib.sha256(json.dumps(options, sort_keys=True).encode()).hexdigest()[:24]
         return f"{self.result}-{digest}-{self.format.value}".lower()
 
@@ -196,8 +202,9 @@ class ExportSpec:
 
 def inline_ok(spec: ExportSpec, frames: int, joints: int, fps: float) -> bool:
     """True when an export of a result of ``frames`` x ``joints`` at ``fps`` is small enough to
-    make in the API process (:data:`INLINE_JOINT_FRAMES`; never with a character)."""
-    if spec.character is not None:
+    make in the API process (:data:`INLINE_JOINT_FRAMES`; never with a character or a foot
+    clean-up)."""
+    if spec.character is not None or spec.feet not in (None, FeetMode.free):
         return False
     out_fps = spec.output_fps(fps) or fps
     return frames * max(out_fps / fps, 1.0) * joints <= INLINE_JOINT_FRAMES
@@ -307,6 +314,7 @@ def make_export(store: Store, spec: ExportSpec) -> bytes:
     if spec.character is not None:
         from motion.retarget import correspond, retarget
         from motion.retarget.rootmotion import default_root_motion
+        from motion.skinning import read_skinned_mesh
 
         limits = BvhLimits(*spec.bvh_limits)
         char, rig = character_of(store, spec.character, spec.rest, limits)
@@ -314,13 +322,29 @@ def make_export(store: Store, spec: ExportSpec) -> bytes:
         in_place = False  # a character's root motion is placed by the retargeting
         try:
             hips = correspond(motion.skeleton, char.skeleton).target_roles["Hips"]
-            motion = retarget(motion, char, root_motion=mode or default_root_motion(spec.target.value, hips))
+            mesh = None if rig is None else read_skinned_mesh(rig)  # its soles stand on the floor
+            motion = retarget(
+                motion,
+                char,
+                root_motion=mode or default_root_motion(spec.target.value, hips),
+                feet=(spec.feet or FeetMode.lock).value,
+                mesh=mesh,
+            )
         except MotionError as exc:
             raise ExportFailure(
                 422, "retarget_failed", f"cannot retarget result {rid} onto {spec.character.ref}: {exc}"
             ) from None
         if units is None and fmt is not ResultFormat.glb and motion.units in {u.value for u in ExportUnits}:
             units = ExportUnits(motion.units)  # the character's own units, exactly
+    elif spec.feet is not None and spec.feet is not FeetMode.free:
+        from motion.retarget.legik import feet_on_floor
+
+        try:
+            motion = feet_on_floor(motion, spec.feet.value)
+        except MotionError as exc:
+            raise ExportFailure(
+                422, "export_failed", f"cannot keep the feet of result {rid} on the floor: {exc}"
+            ) from None
     if not (np.isfinite(motion.root_positions).all() and np.isfinite(motion.rotations).all()):
         raise ExportFailure(
             422, "export_failed", f"result {rid} holds numbers that are not finite; it cannot be exported"

@@ -78,9 +78,11 @@ def assemble(
     footskate: bool,
     limits: CorrectionLimits | None = None,
     floor: dict[int, tuple[float, float]] | None = None,
+    lock: bool = True,
 ) -> tuple[Motion, IntArray]:
     """The motion of ``cand.sigma`` placed, smoothed, corrected towards the end constraint
-    (within ``limits``; ``None``: without limit) and cleaned; and its cut frames ``(X,)``."""
+    (within ``limits``; ``None``: without limit) and cleaned (``footskate``; ``lock=False``: the
+    planted feet's height only); and its cut frames ``(X,)``."""
     sigma = cand.sigma
     clips = db.clip_of[sigma]
     main = frames.library.motions[int(np.bincount(clips).argmax())]
@@ -104,19 +106,19 @@ def assemble(
         corr = floor_correction(xz * motion.metres_per_unit, yaw, motion.fps, goals, limits)
         motion = apply_floor_transform(motion, corr.theta, corr.shift, frames.static)
     if footskate:
-        motion = clean_feet(motion, floor)
+        motion = clean_feet(motion, floor, lock)
     return motion, cuts
 
 
-def clean_feet(motion: Motion, floor: dict[int, tuple[float, float]] | None) -> Motion:
+def clean_feet(motion: Motion, floor: dict[int, tuple[float, float]] | None, lock: bool = True) -> Motion:
     """:func:`motion.footskate.remove_foot_skate` with contacts detected on the motion and, given
     the examples' foot heights ``floor`` (:meth:`engines.base.Engine.foot_floor`), no foot lower
-    than theirs."""
+    than theirs; ``lock=False`` pins the planted feet's height only (``grounding``)."""
     joints, flags = detect_contacts(motion)
     lowest = None
     if floor and all(int(j) in floor for j in joints):
         lowest = np.array([floor[int(j)][1] for j in joints]) / motion.metres_per_unit
-    return remove_foot_skate(motion, (joints, flags), floor=lowest)
+    return remove_foot_skate(motion, (joints, flags), floor=lowest, horizontal=lock)
 
 
 def _ranges(flags: npt.NDArray[np.bool_]) -> list[list[int]]:

@@ -200,9 +200,10 @@ class AnnotationEngine(Engine[AnnotationRequest, AnnotatedDatabaseSpec]):
             pb,
             cand,
             int(request.smoothing_frames),
-            bool(request.footskate),
+            request.feet_mode() != "free",
             limits,
             floor,
+            lock=request.feet_mode() == "lock",
         )
         if getattr(request, "loop", False):
             motion = close_loop(motion)

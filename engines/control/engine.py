@@ -671,7 +671,8 @@ class ControlEngine(Engine[ControlRequest, ControlDatabaseSpec]):
         """The assembled motion with its feet kept planted where the examples' contacts say
         (:func:`motion.footskate.remove_foot_skate`, above the examples' floor)."""
         motion = out.motion
-        if not request.footskate or not self.db.contact_joints:
+        mode = request.feet_mode()
+        if mode == "free" or not self.db.contact_joints:
             return motion
         try:
             from motion.footskate import remove_foot_skate
@@ -684,7 +685,9 @@ class ControlEngine(Engine[ControlRequest, ControlDatabaseSpec]):
         if floor and all(int(j) in floor for j in joints):
             lowest = np.array([floor[int(j)][1] for j in joints]) / motion.metres_per_unit
         try:
-            return remove_foot_skate(motion, (joints, flags), floor=lowest, fk=fast_fk(motion))
+            return remove_foot_skate(
+                motion, (joints, flags), floor=lowest, fk=fast_fk(motion), horizontal=mode == "lock"
+            )
         except MotionError:
             return motion
 

@@ -167,11 +167,12 @@ def clean_feet(
     blend_s: float = FOOT_BLEND_S,
     heights: FloatArray | None = None,
     floor: FloatArray | None = None,
+    lock: bool = True,
 ) -> Motion:
     """:func:`motion.footskate.remove_foot_skate` with the given contacts (and rest ``heights``
     ``(F, K)`` and lowest heights ``floor (K,)`` of the contact joints), except around joint
     constraints on leg joints (see the module docstring); the motion unchanged when its legs
-    cannot be found."""
+    cannot be found. ``lock=False`` pins the planted feet's height only."""
     joints, flags = contacts
     if not flags.any():
         return motion
@@ -191,7 +192,9 @@ def clean_feet(
                     if leg.hip in chain:
                         cols = [s for s in (leg.ankle_slot, leg.toe_slot) if s >= 0]
                         flags[max(jt.frame - blend, 0) : jt.frame + blend + 1, cols] = False
-        return remove_foot_skate(motion, (joints, flags), blend_s=blend_s, heights=heights, floor=floor)
+        return remove_foot_skate(
+            motion, (joints, flags), blend_s=blend_s, heights=heights, floor=floor, horizontal=lock
+        )
     except MotionError:  # no hip-knee-ankle chains above the feet: nothing to pin
         return motion
 
@@ -205,6 +208,7 @@ def assemble(
     problem: Problem | None = None,
     *,
     feet: bool = True,
+    lock: bool = True,
     contacts: FootContacts | None = None,
     limits: CorrectionLimits | None = None,
     floor: dict[int, tuple[float, float]] | None = None,
@@ -223,6 +227,9 @@ def assemble(
         The request already compiled (:func:`engines.graph.score.compile_problem`), to skip it.
     feet:
         Clean foot skate with the source clips' contacts (step 4 of the module docstring).
+    lock:
+        Hold planted feet in place (the request's ``feet``: ``lock``); off, their height only
+        (``grounding``: they rest at their planted height and never go under the floor).
     contacts:
         The database's foot contacts (:class:`~engines.graph.model.FootContacts`); computed from
         the library (and cached) when not given.
@@ -274,7 +281,7 @@ def assemble(
             lowest = None
             if floor and all(int(j) in floor for j in joints):
                 lowest = np.array([floor[int(j)][1] for j in joints]) / motion.metres_per_unit
-            motion = clean_feet(motion, (joints, flags), problem, heights=rest, floor=lowest)
+            motion = clean_feet(motion, (joints, flags), problem, heights=rest, floor=lowest, lock=lock)
     provenance = [(library.names[int(c)], int(f)) for c, f in zip(clips, frames, strict=True)]
     return motion, provenance
 

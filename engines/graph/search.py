@@ -649,7 +649,8 @@ class GraphSearch:
             request,
             self._problem,
             contacts=self.contacts,
-            feet=request.footskate,
+            feet=request.feet_mode() != "free",
+            lock=request.feet_mode() == "lock",
             limits=self.limits,
             floor=self.foot_floor,
         )

@@ -491,9 +491,11 @@ class RhythmEngine(Engine[RhythmRequest, RhythmDatabaseSpec]):
         beats = music_beats(request, self.tables.beats_per_movement)
         emit.progress(0.1, f"{beats.size} music beats")
         leaders, partners, r = self.synthesize(request, beats)
-        if request.footskate:
-            leaders = [_clean(m, self.foot_floor(m.skeleton)) for m in leaders]
-            partners = [_clean(m, self.foot_floor(m.skeleton)) for m in partners]
+        mode = request.feet_mode()
+        if mode != "free":
+            lock = mode == "lock"
+            leaders = [_clean(m, self.foot_floor(m.skeleton), lock) for m in leaders]
+            partners = [_clean(m, self.foot_floor(m.skeleton), lock) for m in partners]
             if run.cancelled():
                 return Stopped.cancelled
         hold = request.hand_hold
@@ -571,21 +573,26 @@ class RhythmEngine(Engine[RhythmRequest, RhythmDatabaseSpec]):
         return Stopped.work
 
 
-def _clean(m: Motion, floor: dict[int, tuple[float, float]]) -> Motion:
-    """Planted feet kept still at the examples' planted height of each foot joint, and no foot
-    lower than the examples' lowest (``floor``: joint -> (planted, lowest) metres): blending
-    movements and fading their joins moves the body up and down and swings legs through the floor."""
+def _clean(m: Motion, floor: dict[int, tuple[float, float]], lock: bool = True) -> Motion:
+    """Planted feet kept still (``lock``; their height only without it) at the examples' planted
+    height of each foot joint, and no foot lower than the examples' lowest (``floor``: joint ->
+    (planted, lowest) metres): blending movements and fading their joins moves the body up and
+    down and swings legs through the floor."""
     from motion.contacts import detect_contacts
     from motion.footskate import remove_foot_skate
 
     try:
         joints, flags = detect_contacts(m)
         if not floor or not all(int(j) in floor for j in joints):
-            return remove_foot_skate(m, (joints, flags))
+            return remove_foot_skate(m, (joints, flags), horizontal=lock)
         rest = np.array([floor[int(j)][0] for j in joints])
         lowest = np.array([floor[int(j)][1] for j in joints])
         return remove_foot_skate(
-            m, (joints, flags), heights=np.broadcast_to(rest, flags.shape).copy(), floor=lowest
+            m,
+            (joints, flags),
+            heights=np.broadcast_to(rest, flags.shape).copy(),
+            floor=lowest,
+            horizontal=lock,
         )
     except MotionError:
         return m  # no feet found by name: nothing to keep planted

@@ -5,7 +5,9 @@
 placed by :mod:`motion.retarget.rootmotion`) and returns a GLB that is
 
 * the user's file with one animation added (``animation_only=False``): every node, name,
-  hierarchy, skin, mesh, material, texture and earlier animation kept as they were; or
+  hierarchy, skin, mesh, material, texture and earlier animation kept as they were, the new
+  animation first among them (Blender makes the first animation the armature's active action
+  and stashes the others in NLA tracks; a character that had an idle played it before); or
 * only the skeleton (``animation_only=True``): the skin's joints and the nodes above them, with
   their names, rest transforms, hierarchy and the skin's inverse bind matrices, no mesh, and the
   animation: a file that binds to the character by node (bone) names.
@@ -269,7 +271,7 @@ def bound_glb(
         if scene is not None:
             scene.setdefault("extras", {})["events"] = evs
         doc["nodes"][node_of[tracks.root]].setdefault("extras", {})["events"] = evs
-    doc.setdefault("animations", []).append(animation)
+    doc.setdefault("animations", []).insert(0, animation)  # first: the one importers make active
     doc["buffers"] = [{"byteLength": len(b.data)}]
     generator = str(doc.get("asset", {}).get("generator", ""))
     doc.setdefault("asset", {"version": "2.0"})["generator"] = (generator + " + segue").strip(" +")

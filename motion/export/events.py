@@ -20,12 +20,17 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import numpy as np
-
-from ..contacts import foot_joints
+from ..contacts import (  # noqa: F401  (the plant thresholds, re-exported)
+    PLANT_ENTER,
+    PLANT_GAP_S,
+    PLANT_MIN_S,
+    PLANT_SPEED_WINDOW_S,
+    PLANT_STAY,
+    foot_groups,
+    foot_plants,
+)
 from ..errors import MotionError
 from ..motion import Motion
-from ..units import standing_height
 from .characters import split_characters, without_prefix
 
 Event = dict[str, Any]
@@ -33,90 +38,33 @@ Event = dict[str, Any]
 EVENT_KINDS = ("contacts", "beats", "labels")
 """What ``events`` may ask for (CLI ``--events``, HTTP ``events=``)."""
 
-# Foot plants, in body heights and seconds (so that a plant is one event at any frame rate)
-PLANT_ENTER = (0.05, 0.35)
-"""A plant starts where a foot is within 5 % of the body height of its floor and moves slower than
-0.35 body heights per second horizontally (the quality report's contact thresholds)..."""
-PLANT_STAY = (0.075, 0.6)
-"""... and lasts while it stays within 7.5 % and under 0.6 body heights per second (hysteresis)."""
-PLANT_SPEED_WINDOW_S = 0.1
-"""Foot speed: the displacement over this span (centred), not frame to frame (mocap jitter)."""
-PLANT_GAP_S = 0.12
-"""Lifts shorter than this join the plants on either side."""
-PLANT_MIN_S = 0.1
-"""Plants shorter than this are dropped."""
 
+def contact_runs(motion: Motion, feet: Sequence[tuple[int, ...]] | None = None) -> list[tuple[int, int, int]]:
+    """The foot plants of ``motion``: ``(joint, start frame, end frame exclusive)`` per plant, the
+    joint being the foot's ankle (:func:`motion.contacts.foot_plants`: one plant whichever of the
+    foot's joints touches, debounced so that their number does not depend on the frame rate).
 
-def _runs(flags: np.ndarray[Any, np.dtype[np.bool_]]) -> list[tuple[int, int]]:
-    """``[(start, end), ...]`` frame runs of True (end exclusive)."""
-    x = np.concatenate(([0], flags.astype(np.int8), [0]))
-    edges = np.flatnonzero(np.diff(x))
-    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
-
-
-def _planted(
-    motion: Motion,
-    positions: np.ndarray[Any, np.dtype[np.float64]],
-    height: float,
-    height_tol: float,
-    speed_tol: float,
-) -> np.ndarray[Any, np.dtype[np.bool_]]:
-    """``(F, K)`` whether each foot (``positions (F, K, 3)``) is low and slow, in body heights
-    (``height``, the motion's units)."""
-    floor = np.percentile(positions[:, :, 1], 5, axis=0)
-    low = positions[:, :, 1] - floor < height_tol * height
-    f = positions.shape[0]
-    half = max(1, int(round(PLANT_SPEED_WINDOW_S * motion.fps / 2)))
-    i = np.arange(f)
-    a, b = np.clip(i - half, 0, f - 1), np.clip(i + half, 0, f - 1)
-    span = np.maximum(b - a, 1) / motion.fps
-    speed = np.linalg.norm(positions[b][:, :, [0, 2]] - positions[a][:, :, [0, 2]], axis=-1) / span[:, None]
-    return np.asarray(low & (speed < speed_tol * height))
-
-
-def contact_runs(motion: Motion) -> list[tuple[int, int, int]]:
-    """The foot plants of ``motion``: ``(joint, start frame, end frame exclusive)`` per plant, feet
-    found by name (:func:`motion.contacts.foot_joints`; none: an empty list).
-
-    Debounced so that their number does not depend on the frame rate: a plant starts where a
-    foot meets :data:`PLANT_ENTER` and lasts while it meets :data:`PLANT_STAY` (hysteresis),
-    speeds are measured over :data:`PLANT_SPEED_WINDOW_S`, lifts shorter than
-    :data:`PLANT_GAP_S` are bridged and plants shorter than :data:`PLANT_MIN_S` dropped.
+    ``feet``: one group of joints per foot, ankle first (default
+    :func:`motion.contacts.foot_groups`: by the naming convention's roles, else by name; a
+    character with other names passes its own, e.g. from a retargeting's role map). A motion
+    without feet has no plants.
     """
-    try:
-        joints = foot_joints(motion.skeleton)
-    except MotionError:
-        return []
-    pos = motion.global_positions()
-    height = standing_height(pos)
-    if motion.num_frames < 2 or height <= 0:
-        return []
-    feet = pos[:, joints]
-    enter = _planted(motion, feet, height, *PLANT_ENTER)
-    stay = _planted(motion, feet, height, *PLANT_STAY)
-    out: list[tuple[int, int, int]] = []
-    for k, j in enumerate(joints.tolist()):
-        merged: list[tuple[int, int]] = []
-        for a, b in _runs(stay[:, k]):
-            if not enter[a:b, k].any():
-                continue
-            if merged and (a - merged[-1][1]) / motion.fps < PLANT_GAP_S:
-                merged[-1] = (merged[-1][0], b)
-            else:
-                merged.append((a, b))
-        out += [(j, a, b) for a, b in merged if (b - a) / motion.fps >= PLANT_MIN_S - 1e-9]
-    return out
+    groups = foot_groups(motion.skeleton) if feet is None else [tuple(g) for g in feet]
+    return [(groups[g][0], a, b) for g, a, b in foot_plants(motion, groups)]
 
 
-def contact_events(motion: Motion, character: str | None = None) -> list[Event]:
-    """One ``contact`` event per foot plant of ``motion`` (:func:`contact_runs`).
+def contact_events(
+    motion: Motion, character: str | None = None, feet: Sequence[tuple[int, ...]] | None = None
+) -> list[Event]:
+    """One ``contact`` event per foot plant of ``motion`` (:func:`contact_runs`; ``feet`` as
+    there), named after the foot's ankle joint.
 
     A motion without joints named like feet has no contacts (an empty list, not an error). The
     duration of a run of ``n`` frames is ``n / fps`` seconds (each frame stands for one period).
     """
     out: list[Event] = []
     names = motion.skeleton.names
-    for j, a, b in contact_runs(motion):
+    for j, a, b in contact_runs(motion, feet):
         ev: Event = {
             "type": "contact",
             "joint": names[j],

@@ -44,8 +44,12 @@ Several characters
     character: its own ``cN_ground`` root, joints, bind matrices and mesh node, the rig under its
     own plain (non-joint) node named ``cN`` (so that importers make one armature or Skeleton per
     character: Blender and Godot merge rigs that share a parent), and its own animation named
-    ``<motion>_cN``. Characters with the same bind pose share one bone mesh and one bind-matrix
-    accessor, so the file grows by the animation of each character only (``bench/glb_size.py``).
+    ``<motion>_cN``. Each character is bound where it stands in its first frame (its root's
+    floor position; :data:`SPREAD_M` apart when two stand at one place), so its skin, its inverse
+    bind matrices, is its own: Godot 3.2 merges skins whose bind poses are equal and deforms every
+    such character with the first one's skeleton. Characters with the same body share its
+    normals, joints, weights and triangles; each has its own vertex positions and bind matrices,
+    so the file grows by those and the animation of each character (``bench/glb_size.py``).
 Animation
     One animation named after the motion (``"motion"`` when unnamed; one per character, above).
     Key times ``frame / fps``
@@ -206,11 +210,15 @@ def glb_bytes(
     scene_roots: list[int] = []
     meshes: list[dict[str, Any]] = []
     mesh_nodes: list[dict[str, Any]] = []
-    shared: list[tuple[_Rest, npt.NDArray[np.intp], int, int | None]] = []  # rest, parents, IBM, mesh
+    shared: list[tuple[_Rest, npt.NDArray[np.intp], _Geometry | None]] = []  # a rest and its mesh
+    placed: list[_Rest] = []
     for m, pre in prepared:
         base = len(nodes)
         rest = _rest_pose(m, lead)
-        nodes += _joint_nodes(m, rest, base, pre)
+        at = _rest_place(m, placed) if split is not None else None
+        shape = rest if at is None else _moved(rest, m, at)
+        placed.append(shape)
+        nodes += _joint_nodes(m, shape, base, pre)
         if names is not None:
             for j, name in enumerate(names):
                 nodes[base + j]["name"] = name
@@ -226,20 +234,23 @@ def glb_bytes(
                     "samplers": samplers,
                 }
             )
-        found = next((s for s in shared if _same_rest(s[0], s[1], rest, m.skeleton.parents)), None)
-        if found is None:
-            ibm = _ibm(b, rest)
+        match = next((x for x in shared if _same_rest(x[0], x[1], rest, m.skeleton.parents)), None)
+        if match is None:
             geometry = _skin_mesh(m.skeleton, rest, lead, mesh)
-            mesh_index = None
-            if geometry is not None:
-                mesh_index = len(meshes)
-                kind = "body" if mesh == "body" else "bones"
-                meshes.append(
-                    {"name": m.skeleton.names[0] + "_" + kind, "primitives": [_primitive(b, geometry)]}
-                )
-            shared.append((rest, m.skeleton.parents, ibm, mesh_index))
-        else:
-            ibm, mesh_index = found[2], found[3]
+            kind = "body" if mesh == "body" else "bones"
+            match = (rest, m.skeleton.parents, None if geometry is None else _Geometry(geometry, kind))
+            shared.append(match)
+        found = match[2]
+        ibm = _ibm(b, shape)
+        mesh_index = None
+        if found is not None:  # the same body, bound where this character stands
+            mesh_index = len(meshes)
+            meshes.append(
+                {
+                    "name": pre + m.skeleton.names[0] + "_" + found.kind,
+                    "primitives": [found.primitive(b, at)],
+                }
+            )
         skin: dict[str, Any] = {
             "name": pre + m.skeleton.names[0] + "_skin",
             "joints": list(range(base, base + m.num_joints)),
@@ -399,6 +410,73 @@ def _down(points: Array, leg: tuple[int, int]) -> npt.NDArray[np.bool_]:
     ``points (F, P, 3)``."""
     v = points[:, leg[1]] - points[:, leg[0]]
     return np.asarray(v[:, 1] < -np.sin(np.radians(60.0)) * np.linalg.norm(v, axis=-1))
+
+
+class _Geometry:
+    """One skin's mesh in its bind pose, written once: the joints, weights, normals and indices
+    of every character with that bind pose share their accessors; each character where it
+    stands gets its own vertex positions (:meth:`primitive`)."""
+
+    def __init__(self, mesh: SkinnedMesh, kind: str) -> None:
+        self.mesh = mesh
+        self.kind = kind
+        self.shared: dict[str, int] | None = None
+
+    def primitive(self, b: _Builder, shift: Array | None) -> dict[str, Any]:
+        """The primitive of this mesh moved by ``shift (3,)`` metres (``None``: where it is)."""
+        m = self.mesh
+        pos32 = (m.positions if shift is None else m.positions + shift).astype(np.float32)
+        n = m.num_vertices
+        position = b.accessor(
+            b.view(pos32, ARRAY_BUFFER), 0, FLOAT, n, "VEC3", pos32.min(axis=0), pos32.max(axis=0)
+        )
+        if self.shared is None:
+            flat = m.indices.reshape(-1)
+            index = flat.astype(np.uint16 if n <= 65535 else np.uint32)
+            index_type = UNSIGNED_SHORT if index.dtype == np.uint16 else UNSIGNED_INT
+            self.shared = {
+                "NORMAL": b.accessor(b.view(m.normals.astype(np.float32), ARRAY_BUFFER), 0, FLOAT, n, "VEC3"),
+                "JOINTS_0": b.accessor(
+                    b.view(m.joints.astype(np.uint16), ARRAY_BUFFER), 0, UNSIGNED_SHORT, n, "VEC4"
+                ),
+                "WEIGHTS_0": b.accessor(
+                    b.view(m.weights.astype(np.float32), ARRAY_BUFFER), 0, FLOAT, n, "VEC4"
+                ),
+                "indices": b.accessor(
+                    b.view(index, ELEMENT_ARRAY_BUFFER), 0, index_type, len(index), "SCALAR"
+                ),
+            }
+        attributes = {"POSITION": position, **{k: v for k, v in self.shared.items() if k != "indices"}}
+        return {"attributes": attributes, "indices": self.shared["indices"], "material": 0, "mode": 4}
+
+
+SPREAD_M = 1e-3
+"""Characters that stand at the same place in their first frame are bound this far apart (x), so
+that their bind poses still differ."""
+
+
+def _rest_place(m: Motion, earlier: list[_Rest]) -> Array:
+    """``(3,)`` where one of several characters is bound, metres: its root's floor position in its
+    first frame, so that each character's skin (its inverse bind matrices) is its own: Godot 3.2
+    merges skins whose bind poses are equal, and then deforms every character with the first
+    one's skeleton. Moved :data:`SPREAD_M` along x while it stands where an earlier one does."""
+    at = np.array([m.root_positions[0, 0], 0.0, m.root_positions[0, 2]]) * m.metres_per_unit
+    taken = {tuple(np.round(r.globals[0, :3, 3] / SPREAD_M).astype(np.int64)) for r in earlier}
+    while tuple(np.round(at / SPREAD_M).astype(np.int64)) in taken:
+        at[0] += SPREAD_M
+    return at
+
+
+def _moved(rest: _Rest, m: Motion, at: Array) -> _Rest:
+    """``rest`` (of ``m``'s skeleton) with its root moved by ``at (3,)`` metres: every joint, End
+    Site and bind matrix follows."""
+    t = np.array(rest.translations, copy=True)
+    t[0] = t[0] + at
+    sk = m.skeleton
+    g, ends = _rest_fk(
+        sk.parents, t, rest.rotations, sk.end_site_parents, sk.end_site_offsets * m.metres_per_unit
+    )
+    return _Rest(rest.rotations, t, g, ends)
 
 
 def _same_rest(a: _Rest, pa: npt.NDArray[np.intp], b: _Rest, pb: npt.NDArray[np.intp]) -> bool:
@@ -682,27 +760,6 @@ def _skin_mesh(sk: Skeleton, rest: _Rest, lead: int, mesh: bool | MeshKind) -> S
     weights = np.zeros((n, 4), dtype=np.float32)
     weights[:, 0] = 1.0
     return SkinnedMesh(positions, normals, joints, weights, np.arange(n, dtype=np.uint32).reshape(-1, 3))
-
-
-def _primitive(b: _Builder, mesh: SkinnedMesh) -> dict[str, Any]:
-    """Write a skinned mesh's vertex attributes and indices; return the primitive JSON."""
-    n = mesh.num_vertices
-    pos32 = mesh.positions.astype(np.float32)
-    flat = mesh.indices.reshape(-1)
-    index = flat.astype(np.uint16 if n <= 65535 else np.uint32)
-    attributes = {
-        "POSITION": b.accessor(
-            b.view(pos32, ARRAY_BUFFER), 0, FLOAT, n, "VEC3", pos32.min(axis=0), pos32.max(axis=0)
-        ),
-        "NORMAL": b.accessor(b.view(mesh.normals.astype(np.float32), ARRAY_BUFFER), 0, FLOAT, n, "VEC3"),
-        "JOINTS_0": b.accessor(
-            b.view(mesh.joints.astype(np.uint16), ARRAY_BUFFER), 0, UNSIGNED_SHORT, n, "VEC4"
-        ),
-        "WEIGHTS_0": b.accessor(b.view(mesh.weights.astype(np.float32), ARRAY_BUFFER), 0, FLOAT, n, "VEC4"),
-    }
-    index_type = UNSIGNED_SHORT if index.dtype == np.uint16 else UNSIGNED_INT
-    indices = b.accessor(b.view(index, ELEMENT_ARRAY_BUFFER), 0, index_type, len(index), "SCALAR")
-    return {"attributes": attributes, "indices": indices, "material": 0, "mode": 4}
 
 
 class _Builder:

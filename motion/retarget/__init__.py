@@ -23,12 +23,15 @@ import numpy as np
 
 from ..errors import MotionError
 from ..motion import Motion
-from .legik import plant_feet, settle
+from ..skinning import BoundMesh
+from .grounding import FEET_MODES, ground_feet
+from .legik import character_soles, settle, sole_floor
 from .names import PRESETS, ROLES, Correspondence, correspond, detect_roles
 from .rootmotion import ROOT_MOTION_MODES, apply_root_motion
 from .transfer import Pose, hips_path, place_hips, transfer_rotations
 
 __all__ = [
+    "FEET_MODES",
     "PRESETS",
     "ROLES",
     "ROOT_MOTION_MODES",
@@ -55,8 +58,9 @@ def retarget(
     character: Motion,
     *,
     name_map: Mapping[str, str] | None = None,
-    plant: bool = True,
+    feet: str = "lock",
     root_motion: str | None = None,
+    mesh: BoundMesh | None = None,
 ) -> Motion:
     """``motion`` played by ``character``.
 
@@ -69,12 +73,18 @@ def retarget(
         :func:`motion.retarget.character.load_character`).
     name_map:
         ``{source joint or role: character joint}``, added to the automatic correspondence.
-    plant:
-        Keep planted feet planted and above the floor (leg IK); off, the transfer alone.
+    feet:
+        ``"lock"`` (planted feet held in place, soles on the floor), ``"grounding"`` (soles on the
+        floor only: planted soles touch it, none goes under it) or ``"free"`` (the transfer
+        alone): :mod:`motion.retarget.grounding`.
     root_motion:
         Where the root motion goes (:mod:`motion.retarget.rootmotion`): ``"root"`` (the joint
         above the hips, on the floor, turning with the body), ``"hips"`` or ``"none"``; ``None``
         leaves it on the character's root joint, moving with the hips.
+    mesh:
+        The character's skinned mesh (:func:`motion.skinning.read_skinned_mesh`): its soles are
+        what stands on the floor; without it, soles made from its bones
+        (:mod:`motion.retarget.sole`).
 
     Returns
     -------
@@ -88,6 +98,8 @@ def retarget(
         When a required joint (hips, legs, feet) has no counterpart, an input is not finite, or
         ``root_motion="root"`` is asked of a skeleton starting at its hips.
     """
+    if feet not in FEET_MODES:
+        raise MotionError(f"feet {feet!r}: use one of {', '.join(FEET_MODES)}")
     if root_motion is not None and root_motion not in ROOT_MOTION_MODES:
         raise MotionError(f"root motion {root_motion!r}: use one of {', '.join(ROOT_MOTION_MODES)}")
     _check_finite(motion, "motion")
@@ -108,8 +120,11 @@ def retarget(
     )
     path, _ = hips_path(motion, character, corr, src_pose, out)
     out = place_hips(out, corr.target_roles["Hips"], path)
-    if plant and n > 1:
-        out = plant_feet(settle(out, corr.target_roles, rest), corr.target_roles, rest)
+    if feet != "free" and n > 1:
+        roles = corr.target_roles
+        soles = character_soles(rest, roles, mesh)
+        floor = sole_floor(out, soles, rest, roles)
+        out = ground_feet(settle(out, roles, rest, soles, floor), soles, floor, mode=feet)
     if not np.all(np.isfinite(out.rotations)) or not np.all(np.isfinite(out.root_positions)):
         raise MotionError("retargeting produced non-finite values (degenerate bones in a skeleton?)")
     if root_motion is not None:

@@ -23,12 +23,24 @@ import numpy as np
 import numpy.typing as npt
 
 from ..contacts import detect_contacts
-from ..footskate import solve_foot_skate
 from ..motion import Motion
+from ..skinning import BoundMesh
+from .grounding import ground_feet
+from .sole import Sole, bone_soles, mesh_soles, soles_floor
 from .transfer import place_hips
 
 FOOT_ROLES = ("LeftFoot", "LeftToes", "RightFoot", "RightToes")
 FLOOR_PERCENTILE = 5.0
+
+
+def foot_groups_of(roles: dict[str, int]) -> list[tuple[int, ...]]:
+    """The character's feet as :func:`motion.contacts.foot_plants` and the contact events take
+    them: per side, the ankle then the toe (when it has one), by role (a role map's names count)."""
+    return [
+        tuple(roles[side + part] for part in ("Foot", "Toes") if side + part in roles)
+        for side in ("Left", "Right")
+        if side + "Foot" in roles
+    ]
 
 
 def foot_joints(roles: dict[str, int]) -> npt.NDArray[np.intp]:
@@ -68,30 +80,72 @@ def rest_floor(rest: Motion, roles: dict[str, int]) -> npt.NDArray[np.float64] |
     return floor_heights(roles, rest.global_positions())
 
 
-def settle(motion: Motion, roles: dict[str, int], rest: Motion) -> Motion:
-    """``motion`` moved up or down so that its flat planted feet sit, over the clip, at the rest
-    pose's ankle height (:func:`rest_ankle_height`): the median ankle height over the frames where
-    an ankle and its toe (when the skeleton has toes) are both planted. A vertical shift of the
-    whole body: no limb turns. Unchanged when the rest pose does not stand or no foot is planted."""
+def settle(
+    motion: Motion,
+    roles: dict[str, int],
+    rest: Motion,
+    soles: tuple[Sole, ...] | None = None,
+    floor: float | None = None,
+) -> Motion:
+    """``motion`` moved up or down so that its flat planted feet sit, over the clip, on the
+    floor: the median ankle height over the frames where an ankle and its toe (when the skeleton
+    has toes) are both planted is the rest pose's (:func:`rest_ankle_height`), or with ``soles``
+    and their ``floor`` the median lowest sole point on those frames is the floor. A vertical
+    shift of the whole body: no limb turns. Unchanged when the rest pose does not stand or no
+    foot is planted."""
     target = rest_ankle_height(rest, roles)
     if target is None:
         return motion
     pos = np.ascontiguousarray(motion.global_positions())
+    by_side = {s.side: s for s in soles or ()}
+    lowest = None
+    if soles is not None and floor is not None:
+        _, grot = motion.fk()
+        lowest = {s.side: s.positions(pos, grot)[:, :, 1].min(axis=1) for s in soles}
     heights = []
     for side in ("Left", "Right"):
         joints = np.array([roles[side + p] for p in ("Foot", "Toes") if side + p in roles], dtype=np.intp)
         _, flags = detect_contacts(motion, joints, positions=pos)
-        heights.append(pos[flags.all(axis=1), joints[0], 1])
-    flat = np.concatenate(heights)
-    if flat.size == 0:
+        flat = flags.all(axis=1)
+        if lowest is not None and side in by_side and floor is not None:
+            heights.append(lowest[side][flat] - floor)
+        else:
+            heights.append(pos[flat, joints[0], 1] - target)
+    flat_heights = np.concatenate(heights)
+    if flat_heights.size == 0:
         return motion
-    shift = float(np.median(flat)) - target
+    shift = float(np.median(flat_heights))
     hips = roles["Hips"]
     return place_hips(motion, hips, pos[:, hips] - np.array([0.0, shift, 0.0]))
 
 
-def plant_feet(motion: Motion, roles: dict[str, int], rest: Motion | None = None) -> Motion:
-    """``motion`` with planted feet pinned and no ankle or toe under its floor.
+def character_soles(rest: Motion, roles: dict[str, int], mesh: BoundMesh | None = None) -> tuple[Sole, ...]:
+    """The character's soles (:mod:`motion.retarget.sole`): from its skinned mesh when it has one,
+    else from its bones."""
+    return mesh_soles(mesh, rest, roles) if mesh is not None else bone_soles(rest, roles)
+
+
+def sole_floor(motion: Motion, soles: tuple[Sole, ...], rest: Motion, roles: dict[str, int]) -> float:
+    """The floor the soles stand on: the rest pose's lowest sole point when that pose stands
+    (:func:`rest_ankle_height`), else the usual lowest level of the soles in ``motion`` (the 5th
+    percentile over frames of the lower sole's lowest point)."""
+    if rest_ankle_height(rest, roles) is not None:
+        return soles_floor(soles)
+    pos, grot = motion.fk()
+    low = np.min([s.positions(pos, grot)[:, :, 1].min(axis=1) for s in soles], axis=0)
+    return float(np.percentile(low, FLOOR_PERCENTILE))
+
+
+def plant_feet(
+    motion: Motion,
+    roles: dict[str, int],
+    rest: Motion | None = None,
+    *,
+    soles: tuple[Sole, ...] | None = None,
+    mode: str = "lock",
+) -> Motion:
+    """``motion`` with planted feet pinned (``mode="lock"``) and its soles on the floor
+    (:func:`motion.retarget.grounding.ground_feet`).
 
     Parameters
     ----------
@@ -100,15 +154,65 @@ def plant_feet(motion: Motion, roles: dict[str, int], rest: Motion | None = None
     roles:
         Role -> joint index of the character (:class:`motion.retarget.names.Correspondence`).
     rest:
-        The character in its rest pose: when that pose stands, the floor of each ankle and toe
-        is its flat-foot rest height (:func:`rest_floor`) instead of its usual lowest level.
+        The character in its rest pose (default: ``motion``'s first frame): its soles and floor.
+    soles:
+        The character's soles (default: from its bones, :func:`character_soles`).
+    mode:
+        ``"lock"``, ``"grounding"`` or ``"free"`` (:data:`motion.retarget.grounding.FEET_MODES`).
     """
-    joints = foot_joints(roles)
-    pos = np.ascontiguousarray(motion.global_positions())
-    floor = floor_heights(roles, pos)
-    flat = None if rest is None else rest_floor(rest, roles)
-    if flat is not None:
-        floor = flat
-    joints, flags = detect_contacts(motion, joints, positions=pos)
-    result = solve_foot_skate(motion, (joints, flags), blend_s=0.1, floor=floor)
-    return result.motion
+    rest = motion.slice(0, 1) if rest is None else rest
+    soles = character_soles(rest, roles) if soles is None else soles
+    floor = sole_floor(motion, soles, rest, roles)
+    return ground_feet(motion, soles, floor, mode=mode)
+
+
+def feet_on_floor(motion: Motion, mode: str) -> Motion:
+    """A motion's own feet (not retargeted) kept on its floor (:func:`motion.retarget.grounding.ground_feet`):
+    ``"lock"`` holds planted feet in place and keeps soles on the floor, ``"grounding"`` keeps
+    soles on the floor only, ``"free"`` returns ``motion`` as it is. Its roles are found by name
+    (:func:`motion.retarget.names.detect_roles`); its soles are made from its bones in a standing
+    pose (its zero pose when that stands, else its first frame); its floor is the soles' usual
+    lowest level (the 5th percentile over frames of the lower sole's lowest point). A combined
+    motion of several characters (a crowd) has each character's feet kept on its floor.
+
+    Raises :class:`MotionError` naming the missing joints when the skeleton's hips, legs and feet
+    are not found under any naming convention."""
+    from ..errors import MotionError
+    from ..export.characters import combine_characters, split_characters, without_prefix
+    from .names import REQUIRED, detect_roles, role_label
+    from .transfer import zero_pose
+
+    if mode == "free" or motion.num_frames < 2:
+        return motion
+    chars = split_characters(motion)
+    if chars is not None:
+        done = []
+        for c in chars:
+            plain, pre = without_prefix(c)
+            moved = feet_on_floor(plain, mode)
+            kept = Motion(
+                c.skeleton,
+                moved.root_positions,
+                moved.rotations,
+                c.fps,
+                moved.joint_translations,
+                c.units,
+                c.name,
+            )
+            done.append((kept, pre))
+        return combine_characters([m for m, _ in done], [p for _, p in done])
+    roles = detect_roles(motion.skeleton).joints
+    missing = [r for r in REQUIRED if r not in roles]
+    if missing:
+        raise MotionError(
+            "cannot keep the feet on the floor: no joint found for "
+            f"{', '.join(role_label(r) for r in missing)} (joint names of a known convention are "
+            "needed; --feet free leaves the motion as it is)"
+        )
+    zero = zero_pose(motion)
+    rest = zero if rest_ankle_height(zero, roles) is not None else motion.slice(0, 1)
+    soles = bone_soles(rest, roles)
+    pos, grot = motion.fk()
+    low = np.min([s.positions(pos, grot)[:, :, 1].min(axis=1) for s in soles], axis=0)
+    floor = float(np.percentile(low, FLOOR_PERCENTILE))
+    return ground_feet(motion, soles, floor, mode=mode)

@@ -14,6 +14,12 @@ between them are paired by their position along the chain, and joints left over 
 chain's) are unmapped: they keep their rest rotation.
 
 An explicit map ``{source joint or role: character joint}`` extends or overrides the presets.
+A role may name any joint of the character, even one the source has no joint for (a game rig's
+toes under a CMU motion): the character then knows that joint's role (its feet stand on their
+toes, :mod:`motion.retarget.sole`) and the joint follows its parent (toes keep their rest bend on
+a foot aimed where the source's foot points). A limb the source moves and the character's roles
+leave undriven (an arm, the head, the spine: a map naming only the legs) is named in the
+correspondence's ``warnings``: it keeps its rest pose.
 """
 
 from __future__ import annotations
@@ -215,6 +221,9 @@ class Correspondence:
     source_roles: dict[str, int]
     target_preset: str
     source_preset: str
+    warnings: tuple[str, ...] = ()
+    """What the correspondence leaves undriven that the source moves (limbs keeping their rest
+    pose), one sentence each (:func:`undriven_warnings`)."""
 
     def side(self, skeleton: Skeleton) -> dict[int, int]:
         """Character joint -> +1 left, -1 right, 0 centre (roles first, then names)."""
@@ -304,9 +313,7 @@ def correspond(
                 extra[t_index[value]] = s_index[key]
             else:
                 tgt_roles[role] = t_index[value]
-        elif key in ROLES:
-            if key not in src_roles:
-                raise MotionError(f"joint map: the motion has no joint for the role {key!r}")
+        elif key in ROLES:  # the source may lack it (toes): the character still knows the role
             tgt_roles[key] = t_index[value]
         else:
             raise MotionError(
@@ -327,4 +334,47 @@ def correspond(
     for t, s in (*pair_chains(t_torso, s_torso).items(), *pair_chains(t_neck, s_neck).items()):
         pairs.setdefault(t, s)
     pairs.update(extra)
-    return Correspondence(pairs, tgt_roles, src_roles, tgt.preset or "map", src.preset or "map")
+    warnings = undriven_warnings(source, target, src_roles, tgt_roles, pairs)
+    return Correspondence(pairs, tgt_roles, src_roles, tgt.preset or "map", src.preset or "map", warnings)
+
+
+LIMB_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("head", ("Head",)),
+    ("left arm", ("LeftShoulder", "LeftUpperArm", "LeftLowerArm", "LeftHand")),
+    ("right arm", ("RightShoulder", "RightUpperArm", "RightLowerArm", "RightHand")),
+    ("left leg", ("LeftUpperLeg", "LeftLowerLeg", "LeftFoot")),
+    ("right leg", ("RightUpperLeg", "RightLowerLeg", "RightFoot")),
+)
+"""Limbs by role, for :func:`undriven_warnings` (toes are not among them: a character's toes follow
+its foot when the source has none)."""
+
+
+def undriven_warnings(
+    source: Skeleton,
+    target: Skeleton,
+    source_roles: dict[str, int],
+    target_roles: dict[str, int],
+    pairs: dict[int, int],
+) -> tuple[str, ...]:
+    """Sentences naming what the source moves and the character leaves undriven: each limb of
+    :data:`LIMB_GROUPS` with roles the source has and the character does not (its joints keep
+    their rest pose), and the spine when the source's is paired and the character's cannot be
+    (no head or arms known on it)."""
+    out: list[str] = []
+    missing = []
+    for label, roles in LIMB_GROUPS:
+        lacking = [r for r in roles if r in source_roles and r not in target_roles]
+        if lacking:
+            parts = ", ".join(role_label(r) for r in lacking)
+            missing.append(label if parts == label else f"{label} ({parts})")
+    t_torso, _ = torso_chain(target, target_roles)
+    s_torso, _ = torso_chain(source, source_roles)
+    if s_torso and not t_torso:
+        missing.append("spine and neck (paired only when the head and both arms are known)")
+    if missing:
+        out.append(
+            f"the character's joints for these limbs of the motion are not known, so they keep their "
+            f"rest pose ({len(pairs)} of {target.num_joints} joints driven): {'; '.join(missing)}; "
+            'name them in the joint map (--map), e.g. {"LeftUpperArm": "<the character\'s joint>"}'
+        )
+    return tuple(out)

@@ -7,16 +7,19 @@ Commands::
                                                   labels, skeleton; what a graph build left out)
     segue beats FILE [--json] [--joints A,B] [--positions] [--tempo LO:HI]   motion beats (Kim et al. 2003)
     segue beats SONG.wav [--json] [--tempo-bpm X]      music beats of a recording (WAV, FLAC, Ogg, MP3)
-    segue convert IN OUT [--fps N] [--target T]   BVH -> .bvh/.bvh.gz/.glb/.json/.npz
+    segue convert IN OUT [--fps N] [--target T] [--feet lock|grounding|free]
+                                                  BVH -> .bvh/.bvh.gz/.glb/.json/.npz
     segue retarget MOTION --to CHARACTER --out OUT [--map MAP.json] [--rest first|zero]
            [--target T] [--root-motion root|hips|none] [--animation-only] [--events contacts]
+           [--feet lock|grounding|free] [--report FEET.json]
                                                   the motion on another character (BVH or GLB/glTF skin;
                                                   a GLB character's own file with the animation added)
     segue samples                                 list the bundled samples (clips and a MIDI song)
     segue demo [--out DIR]                        convert a bundled clip and dance it (rhythm)
     segue demo ENGINE [--out DIR]                 one engine end to end on bundled clips (service.demos)
     segue build SPEC.json --out DIR               build a database (same JSON as POST /v1/databases)
-    segue synth REQUEST.json --db DIR --out OUT   run a job in-process (same JSON as POST /v1/jobs)
+    segue synth REQUEST.json --db DIR --out OUT [--feet lock|grounding|free]
+                                                  run a job in-process (same JSON as POST /v1/jobs)
     segue graph DIR [--json]                      a rhythm database's movement transition graph
     segue graph-edit DIR EDITS.json --out DIR2    derive a database with an edited movement graph
     segue serve [--host H] [--port P] [--redis URL] [--import DIR]   the HTTP/WebSocket API (+ embedded
@@ -42,6 +45,7 @@ from .addon import cmd_blender_addon
 from .demo import cmd_demo
 from .files import (
     DEFAULT_MAX_JOINT_FRAMES,
+    FEET_MODES,
     OUTPUT_SUFFIXES,
     SAMPLE_PREFIX,
     TARGETS,
@@ -55,7 +59,7 @@ from .files import (
 from .jobs import _validation_message, cmd_build, cmd_graph, cmd_graph_edit, cmd_synth
 from .serve import cmd_serve, cmd_warm, cmd_worker
 
-__all__ = ["OUTPUT_SUFFIXES", "SAMPLE_PREFIX", "TARGETS", "UNITS", "build_parser", "main"]
+__all__ = ["FEET_MODES", "OUTPUT_SUFFIXES", "SAMPLE_PREFIX", "TARGETS", "UNITS", "build_parser", "main"]
 
 
 class _Version(argparse.Action):
@@ -99,6 +103,16 @@ def build_parser() -> argparse.ArgumentParser:
             action="store_true",
             help="drop the reference-pose frames a file starts with (a file keeps its frame count by "
             "default; a note says when it starts with such frames)",
+        )
+
+    def feet_option(p: argparse.ArgumentParser, default: str | None, what: str = "") -> None:
+        p.add_argument(
+            "--feet",
+            choices=FEET_MODES,
+            default=default,
+            help="lock: planted feet held in place, soles on the floor; grounding: soles on the floor "
+            f"only (no sole under it, planted soles on it); free: feet left as they are{what}"
+            + (f" (default {default})" if default else ""),
         )
 
     def limits(p: argparse.ArgumentParser) -> None:
@@ -200,6 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
         help=".glb: the body stays over the origin; the root motion stays on the ground joint",
     )
     p.add_argument("--events", help="contacts: foot-contact events in .glb extras / .json events")
+    feet_option(p, "free", "; the motion's own feet, soles from its bones")
     reference_options(p)
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     limits(p)
@@ -225,7 +240,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="the BVH character's rest pose: its first frame (default) or zero rotations",
     )
     p.add_argument("--in-units", choices=units, help="declare the motion's length unit instead of guessing")
-    p.add_argument("--no-plant", action="store_true", help="skip the leg IK that keeps planted feet planted")
+    feet_option(p, "lock")
+    p.add_argument("--no-plant", action="store_true", help=argparse.SUPPRESS)  # before --feet free
+    p.add_argument("--report", help="write the feet's figures (motion.retarget.report) to this JSON file")
     p.add_argument(
         "--target",
         default="gltf",
@@ -292,6 +309,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         help="time cap of the search, seconds (overrides the request's budget_s; the request sets the work)",
     )
+    feet_option(p, None, "; overrides the request's feet (graph, annotations, control, rhythm)")
     p.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
     p.set_defaults(func=cmd_synth)
 

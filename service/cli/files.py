@@ -28,6 +28,8 @@ OUTPUT_SUFFIXES = (".bvh", ".bvh.gz", ".glb", ".json", ".npz")
 """Output formats by extension (:data:`motion.io.OUTPUT_SUFFIXES`)."""
 DEFAULT_MAX_JOINT_FRAMES = 20_000_000
 """Default ``--max-joint-frames`` (:data:`motion.bvh.DEFAULT_MAX_JOINT_FRAMES`; a test keeps them equal)."""
+FEET_MODES = ("lock", "grounding", "free")
+"""What ``--feet`` does to the feet (:data:`motion.retarget.grounding.FEET_MODES`)."""
 
 
 def _resolve(path: str) -> Path:
@@ -315,6 +317,10 @@ def cmd_convert(args: argparse.Namespace) -> int:
             raise MotionError(f"--frames {args.frames!r}: expected START:STOP frame numbers") from None
     if args.fps is not None:
         motion = resample(motion, args.fps)
+    if args.feet != "free":
+        from motion.retarget.legik import feet_on_floor
+
+        motion = feet_on_floor(motion, args.feet)
     if args.ground_root and not args.output.lower().endswith(".glb"):
         motion = add_ground_root(motion)
     t0 = time.perf_counter()
@@ -343,7 +349,10 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     from motion.io import save_motion
     from motion.retarget import correspond, retarget
     from motion.retarget.character import GLTF_SUFFIXES, load_character
+    from motion.retarget.legik import character_soles, foot_groups_of, sole_floor
+    from motion.retarget.report import feet_report
     from motion.retarget.rootmotion import default_root_motion
+    from motion.skinning import read_skinned_mesh
     from motion.units import METRES_PER_UNIT
 
     name_map = None
@@ -367,13 +376,27 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     motion = _read(_resolve(args.motion), args, args.in_units, _animation(args))
     motion, reference = _without_reference(motion, args.motion, args)
     character = load_character(to, rest=args.rest, limits=_limits(args))
+    mesh = read_skinned_mesh(to.read_bytes(), base_dir=to.parent) if gltf_character else None
     t0 = time.perf_counter()
     corr = correspond(motion.skeleton, character.skeleton, name_map)
+    for warning in corr.warnings:
+        print(f"segue: warning: {warning}", file=sys.stderr)
     mode = args.root_motion or default_root_motion(args.target, corr.target_roles["Hips"])
-    out = retarget(motion, character, name_map=name_map, plant=not args.no_plant, root_motion=mode)
+    feet = "free" if args.no_plant else args.feet
+    out = retarget(motion, character, name_map=name_map, feet=feet, root_motion=mode, mesh=mesh)
+    groups = foot_groups_of(corr.target_roles)
+    soles = character_soles(character, corr.target_roles, mesh)
+    report = feet_report(
+        motion, out, character, corr, soles, sole_floor(out, soles, character, corr.target_roles)
+    )
+    if args.report:
+        try:
+            Path(args.report).write_text(json.dumps({"feet": feet, **report.as_dict()}, indent=1) + "\n")
+        except OSError as exc:
+            raise MotionError(f"cannot write {args.report}: {exc.strerror or exc}") from None
     notes: list[str] = []
     if glb_out:
-        events = contact_events(out) if kinds else None
+        events = contact_events(out, feet=groups) if kinds else None
         if gltf_character:  # the character's own file, with the animation added
             data = bound_glb(
                 to.read_bytes(), out, animation_only=args.animation_only, events=events, base_dir=to.parent
@@ -387,7 +410,14 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     else:
         # the character's own units, exactly
         keep = out.units in METRES_PER_UNIT
-        notes = save_motion(out, args.out, units=out.units if keep else None, events=kinds)
+        extra = contact_events(out, feet=groups) if kinds else None
+        notes = save_motion(
+            out,
+            args.out,
+            units=out.units if keep else None,
+            events=kinds if not extra else (),  # no contact found: as any file (.bvh refuses events)
+            extra_events=extra or (),
+        )
     for note in reference + notes:
         print(f"segue: note: {note}", file=sys.stderr)
     if not args.quiet:
@@ -405,6 +435,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
             + ("" if mode == "none" else f" on {root!r}")
             + f"; {time.perf_counter() - t0:.2f} s)"
         )
+        print(f"feet ({feet}): {report.summary()}")
     return 0
 
 

@@ -111,7 +111,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
     with _events_sink(args.events) as sink:
         writer = EventWriter("local", sink, None if args.quiet else _echo)
-        result = synth_from_dir(Path(args.request), Path(args.db), writer, args.budget)
+        result = synth_from_dir(Path(args.request), Path(args.db), writer, args.budget, args.feet)
     if result is None:
         failed = [e for e in writer.events if e.type == EventType.failed]
         msg = failed[-1].data["error"]["message"] if failed else "no result"

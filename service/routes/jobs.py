@@ -11,6 +11,7 @@ from starlette.concurrency import run_in_threadpool
 from engines.registry import parse_job_request
 from schemas import JobInfo, Report
 from schemas.bases import JobRequestBase
+from schemas.common import FeetMode
 from schemas.jobs import JobKind, JobStatus
 from workers.backend import JobBackend, JobNotFinished
 from workers.budget import check_work, database_facts, estimate_work
@@ -352,6 +353,13 @@ async def download_result(
             "its joints without their c0_ prefix; with character, that dancer on it",
         ),
     ] = None,
+    feet: Annotated[
+        FeetMode | None,
+        Query(
+            description="lock: planted feet held in place and on the floor; grounding: on the floor "
+            "only; free: as they are (default: lock with character, free without)"
+        ),
+    ] = None,
 ) -> Response:
     """Download a result motion (default: the job's best result so far), optionally resampled or
     retargeted onto a character; 409 ``result_not_ready`` while the job has none yet, 422
@@ -384,6 +392,7 @@ async def download_result(
         mesh=mesh or ResultMesh.bones,
         animation_only=animation_only,
         dancer=dancer,
+        feet=feet,
         max_frames=settings.max_output_frames,
         max_joint_frames=settings.max_joint_frames,
         bvh_limits=(limits.max_joints, limits.max_frames, limits.max_bytes),

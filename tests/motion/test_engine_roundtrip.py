@@ -35,6 +35,7 @@ from motion.export.bind import bound_glb
 from motion.export.characters import combine_characters
 from motion.export.events import contact_events
 from motion.export.glb import glb_bytes
+from motion.export.mannequin import mannequin_glb
 from motion.io import load_motion
 from motion.refpose import without_reference_lead
 from motion.retarget import retarget
@@ -42,6 +43,7 @@ from motion.retarget.character import gltf_character
 
 from ..blender import run_blender
 from .retarget.gltf_rig import NAMES, PARENTS, unreal_character_glb
+from .retarget.namings import game_rig, name_in
 
 pytestmark = pytest.mark.slow
 
@@ -74,7 +76,25 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     (folder / "couple.glb").write_bytes(glb_bytes(couple))
     body_walk = walk.slice(0, 100)
     (folder / "body_walk.glb").write_bytes(glb_bytes(body_walk, mesh="body"))
-    return {"folder": folder, "moved": moved, "events": events, "couple": people, "body_walk": body_walk}
+    dancers = [
+        replace(base, root_positions=base.root_positions + np.array([k * 80.0, 0.0, k * 40.0]))
+        for k in range(3)
+    ]
+    rootless = game_rig(root=False)  # a skeleton that starts at its hips (Mixamo names)
+    rig = mannequin_glb(rootless, names=[name_in("mixamo", n) for n in rootless.skeleton.names])
+    on_hips = retarget(walk, gltf_character(rig), root_motion="hips")
+    (folder / "rootless_walk.glb").write_bytes(bound_glb(rig, on_hips))
+    crowd = combine_characters(dancers, ["c0_", "c1_", "c2_"])
+    (folder / "crowd.glb").write_bytes(glb_bytes(crowd, mesh="body"))
+    return {
+        "folder": folder,
+        "moved": moved,
+        "events": events,
+        "couple": people,
+        "body_walk": body_walk,
+        "crowd": dancers,
+        "on_hips": on_hips,
+    }
 
 
 def _segue_positions(moved: Any) -> np.ndarray:
@@ -211,6 +231,46 @@ def test_godot_binds_the_walk_and_its_root_motion_recipe_ends_where_root_ends(
     assert got["events"] == files["events"]  # read from the file by the documented GDScript
     # the recipe the docs gave before (each step turned by the body's heading) ends elsewhere
     assert np.abs(np.array(recipe["end_turned_each_step"]) - travel).max() > 0.1
+
+
+def test_godot_deforms_each_dancer_of_a_crowd_with_its_own_skin(
+    files: dict[str, Any], godot: dict[str, dict[str, Any]]
+) -> None:
+    """Godot 3.2 merges skins whose bind poses are equal: with every dancer bound at the origin,
+    dancers 1 and 2 were deformed by dancer 0's skin (their meshes collapsed onto it). Each
+    dancer is now bound where it stands in its first frame."""
+    got = godot["crowd.glb"]
+    assert len(got["skeletons"]) == 3
+    meshes = got["meshes"]
+    assert len(meshes) == 3 and all(m["skin"] for m in meshes)
+    assert len({m["skin_ref"] for m in meshes}) == 3  # three skins, none merged
+    assert sorted(m["skeleton_path"].split("/")[0] for m in meshes) == ["c0", "c1", "c2"]  # its own Skeleton
+    for k, dancer in enumerate(files["crowd"]):
+        (mesh,) = [m for m in meshes if m["skeleton_path"].startswith(f"c{k}/")]
+        # a bind pose is the inverse of the joint's rest: its origin is minus the root's place
+        root = -np.array(mesh["binds"][0])
+        assert np.allclose(root[[0, 2]], dancer.root_positions[0, [0, 2]] * 0.01, atol=1e-3)
+
+
+def test_godot_recipe_for_a_rig_without_a_root_bone_ends_where_the_hips_end(
+    files: dict[str, Any], godot: dict[str, dict[str, Any]]
+) -> None:
+    """With the AnimationTree's root motion on the hips (the recipe for a root bone), Godot 3.2
+    turns each step about the skeleton's origin (by the hips' rest) and holds the hips at rest:
+    the body ended 20 cm off and the character lost its hips' motion. The recipe for such rigs
+    takes the hips' floor path from their track while the player plays everything."""
+    (anim,) = godot["rootless_walk.glb"]["animations"]
+    moved = files["on_hips"]
+    pos = _segue_positions(moved)
+    hips = moved.skeleton.names.index("mixamorig:Hips")
+    recipe = anim["hips_motion"]
+    travel = pos[-1, hips] - pos[0, hips]
+    assert np.abs(np.array(recipe["end"])[[0, 2]] - travel[[0, 2]]).max() < 0.01  # metres
+    assert abs(recipe["end"][1]) < 1e-6  # no vertical drift: the body stays on the floor
+    for k, t in enumerate(TIMES):  # the hips where the animation puts them, body and all
+        assert np.abs(np.array(recipe["hips"][k]) - pos[_frame(moved, t), hips]).max() < GODOT_FK_TOLERANCE_M
+    # the root-bone recipe on the hips ends elsewhere (the issue measured 4.1 cm; here more)
+    assert np.abs(np.array(anim["root_motion"]["end"]) - travel).max() > 0.03
 
 
 def test_godot_gives_each_dancer_a_skeleton_and_an_animation(godot: dict[str, dict[str, Any]]) -> None:

@@ -194,8 +194,17 @@ def test_crowd_has_one_skin_per_character_and_grows_linearly() -> None:
     skins = gltf["skins"]
     assert len(skins) == 3
     assert len({j for s in skins for j in s["joints"]}) == sum(len(s["joints"]) for s in skins)
-    assert len(gltf["meshes"]) == 1  # same bind pose: one bone mesh, one set of bind matrices
-    assert len({s["inverseBindMatrices"] for s in skins}) == 1
+    # each character bound where it stands in its first frame (Godot 3.2 merges equal skins): its
+    # own bind matrices and vertex positions; the same body shares its other vertex attributes
+    assert len({s["inverseBindMatrices"] for s in skins}) == 3
+    prims = [m["primitives"][0] for m in gltf["meshes"]]
+    assert len({p["attributes"]["POSITION"] for p in prims}) == 3
+    for key in ("NORMAL", "JOINTS_0", "WEIGHTS_0"):
+        assert len({p["attributes"][key] for p in prims}) == 1
+    ibms = [glb.accessor(s["inverseBindMatrices"]) for s in skins]
+    for ibm, person in zip(ibms, people, strict=True):
+        root = np.linalg.inv(ibm[0])[:3, 3]
+        np.testing.assert_allclose(root[[0, 2]], person.root_positions[0, [0, 2]] * 0.01, atol=1e-5)
     mesh_nodes = [n for n in gltf["nodes"] if "mesh" in n]
     assert sorted(n["skin"] for n in mesh_nodes) == [0, 1, 2]
     nodes = gltf["nodes"]
@@ -222,6 +231,13 @@ def test_crowd_has_one_skin_per_character_and_grows_linearly() -> None:
     assert per == pytest.approx(sizes[1] - sizes[0], rel=0.02)  # linear in the number of characters
     heights = rest_heights(data)
     assert min(heights.values()) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_characters_at_one_place_still_have_skins_of_their_own() -> None:
+    base = motion.read_bvh(sample_path("walk-05-01")).slice(0, 30)
+    glb = read_glb(glb_bytes(combine_characters([base, base, base], ["c0_", "c1_", "c2_"])))
+    roots = [np.linalg.inv(glb.accessor(s["inverseBindMatrices"])[0])[:3, 3] for s in glb.gltf["skins"]]
+    assert np.diff(np.array(roots)[:, 0]) == pytest.approx([0.001, 0.001], abs=2e-6)  # 1 mm apart
 
 
 def test_crowd_contact_events_name_their_character() -> None:
@@ -306,3 +322,23 @@ def test_contact_count_of_a_dance_barely_depends_on_the_frame_rate() -> None:
     m = motion.read_bvh(sample_path("salsa-follower-02"))
     counts = [len(contact_events(resample(m, fps))) for fps in (24.0, 30.0, 60.0, 120.0)]
     assert max(counts) - min(counts) <= 0.05 * max(counts), counts
+
+
+def test_one_contact_per_plant_whatever_the_names() -> None:
+    """A foot's ankle and toe planting together are one plant: under Mixamo names (``LeftFoot``,
+    ``LeftToeBase``, both found by name) a walk gave two events per plant, 10 where Unreal names
+    (``ball_l`` is not named like a toe) gave 5."""
+    from motion.refpose import without_reference_lead
+    from motion.retarget import retarget
+    from motion.retarget.character import gltf_character
+
+    from .retarget.gltf_rig import unreal_character_glb
+    from .retarget.namings import renamed_glb
+
+    walk, _ = without_reference_lead(motion.io.load_motion("sample:walk"))
+    events = {}
+    for naming in ("unreal", "mixamo"):
+        out = retarget(walk, gltf_character(renamed_glb(unreal_character_glb(), naming)))
+        events[naming] = contact_events(out)
+    assert len(events["unreal"]) == len(events["mixamo"]) == 5
+    assert {e["joint"] for e in events["mixamo"]} == {"mixamorig:LeftFoot", "mixamorig:RightFoot"}

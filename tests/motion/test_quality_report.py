@@ -188,3 +188,24 @@ def test_beat_align_scores_count_speed_minima() -> None:
     assert mint > 0.85 and bail > 0.85 and minima.size >= 8
     mint2, bail2, _ = beat_align_scores(pos, fps, music + period / 2)  # music off by half a beat
     assert mint2 < 0.01 and bail2 < 0.01
+
+
+def test_the_fastest_foot_against_the_examples(walk: Motion, ref: Reference) -> None:
+    """The report gives the fastest foot (frame to frame) against the examples' fastest: a knee
+    that turns half round for one frame snaps its foot, 1.3 times the examples' or more."""
+    from dataclasses import replace
+
+    from motion import rotations as rot
+    from motion.contacts import foot_joints
+
+    report = assess(walk, QualityInputs(), ref)
+    speed = report.plausibility["foot_speed"]
+    assert speed["ratio"] <= 1.0 + 1e-9 and speed["limit"] is None  # reported, not gated
+    assert report.metrics["foot_speed_ratio"] == speed["ratio"]
+    foot = int(foot_joints(walk.skeleton)[0])
+    knee = int(walk.skeleton.parents[foot])
+    q = np.array(walk.rotations, copy=True)
+    q[120, knee] = rot.multiply(rot.from_axis_angle(np.array([1.0, 0.0, 0.0]), 1.2), q[120, knee])
+    snapped = assess(replace(walk, rotations=q), QualityInputs(), ref).plausibility["foot_speed"]
+    assert snapped["ratio"] > 1.3 and snapped["value"] > snapped["snap_limit"]
+    assert snapped["frame"] in (120, 121)

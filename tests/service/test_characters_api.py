@@ -71,7 +71,7 @@ def test_a_glb_characters_binding_is_the_retargetings_transfer(
     moved = apply_binding(
         type(b)(**{**{f: getattr(b, f) for f in b.__slots__}, "offsets": served}), walk, hero
     )
-    want_pos = retarget(walk, hero, plant=False).global_positions()
+    want_pos = retarget(walk, hero, feet="free").global_positions()
     assert np.abs(moved.global_positions() - want_pos).max() < 1e-4
 
 

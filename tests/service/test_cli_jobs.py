@@ -176,3 +176,39 @@ def test_synth_glb_and_json_carry_the_results_beats_and_labels(tmp_path: Path) -
     plain = Report(job="j", result="r1", engine="x", score=0.0, frames=60, fps=m.fps, provenance=[])
     write_result(m, plain, tmp_path / "b.glb", None)
     assert (tmp_path / "b.glb").read_bytes() == glb_bytes(m)  # nothing to add: no extras
+
+
+def test_synth_feet_overrides_the_request(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``segue synth --feet``: the request's ``feet`` (lock by default through ``footskate``); an
+    engine without a foot clean-up refuses it."""
+    from service.demos import DEMOS
+
+    demo = DEMOS["rhythm"]
+    (tmp_path / "db.json").write_text(json.dumps(demo.spec))
+    (tmp_path / "req.json").write_text(json.dumps(demo.request))
+    assert main(["build", str(tmp_path / "db.json"), "--out", str(tmp_path / "db"), "-q"]) == 0
+    outs = {}
+    for feet in (None, "lock", "grounding", "free"):
+        out = tmp_path / f"{feet}.bvh"
+        args = ["synth", str(tmp_path / "req.json"), "--db", str(tmp_path / "db"), "--out", str(out), "-q"]
+        assert main(args + (["--feet", feet] if feet else [])) == 0
+        outs[feet] = out.read_bytes()
+    assert outs[None] == outs["lock"]
+    assert len({outs[f] for f in ("lock", "grounding", "free")}) == 3
+    request = json.loads((tmp_path / "req.json").read_text())
+    (tmp_path / "req2.json").write_text(json.dumps({**request, "feet": "grounding"}))
+    out2 = tmp_path / "in-request.bvh"
+    assert (
+        main(["synth", str(tmp_path / "req2.json"), "--db", str(tmp_path / "db"), "--out", str(out2), "-q"])
+        == 0
+    )
+    assert out2.read_bytes() == outs["grounding"]
+    spec_dir = tmp_path / "clips"
+    spec_dir.mkdir()
+    shutil.copy(sample_path("walk"), spec_dir / "walk.bvh.gz")
+    (spec_dir / "db.json").write_text(json.dumps({"kind": "clips", "clips": [{"bvh": "walk.bvh.gz"}]}))
+    (spec_dir / "r.json").write_text(json.dumps({"engine": "clip", "clip": "walk"}))
+    assert main(["build", str(spec_dir / "db.json"), "--out", str(spec_dir / "db"), "-q"]) == 0
+    args = ["synth", str(spec_dir / "r.json"), "--db", str(spec_dir / "db"), "--out", str(spec_dir / "o.bvh")]
+    assert main([*args, "--feet", "lock"]) == 2
+    assert "no foot clean-up" in capsys.readouterr().err

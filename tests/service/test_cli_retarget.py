@@ -152,3 +152,64 @@ def test_root_motion_options(tmp_path: Path, capsys: pytest.CaptureFixture[str])
         == 2
     )
     assert "starts at its hips" in capsys.readouterr().err
+
+
+def test_feet_option_report_and_warnings(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--feet lock|grounding|free`` (lock by default, as before), the feet's figures printed and
+    written (``--report``), the character's own mesh read, and a map that leaves limbs undriven
+    warns naming them."""
+    from tests.motion.retarget.namings import mannequin_character, role_map
+
+    hero = tmp_path / "hero.glb"
+    hero.write_bytes(mannequin_character("own"))
+    amap = tmp_path / "map.json"
+    amap.write_text(json.dumps(role_map("own")))
+    outs = {}
+    for feet in ("lock", "grounding", "free", None):
+        out = tmp_path / f"out-{feet}.bvh"
+        args = ["retarget", "sample:walk", "--to", str(hero), "--out", str(out), "--map", str(amap)]
+        args += ["--report", str(tmp_path / f"{feet}.json")] + (["--feet", feet] if feet else [])
+        assert main(args) == 0
+        said = capsys.readouterr()
+        assert f"feet ({feet or 'lock'}): soles at worst" in said.out and "warning" not in said.err
+        outs[feet] = out.read_bytes()
+    assert outs[None] == outs["lock"] and len({outs[f] for f in ("lock", "grounding", "free")}) == 3
+    figures = {f: json.loads((tmp_path / f"{f}.json").read_text()) for f in ("lock", "free")}
+    assert figures["lock"]["sink_cm"] <= 1.0 < figures["free"]["sink_cm"]  # the mesh's soles, not joints
+    assert figures["lock"]["contacts"] == figures["lock"]["source_plants"] == 5
+    legs = {k: v for k, v in role_map("own").items() if "Leg" in k or "Foot" in k or k == "Hips"}
+    amap.write_text(json.dumps(legs))
+    assert (
+        main(
+            [
+                "retarget",
+                "sample:walk",
+                "--to",
+                str(hero),
+                "--out",
+                str(tmp_path / "x.bvh"),
+                "--map",
+                str(amap),
+                "-q",
+            ]
+        )
+        == 0
+    )
+    err = capsys.readouterr().err
+    assert "segue: warning:" in err and "left arm" in err and "keep their rest pose" in err
+    bad = ["retarget", "sample:walk", "--to", str(hero), "--out", str(tmp_path / "y.bvh"), "--feet", "x"]
+    with pytest.raises(SystemExit) as exit_:
+        main(bad)
+    assert exit_.value.code == 2 and "invalid choice: 'x'" in capsys.readouterr().err
+
+
+def test_convert_keeps_a_motions_own_feet_on_its_floor(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    plain, ground = tmp_path / "plain.bvh", tmp_path / "ground.bvh"
+    assert main(["convert", "sample:walk", str(plain), "-q"]) == 0
+    assert main(["convert", "sample:walk", str(tmp_path / "free.bvh"), "--feet", "free", "-q"]) == 0
+    assert (tmp_path / "free.bvh").read_bytes() == plain.read_bytes()  # free: as before, the default
+    assert main(["convert", "sample:walk", str(ground), "--feet", "grounding", "-q"]) == 0
+    assert ground.read_bytes() != plain.read_bytes()
+    assert read_bvh(ground).skeleton.names == read_bvh(plain).skeleton.names

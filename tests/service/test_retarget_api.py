@@ -105,3 +105,24 @@ def test_result_on_an_uploaded_glb_clip_character(client: TestClient, walk_job: 
     r = client.get(f"/v1/jobs/{walk_job}/result", params={"format": "bvh", "character": clip["id"]})
     assert r.status_code == 200, r.text
     assert parse_bvh(r.content).skeleton.names[1] == "hip"  # under the character's own ground root
+
+
+def test_feet_of_a_download(client: TestClient, walk_job: str) -> None:
+    """``feet=lock|grounding|free``: lock (the default on a character) holds planted feet in place
+    on the floor, grounding keeps them on it along their own path, free leaves the transfer; a
+    download without a character is as computed unless it asks."""
+    data = _bvh_bytes("unreal", scale=0.9, shin=1.25)
+    clip = client.post("/v1/clips", files={"file": ("feet-char.bvh", data)}).json()
+
+    def get(**params: Any) -> bytes:
+        r = client.get(f"/v1/jobs/{walk_job}/result", params={"format": "bvh", **params})
+        assert r.status_code == 200, r.text
+        return bytes(r.content)
+
+    on_char = {feet: get(character=clip["id"], feet=feet) for feet in ("lock", "grounding", "free")}
+    assert get(character=clip["id"]) == on_char["lock"]
+    assert len(set(on_char.values())) == 3
+    plain = get()
+    assert get(feet="free") == plain and get(feet="grounding") != plain
+    bad = client.get(f"/v1/jobs/{walk_job}/result", params={"feet": "stomp"})
+    assert bad.status_code == 422

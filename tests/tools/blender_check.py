@@ -2,11 +2,12 @@
 OUT.json TIMES``; tests/blender.py): import a GLB with Blender's own glTF importer into an empty
 scene and write what came in as JSON.
 
-For each armature: its bones (name -> parent), its actions (the active one and those stashed in
-NLA tracks) with the bones their channels drive, and, for each action at each time (seconds, comma
-separated), the world position of every bone's head in glTF axes (Y up, metres); for each mesh
-object, how far its evaluated (deformed) vertices move from the rest pose at each time and their
-lowest height; and the scene's and the armatures' custom properties named ``events``.
+For each armature: its bones (name -> parent), the action active after the import, its actions
+(the active one and those stashed in NLA tracks) with the bones their channels drive, and, for
+each action at each time (seconds, comma separated), the world position of every bone's head in
+glTF axes (Y up, metres); for each mesh object, how far its evaluated (deformed) vertices move
+from the rest pose at each time and their lowest height; and the scene's and the armatures'
+custom properties named ``events``.
 """
 
 import json
@@ -57,7 +58,8 @@ for arm in arms:
             actions.append(ad.action)
         for track in ad.nla_tracks:
             actions += [s.action for s in track.strips if s.action is not None]
-    info = {"name": arm.name, "bones": bones, "events": events_of(arm), "actions": []}
+    active = ad.action.name if ad is not None and ad.action is not None else None
+    info = {"name": arm.name, "bones": bones, "events": events_of(arm), "active": active, "actions": []}
     for act in dict.fromkeys(actions):
         driven = sorted({fc.data_path.split('"')[1] for fc in fcurves_of(act) if '"' in fc.data_path})
         for track in ad.nla_tracks:  # play this action alone

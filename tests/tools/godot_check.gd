@@ -68,7 +68,15 @@ func _check(path, times, root_track):
 	var meshes = []
 	_find(scene, "MeshInstance", meshes)
 	for m in meshes:
-		out["meshes"].append({"name": m.name, "skeleton": str(m.skeleton), "skin": m.skin != null})
+		var binds = []
+		if m.skin != null:
+			for i in range(m.skin.get_bind_count()):
+				var o = m.skin.get_bind_pose(i).origin
+				binds.append([o.x, o.y, o.z])
+		var skel = m.get_node_or_null(m.skeleton)
+		out["meshes"].append({"name": m.name, "skeleton": str(m.skeleton), "skin": m.skin != null,
+			"skin_ref": str(m.skin), "binds": binds,
+			"skeleton_path": str(scene.get_path_to(skel)) if skel != null else ""})
 	var players = []
 	_find(scene, "AnimationPlayer", players)
 	if players.empty():
@@ -96,7 +104,8 @@ func _check(path, times, root_track):
 			poses.append(frame)
 		player.stop()
 		out["animations"].append({"name": anim_name, "length": anim.length, "tracks": tracks,
-			"poses": poses, "root_motion": _root_motion(player, anim_name, anim.length, skels, root_track)})
+			"poses": poses, "root_motion": _root_motion(player, anim_name, anim.length, skels, root_track),
+			"hips_motion": _hips_motion(player, anim_name, skels, times)})
 	return out
 
 
@@ -113,7 +122,8 @@ func _root_motion(player, anim_name, length, skels, root_track):
 	tree.tree_root = node
 	tree.anim_player = tree.get_path_to(player)
 	var base = player.get_node(player.root_node)
-	tree.root_motion_track = NodePath(str(base.get_path_to(skel)) + ":" + root_track)
+	var bone = root_track if skel.find_bone(root_track) >= 0 else skel.get_bone_name(0)  # no root: hips
+	tree.root_motion_track = NodePath(str(base.get_path_to(skel)) + ":" + bone)
 	tree.process_mode = AnimationTree.ANIMATION_PROCESS_MANUAL
 	tree.active = true
 	# the skeleton's transform in the scene (an Armature's 0.01 scale): the step is in its space
@@ -133,3 +143,54 @@ func _root_motion(player, anim_name, length, skels, root_track):
 	var fwd = body.basis.z
 	return {"end": [body.origin.x, body.origin.y, body.origin.z], "forward": [fwd.x, fwd.y, fwd.z],
 		"end_turned_each_step": [turned.origin.x, turned.origin.y, turned.origin.z]}
+
+
+# The documented recipe for a rig without a root bone (docs/game-engines.md, Godot 3.2): root
+# motion on the hips, taken from their own track while the AnimationPlayer plays everything; the
+# body walks the hips' floor path and the character's node steps back by as much, so the mesh
+# stays over the body. Where the body ends, and the hips' world position at the listed times.
+func _hips_motion(player, anim_name, skels, times):
+	if skels.empty():
+		return null
+	var skel = skels[0]
+	var hips = 0
+	for i in range(skel.get_bone_count()):
+		if skel.get_bone_parent(i) < 0:
+			hips = i
+			break
+	var anim = player.get_animation(anim_name)
+	var base = player.get_node(player.root_node)
+	var track = anim.find_track(NodePath(str(base.get_path_to(skel)) + ":" + skel.get_bone_name(hips)))
+	if track < 0:
+		return null
+	var visual = player.get_parent()
+	var body = Spatial.new()
+	visual.get_parent().add_child(body)
+	visual.get_parent().remove_child(visual)
+	body.add_child(visual)
+	var to_visual = visual.global_transform.affine_inverse() * skel.global_transform
+	var rest = skel.get_bone_rest(hips)
+	var start = _hips_floor(anim, track, 0.0, rest, to_visual)
+	var last = start
+	player.play(anim_name)
+	var steps = int(round(anim.length * 60.0))
+	var seen = []
+	for i in range(steps + 1):
+		var time = anim.length * i / steps
+		player.seek(time, true)
+		var now = _hips_floor(anim, track, time, rest, to_visual)
+		body.translation += body.transform.basis.xform(now - last)   # move_and_slide(... / delta)
+		last = now
+		visual.translation = -(now - start)                            # the mesh stays over the body
+		for t in times:
+			if abs(time - t) < 0.5 * anim.length / steps:
+				var w = skel.global_transform * skel.get_bone_global_pose(hips)
+				seen.append([w.origin.x, w.origin.y, w.origin.z])
+	player.stop()
+	return {"end": [body.translation.x, body.translation.y, body.translation.z], "hips": seen}
+
+
+# the hips' floor position in the character's node (its y dropped), from their track at a time
+func _hips_floor(anim, track, time, rest, to_visual):
+	var at = to_visual.xform(rest.xform(anim.transform_track_interpolate(track, time)[0]))
+	return Vector3(at.x, 0.0, at.z)

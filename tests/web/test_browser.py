@@ -365,6 +365,14 @@ def test_constraints_build_and_alternatives(page: Any, segue: SegueClient) -> No
     clip = next(c for c in segue.clips() if c.id == chars[1])
     joints = [ln.split()[1] for ln in text.splitlines() if ln.strip().startswith(("ROOT", "JOINT"))]
     assert joints == clip.joints
+    # the feet beside it: the character's feet on the floor only (their own path), not held in place
+    page.select_option("#feet", "grounding")
+    with page.expect_download() as dl:
+        page.click("#dl-bvh")
+    grounded = state(page, ".downloads")[-1]
+    assert grounded["feet"] == "grounding" and grounded["frames"] == 120
+    assert Path(dl.value.path()).read_text() != text  # another download: the feet differ
+    page.select_option("#feet", "")
     page.select_option("#character", "")
 
     press_again(page, "#cons-go", "constraints")

@@ -123,10 +123,10 @@ export const api = {
   // the full rate)
   // character: an uploaded clip's or file's id to retarget the result onto (docs/retargeting.md),
   // events: 'contacts' etc. (GLB extras); mesh: what a GLB wears without a glTF character
-  // ('body': Segue's mannequin)
-  resultBlob: async (job, result, format, maxFps, character, events, mesh) =>
+  // ('body': Segue's mannequin); feet: lock, grounding or free (the server's default when empty)
+  resultBlob: async (job, result, format, maxFps, character, events, mesh, feet) =>
     (await request('GET', `/v1/jobs/${job}/result`, {
-      query: { format, result, max_fps: maxFps, character: character || undefined, events, mesh },
+      query: { format, result, max_fps: maxFps, character: character || undefined, events, mesh, feet: feet || undefined },
     })).blob(),
 };
 

@@ -763,8 +763,9 @@ async function download(format) {
   if (!state.current || !state.current.job) throw new ApiError(0, 'no_result', 'no result to download yet');
   const { job, result } = state.current;
   const character = $('character').value;
-  const blob = await api.resultBlob(job, result, format, undefined, character);
-  const record = { format, job, result, bytes: blob.size, character };
+  const feet = $('feet').value;
+  const blob = await api.resultBlob(job, result, format, undefined, character, undefined, undefined, feet);
+  const record = { format, job, result, bytes: blob.size, character, feet };
   if (format === 'glb') {
     // check the file the service made: it must load in three.js with its animation
     const gltf = await new GLTFLoader().parseAsync(await blob.arrayBuffer(), '');

@@ -70,6 +70,7 @@ export function setupCharacters({ state, $, api, viewer, guarded, clearError, sh
       await reshow();
     });
   $('character').addEventListener('change', () => guarded('character', reshow));
+  $('feet').addEventListener('change', () => guarded('character', reshow)); // the body wears the downloads' feet
 
   const modelKey = (kind, id, skeleton) => (kind === 'file' ? `file:${id}` : `${kind}:${id}:${skeleton.names.join(',')}`);
   const model = async (kind, id, skeleton) => {
@@ -108,7 +109,7 @@ export function setupCharacters({ state, $, api, viewer, guarded, clearError, sh
         // the download itself: the result retargeted by the service onto the character (or worn
         // by the mannequin), with the foot contacts measured on it
         const hips = kind === 'mannequin' ? what.hips : (await binding(id, skeleton, null, '')).hips.joint;
-        const blob = await api.resultBlob(what.job, what.result, 'glb', 30, id, 'contacts', kind === 'file' ? undefined : 'body');
+        const blob = await api.resultBlob(what.job, what.result, 'glb', 30, id, 'contacts', kind === 'file' ? undefined : 'body', $('feet').value);
         if (tokens[key] !== token) return null;
         body = new Body(await loadGltf(await blob.arrayBuffer()), label());
         body.hipsJoint = hips;

@@ -240,9 +240,10 @@ def accessor(doc: dict[str, Any], binary: bytes, index: int) -> Array:
     )
 
 
-def animated_world(doc: dict[str, Any], binary: bytes, animation: int = -1) -> dict[int, Array]:
+def animated_world(doc: dict[str, Any], binary: bytes, animation: int = 0) -> dict[int, Array]:
     """Node index -> ``(F, 4, 4)`` world matrices of every node with the animation's channels
-    applied at each of its keys (LINEAR samplers keyed at every frame, or one key)."""
+    applied at each of its keys (LINEAR samplers keyed at every frame, or one key); Segue's added
+    animation is the first."""
     anim = doc["animations"][animation]
     frames = max(doc["accessors"][s["input"]]["count"] for s in anim["samplers"])
     nodes = doc["nodes"]

@@ -146,3 +146,14 @@ def test_a_gltf_character_with_its_buffer_beside_it_or_inline(hero: bytes, walk:
             out,
             base_dir=tmp_path,
         )
+
+
+def test_the_new_animation_comes_first_so_that_importers_play_it(hero: bytes, walk: Any) -> None:
+    """Blender makes a file's first animation the armature's active action: a character that
+    had an idle opened playing the idle, Segue's animation stashed in an NLA track."""
+    idle = retarget(walk.slice(0, 30), gltf_character(hero), root_motion="root")
+    with_idle = bound_glb(hero, idle)
+    out = retarget(walk, gltf_character(hero), root_motion="root")
+    doc, binary = read_glb(bound_glb(with_idle, out))
+    assert [a["name"] for a in doc["animations"]] == [f"{walk.name}_2", walk.name]
+    assert _fk_error(out, doc, binary) < FK_TOLERANCE_M  # the first animation is the new one

@@ -34,7 +34,7 @@ def test_bound_to_the_whole_motion_it_is_the_retargeting_without_leg_ik(sample: 
     m = _metres(f"sample:{sample}")
     b = bind(m.skeleton, hero, example=m)
     got = apply_binding(b, m, hero).global_positions()
-    want = retarget(m, hero, plant=False).global_positions()
+    want = retarget(m, hero, feet="free").global_positions()
     assert np.abs(got - want).max() < 1e-6
 
 
@@ -43,7 +43,7 @@ def test_bound_to_a_few_frames_it_stays_within_centimetres(hero) -> None:  # typ
     m = _metres("sample:salsa-leader")
     b = bind(m.skeleton, hero, example=m.slice(0, 120))
     err = np.linalg.norm(
-        apply_binding(b, m, hero).global_positions() - retarget(m, hero, plant=False).global_positions(),
+        apply_binding(b, m, hero).global_positions() - retarget(m, hero, feet="free").global_positions(),
         axis=-1,
     )
     assert np.percentile(err, 95) < 0.04 and err.max() < 0.06
@@ -56,7 +56,7 @@ def test_rest_only_binding_turns_limbs_as_the_transfer_does(hero) -> None:  # ty
     m = _metres("sample:walk")
     b = bind(m.skeleton, hero)
     got = apply_binding(b, m, hero).global_positions()
-    want = retarget(m, hero, plant=False).global_positions()
+    want = retarget(m, hero, feet="free").global_positions()
     names = hero.skeleton.names
     feet = [names.index(n) for n in ("foot_l", "foot_r", "ball_l", "ball_r")]
     body = [j for j in range(len(names)) if j not in feet and j != 0]

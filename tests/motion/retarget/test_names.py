@@ -24,7 +24,7 @@ def test_each_preset_is_recognised_and_drives_the_limbs(convention: str) -> None
     assert roles.preset == convention
     assert set(REQUIRED) <= set(roles.joints)
     src = walk(120)
-    out = retarget(src, char, plant=False)
+    out = retarget(src, char, feet="free")
     assert out.skeleton is char.skeleton and out.units == char.units
     err = angle_deg(
         bone_directions(src, renamed_limbs(None)), bone_directions(out, renamed_limbs(convention))
@@ -83,8 +83,8 @@ def test_map_pairs_extra_joints() -> None:
     # a joint no preset knows (a finger) is driven when mapped, else it keeps its rest rotation
     src = walk(60)
     char = character("unreal")
-    plain = retarget(src, char, plant=False)
-    mapped = retarget(src, char, name_map={"lIndex2": "lIndex2"}, plant=False)
+    plain = retarget(src, char, feet="free")
+    mapped = retarget(src, char, name_map={"lIndex2": "lIndex2"}, feet="free")
     j = char.skeleton.index("lIndex2")
     assert np.allclose(plain.rotations[:, j], char.rotations[0, j])  # unmapped: rest rotation
     assert not np.allclose(mapped.rotations[:, j], char.rotations[0, j])
@@ -125,7 +125,7 @@ def test_a_longer_spine_pairs_its_ends_and_keeps_the_rest() -> None:
     named = {char.skeleton.names[t]: src.skeleton.names[s] for t, s in corr.pairs.items()}
     assert named["spine_01"] == "abdomen" and named["spine_05"] == "chest"
     assert not {"spine_02", "spine_03", "spine_04"} & set(named)
-    out = retarget(src, char, plant=False)
+    out = retarget(src, char, feet="free")
     err = angle_deg(bone_directions(src, renamed_limbs(None)), bone_directions(out, renamed_limbs("unreal")))
     assert err.max() < 0.5
     # the shoulders face where the source's do: the clavicle-to-clavicle axis follows the source's
@@ -153,3 +153,40 @@ def test_a_cgspeed_cmu_file_is_named_cmu_not_mixamo() -> None:
     other = Skeleton(mixamo_names, cmu.parents, cmu.offsets, cmu.channels)
     assert detect_roles(other).preset == "mixamo"
     assert detect_roles(cmu).joints == detect_roles(other).joints  # the same roles either way
+
+
+def test_a_map_may_name_toes_the_source_lacks() -> None:
+    """A role map naming the character's toes (CMU-Daz sources have none) was an error; now the
+    character knows them (its feet stand on them) and the result is the preset-named rig's."""
+    from motion.retarget.character import gltf_character
+
+    from .gltf_rig import unreal_character_glb
+    from .namings import renamed_glb, role_map
+
+    src = walk(120)
+    preset = gltf_character(unreal_character_glb())
+    own = gltf_character(renamed_glb(unreal_character_glb(), "own"))
+    corr = correspond(src.skeleton, own.skeleton, role_map("own"))
+    assert own.skeleton.names[corr.target_roles["LeftToes"]] == "L_digiti"
+    assert "LeftToes" not in corr.source_roles and corr.target_roles["LeftToes"] not in corr.pairs
+    assert not corr.warnings
+    a, b = retarget(src, preset), retarget(src, own, name_map=role_map("own"))
+    np.testing.assert_allclose(a.global_positions(), b.global_positions(), atol=1e-9)
+
+
+def test_a_map_that_leaves_limbs_undriven_names_them() -> None:
+    """A map naming only the roles the missing-joint error lists drove 7 joints and silently froze
+    the upper body; the correspondence now says which limbs keep their rest pose."""
+    from motion.retarget.character import gltf_character
+
+    from .gltf_rig import unreal_character_glb
+    from .namings import renamed_glb, role_map
+
+    own = gltf_character(renamed_glb(unreal_character_glb(), "own"))
+    legs = {r: j for r, j in role_map("own").items() if r in REQUIRED}
+    corr = correspond(walk(2).skeleton, own.skeleton, legs)
+    assert len(corr.pairs) == 7
+    (warning,) = corr.warnings
+    for limb in ("head", "left arm (left shoulder", "right arm", "spine and neck"):
+        assert limb in warning
+    assert "7 of 24 joints driven" in warning and "--map" in warning

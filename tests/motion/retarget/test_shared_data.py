@@ -71,7 +71,9 @@ def test_real_clips_on_game_characters(clip: str, convention: str, scale: float,
     ):
         u, w = ps[:, sr[b]] - ps[:, sr[a]], po[:, tr[b]] - po[:, tr[a]]
         cos = np.sum(u * w, axis=1) / np.linalg.norm(u, axis=1) / np.linalg.norm(w, axis=1)
-        assert np.degrees(np.arccos(np.clip(cos, -1, 1))).mean() < 3.0
+        # the soles on the floor bend the legs a little where the source's feet do not touch the
+        # character's floor (3.0 degrees at most here; 1.7 when the joints' heights were held)
+        assert np.degrees(np.arccos(np.clip(cos, -1, 1))).mean() < 3.5
 
     def slide(m: Motion, p: np.ndarray, feet: np.ndarray) -> float:
         """Mean horizontal speed (m/s) of feet joints over the frames they are planted."""

@@ -33,8 +33,8 @@ def test_round_trip_within_one_degree() -> None:
     proportions, other units) and back onto the walk's own skeleton."""
     a = walk(240)
     b = load_motion("sample:start-walk-stop").slice(0, 1)
-    there = retarget(a, b, plant=False)
-    back = retarget(there, a.slice(0, 1), plant=False)
+    there = retarget(a, b, feet="free")
+    back = retarget(there, a.slice(0, 1), feet="free")
     err = angle_deg(bone_directions(a, LIMBS), bone_directions(back, LIMBS))
     assert err.max() < 1.0, f"limbs off by up to {err.max():.3f} deg after a round trip"
     cmu_limbs = (("LeftHip", "LeftKnee"), ("RightKnee", "RightAnkle"), ("LeftShoulder", "LeftElbow"))
@@ -84,8 +84,8 @@ def test_zero_and_first_rest_poses_give_the_same_directions() -> None:
     src = walk(60)
     first = character("unreal")
     zero = replace(first, rotations=np.tile(rot.IDENTITY, first.rotations.shape[:2] + (1,)))
-    a = retarget(src, first, plant=False)
-    b = retarget(src, zero, plant=False)
+    a = retarget(src, first, feet="free")
+    b = retarget(src, zero, feet="free")
     limbs = renamed_limbs("unreal")
     assert angle_deg(bone_directions(a, limbs), bone_directions(b, limbs)).max() < 1e-3
 

@@ -1,0 +1,188 @@
+"""Benchmark: feet on the floor, measured on the character's own skinned mesh.
+
+A suite of retargets (``segue retarget SOURCE --to CHARACTER.glb --out OUT.glb --events
+contacts``, the command line a user runs) onto skinned characters, each measured on the file
+written, as Blender or a game engine plays it: the character's mesh deformed by linear blend
+skinning (numpy, :mod:`motion.skinning`; ``tests/motion/test_feet_blender.py`` checks it against
+Blender's own deformation) under the animation in the output file.
+
+Sources: ``sample:walk``, the rhythm demo's dance (``segue demo rhythm``: the salsa leader to the
+bundled MIDI song, 120 fps) and, when ``../shared/data`` is there, Bandai-Namco's short dance and a
+CMU salsa leader. Characters: Segue's mannequin (:mod:`motion.export.mannequin`: a heel behind the
+ankle, a ball, toes, soles flat on the rest floor) on the test game rig's skeleton
+(``tests/motion/retarget/namings.py``: Unreal-style, a root, ball joints) and on a Bandai-Namco
+skeleton (its first frame: a rest pose taken from a clip), each under Unreal names, Mixamo names
+and names of its own with a role map naming every role, toes included (a checkout whose maps
+cannot name toes the source lacks gets the map without them: ``map_toes`` false).
+
+Per retarget (all on the output file):
+
+* ``sink_cm``: how far the mesh goes under its rest floor (the lowest vertex of the bind pose), at
+  worst (``sink_frame``);
+* ``lift_cm``: over the frames of the file's contact events, how far the planted foot's lowest
+  vertex (vertices weighted at least half to that foot and its toes) is above the rest floor, at
+  worst (``lift_frame``), and ``lift_p95_cm`` its 95th percentile;
+* ``foot_speed_ratio``: the fastest foot joint (ankle or toe, world speed frame to frame) over the
+  source's fastest (ankle or toe) scaled by the leg-length ratio (character over source, thigh plus
+  shin in the rest poses), with ``foot_speed_m_s`` and its frame and joint;
+* ``contacts``: contact events in the file, and ``contacts_per_plant`` per plant of the source
+  (:func:`motion.contacts.foot_plants` on the source's feet).
+
+``--code DIR`` retargets with another checkout's command line (e.g. main as it was, unpacked with
+``git archive COMMIT | tar -x -C DIR``): the measurement is this checkout's. ``--keep DIR`` keeps
+the characters and outputs (for pictures: ``bench/feet_pictures.py``). Prints one JSON object:
+every row and the worst of each figure per source.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from motion import Motion, Skeleton  # noqa: E402
+from motion.export.mannequin import mannequin_glb  # noqa: E402
+from motion.io import load_motion  # noqa: E402
+from motion.refpose import without_reference_lead  # noqa: E402
+from tests.motion.retarget.mesh_feet import measure  # noqa: E402
+from tests.motion.retarget.namings import (  # noqa: E402
+    NAMINGS,
+    ROLE_OF_UNREAL,
+    game_rig,
+    name_in,
+)
+
+DATA = ROOT.parent / "shared" / "data"
+BANDAI_UNREAL = {
+    "Hips": "pelvis", "Spine": "spine_01", "Chest": "spine_02", "Neck": "neck_01", "Head": "head",
+    "Shoulder_L": "clavicle_l", "UpperArm_L": "upperarm_l", "LowerArm_L": "lowerarm_l", "Hand_L": "hand_l",
+    "Shoulder_R": "clavicle_r", "UpperArm_R": "upperarm_r", "LowerArm_R": "lowerarm_r", "Hand_R": "hand_r",
+    "UpperLeg_L": "thigh_l", "LowerLeg_L": "calf_l", "Foot_L": "foot_l", "Toes_L": "ball_l",
+    "UpperLeg_R": "thigh_r", "LowerLeg_R": "calf_r", "Foot_R": "foot_r", "Toes_R": "ball_r",
+}  # fmt: skip
+
+
+def bandai_rig() -> Motion:
+    """Bandai-Namco's skeleton in Unreal names, its first frame (metres): a rest pose from a clip."""
+    m = load_motion(DATA / "bandai-namco" / "dataset-2" / "dataset-2_walk_normal_002.bvh").slice(0, 1)
+    m = m.to_units("m")
+    sk = m.skeleton
+    names = tuple(BANDAI_UNREAL.get(n, n) for n in sk.names)
+    renamed = Skeleton(names, sk.parents, sk.offsets, sk.channels, sk.end_site_parents, sk.end_site_offsets)
+    root = np.array(m.root_positions, copy=True)
+    root[:, [0, 2]] = 0.0
+    return Motion(renamed, root, m.rotations, m.fps, m.joint_translations, m.units, "bandai_rig")
+
+
+def role_map_of(rest: Motion, naming: str, toes: bool) -> dict[str, str]:
+    """``{role: joint}`` naming every role of ``rest`` (Unreal names) in ``naming``."""
+    names = set(rest.skeleton.names)
+    return {
+        role: name_in(naming, u)
+        for u, role in ROLE_OF_UNREAL.items()
+        if u in names and (toes or not role.endswith("Toes"))
+    }
+
+
+def sources(folder: Path, full: bool) -> list[tuple[str, Path]]:
+    """(name, BVH file) of each source; the demo's dance is made here."""
+    out = [("walk", Path("sample:walk"))]
+    demo = folder / "demo"
+    subprocess.run(
+        [sys.executable, "-m", "service.cli", "demo", "rhythm", "--out", str(demo)],
+        cwd=ROOT, check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    out.append(("rhythm-dance", demo / "rhythm" / "dance.bvh"))
+    if full and (DATA / "bandai-namco").is_dir():
+        out.append(("bandai-dance", DATA / "bandai-namco/dataset-1/dataset-1_dance-short_normal_001.bvh"))
+        out.append(("cmu-salsa-60_02", DATA / "cmu-salsa/60_02_scaled.bvh"))
+    return out
+
+
+def _load_source(path: Path) -> Motion:
+    m = load_motion(str(path))
+    if str(path).startswith("sample:"):
+        m, _ = without_reference_lead(m)  # as segue retarget does for a bundled sample
+    return m
+
+
+def _retarget(
+    code: Path, src: Path, char: Path, out: Path, role_map: dict[str, str] | None
+) -> tuple[bool, str]:
+    cmd = [sys.executable, "-m", "service.cli", "retarget", str(src), "--to", str(char), "--out", str(out),
+           "--events", "contacts", "--quiet"]  # fmt: skip
+    if role_map is not None:
+        map_file = out.with_suffix(".map.json")
+        map_file.write_text(json.dumps(role_map))
+        cmd += ["--map", str(map_file)]
+    env = {**os.environ, "PYTHONPATH": str(code)}
+    res = subprocess.run(cmd, cwd=code, env=env, capture_output=True, text=True, check=False)
+    return res.returncode == 0, (res.stderr or res.stdout).strip()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--code", type=Path, default=ROOT, help="the checkout whose segue retargets")
+    ap.add_argument("--keep", type=Path, help="keep the characters and outputs in this folder")
+    ap.add_argument("--quick", action="store_true", help="the bundled sources only, the game rig only")
+    args = ap.parse_args()
+    folder = args.keep or Path(tempfile.mkdtemp(prefix="feet-mesh-"))
+    folder.mkdir(parents=True, exist_ok=True)
+    code = args.code.resolve()
+    rigs = [("game-rig", game_rig())]
+    if not args.quick and (DATA / "bandai-namco").is_dir():
+        rigs.append(("bandai-rig", bandai_rig()))
+    rows = []
+    for src_name, src_path in sources(folder, not args.quick):
+        source = _load_source(src_path)
+        for rig_name, rest in rigs:
+            for naming in NAMINGS:
+                char = folder / f"{rig_name}-{naming}.glb"
+                char.write_bytes(mannequin_glb(rest, names=[name_in(naming, n) for n in rest.skeleton.names]))
+                out = folder / f"{src_name}-on-{rig_name}-{naming}.glb"
+                role_map = role_map_of(rest, naming, toes=True) if naming == "own" else None
+                t0 = time.perf_counter()
+                ok, message = _retarget(code, src_path, char, out, role_map)
+                map_toes = role_map is not None
+                if not ok and role_map is not None:  # a map cannot name toes the source lacks there
+                    role_map = role_map_of(rest, naming, toes=False)
+                    ok, message = _retarget(code, src_path, char, out, role_map)
+                    map_toes = False
+                row: dict[str, Any] = {"source": src_name, "rig": rig_name, "naming": naming}
+                if naming == "own":
+                    row["map_toes"] = map_toes
+                if not ok:
+                    rows.append({**row, "error": message.splitlines()[-1] if message else "failed"})
+                    continue
+                row["retarget_s"] = round(time.perf_counter() - t0, 2)
+                row.update(measure(out.read_bytes(), source, rest, naming))
+                rows.append(row)
+                print(json.dumps(row), file=sys.stderr)
+    worst: dict[str, dict[str, Any]] = {}
+    for src_name in dict.fromkeys(r["source"] for r in rows):
+        mine = [r for r in rows if r["source"] == src_name and "error" not in r]
+        if not mine:
+            continue
+        worst[src_name] = {
+            "sink_cm": max(r["sink_cm"] for r in mine),
+            "lift_cm": max((r["lift_cm"] or 0.0) for r in mine),
+            "foot_speed_ratio": max(r["foot_speed_ratio"] for r in mine),
+            "contacts": sorted({r["contacts"] for r in mine}),
+            "source_plants": mine[0]["source_plants"],
+        }
+    print(json.dumps({"code": str(code), "rows": rows, "worst": worst}, indent=1))
+
+
+if __name__ == "__main__":
+    main()

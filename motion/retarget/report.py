@@ -1,0 +1,114 @@
+"""What a retargeting did to the feet, measured on its result: the figures ``segue retarget``
+prints and writes with ``--report``.
+
+* ``sink_cm``: how far the character's soles (:mod:`motion.retarget.sole`: its skinned mesh's
+  lowest foot vertices, or soles made from its bones) go under its floor, at worst;
+* ``planted_lift_cm``: how far a planted sole (a plant of :func:`motion.contacts.foot_plants`, the
+  contact events' detector, on the result) is above the floor, at worst;
+* ``foot_speed_m_s``: the fastest foot joint (ankle or toe) of the result, frame to frame, against
+  ``source_foot_speed_m_s``, the source's fastest foot (:func:`fastest_foot`: its ankle and toe,
+  or the foot's tip where it has no toe joint) scaled to the character (by the ratio of the two
+  skeletons' legs, thigh plus shin, in their rest poses), and their ``foot_speed_ratio``;
+* ``contacts``: the result's foot plants (one per plant, whichever of the foot's joints
+  touches: its contact events) and ``source_plants``, the source's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from ..contacts import foot_plants
+from ..motion import Motion
+from .legik import foot_groups_of
+from .names import Correspondence
+from .sole import Sole
+from .transfer import Pose, leg_length, tip_positions, zero_pose
+
+Array = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class FeetReport:
+    """The figures of the module docstring (centimetres, metres per second, counts)."""
+
+    sink_cm: float
+    planted_lift_cm: float | None
+    foot_speed_m_s: float
+    source_foot_speed_m_s: float
+    foot_speed_ratio: float | None
+    contacts: int
+    source_plants: int
+
+    def as_dict(self) -> dict[str, float | int | None]:
+        return asdict(self)
+
+    def summary(self) -> str:
+        """One line for people."""
+        lift = "no plant" if self.planted_lift_cm is None else f"{self.planted_lift_cm:.1f} cm"
+        ratio = "" if self.foot_speed_ratio is None else f" ({self.foot_speed_ratio:.2f} of the source's"
+        return (
+            f"soles at worst {self.sink_cm:.1f} cm under the floor, planted soles within {lift} of it; "
+            f"fastest foot {self.foot_speed_m_s:.2f} m/s{ratio} {self.source_foot_speed_m_s:.2f}, scaled)"
+            f"; {self.contacts} contacts for the source's {self.source_plants} plants"
+        )
+
+
+def fastest_foot(motion: Motion, roles: dict[str, int]) -> float:
+    """The fastest foot of ``motion``, m/s frame to frame: its ankle and toe joints (roles
+    ``LeftFoot``, ``LeftToes``, ...) and, for a foot without a toe joint (CMU motions), the tip of
+    the foot (its End Site or child: where a toe joint would be, and beyond)."""
+    if motion.num_frames < 2:
+        return 0.0
+    pose = Pose.of(motion)
+    tips = None
+    points = []
+    for side in ("Left", "Right"):
+        if side + "Foot" not in roles:
+            continue
+        points.append(pose.positions[:, roles[side + "Foot"]])
+        if side + "Toes" in roles:
+            points.append(pose.positions[:, roles[side + "Toes"]])
+        else:
+            tips = tip_positions(motion, pose) if tips is None else tips
+            points.append(tips[:, roles[side + "Foot"]])
+    if not points:
+        return 0.0
+    pos = np.stack(points, axis=1) * motion.metres_per_unit
+    return float((np.linalg.norm(np.diff(pos, axis=0), axis=-1) * motion.fps).max())
+
+
+def feet_report(
+    source: Motion,
+    result: Motion,
+    character: Motion,
+    corr: Correspondence,
+    soles: tuple[Sole, ...],
+    floor: float,
+) -> FeetReport:
+    """The figures of ``result`` (``source`` retargeted onto ``character``, in its rest pose at
+    frame 0, with correspondence ``corr``), its ``soles`` and their ``floor`` (character units)."""
+    tr, sr = corr.target_roles, corr.source_roles
+    groups = foot_groups_of(tr)
+    pos, grot = result.fk()
+    m = result.metres_per_unit
+    lowest = {s.side: s.positions(pos, grot)[:, :, 1].min(axis=1) - floor for s in soles}
+    sink = max(0.0, -float(min(v.min() for v in lowest.values()))) * m
+    plants = foot_plants(result, groups, positions=pos)
+    lifts = [lowest[("Left", "Right")[g]][a:b].max() for g, a, b in plants if ("Left", "Right")[g] in lowest]
+    scale = (leg_length(character.global_positions()[0], tr) * character.metres_per_unit) / max(
+        leg_length(zero_pose(source).global_positions()[0], sr) * source.metres_per_unit, 1e-300
+    )
+    fastest = fastest_foot(result, tr)
+    src = fastest_foot(source, sr) * scale
+    return FeetReport(
+        sink_cm=round(100.0 * sink, 2),
+        planted_lift_cm=round(100.0 * m * max(0.0, float(max(lifts))), 2) if lifts else None,
+        foot_speed_m_s=round(fastest, 3),
+        source_foot_speed_m_s=round(src, 3),
+        foot_speed_ratio=round(fastest / src, 3) if src > 0 else None,
+        contacts=len(plants),
+        source_plants=len(foot_plants(source)),
+    )
