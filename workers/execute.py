@@ -232,34 +232,33 @@ def _build(
     publish: Publish,
     should_stop: ShouldStop,
 ) -> None:
+    """Build a database and write its arrays and its ``ready`` record. A build that fails or is
+    cancelled writes no record: its terminal event does, through whoever publishes it
+    (:func:`workers.records.settle_database`), so the record's reason is the one the runtime
+    decided, and an engine process whose worker died (its events going nowhere) cannot leave a
+    ``failed`` of its own."""
     info = store.database_info(db_id)
     spec = parse_database_spec(store.database_spec(db_id))
     kind_class(spec.kind)
     store.put_database_info(info.model_copy(update={"status": DatabaseStatus.building}))
+    clips = []
+    for source in spec.clips:
+        if source.clip is None:
+            raise JobFailure(
+                "invalid_request", f"clip {source.display_name()!r} was not resolved to an upload"
+            )
+        labels = [lb.model_dump() for lb in source.labels]
+        # the spec's unit, else the clip's own (declared at upload, e.g. a bundled sample's, or guessed)
+        units = source.units if source.units is not None else store.clip_info(source.clip).units
+        clips.append(ClipInput(source.display_name(), store.clip_bytes(source.clip), units, labels))
     try:
-        clips = []
-        for source in spec.clips:
-            if source.clip is None:
-                raise JobFailure(
-                    "invalid_request", f"clip {source.display_name()!r} was not resolved to an upload"
-                )
-            labels = [lb.model_dump() for lb in source.labels]
-            # the spec's unit, else the clip's own (declared at upload, e.g. a bundled sample's, or guessed)
-            units = source.units if source.units is not None else store.clip_info(source.clip).units
-            clips.append(ClipInput(source.display_name(), store.clip_bytes(source.clip), units, labels))
         arrays, library = build_database_arrays(spec, clips, publish, should_stop)
-        store.put_database_arrays(db_id, arrays)
     except JobFailure as exc:
-        store.put_database_info(
-            info.model_copy(update={"status": DatabaseStatus.failed, "error": exc.message})
-        )
         if exc.code == "cancelled":
             publish(EventType.cancelled, {"result": None})
             return
         raise
-    except Exception as exc:
-        store.put_database_info(info.model_copy(update={"status": DatabaseStatus.failed, "error": str(exc)}))
-        raise
+    store.put_database_arrays(db_id, arrays)
     store.put_database_info(
         info.model_copy(
             update={
