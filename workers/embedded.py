@@ -13,7 +13,7 @@ Recovery (the store's job records are the source of truth):
   job's current run is recorded (the supervisor also drops a replaced child's late messages), as
   the Redis backend's fence does across hosts (:mod:`workers.fencing`);
 * a build's terminal event leaves its database ``ready`` or ``failed`` with the reason
-  (:func:`workers.records.settle_database`);
+  (:func:`workers.records.settle_database`), and a small job's staged upload is removed;
 * at start-up, jobs a previous server process left ``queued`` or ``running`` are queued again, their
   events replayed from ``events.jsonl`` so clients resume with ``after=`` where they were;
 * the supervisor kills a job that ignores its cancel for ``cancel_grace_s``, runs past its time limit
@@ -27,6 +27,7 @@ error (``/healthz`` 503) when no engine process is alive and none can start.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import time
@@ -40,7 +41,7 @@ from schemas.jobs import JobKind
 from .backend import BackendUnavailable, EventHub, JobNotFinished
 from .budget import shortfall
 from .execute import apply_event
-from .records import settle_database
+from .records import settle, sweep_staged
 from .settings import Settings
 from .store import NotFoundError, Store
 from .supervisor import (
@@ -72,6 +73,8 @@ class EmbeddedBackend:
             plugins=settings.engine_plugins,
             engine_cache_bytes=settings.engine_cache_mb << 20,
             load_timeout_s=settings.load_timeout_s,
+            staged_max_age_s=settings.staged_max_age_s,
+            staged_sweep_s=settings.staged_sweep_s,
         )
 
     def __init__(
@@ -87,6 +90,8 @@ class EmbeddedBackend:
         plugins: str | None = None,
         engine_cache_bytes: int = 2048 << 20,
         load_timeout_s: float | None = 300.0,
+        staged_max_age_s: float = 3600.0,
+        staged_sweep_s: float = 300.0,
     ) -> None:
         self.store = store
         self.plugins, self.engine_cache_bytes = plugins, engine_cache_bytes
@@ -104,6 +109,8 @@ class EmbeddedBackend:
         """The current run of each job (its latest dispatched attempt): only its events are recorded."""
         self._closing = False
         self.reruns = 0
+        self.staged_max_age_s, self.staged_sweep_s = staged_max_age_s, staged_sweep_s
+        self._sweeper: asyncio.Task[None] | None = None
 
     # -- lifecycle ------------------------------------------------------------------------------
     async def start(self) -> None:
@@ -134,11 +141,23 @@ class EmbeddedBackend:
             await asyncio.to_thread(process.ready.wait, 120)
         await self._requeue_unfinished()
         self._dispatch()
+        self._sweeper = asyncio.create_task(self._sweep_loop(), name="segue-staged-sweep")
+
+    async def _sweep_loop(self) -> None:
+        """Every ``staged_sweep_s``: remove orphaned staged uploads (off the event loop)."""
+        while True:
+            await asyncio.to_thread(sweep_staged, self.store, self.staged_max_age_s)
+            await asyncio.sleep(self.staged_sweep_s)
 
     async def close(self) -> None:
         """Stop the engine processes (running jobs stay ``running`` on disk and are re-queued by the
         next server process)."""
         self._closing = True
+        if self._sweeper is not None:
+            self._sweeper.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._sweeper
+            self._sweeper = None
         processes, self._processes = self._processes, []
         await asyncio.gather(*(asyncio.to_thread(p.close) for p in processes))
 
@@ -291,7 +310,7 @@ class EmbeddedBackend:
         self.store.put_job(info)
         if type_.terminal:
             self._attempts.pop(job_id, None)
-            settle_database(self.store, info, event)
+            settle(self.store, info, event)
         return event
 
     # -- the backend protocol ---------------------------------------------------------------------

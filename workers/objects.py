@@ -99,6 +99,10 @@ class Objects(Protocol):
         """The object's size in bytes; :class:`ObjectNotFound` when there is none."""
         ...
 
+    def modified(self, key: str) -> float:
+        """When the object was last written, Unix seconds; :class:`ObjectNotFound` when there is none."""
+        ...
+
     def open(self, key: str) -> BinaryIO:
         """The object opened for reading in chunks (a file, or the server's response stream);
         :class:`ObjectNotFound` when there is none."""
@@ -192,6 +196,12 @@ class LocalObjects:
     def size(self, key: str) -> int:
         try:
             return self._path(key).stat().st_size
+        except (FileNotFoundError, NotADirectoryError):
+            raise ObjectNotFound(key) from None
+
+    def modified(self, key: str) -> float:
+        try:
+            return self._path(key).stat().st_mtime
         except (FileNotFoundError, NotADirectoryError):
             raise ObjectNotFound(key) from None
 
@@ -340,6 +350,9 @@ class S3Objects:
 
     def size(self, key: str) -> int:
         return int(self._call("head_object", key, Key=self._key(key))["ContentLength"])
+
+    def modified(self, key: str) -> float:
+        return float(self._call("head_object", key, Key=self._key(key))["LastModified"].timestamp())
 
     def open(self, key: str) -> BinaryIO:
         body = self._call("get_object", key, Key=self._key(key))["Body"]

@@ -24,7 +24,7 @@ changes (``queued``, ``started``, the terminal event; not for every progress or 
 would cost a file write each; never backwards, :func:`workers.records.put_job_record`), and the
 process that published the terminal event archives the whole stream to the store's ``events.jsonl``
 (the file the embedded backend writes), so finished jobs replay after Redis forgot them, and settles
-a build's database record (:func:`workers.records.settle_database`).
+a build's database record and a small job's staged upload (:func:`workers.records.settle`).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from schemas import EventType, JobEvent, JobInfo
 
 from .execute import apply_event
 from .fencing import StaleAttempt
-from .records import put_job_record, settle_database
+from .records import put_job_record, settle
 from .redis_keys import EVENTS_MAXLEN, RedisKeys
 from .store import NotFoundError, Store
 
@@ -204,9 +204,11 @@ class _Publisher(Generic[Client]):
         if plan.info is not None and plan.event.type in DISK_STATUS_EVENTS:
             put_job_record(self.store, plan.info)
         if entries is not None:
-            archive_events(self.store, plan.event.job, entries)
             if plan.info is not None:
-                settle_database(self.store, plan.info, plan.event)
+                settle(self.store, plan.info, plan.event)
+            # last: a whole archive is what tells the API the job's records are written (its
+            # delete waits for it)
+            archive_events(self.store, plan.event.job, entries)
 
 
 class EventPublisher(_Publisher[redis.Redis]):

@@ -63,6 +63,7 @@ from schemas import DatabaseStatus, EventType
 
 from .budget import shortfall
 from .fencing import ACQUIRE_LUA, StaleAttempt
+from .records import sweep_staged
 from .redis_events import EventPublisher
 from .redis_keys import DEAD_MAXLEN, RedisKeys
 from .settings import Settings
@@ -185,6 +186,9 @@ class Worker:
         beater = threading.Thread(
             target=self._heartbeat_loop, args=(beat_stop,), name="segue-heartbeat", daemon=True
         )
+        sweeper = threading.Thread(
+            target=self._sweep_loop, args=(beat_stop,), name="segue-sweep", daemon=True
+        )
         startup = True
         backoff = 0.1
         try:
@@ -201,6 +205,7 @@ class Worker:
                 return self.processed
             self._beat()
             beater.start()
+            sweeper.start()
             self.engine.start()
             while not self.engine.ready.wait(0.2):  # spawning + imports take ~1 s
                 if self._stop.is_set():
@@ -238,8 +243,9 @@ class Worker:
         finally:
             self.engine.close()
             beat_stop.set()
-            if beater.is_alive():
-                beater.join(timeout=5)
+            for thread in (beater, sweeper):
+                if thread.is_alive():
+                    thread.join(timeout=5)
             # gone at once: other workers reclaim anything we leave pending without waiting the TTL
             with contextlib.suppress(redis.RedisError):
                 self.client.delete(self.keys.worker(self.name))
@@ -266,6 +272,15 @@ class Worker:
             for entry_id, fields in entries:
                 return str(entry_id), dict(fields or {}), 1
         return None
+
+    # -- housekeeping ---------------------------------------------------------------------------
+    def _sweep_loop(self, stop: threading.Event) -> None:
+        """Every ``staged_sweep_s``: remove orphaned staged uploads (:meth:`Store.sweep_staged`);
+        in its own thread, so a slow store never holds up heartbeats or jobs."""
+        while True:
+            sweep_staged(self.store, self.settings.staged_max_age_s)
+            if stop.wait(self.settings.staged_sweep_s):
+                return
 
     # -- heartbeats -----------------------------------------------------------------------------
     def _heartbeat_loop(self, beat_stop: threading.Event) -> None:

@@ -161,6 +161,13 @@ class Settings(BaseSettings):
     publish_retry_s: float = Field(
         default=300.0, gt=0, description="how long a worker retries an event while Redis is away"
     )
+    staged_max_age_s: float = Field(
+        default=3600.0,
+        gt=0,
+        description="staged uploads (bytes a worker is to parse) older than this are removed as orphans "
+        "by the sweep every worker and the embedded backend run every staged_sweep_s",
+    )
+    staged_sweep_s: float = Field(default=300.0, gt=0, description="how often the staged-upload sweep runs")
     log_level: str = Field(default="INFO", description="log level of segue worker")
     request_timeout_s: float = Field(
         default=30.0,

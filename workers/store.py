@@ -38,6 +38,8 @@ import hashlib
 import io
 import json
 import threading
+import time
+import uuid
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from datetime import UTC, datetime
@@ -666,6 +668,16 @@ class Store:
         return int(shape[0]), int(shape[1]), fps
 
     # -- staged uploads: bytes kept until a worker has checked them (workers.tasks) -------------
+    # Removed by the small job that reads them, by whoever publishes that job's terminal event
+    # (workers.records.settle_task: a parse killed by its limits, dead-lettered or cancelled), by
+    # the API when no job will read them, and, for whatever a lost process left, by
+    # sweep_staged (run by every worker and the embedded backend).
+    def stage(self, data: bytes) -> str:
+        """Keep an upload's bytes under a new key until a worker has checked them; the key."""
+        key = uuid.uuid4().hex
+        self.put_staged(key, data)
+        return key
+
     def put_staged(self, key: str, data: bytes) -> None:
         """Keep an upload's bytes until a worker has checked them (:meth:`delete_staged` after)."""
         self.objects.put(f"staged/{_safe_id(key)}", data)
@@ -675,3 +687,22 @@ class Store:
 
     def delete_staged(self, key: str) -> None:
         self.objects.delete(f"staged/{_safe_id(key)}")
+
+    def staged_keys(self) -> list[str]:
+        """The keys of every staged upload."""
+        return self.objects.children("staged")
+
+    def sweep_staged(self, older_than_s: float, now_s: float | None = None) -> list[str]:
+        """Remove the staged uploads written more than ``older_than_s`` seconds ago (orphans: the
+        process that staged or was to read them is gone); their keys."""
+        cutoff = (time.time() if now_s is None else now_s) - older_than_s
+        removed = []
+        for key in self.staged_keys():
+            try:
+                if self.objects.modified(f"staged/{key}") >= cutoff:
+                    continue
+                self.delete_staged(key)
+            except (ObjectNotFound, NotFoundError, ValueError):  # gone meanwhile, or not a key of ours
+                continue
+            removed.append(key)
+        return removed
