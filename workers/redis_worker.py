@@ -62,6 +62,7 @@ from engines.registry import warm_compiled
 from schemas import DatabaseStatus, EventType
 
 from .budget import shortfall
+from .event_archive import BatchArchiver
 from .fencing import ACQUIRE_LUA, StaleAttempt
 from .records import sweep_staged
 from .redis_events import EventPublisher
@@ -144,7 +145,8 @@ class Worker:
         self.client = redis.Redis.from_url(redis_url, decode_responses=True, socket_timeout=timeout)
         cache_url = s.redis_cache_url or redis_url
         self.cache_client = redis.Redis.from_url(cache_url)
-        self.publisher = EventPublisher(self.client, self.store, self.keys)
+        self.archiver = BatchArchiver(self.store, s.event_archive_s)
+        self.publisher = EventPublisher(self.client, self.store, self.keys, archiver=self.archiver)
         config = ChildConfig(
             store_root=self.store.url,
             plugins=engine_plugins(s.engine_plugins),
@@ -189,6 +191,9 @@ class Worker:
         sweeper = threading.Thread(
             target=self._sweep_loop, args=(beat_stop,), name="segue-sweep", daemon=True
         )
+        archiving = threading.Thread(
+            target=self.archiver.run, args=(beat_stop,), name="segue-event-archive", daemon=True
+        )
         startup = True
         backoff = 0.1
         try:
@@ -206,6 +211,7 @@ class Worker:
             self._beat()
             beater.start()
             sweeper.start()
+            archiving.start()
             self.engine.start()
             while not self.engine.ready.wait(0.2):  # spawning + imports take ~1 s
                 if self._stop.is_set():
@@ -243,7 +249,7 @@ class Worker:
         finally:
             self.engine.close()
             beat_stop.set()
-            for thread in (beater, sweeper):
+            for thread in (beater, sweeper, archiving):
                 if thread.is_alive():
                     thread.join(timeout=5)
             # gone at once: other workers reclaim anything we leave pending without waiting the TTL

@@ -161,6 +161,12 @@ class Settings(BaseSettings):
     publish_retry_s: float = Field(
         default=300.0, gt=0, description="how long a worker retries an event while Redis is away"
     )
+    event_archive_s: float = Field(
+        default=1.0,
+        gt=0,
+        description="segue worker: a running job's events are copied to the store in batches at most "
+        "this old (the history that survives a Redis restart without persistence)",
+    )
     staged_max_age_s: float = Field(
         default=3600.0,
         gt=0,

@@ -18,7 +18,9 @@ Keys::
     databases/<id>/data.npz       the same arrays as written before (read, and converted once)
     jobs/<id>/request.json        {"kind", "payload"}
     jobs/<id>/info.json           JobInfo
-    jobs/<id>/events.jsonl        the job's events (the backends' archive)
+    jobs/<id>/events.jsonl        the job's events (the backends' archive), written whole at its end
+    jobs/<id>/events/<n>.jsonl    batches of a running job's events from event n on (Redis backend:
+                                  written as they are published, removed once events.jsonl is)
     jobs/<id>/results/<rid>.npz   result motion (motion.serialize arrays)
     jobs/<id>/results/<rid>.json  Report
     jobs/<id>/exports/<name>      derived bytes of a result (exports), by whoever makes them
@@ -619,6 +621,30 @@ class Store:
         except ObjectNotFound:
             return []
         return [line for line in data.decode("utf-8").splitlines() if line.strip()]
+
+    def put_event_batch(self, job_id: str, first_id: int, lines: list[str]) -> None:
+        """Store a batch of a running job's events (``lines``, from event ``first_id`` on) beside
+        its archive (``jobs/<id>/events/<first id>.jsonl``), until its whole archive is written."""
+        if first_id < 1:
+            raise ValueError(f"event ids start at 1, not {first_id}")
+        key = f"{self._job(job_id)}/events/{first_id:010d}.jsonl"
+        self.objects.put(key, ("\n".join(lines) + "\n").encode())
+
+    def event_batches(self, job_id: str) -> list[str]:
+        """The lines of a job's event batches (:meth:`put_event_batch`), in id order of their first."""
+        prefix = f"{self._job(job_id)}/events"
+        lines: list[str] = []
+        for name in self.objects.children(prefix):
+            try:
+                data = self.objects.get(f"{prefix}/{name}")
+            except (ObjectNotFound, ValueError):  # removed meanwhile (the whole archive was written)
+                continue
+            lines.extend(line for line in data.decode("utf-8").splitlines() if line.strip())
+        return lines
+
+    def delete_event_batches(self, job_id: str) -> None:
+        """Remove a job's event batches (its whole archive holds them)."""
+        self.objects.delete_prefix(f"{self._job(job_id)}/events")
 
     def put_export(self, job_id: str, name: str, data: bytes) -> None:
         """Store derived bytes of a job's result (an export) under ``name`` (a safe file name)."""

@@ -11,8 +11,9 @@ import pytest
 import redis
 
 from schemas import EventType, JobEvent, JobStatus
+from workers.event_archive import read_archive
 from workers.redis_backend import RedisBackend
-from workers.redis_events import EventPublisher, read_archive
+from workers.redis_events import EventPublisher
 from workers.redis_keys import RedisKeys
 from workers.store import NotFoundError, Store
 
