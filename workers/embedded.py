@@ -22,6 +22,9 @@ Recovery (the store's job records are the source of truth):
 
 ``health()`` reports the processes alive and ready, restarts, the queue and running jobs; it is an
 error (``/healthz`` 503) when no engine process is alive and none can start.
+
+Jobs wait in a :class:`~workers.fair_queue.FairQueue`: one line per principal, served round-robin,
+so one principal's backlog delays another's next job by at most the job each process is running.
 """
 
 from __future__ import annotations
@@ -31,7 +34,6 @@ import contextlib
 import json
 import logging
 import time
-from collections import deque
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -41,6 +43,7 @@ from schemas.jobs import JobKind
 from .backend import BackendUnavailable, EventHub, JobNotFinished
 from .budget import shortfall
 from .execute import apply_event
+from .fair_queue import FairQueue
 from .records import settle, sweep_staged
 from .settings import Settings
 from .store import NotFoundError, Store
@@ -103,7 +106,8 @@ class EmbeddedBackend:
         self.hub = EventHub()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._processes: list[EngineProcess] = []
-        self._queue: deque[Task] = deque()
+        self._queue: FairQueue[Task] = FairQueue(lambda task: task.owner)
+        """Waiting jobs, served round-robin by principal (:mod:`workers.fair_queue`)."""
         self._running: dict[str, Task] = {}
         self._attempts: dict[str, int] = {}
         """The current run of each job (its latest dispatched attempt): only its events are recorded."""
@@ -184,7 +188,7 @@ class EmbeddedBackend:
             if info.kind == JobKind.build and info.database:
                 self._reset_database(info.database)
             self._queue.append(
-                self._task(info.id, str(request["kind"]), dict(request["payload"]), attempts + 1)
+                self._task(info.id, str(request["kind"]), dict(request["payload"]), attempts + 1, info.owner)
             )
             self.reruns += 1
 
@@ -196,9 +200,11 @@ class EmbeddedBackend:
         if db.status == DatabaseStatus.building:
             self.store.put_database_info(db.model_copy(update={"status": DatabaseStatus.queued}))
 
-    def _task(self, job_id: str, kind: str, payload: dict[str, Any], attempt: int) -> Task:
+    def _task(
+        self, job_id: str, kind: str, payload: dict[str, Any], attempt: int, owner: str | None = None
+    ) -> Task:
         limit = time_limit(kind, payload, self.time_grace_s, self.build_timeout_s)
-        return Task(job_id, kind, payload, attempt=attempt, time_limit_s=limit)
+        return Task(job_id, kind, payload, attempt=attempt, time_limit_s=limit, owner=owner)
 
     # -- dispatch (event loop) --------------------------------------------------------------------
     def _dispatch(self) -> None:
@@ -208,12 +214,12 @@ class EmbeddedBackend:
             if not self._queue:
                 return
             if process.idle:
-                task = self._queue.popleft()
+                task = self._queue.pop()
                 if process.run(task):
                     self._running[task.job_id] = task
                     self._attempts[task.job_id] = task.attempt
                 else:
-                    self._queue.appendleft(task)
+                    self._queue.unpop(task)
 
     def _on_event(self, task: Task, type_: EventType, data: dict[str, Any], when: float) -> None:
         """Watch thread: relay an event of a running job (waits until it is recorded)."""
@@ -278,7 +284,8 @@ class EmbeddedBackend:
                         "job %s: %s; running it again (attempt %d)", task.job_id, detail, task.attempt + 1
                     )
                     self.reruns += 1
-                    self._queue.appendleft(self._task(task.job_id, task.kind, task.payload, task.attempt + 1))
+                    again = self._task(task.job_id, task.kind, task.payload, task.attempt + 1, task.owner)
+                    self._queue.appendleft(again)
             elif not task.terminal:
                 type_, data = terminal_after_kill(outcome, task, detail)
                 await self._record(task.job_id, type_, data, time.time())
@@ -320,7 +327,7 @@ class EmbeddedBackend:
         if not any(p.ready.is_set() or p.failed_starts < 3 for p in self._processes):
             raise BackendUnavailable("no engine process is alive and none could start")
         await self._record(info.id, EventType.queued, {}, time.time())
-        self._queue.append(self._task(info.id, kind, payload, 1))
+        self._queue.append(self._task(info.id, kind, payload, 1, info.owner))
         self._dispatch()
         return await self.status(info.id)
 

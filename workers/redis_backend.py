@@ -53,7 +53,9 @@ from .fencing import StaleAttempt
 from .records import put_job_record, settle
 from .redis_events import RETENTION_S, AsyncEventPublisher, Entries, decode_event, stream_id
 from .redis_keys import DEFAULT_PREFIX, RedisKeys
+from .redis_queue import BELL_MAX, SUBMIT_LUA, principal_list, queue_entry
 from .store import NotFoundError, Store
+from .version import describe, stamp
 
 log = logging.getLogger("segue.redis.backend")
 
@@ -90,6 +92,8 @@ class RedisBackend:
         self._unfinished: set[str] = set()
         self._missing: dict[str, float] = {}
         self._finishing: dict[str, float] = {}
+        self._warned_versions: set[str] = set()
+        self._submit_lua: Any = None
         self._reconciler: asyncio.Task[None] | None = None
         self.requeued = 0
         self.redis_ok = False
@@ -109,6 +113,7 @@ class RedisBackend:
         )
         client = aredis.Redis.from_pool(pool)
         self._client = client
+        self._submit_lua = client.register_script(SUBMIT_LUA)
         self._publisher = AsyncEventPublisher(client, self.store, self.keys)
         self._unfinished = {
             i.id for i in await asyncio.to_thread(self.store.list_jobs) if not i.status.finished
@@ -163,7 +168,7 @@ class RedisBackend:
             if not await client.set(self.keys.job(info.id), info.model_dump_json(), nx=True):
                 return await self.status(info.id)  # submitted before: nothing to do
             queued = await publisher.publish(info.id, EventType.queued, {})
-            await client.xadd(self.keys.jobs, {"job": info.id, "kind": kind, "payload": json.dumps(payload)})
+            await self._enqueue(client, info.id, kind, payload, info.owner)
         except (redis.ConnectionError, redis.TimeoutError) as exc:
             with contextlib.suppress(redis.RedisError):
                 await client.delete(
@@ -174,6 +179,15 @@ class RedisBackend:
         if queued is not None:  # the history's first line, in the store at once (workers batch the rest)
             await asyncio.to_thread(archive_event, self.store, queued)
         return await self.status(info.id)
+
+    async def _enqueue(
+        self, client: aredis.Redis, job_id: str, kind: str, payload: dict[str, Any], owner: str | None
+    ) -> None:
+        """Queue a job on its principal's waiting list (:mod:`workers.redis_queue`), stamped with
+        this API's version (:mod:`workers.version`)."""
+        entry = queue_entry(job_id, kind, payload, owner, **stamp())
+        keys = [principal_list(self.keys, owner), self.keys.queues, self.keys.bell]
+        await self._submit_lua(keys=keys, args=[entry, "tail", BELL_MAX])
 
     # -- reconcile -----------------------------------------------------------------------------------
     async def _reconcile_loop(self) -> None:
@@ -286,8 +300,7 @@ class RedisBackend:
                         self.keys.events(info.id), {"event": event.model_dump_json()}, id=stream_id(event.id)
                     )
         await client.set(self.keys.event_seq(info.id), floor, nx=True)
-        payload = json.dumps(request["payload"])
-        await client.xadd(self.keys.jobs, {"job": info.id, "kind": str(request["kind"]), "payload": payload})
+        await self._enqueue(client, info.id, str(request["kind"]), dict(request["payload"]), info.owner)
         self.requeued += 1
         log.warning("job %s was lost by Redis (status %s); queued again", info.id, info.status.value)
 
@@ -480,6 +493,21 @@ class RedisBackend:
                 await self.hub.set_exhausted(job_id)
 
     # -- health ------------------------------------------------------------------------------------
+    async def _worker_versions(self, client: aredis.Redis, names: list[str]) -> dict[str, str]:
+        """Each live worker's version as its heartbeat announces it; a worker of another version
+        than this API is logged (it refuses this API's jobs)."""
+        out: dict[str, str] = {}
+        mine = describe(stamp())
+        for name in names:
+            with contextlib.suppress(ValueError, TypeError, AttributeError):
+                beat = json.loads(await client.get(self.keys.worker(name)) or "{}")
+                out[name] = describe({"version": beat.get("version"), "format": beat.get("format")})
+        for name, theirs in out.items():
+            if theirs != mine and name not in self._warned_versions:
+                self._warned_versions.add(name)
+                log.error("worker %s is %s, this API %s: it refuses this API's jobs", name, theirs, mine)
+        return out
+
     async def health(self) -> dict[str, Any]:
         client, _ = self._redis()
         facts: dict[str, Any] = {"backend": "redis"}
@@ -492,11 +520,21 @@ class RedisBackend:
                     if group["name"] == self.keys.group:
                         pending = int(group["pending"])
             length = int(await client.xlen(self.keys.jobs))  # finished entries are deleted
+            lists = cast(list[str], await client.zrange(self.keys.queues, 0, -1))
+            waiting = 0
+            if lists:
+                async with client.pipeline(transaction=False) as pipe:
+                    for name in lists:
+                        pipe.llen(name)
+                    waiting = sum(int(n) for n in await pipe.execute())
+            versions = await self._worker_versions(client, names)
             facts.update(
                 redis="ok",
                 workers=len(names),
                 worker_names=names,
-                queued=max(length - pending, 0),
+                worker_versions=versions,
+                queued=waiting + max(length - pending, 0),
+                principals_waiting=len(lists),
                 pending=pending,
                 dead_letters=int(await client.xlen(self.keys.dead)),
                 followed_jobs=len(self._readers),

@@ -67,6 +67,7 @@ from .fencing import ACQUIRE_LUA, StaleAttempt
 from .records import sweep_staged
 from .redis_events import EventPublisher
 from .redis_keys import DEAD_MAXLEN, RedisKeys
+from .redis_queue import BELL_MAX, RELEASE_LUA, TAKE_LUA, entry_of_fields, principal_list
 from .settings import Settings
 from .store import NotFoundError, Store
 from .supervisor import (
@@ -79,6 +80,7 @@ from .supervisor import (
     terminal_after_kill,
     time_limit,
 )
+from .version import mismatch, stamp
 
 log = logging.getLogger("segue.redis.worker")
 
@@ -173,6 +175,8 @@ class Worker:
         self._release = self.client.register_script(_RELEASE_LUA)
         self._ack_owned = self.client.register_script(_ACK_LUA)
         self._acquire_lua = self.client.register_script(ACQUIRE_LUA)
+        self._take_lua = self.client.register_script(TAKE_LUA)
+        self._release_lua = self.client.register_script(RELEASE_LUA)
         self._running: _Running | None = None
         self._stop = threading.Event()
         self._next_reclaim = 0.0
@@ -268,16 +272,36 @@ class Worker:
                 raise
 
     def _read(self) -> Entry | None:
-        response = cast(
-            list[Any],
-            self.client.xreadgroup(
-                self.keys.group, self.name, {self.keys.jobs: ">"}, count=1, block=self.settings.block_ms
-            ),
-        )
-        for _stream, entries in response or []:
-            for entry_id, fields in entries:
-                return str(entry_id), dict(fields or {}), 1
-        return None
+        """The next job, from the principals' waiting lists in turn (:mod:`workers.redis_queue`);
+        when there is none, wait for the bell (at most ``block_ms``) and look once more."""
+        entry = self._take()
+        if entry is None:
+            self.client.blpop([self.keys.bell], timeout=self.settings.block_ms / 1000)
+            entry = self._take()
+        return entry
+
+    def _take(self) -> Entry | None:
+        keys = [self.keys.queues, self.keys.queues_turn, self.keys.jobs]
+        got = cast(list[str] | None, self._take_lua(keys=keys, args=[self.keys.group, self.name]))
+        if not got:
+            return None
+        entry_id, flat = got[0], got[1:]
+        return str(entry_id), dict(zip(flat[::2], flat[1::2], strict=True)), 1
+
+    def _give_back(self, entry_id: str, fields: dict[str, str], why: str) -> bool:
+        """Put a job this worker will not run back first in its principal's waiting list (acked and
+        removed from the stream in the same step); False when the entry is no longer ours."""
+        keys = [
+            self.keys.jobs,
+            principal_list(self.keys, fields.get("owner")),
+            self.keys.queues,
+            self.keys.bell,
+        ]
+        args: list[str | int] = [self.keys.group, self.name, entry_id, entry_of_fields(fields), BELL_MAX]
+        given = bool(self._release_lua(keys=keys, args=args))
+        if given:
+            log.warning("job %s given back to the queue: %s", fields.get("job"), why)
+        return given
 
     # -- housekeeping ---------------------------------------------------------------------------
     def _sweep_loop(self, stop: threading.Event) -> None:
@@ -299,7 +323,12 @@ class Worker:
 
     def _beat(self) -> None:
         running = self._running
-        info = {"pid": os.getpid(), "host": socket.gethostname(), "job": running.job_id if running else None}
+        info = {
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "job": running.job_id if running else None,
+            **stamp(),
+        }
         try:
             self._announce(json.dumps(info))
             if running is None:
@@ -436,6 +465,17 @@ class Worker:
         if self._finished(job_id):
             log.info("job %s already ended; dropping its entry %s", job_id, entry_id)
             self._ack(entry_id)
+            return
+        refused = mismatch(fields)
+        if refused is not None:
+            log.error(
+                "worker %s refuses job %s: %s; run workers of the API's version (the job stays queued)",
+                self.name,
+                job_id,
+                refused,
+            )
+            self._give_back(entry_id, fields, "another version")
+            self._stop.wait(self.settings.refuse_backoff_s)  # leave it to a worker of its version
             return
         if deliveries > self.settings.max_deliveries:
             self._dead_letter(

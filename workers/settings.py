@@ -137,6 +137,12 @@ class Settings(BaseSettings):
     reclaim_idle_s: float = Field(
         default=30.0, gt=0, description="entries not refreshed this long are taken over (hung workers)"
     )
+    refuse_backoff_s: float = Field(
+        default=2.0,
+        gt=0,
+        description="a worker that refused a job of another version takes no job for this long "
+        "(a worker of the job's version takes it meanwhile)",
+    )
     cache_chunk_bytes: int = Field(default=CHUNK_SIZE, ge=1, description="database cache chunk size")
     engine_cache_mb: int = Field(
         default=2048,

@@ -84,6 +84,8 @@ class Task:
     payload: dict[str, Any]
     attempt: int = 1
     time_limit_s: float | None = None
+    owner: str | None = None
+    """The principal that submitted the job (its place in the fair queue)."""
     seq: int = 0
     started: float = 0.0
     cancel_asked: float | None = None
