@@ -60,6 +60,12 @@ from .supervisor import (
 log = logging.getLogger("segue.embedded")
 
 
+CACHE_FULL_MESSAGE = (
+    "the server has no room in its local cache for this job's database (its disk is full; the "
+    "operator is told in the server log); nothing is wrong with the request: submit it again later"
+)
+
+
 class EmbeddedBackend:
     """Jobs in local supervised engine processes (see the module docstring)."""
 
@@ -265,7 +271,10 @@ class EmbeddedBackend:
     async def _ended(self, task: Task, outcome: Outcome, detail: str) -> None:
         self._running.pop(task.job_id, None)
         try:
-            if outcome == "finished":
+            if outcome == "released":  # this host's cache disk: every engine process here shares it
+                log.error("job %s: %s", task.job_id, detail)
+                await self._fail(task.job_id, "cache_full", CACHE_FULL_MESSAGE)
+            elif outcome == "finished":
                 if not task.terminal:
                     await self._fail(task.job_id, "internal", "the job ended without a terminal event")
             elif outcome == "crashed":

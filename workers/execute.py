@@ -23,6 +23,7 @@ from motion.quality import assess
 from schemas import DatabaseStatus, EventType, JobInfo, JobStatus, ProvenanceEntry, Report
 from schemas.bases import DatabaseSpecBase, JobRequestBase
 
+from .dbcache import CacheFull
 from .engine_cache import EngineCache as EngineCache  # re-exported: where it lived before
 from .engine_cache import OpenArrays
 from .prepare import PrepareError, prepare
@@ -161,7 +162,9 @@ def execute_job(
     open_arrays: OpenArrays | None = None,
     on_load: OnLoad | None = None,
 ) -> None:
-    """Run a job to its terminal event (never raises for job-level problems).
+    """Run a job to its terminal event (never raises for job-level problems; raises
+    :class:`~workers.dbcache.CacheFull` when this host cannot cache the job's database, which is
+    not the job's fault: the caller gives it to another worker).
 
     Parameters
     ----------
@@ -194,6 +197,8 @@ def execute_job(
         publish(EventType.failed, {"error": {"code": exc.code, "message": exc.message}})
     except (EngineError, MotionError, UnavailableError, NotFoundError, ValidationError) as exc:
         publish(EventType.failed, {"error": {"code": "invalid_request", "message": str(exc)}})
+    except CacheFull:
+        raise  # this host's problem, not the job's: its owner gives the job to another worker
     except Exception as exc:  # a storage failure names itself; anything else is a bug: report it
         problem = storage_problem(exc)
         if problem is not None:  # full, read-only or unreachable store (the API's 507 codes)

@@ -124,6 +124,23 @@ class _Running:
     lock: tuple[str, str] | None = None
 
 
+CACHE_FULL_FIELD = "cache_full"
+"""A given-back job's field naming the workers whose cache disk had no room for it."""
+
+
+class _Released(Exception):
+    """The engine process gave the job back: this host cannot run it (its cache disk is full)."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+def _marks(fields: dict[str, str]) -> list[str]:
+    """The workers whose cache had no room for a job (its :data:`CACHE_FULL_FIELD`)."""
+    return [name for name in fields.get(CACHE_FULL_FIELD, "").split(",") if name]
+
+
 def default_name() -> str:
     """A unique consumer name: host, pid and a random suffix."""
     return f"{socket.gethostname()}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
@@ -486,12 +503,18 @@ class Worker:
                 "its workers kept dying",
             )
             return
+        if self.name in _marks(fields) and self._others(_marks(fields)):
+            # this worker's cache had no room for it: leave it to another worker
+            self._give_back(entry_id, fields, f"worker {self.name}'s cache disk had no room for it")
+            self._stop.wait(0.5)
+            return
         attempt = self._acquire(job_id, deliveries - 1)
         if attempt <= 0:
             log.info("job %s already ended; dropping its entry %s", job_id, entry_id)
             self._ack(entry_id)
             return
         self._running = _Running(entry_id, job_id, time.monotonic() + self._time_limit(kind, payload))
+        released: str | None = None
         try:
             publish = self._publisher_for(job_id, attempt)
             should_stop = self._stop_check(job_id, attempt)
@@ -501,11 +524,54 @@ class Worker:
                 self._supervised(job_id, kind, payload, attempt)
         except StaleAttempt as exc:
             log.warning("%s; this worker publishes nothing more of it", exc.message)
+        except _Released as exc:
+            released = exc.reason
         finally:
             self._running = None
             self.publisher.forget(job_id)
+        if released is not None:
+            self._cache_full(entry_id, fields, attempt, released)
+            return
         self._ack(entry_id)
         self.processed += 1
+
+    def _cache_full(self, entry_id: str, fields: dict[str, str], attempt: int, reason: str) -> None:
+        """This host cannot cache the job's database (:class:`~workers.dbcache.CacheFull`): the
+        operator is told, and the job goes back to the queue for a worker whose cache has not
+        failed it; when every live worker's has, it fails naming the servers' problem (never the
+        user's ``storage_full``)."""
+        job_id = fields["job"]
+        marks = [*_marks(fields), self.name]
+        others = self._others(marks)
+        log.error(
+            "worker %s: %s; job %s %s",
+            self.name,
+            reason,
+            job_id,
+            "goes back to the queue for another worker" if others else "fails: no other worker can take it",
+        )
+        if others:
+            self._give_back(entry_id, {**fields, CACHE_FULL_FIELD: ",".join(marks)}, "cache disk full")
+            return
+        message = (
+            "no worker has room in its local cache for this job's database (the servers' disks are full; "
+            "their operator is told in the worker logs); nothing is wrong with the request: submit it "
+            "again later"
+        )
+        with contextlib.suppress(StaleAttempt):
+            self.publisher.publish(
+                job_id,
+                EventType.failed,
+                {"error": {"code": "cache_full", "message": message}},
+                attempt=attempt,
+            )
+        self._ack(entry_id)
+
+    def _others(self, marks: list[str]) -> list[str]:
+        """Live workers (heartbeat keys) other than ``marks``."""
+        cut = len(self.keys.worker(""))
+        names = [str(k)[cut:] for k in self.client.scan_iter(match=self.keys.worker_pattern, count=500)]
+        return sorted(set(names) - set(marks) - {self.name})
 
     # -- running a job in the engine process ------------------------------------------------------
     def _supervised(self, job_id: str, kind: str, payload: dict[str, Any], attempt: int) -> None:
@@ -515,6 +581,8 @@ class Worker:
             task, outcome, detail = self._run_once(job_id, kind, payload, attempt)
             if task.stale:
                 return  # another run holds the job: nothing of this one is published
+            if outcome == "released":
+                raise _Released(detail)
             if outcome == "finished":
                 if not task.terminal:
                     self._publish_safely(

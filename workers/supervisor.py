@@ -8,6 +8,9 @@ process, or a ``segue worker``) gives it a :class:`Task`; a watch thread of the 
 child's events (``on_event``) and calls ``on_end`` once per task with an :data:`Outcome`:
 
 * ``finished`` — the child reported the job over (it published the terminal event itself);
+* ``released`` — the child could not run the job on this host (its cache disk is full:
+  :class:`~workers.dbcache.CacheFull`) and published no terminal event: the owner gives the job
+  to another worker, or fails it naming the host's problem;
 * ``crashed`` — the child died (SIGKILL, the OOM killer, a segfault): the owner re-runs the job;
 * ``cancel_timeout`` — a cancel was asked and the job had not ended ``cancel_grace_s`` later;
 * ``time_limit`` — the job ran past its hard time limit (``budget_s`` + room for assembly), or
@@ -49,7 +52,7 @@ from schemas import EventType
 
 log = logging.getLogger("segue.supervisor")
 
-Outcome = Literal["finished", "crashed", "cancel_timeout", "time_limit", "memory_limit"]
+Outcome = Literal["finished", "released", "crashed", "cancel_timeout", "time_limit", "memory_limit"]
 
 PAGE_SIZE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
@@ -92,6 +95,8 @@ class Task:
     loading_since: float | None = None
     """When the child started loading the job's database (timed apart from the job's limit)."""
     best: str | None = None
+    released: str | None = None
+    """Why the child gave the job back without ending it (``released``), else None."""
     terminal: bool = False
     stale: bool = False
     """The run lost its job to a later attempt (its events are refused; it is being stopped)."""
@@ -202,6 +207,7 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
 
     from motion.allocator import tune_process
 
+    from .dbcache import CacheFull
     from .engine_cache import EngineCache
     from .execute import execute_job
     from .fencing import Fence, FencedStore
@@ -257,17 +263,10 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
         def on_load(loading: bool, seq: int = seq) -> None:
             events.send(("load", seq, loading, time.monotonic()))
 
-        execute_job(
-            store,
-            job_id,
-            kind,
-            payload,
-            publish,
-            should_stop,
-            cache,
-            attempt,
-            on_load=on_load,
-        )
+        try:
+            execute_job(store, job_id, kind, payload, publish, should_stop, cache, attempt, on_load=on_load)
+        except CacheFull as exc:
+            events.send(("release", seq, str(exc)))
         events.send(("end", seq))
 
 
@@ -518,8 +517,13 @@ class EngineProcess:
             elif task.loading_since is not None:
                 task.started += now - task.loading_since  # the load is not the job's time
                 task.loading_since = None
+        elif kind == "release":
+            task.released = str(message[2])
         elif kind == "end":
-            self._finish(task, "finished", "")
+            if task.released is not None:
+                self._finish(task, "released", task.released)
+            else:
+                self._finish(task, "finished", "")
 
     def _finish(self, task: Task, outcome: Outcome, detail: str) -> None:
         with self._lock:
