@@ -223,6 +223,11 @@ class Worker:
                     self._ensure_group()
                     self._announce("{}")
                     break
+                except (redis.AuthenticationError, redis.exceptions.AuthorizationError) as exc:
+                    raise redis.AuthenticationError(
+                        f"Redis refused this worker's credentials ({exc}): check the password in "
+                        "SEGUE_REDIS_URL (redis://:PASSWORD@host:port/0)"
+                    ) from None
                 except (redis.ConnectionError, redis.TimeoutError) as exc:
                     log.warning("waiting for Redis (%s); retrying in %.1f s", exc, backoff)
                     self._stop.wait(backoff)

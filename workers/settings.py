@@ -44,7 +44,14 @@ class Settings(BaseSettings):
     disk_cache_mb: int = Field(
         default=8192, ge=1, description="databases downloaded from an object store kept on local disk, MiB"
     )
-    redis_url: str | None = Field(default=None, description="Redis job backend; unset = embedded pool")
+    redis_url: str | None = Field(
+        default=None,
+        repr=False,
+        description="Redis job backend (unset = embedded pool): redis://[[user]:password@]host:port/db, "
+        "rediss://... for TLS (?ssl_ca_certs=/path/ca.crt to trust a private CA; ssl_certfile and "
+        "ssl_keyfile for client certificates), or unix:///path.sock; a password with URL-reserved "
+        "characters is percent-encoded",
+    )
     workers: int = Field(default=2, ge=1, le=256, description="embedded backend: worker processes")
     api_tokens: Annotated[tuple[str, ...], NoDecode] = Field(
         default=(),
@@ -122,7 +129,10 @@ class Settings(BaseSettings):
 
     # -- the Redis runtime (``segue worker`` and the API's Redis backend) --------------------------
     redis_cache_url: str | None = Field(
-        default=None, description="a separate Redis (allkeys-lru) for the database cache; unset = redis_url"
+        default=None,
+        repr=False,
+        description="a separate Redis (allkeys-lru) for the database cache, a URL as redis_url; "
+        "unset = redis_url",
     )
     redis_prefix: str = Field(default=DEFAULT_PREFIX, min_length=1, description="Redis key prefix")
     worker_name: str | None = Field(
