@@ -33,6 +33,25 @@ on a free port, ``SEGUE_STORE_URL=s3://<bucket>/segue``, ``AWS_ENDPOINT_URL``):
   ``StoreUnavailable`` (a 507 to API clients). This row shows that an outage shorter than the
   retries loses nothing; it cannot show a restart that loses objects.
 
+Rows for the hardening of issue 40 (each printed with its own fields):
+
+* ``build_worker_kill``: SIGKILL of the ``segue worker`` running a graph build (40 Bandai-Namco
+  clips of ``../shared/data``, mirrored, all pairs: a few seconds, a progress event every ~0.3 s),
+  three times in a row (``max_deliveries`` 3: the fourth delivery dead-letters it), ``--trials``
+  times: how long each killed worker's engine process outlived it, whether the database record
+  read ``failed`` while the build was still to be re-run, and the record's final status and error;
+* ``redis_restart_no_persistence`` also reads every job's whole log back through a *new* API
+  process: ``history_lost`` (event ids missing from 1..last), ``history_unterminated``;
+* ``terminal_after_done``: clients polling each job's status and reading its events the moment it
+  says finished: events lists without the terminal event;
+* ``cache_disk_full``: S3 store, two workers, one with its data directory on a 32-KiB tmpfs
+  (mounted for the row: root, or a user namespace), graph jobs: jobs done, failed, failed
+  ``storage_full``, and the operator's log lines;
+* ``upload_parse_killed``: a 100k-frame upload (gzip) whose parse a 300-MiB memory limit kills:
+  the answer and the staged objects left in the store;
+* ``fairness_embedded`` / ``fairness_redis``: ``bench/fairness.py`` (256 jobs of one principal, one of
+  another: how long the other's waits, in jobs).
+
 Per scenario: ``jobs_lost`` (jobs not ``done``), ``events_lost`` (gaps in the event ids the clients
 received), ``duplicate_executions`` (a run of a job still publishing after a later run of the same
 job started: result ids carry the attempt), ``duplicate_terminals`` (terminal events beyond one per
@@ -40,7 +59,7 @@ job, in each job's whole event log read back at the end), ``stale_events`` (even
 last ``started`` that carry another attempt), ``reruns`` (runs after the first) and ``recovery_s``
 (from the fault to the first event any client received afterwards). Prints one JSON object.
 
-    python bench/faults.py [--jobs 4] [--budget 2] [--hang 8] [--only NAME,...]
+    python bench/faults.py [--jobs 4] [--budget 2] [--hang 8] [--trials 3] [--only NAME,...]
 
 (the s3 rows need ``pip install -e '.[dev]'``: boto3 and ``moto[server]``)
 """
@@ -702,6 +721,56 @@ def cache_disk_full(n_jobs: int = 4, budget: float = 1.0) -> dict[str, Any]:
         shutil.rmtree(root, ignore_errors=True)
 
 
+def tiled_walk(frames: int) -> bytes:
+    """The bundled walk's frames repeated to ``frames`` frames, as gzip BVH text (a large upload
+    that compresses well: what a worker, not the API, parses)."""
+    import gzip
+    import io
+    from dataclasses import replace
+
+    import numpy as np
+
+    from motion import parse_bvh, write_bvh
+
+    walk = parse_bvh(sample_path("walk").read_bytes())
+    reps = -(-frames // walk.num_frames)
+    rotations = np.concatenate([walk.rotations] * reps)[:frames]
+    roots = np.concatenate([walk.root_positions] * reps)[:frames]
+    buf = io.StringIO()
+    write_bvh(replace(walk, rotations=rotations, root_positions=roots), buf)
+    return gzip.compress(buf.getvalue().encode(), compresslevel=6)
+
+
+def upload_parse_killed(frames: int = 100_000, memory_mb: int = 300) -> dict[str, Any]:
+    """A large upload whose parse its worker's supervisor kills (``SEGUE_MAX_JOB_MEMORY_MB``
+    ``memory_mb``: the parse of ``frames`` frames needs more): the answer, and the staged objects
+    left in the store afterwards (embedded backend, local store)."""
+    root = Path(tempfile.mkdtemp(prefix="segue-faults-staged-"))
+    top = Topology(root, None, workers=1)
+    top.env["SEGUE_MAX_JOB_MEMORY_MB"] = str(memory_mb)
+    try:
+        top.start()
+        data = tiled_walk(frames)
+        with httpx.Client(base_url=top.url, timeout=300) as http:
+            r = http.post("/v1/clips", files={"file": ("long-walk.bvh.gz", data)})
+        time.sleep(1.0)  # whatever the backend removes after answering
+        staged = (
+            sorted(p.name for p in (top.data / "staged").glob("*")) if (top.data / "staged").is_dir() else []
+        )
+        return {
+            "upload_mb": round(len(data) / 2**20, 2),
+            "frames": frames,
+            "status": r.status_code,
+            "code": r.json().get("code")
+            if r.headers.get("content-type", "").startswith("application/json")
+            else None,
+            "staged_objects_left": len(staged),
+        }
+    finally:
+        top.stop()
+        shutil.rmtree(root, ignore_errors=True)
+
+
 SCENARIOS = (
     "embedded_worker_kill",
     "redis_worker_kill",
@@ -714,6 +783,7 @@ SCENARIOS = (
     "build_worker_kill",
     "terminal_after_done",
     "cache_disk_full",
+    "upload_parse_killed",
     "fairness_embedded",
     "fairness_redis",
 )
@@ -722,11 +792,13 @@ SCENARIOS = (
 def run_one(name: str, args: argparse.Namespace) -> dict[str, Any]:
     """One row of the table."""
     if name == "build_worker_kill":
-        return build_worker_kill()
+        return build_worker_kill(args.trials)
     if name == "terminal_after_done":
         return terminal_after_done()
     if name == "cache_disk_full":
         return cache_disk_full(args.jobs)
+    if name == "upload_parse_killed":
+        return upload_parse_killed()
     if name.startswith("fairness_"):
         from fairness import fairness  # bench/fairness.py
 
@@ -739,6 +811,7 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=4)
     ap.add_argument("--budget", type=float, default=2.0)
     ap.add_argument("--hang", type=float, default=8.0, help="seconds a hung worker stays stopped")
+    ap.add_argument("--trials", type=int, default=3, help="build_worker_kill: tries of the kills")
     ap.add_argument("--only", default=",".join(SCENARIOS))
     args = ap.parse_args()
     out = {name: run_one(name, args) for name in args.only.split(",") if name}

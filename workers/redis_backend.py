@@ -6,7 +6,9 @@ best result, every job ends with exactly one of ``done``/``failed``/``cancelled`
 :mod:`workers.redis_keys`; events are published with :mod:`workers.redis_events`.
 
 - **submit**: ``SET segue:job:<job> <JobInfo> NX`` (a second submit of the same job id is a no-op:
-  jobs are idempotent), the ``queued`` event (id 1), then ``XADD segue:jobs {job, kind, payload}``.
+  jobs are idempotent), the ``queued`` event (id 1), then the job on its principal's waiting list
+  (:mod:`workers.redis_queue`: served round-robin; the entry stamped with this API's version,
+  :mod:`workers.version`), and the ``queued`` event written to the store's archive.
 - **status**: the JobInfo in Redis, else the store's ``info.json`` (kept in step by every publisher).
 - **cancel**: ``SET segue:cancel:<job> 1 EX``; the worker's ``should_stop`` sees it within ~50 ms and
   the job ends ``cancelled`` with its best result. A job still queued ends ``cancelled`` at once (the
@@ -17,7 +19,10 @@ best result, every job ends with exactly one of ``done``/``failed``/``cancelled`
   to the :class:`~workers.backend.EventHub`; any number of sockets follow the hub. The blocking part
   is shared: one ``XREAD BLOCK`` over every followed job's stream (:class:`_StreamPump`), so an API
   process holds one blocked connection, not one per job (redis-py pools default to 100
-  connections). A job Redis has forgotten replays from the store's ``events.jsonl`` archive.
+  connections). Events Redis lost (a restart without persistence, a flush) are read from the
+  store's archive (:mod:`workers.event_archive`): a reader never keeps a gap it can fill.
+  ``GET /events`` (:meth:`RedisBackend.backlog`) reads Redis again before it answers, so once the
+  status says a job ended its terminal event is in the answer.
 - **health**: live workers (heartbeat keys), queue length, pending entries, dead letters; an error
   (``/healthz`` 503) while Redis is unreachable.
 - **reconcile** (at start and every ``reconcile_s``): the store's job records are the source of
@@ -26,7 +31,8 @@ best result, every job ends with exactly one of ``done``/``failed``/``cancelled`
   queued again once it has been missing for ``requeue_after_s`` (longer than a worker's heartbeat
   period, so a worker still running it re-announces it first); its event counter is set to the last
   id clients may have seen, so the re-run's events follow them. The stream and its group are
-  recreated when missing.
+  recreated when missing. A job Redis says ended while the store does not (its publisher died
+  between the two) gets its store records written here (:func:`_write_records`).
 - **submit while Redis is down** raises :class:`~workers.backend.BackendUnavailable` (503, and the
   API removes the job's record).
 """

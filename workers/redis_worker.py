@@ -2,9 +2,18 @@
 
 Protocol (key names in :mod:`workers.redis_keys`):
 
-- **Delivery.** Workers share the consumer group ``segue-workers`` on ``segue:jobs`` (created with
-  ``MKSTREAM``) and take one entry at a time with ``XREADGROUP ... >``. An entry stays in the group's
-  pending list until the job's terminal event is published; then ``XACK`` + ``XDEL``.
+- **Delivery.** Jobs wait in one list per principal; a worker with nothing to do takes the next
+  principal's next job (round-robin, :mod:`workers.redis_queue`), which puts it in ``segue:jobs``
+  and reads it for this worker (consumer group ``segue-workers``) in one atomic step, and waits on
+  the queue's bell when there is none. An entry stays in the group's pending list until the job's
+  terminal event is published; then ``XACK`` + ``XDEL``.
+- **Versions.** A job whose entry carries another job format or package version than this worker's
+  (:mod:`workers.version`) is refused with an error log and given back to its principal's list; the
+  worker then takes nothing for ``refuse_backoff_s``.
+- **A full cache disk.** A run whose engine process cannot cache the job's database even after
+  evicting every other (:class:`~workers.dbcache.CacheFull`) is logged for the operator and the job
+  given back, marked, for a worker that has not failed it; when every live worker has, it fails
+  with code ``cache_full``.
 - **Heartbeats.** A background thread ``SET segue:worker:<name> ... EX ttl`` every ``heartbeat_s``.
   While a job runs it also resets the entry's idle time (``XCLAIM ... JUSTID``, only if the entry is
   still ours) until the job's deadline (2 × budget + grace; builds: one hour), and extends the build
@@ -34,10 +43,15 @@ Protocol (key names in :mod:`workers.redis_keys`):
   bounded by bytes (:class:`~workers.engine_cache.EngineCache`).
   A build takes ``segue:lock:build:<db>`` (``SET NX EX``); a second build of the same database waits
   for the lock, then reuses the ready database instead of building it again.
+- **History.** Every event the worker publishes is also copied to the store in batches
+  (:mod:`workers.event_archive`, a thread of its own), so a Redis that loses its memory loses none.
+- **Housekeeping.** A thread removes staged uploads older than ``staged_max_age_s`` (orphans of
+  parses whose processes were lost) every ``staged_sweep_s``.
 - **Stopping.** SIGTERM/SIGINT: finish the current job, then exit. A second signal releases the job
   at once (not acked; the heartbeat key is deleted so another worker reclaims it immediately).
 
-All processes must see the same data directory (the store holds clips, databases and results).
+All processes share one store (``SEGUE_STORE_URL``, or one data directory); a worker's own
+``SEGUE_DATA_DIR`` is then only its cache.
 """
 
 from __future__ import annotations
