@@ -761,9 +761,7 @@ def upload_parse_killed(frames: int = 100_000, memory_mb: int = 300) -> dict[str
             "upload_mb": round(len(data) / 2**20, 2),
             "frames": frames,
             "status": r.status_code,
-            "code": r.json().get("code")
-            if r.headers.get("content-type", "").startswith("application/json")
-            else None,
+            "code": (r.json().get("error") or {}).get("code") if r.status_code >= 400 else None,
             "staged_objects_left": len(staged),
         }
     finally:
