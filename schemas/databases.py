@@ -131,6 +131,14 @@ class SkeletonSummary(Strict):
         "which is not joint 0 on rigs whose root is a static ground node (Bandai-Namco's joint_Root)"
     )
     static_root: bool = Field(description="joint 0 stays put on the floor in every clip")
+    hip_height_m: float | None = Field(
+        default=None,
+        description="the hips' height above the ankles (their mean) in the skeleton's zero pose, "
+        "metres; null when its hips and feet are not recognised. A result put on a character "
+        "(?character=) travels the root path scaled by about the character's own hip height over "
+        "this (docs/retargeting.md), so a client placing goals for its character divides their "
+        "distances by that ratio",
+    )
 
 
 class ClipSummary(Strict):

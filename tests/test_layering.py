@@ -112,3 +112,37 @@ def test_the_checker_sees_violations() -> None:
         assert violations("workers") == ["workers/_layering_probe.py:1: engines.rhythm.audio"]
     finally:
         probe.unlink()
+
+
+BLENDER_ADDON = ROOT / "integrations" / "blender" / "segue_blender"
+BLENDER_OWN = frozenset({"bpy", "mathutils", "gpu", "gpu_extras"})
+"""What Blender gives its add-ons besides the standard library."""
+
+
+def test_the_blender_addon_is_a_thin_client_of_the_http_api() -> None:
+    """The add-on runs in Blender's bundled Python: it imports the standard library, Blender's own
+    modules and itself, never Segue (motion, engines, schemas, service, workers, web) nor a
+    third-party package (numpy, scipy, pydantic...); and its plain modules import no ``bpy`` at
+    their top, so they are tested outside Blender."""
+    import sys
+
+    allowed = set(sys.stdlib_module_names) | BLENDER_OWN | {"integrations"}
+    plain = {"client", "gltf", "mat4", "binding", "axes", "authoring", "roles", "bvh", "jobs",
+             "local_service", "state", "__init__"}  # fmt: skip
+    bad = []
+    for path in sorted(BLENDER_ADDON.glob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        top_level = {id(n) for n in tree.body}
+        for line, name in imports_of(path):
+            top = name.split(".")[0]
+            if top not in allowed:
+                bad.append(f"{path.name}:{line}: {name}")
+        if path.stem in plain:
+            for node in tree.body:
+                if isinstance(node, ast.Import | ast.ImportFrom) and id(node) in top_level:
+                    names = (
+                        [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""]
+                    )
+                    if any(n.split(".")[0] in BLENDER_OWN for n in names):
+                        bad.append(f"{path.name}:{node.lineno}: {names} at the top of a plain module")
+    assert bad == []

@@ -13,7 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from enum import StrEnum
 from typing import Any
 
@@ -126,6 +126,8 @@ class ExportSpec:
     in_place: bool = False
     root_motion: RootMotion | None = None
     events: str | None = None
+    animation_only: bool = False
+    dancer: int | None = None
     max_frames: int = 36_000
     max_joint_frames: int = 10_000_000
     bvh_limits: tuple[int, int, int] = (1024, 2_000_000, 1 << 30)
@@ -153,14 +155,21 @@ class ExportSpec:
             in_place=bool(d["in_place"]),
             root_motion=None if d.get("root_motion") is None else RootMotion(d["root_motion"]),
             events=d.get("events"),
+            animation_only=bool(d.get("animation_only", False)),
+            dancer=None if d.get("dancer") is None else int(d["dancer"]),
             max_frames=int(d["max_frames"]),
             max_joint_frames=int(d["max_joint_frames"]),
             bvh_limits=(int(d["bvh_limits"][0]), int(d["bvh_limits"][1]), int(d["bvh_limits"][2])),
         )
 
     def key(self) -> str:
-        """The export's name in the store: its result, format and a digest of every option."""
+        """The export's name in the store: its result, format and a digest of every option (the
+        options added later, at their defaults, are left out: earlier exports keep their keys)."""
         options = {k: v for k, v in self.to_dict().items() if k not in ("job", "result")}
+        if options["animation_only"] is False:
+            del options["animation_only"]
+        if options["dancer"] is None:
+            del options["dancer"]
         digest = hashlib.sha256(json.dumps(options, sort_keys=True).encode()).hexdigest()[:24]
         return f"{self.result}-{digest}-{self.format.value}".lower()
 
@@ -202,25 +211,29 @@ def export_bytes(
     events: Sequence[dict[str, Any]] | None = None,
     rig: bytes | None = None,
     ground_root: bool = True,
+    animation_only: bool = False,
 ) -> bytes:
     """The file content of ``motion`` in ``fmt`` (raises :class:`motion.ExportError`).
 
     Lengths in the target's units (metres; centimetres for ``unreal``) unless ``units`` overrides
     them; GLB is metres. ``in_place`` is for GLB; ``events`` go into GLB extras and JSON frames.
     ``rig``: the glTF/GLB file of the character the motion was retargeted onto: a GLB is that file
-    with the animation added (:func:`motion.export.bind.bound_glb`). ``ground_root=False`` keeps
-    a GLB's skeleton exactly the motion's (a retargeted BVH character's hierarchy).
+    with the animation added (:func:`motion.export.bind.bound_glb`), or with ``animation_only``
+    just its skeleton and the animation. ``ground_root=False`` keeps a GLB's skeleton exactly the
+    motion's (a retargeted BVH character's hierarchy).
     """
     unit = None if units is None else units.value
     if in_place and fmt != ResultFormat.glb:
         raise ExportError("in_place is for format=glb (its ground joint keeps the root motion)")
+    if animation_only and (fmt != ResultFormat.glb or rig is None):
+        raise ExportError("animation_only is for format=glb onto a glTF/GLB character")
     if events is not None and fmt not in (ResultFormat.glb, ResultFormat.json):
         raise ExportError("events go into format=glb (animation extras) and format=json only")
     if fmt == ResultFormat.glb:
         if unit not in (None, "m"):
             raise ExportError(f"GLB is in metres (glTF 2.0); units={unit} does not apply to it")
         if rig is not None:
-            return bound_glb(rig, motion, events=events)
+            return bound_glb(rig, motion, animation_only=animation_only, events=events)
         return glb_bytes(motion, ground_root=ground_root, in_place=in_place, events=events)
     if fmt == ResultFormat.npz:
         return npz_bytes(motion, target.value, unit)
@@ -268,6 +281,8 @@ def make_export(store: Store, spec: ExportSpec) -> bytes:
     result or character that is gone."""
     motion = store.result_motion(spec.job, spec.result)
     rid, fmt, units, in_place = spec.result, spec.format, spec.units, spec.in_place
+    if spec.dancer is not None:
+        motion = _dancer(motion, spec.dancer, rid)
     rig: bytes | None = None
     if spec.character is not None:
         from motion.retarget import correspond, retarget
@@ -313,11 +328,30 @@ def make_export(store: Store, spec: ExportSpec) -> bytes:
             events=evs,
             rig=rig,
             ground_root=spec.character is None,
+            animation_only=spec.animation_only,
         )
     except (ExportError, MotionError) as exc:
         raise ExportFailure(
             422, "export_failed", f"cannot export result {rid} as {fmt.value}: {exc}"
         ) from None
+
+
+def _dancer(motion: Motion, dancer: int, rid: str) -> Motion:
+    """Dancer ``dancer`` of a result of several (a crowd, a couple, several graph characters: one
+    subtree per dancer under the ``world`` root, :mod:`motion.export.characters`), its joints
+    without their ``c0_`` prefix; 422 ``export_failed`` when the result has no such dancer."""
+    from motion.export.characters import split_characters, without_prefix
+
+    dancers = split_characters(motion) or [motion]
+    if not 0 <= dancer < len(dancers):
+        raise ExportFailure(
+            422,
+            "export_failed",
+            f"result {rid} has {len(dancers)} dancer{'s' if len(dancers) != 1 else ''} "
+            f"(0..{len(dancers) - 1}), not dancer {dancer}",
+        )
+    one, _ = without_prefix(dancers[dancer])
+    return replace(one, name=motion.name)
 
 
 def _check_resampling(spec: ExportSpec, motion: Motion, fps: float) -> None:

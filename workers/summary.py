@@ -17,6 +17,7 @@ import numpy as np
 from engines.registry import kind_class
 from motion.ground import body_root
 from motion.serialize import skeleton_from_arrays
+from motion.skeleton import Skeleton
 from schemas.clips import LabelRange
 from schemas.databases import ClipSummary, DatabaseSummary, SkeletonSummary
 
@@ -47,6 +48,22 @@ def _library_arrays(npz: bytes | Mapping[str, Any], extra: tuple[str, ...] = ())
                 with zf.open(member) as fh:
                     out[key] = np.lib.format.read_array(fh, allow_pickle=False)
     return out
+
+
+def hip_height_m(skeleton: Skeleton) -> float | None:
+    """The hips' height above the mean of the two ankles in the skeleton's zero pose (metres: a
+    database's skeleton is in metres), hips and feet found as retargeting finds them; None when
+    they are not, or when that pose does not stand (hips not above the ankles)."""
+    from motion.retarget.names import detect_roles
+
+    roles = detect_roles(skeleton).joints
+    if any(r not in roles for r in ("Hips", "LeftFoot", "RightFoot")):
+        return None
+    y = np.zeros(skeleton.num_joints)
+    for j, p in enumerate(skeleton.parents):  # parents come before their children
+        y[j] = skeleton.offsets[j, 1] + (y[p] if p >= 0 else 0.0)
+    drop = float(y[roles["Hips"]] - 0.5 * (y[roles["LeftFoot"]] + y[roles["RightFoot"]]))
+    return round(drop, 6) if np.isfinite(drop) and drop > 0 else None
 
 
 def summarize(
@@ -96,6 +113,7 @@ def summarize(
             parents=[int(p) for p in skeleton.parents],
             hips=skeleton.names[hips],
             static_root=static,
+            hip_height_m=hip_height_m(skeleton),
         ),
         control=own.control,
         couples=own.couples,

@@ -93,7 +93,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -103,9 +103,11 @@ from ..errors import ExportError, MotionError
 from ..ground import GROUND_ROOT_NAME, add_ground_root, facing_pairs
 from ..motion import Motion
 from ..skeleton import Skeleton
+from .body import SkinnedMesh, body_mesh
 from .characters import split_characters, without_prefix
 
 Array = npt.NDArray[np.float64]
+MeshKind = Literal["bones", "body"]
 
 __all__ = ["glb_bytes", "write_glb"]
 
@@ -124,6 +126,8 @@ ELEMENT_ARRAY_BUFFER = 34963
 BONE_WIDTH_OF_BODY = 0.03  # octahedron width as a fraction of the body size
 BONE_WIDTH_OF_LENGTH = 0.25  # ... and at most this fraction of the bone's length
 BONE_WAIST = 0.2  # position of the widest section along the bone, from the parent
+BONE_COLOUR = (0.72, 0.74, 0.78, 1.0)
+BODY_COLOUR = (0.78, 0.71, 0.64, 1.0)  # a mannequin's light wood
 _MIN_BONE_OF_BODY = 1e-6  # bones shorter than this fraction of the body size are not drawn
 _MAX_SKIN_JOINTS = 65536  # JOINTS_0 is UNSIGNED_SHORT
 
@@ -132,9 +136,11 @@ def glb_bytes(
     motion: Motion,
     *,
     ground_root: bool = True,
-    mesh: bool = True,
+    mesh: bool | MeshKind = True,
     in_place: bool = False,
     events: Sequence[dict[str, Any]] | None = None,
+    animation: bool = True,
+    names: Sequence[str] | None = None,
 ) -> bytes:
     """The motion as a binary glTF 2.0 file (see the module docstring for the layout).
 
@@ -149,7 +155,9 @@ def glb_bytes(
         Add an explicit ground root joint named ``"ground"`` with
         :func:`motion.ground.add_ground_root` (skipped when the root already has that name).
     mesh:
-        Add a skinned bone mesh so that any viewer shows the character.
+        Add a skinned mesh so that any viewer shows the character: ``True`` or ``"bones"`` the
+        bone octahedra, ``"body"`` Segue's mannequin (:mod:`motion.export.mannequin`: a body
+        with smooth weights and soles on the floor), ``False`` none.
     in_place:
         Keep the body over the origin: the ground joint still carries the root motion (floor
         path and heading) but is not the parent of the hips, whose animation is relative to it
@@ -157,6 +165,12 @@ def glb_bytes(
     events:
         JSON objects (:mod:`motion.export.events`) written to the animations', the scene's and
         the characters' top nodes' ``extras`` as ``{"events": [...]}`` (module docstring).
+    animation:
+        Write the animation; without it the file is a character (its skin in the bind pose).
+    names:
+        The joint names to write, one per joint of ``motion`` (default: its own), so that a body
+        found under one naming convention can be written under another (a single character,
+        without ``ground_root``).
 
     Returns
     -------
@@ -172,6 +186,10 @@ def glb_bytes(
     """
     if in_place and not ground_root:
         raise ExportError("in-place export needs the ground root (it keeps the root motion)")
+    if mesh not in (True, False, "bones", "body"):
+        raise ExportError(f"unknown mesh {mesh!r}: bones, body or none")
+    if names is not None and (len(names) != motion.num_joints or ground_root):
+        raise ExportError("names: one per joint of the motion, and only without a ground root")
     _prepared(motion, False)  # validate the input before splitting it
     split = split_characters(motion)
     chars = [motion] if split is None else split
@@ -181,7 +199,7 @@ def glb_bytes(
         prepared = [(_in_place(m), pre) for m, pre in prepared]
     lead = (2 if in_place else 1) if ground_root else 0  # joints before the body root
     b = _Builder()
-    times = _Times(b, prepared[0][0])
+    times = _Times(b, prepared[0][0]) if animation else None
     nodes: list[dict[str, Any]] = []
     skins: list[dict[str, Any]] = []
     animations: list[dict[str, Any]] = []
@@ -193,36 +211,31 @@ def glb_bytes(
         base = len(nodes)
         rest = _rest_pose(m, lead)
         nodes += _joint_nodes(m, rest, base, pre)
+        if names is not None:
+            for j, name in enumerate(names):
+                nodes[base + j]["name"] = name
         scene_roots.append(base)
         channels: list[dict[str, Any]] = []
         samplers: list[dict[str, Any]] = []
-        _animation(b, m, times, base, channels, samplers)
-        animations.append(
-            {
-                "name": _label(motion) if split is None else _label(m),
-                "channels": channels,
-                "samplers": samplers,
-            }
-        )
+        if times is not None:
+            _animation(b, m, times, base, channels, samplers)
+            animations.append(
+                {
+                    "name": _label(motion) if split is None else _label(m),
+                    "channels": channels,
+                    "samplers": samplers,
+                }
+            )
         found = next((s for s in shared if _same_rest(s[0], s[1], rest, m.skeleton.parents)), None)
         if found is None:
             ibm = _ibm(b, rest)
-            geometry = (
-                _bone_mesh(
-                    m.skeleton.parents,
-                    rest.globals[:, :3, 3],
-                    m.skeleton.end_site_parents,
-                    rest.ends,
-                    lead,
-                )
-                if mesh
-                else None
-            )
+            geometry = _skin_mesh(m.skeleton, rest, lead, mesh)
             mesh_index = None
             if geometry is not None:
                 mesh_index = len(meshes)
+                kind = "body" if mesh == "body" else "bones"
                 meshes.append(
-                    {"name": m.skeleton.names[0] + "_bones", "primitives": [_primitive(b, *geometry)]}
+                    {"name": m.skeleton.names[0] + "_" + kind, "primitives": [_primitive(b, geometry)]}
                 )
             shared.append((rest, m.skeleton.parents, ibm, mesh_index))
         else:
@@ -248,10 +261,11 @@ def glb_bytes(
     if events is not None:
         evs = list(events)
         scene["extras"] = {"events": evs}
-        for k, (anim, (_, pre)) in enumerate(zip(animations, prepared, strict=True)):
+        for k, (_, pre) in enumerate(prepared):
             who = pre.rstrip("_")
             mine = [e for e in evs if "character" not in e or e["character"] == who] if split else evs
-            anim["extras"] = {"events": mine}
+            if animations:
+                animations[k]["extras"] = {"events": mine}
             nodes[scene_roots[k]].setdefault("extras", {})["events"] = mine
     gltf: dict[str, Any] = {
         "asset": {"version": "2.0", "generator": "segue"},
@@ -259,17 +273,19 @@ def glb_bytes(
         "scenes": [scene],
         "nodes": nodes,
         "skins": skins,
-        "animations": animations,
     }
+    if animations:
+        gltf["animations"] = animations
     if meshes:
         gltf["meshes"] = meshes
+        body = mesh == "body"
         gltf["materials"] = [
             {
-                "name": "bone",
+                "name": "body" if body else "bone",
                 "pbrMetallicRoughness": {
-                    "baseColorFactor": [0.72, 0.74, 0.78, 1.0],
+                    "baseColorFactor": list(BODY_COLOUR if body else BONE_COLOUR),
                     "metallicFactor": 0.0,
-                    "roughnessFactor": 0.7,
+                    "roughnessFactor": 0.75 if body else 0.7,
                 },
             }
         ]
@@ -648,25 +664,44 @@ def _bone_mesh(
     return positions, normals, joints
 
 
-def _primitive(b: _Builder, positions: Array, normals: Array, joints: npt.NDArray[np.intp]) -> dict[str, Any]:
-    """Write the vertex attributes and indices of the bone mesh; return the primitive JSON."""
-    n = positions.shape[0]
-    pos32 = positions.astype(np.float32)
-    joint4 = np.zeros((n, 4), dtype=np.uint16)
-    joint4[:, 0] = joints
-    weight4 = np.zeros((n, 4), dtype=np.float32)
-    weight4[:, 0] = 1.0
-    index = np.arange(n, dtype=np.uint16 if n <= 65535 else np.uint32)
+def _skin_mesh(sk: Skeleton, rest: _Rest, lead: int, mesh: bool | MeshKind) -> SkinnedMesh | None:
+    """The mesh of one skin in its bind pose: the bone octahedra (rigid), the mannequin body, or
+    none."""
+    if mesh is False:
+        return None
+    points = rest.globals[:, :3, 3]
+    if mesh == "body":
+        return body_mesh(sk, points, rest.ends, skip=lead)
+    geometry = _bone_mesh(sk.parents, points, sk.end_site_parents, rest.ends, lead)
+    if geometry is None:
+        return None
+    positions, normals, owner = geometry
+    n = len(positions)
+    joints = np.zeros((n, 4), dtype=np.uint16)
+    joints[:, 0] = owner
+    weights = np.zeros((n, 4), dtype=np.float32)
+    weights[:, 0] = 1.0
+    return SkinnedMesh(positions, normals, joints, weights, np.arange(n, dtype=np.uint32).reshape(-1, 3))
+
+
+def _primitive(b: _Builder, mesh: SkinnedMesh) -> dict[str, Any]:
+    """Write a skinned mesh's vertex attributes and indices; return the primitive JSON."""
+    n = mesh.num_vertices
+    pos32 = mesh.positions.astype(np.float32)
+    flat = mesh.indices.reshape(-1)
+    index = flat.astype(np.uint16 if n <= 65535 else np.uint32)
     attributes = {
         "POSITION": b.accessor(
             b.view(pos32, ARRAY_BUFFER), 0, FLOAT, n, "VEC3", pos32.min(axis=0), pos32.max(axis=0)
         ),
-        "NORMAL": b.accessor(b.view(normals.astype(np.float32), ARRAY_BUFFER), 0, FLOAT, n, "VEC3"),
-        "JOINTS_0": b.accessor(b.view(joint4, ARRAY_BUFFER), 0, UNSIGNED_SHORT, n, "VEC4"),
-        "WEIGHTS_0": b.accessor(b.view(weight4, ARRAY_BUFFER), 0, FLOAT, n, "VEC4"),
+        "NORMAL": b.accessor(b.view(mesh.normals.astype(np.float32), ARRAY_BUFFER), 0, FLOAT, n, "VEC3"),
+        "JOINTS_0": b.accessor(
+            b.view(mesh.joints.astype(np.uint16), ARRAY_BUFFER), 0, UNSIGNED_SHORT, n, "VEC4"
+        ),
+        "WEIGHTS_0": b.accessor(b.view(mesh.weights.astype(np.float32), ARRAY_BUFFER), 0, FLOAT, n, "VEC4"),
     }
     index_type = UNSIGNED_SHORT if index.dtype == np.uint16 else UNSIGNED_INT
-    indices = b.accessor(b.view(index, ELEMENT_ARRAY_BUFFER), 0, index_type, n, "SCALAR")
+    indices = b.accessor(b.view(index, ELEMENT_ARRAY_BUFFER), 0, index_type, len(index), "SCALAR")
     return {"attributes": attributes, "indices": indices, "material": 0, "mode": 4}
 
 

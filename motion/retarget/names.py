@@ -237,7 +237,7 @@ def _branch_point(skeleton: Skeleton, joints: list[int]) -> int:
     return max(common, key=lambda j: len(_ancestors(skeleton, j)))
 
 
-def _chain_of(skeleton: Skeleton, roles: dict[str, int]) -> tuple[list[int], list[int]]:
+def torso_chain(skeleton: Skeleton, roles: dict[str, int]) -> tuple[list[int], list[int]]:
     """Torso chain (above the hips up to the chest, inclusive) and neck chain (above the chest,
     below the head) of a skeleton with hips, head and both arms; empty lists when unknown."""
     arms = [roles.get(f"{s}Shoulder", roles.get(f"{s}UpperArm", -1)) for s in ("Left", "Right")]
@@ -309,8 +309,8 @@ def correspond(
                 f"{', ...' if sk.num_joints > 8 else ''}); name them with a joint map (--map)"
             )
     pairs = {tgt_roles[r]: src_roles[r] for r in ROLES if r in tgt_roles and r in src_roles}
-    t_torso, t_neck = _chain_of(target, tgt_roles)
-    s_torso, s_neck = _chain_of(source, src_roles)
+    t_torso, t_neck = torso_chain(target, tgt_roles)
+    s_torso, s_neck = torso_chain(source, src_roles)
     for t, s in (*pair_chains(t_torso, s_torso).items(), *pair_chains(t_neck, s_neck).items()):
         pairs.setdefault(t, s)
     pairs.update(extra)

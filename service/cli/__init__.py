@@ -22,6 +22,7 @@ Commands::
     segue serve [--host H] [--port P] [--redis URL] [--import DIR]   the HTTP/WebSocket API (+ embedded
                                                   workers), serving database folders segue build wrote
     segue worker --redis URL                      a Redis job worker
+    segue blender-addon --out FILE.zip            the Blender add-on, as a zip Blender installs
 
 ``FILE``/``IN`` may be ``sample:NAME`` for a bundled sample (see ``segue samples``), as may clip and
 input paths in spec and request files. Bad input exits with status 2 and a one-line message naming
@@ -37,6 +38,7 @@ import json
 import sys
 from collections.abc import Sequence
 
+from .addon import cmd_blender_addon
 from .demo import cmd_demo
 from .files import (
     OUTPUT_SUFFIXES,
@@ -336,6 +338,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--force", action="store_true", help="run the kernels even if this cache was warmed")
     p.set_defaults(func=cmd_warm)
+
+    p = command(
+        "blender-addon",
+        help="write the Blender add-on as a zip that Blender 4.2+ installs (docs/blender.md)",
+        description="Write the Blender add-on (integrations/blender) as a zip: Blender 4.2+ installs it "
+        "as an extension (Get Extensions > Install from Disk) or as a legacy add-on "
+        "(Add-ons > Install from Disk).",
+    )
+    p.add_argument("--out", required=True, help="the zip to write, e.g. segue_blender.zip")
+    p.set_defaults(func=cmd_blender_addon)
     return ap
 
 

@@ -289,6 +289,19 @@ async def download_result(
         str | None,
         Query(max_length=40, description="glb/json: contacts,beats,labels or all (glTF extras / events)"),
     ] = None,
+    animation_only: Annotated[
+        bool,
+        Query(description="glb onto a glTF/GLB character: its skeleton and the animation only, no mesh"),
+    ] = False,
+    dancer: Annotated[
+        int | None,
+        Query(
+            ge=0,
+            le=100_000,
+            description="one dancer of a result of several (crowds, couples, graph characters), "
+            "its joints without their c0_ prefix; with character, that dancer on it",
+        ),
+    ] = None,
 ) -> Response:
     """Download a result motion (default: the job's best result so far), optionally resampled or
     retargeted onto a character; 409 ``result_not_ready`` while the job has none yet, 422
@@ -312,6 +325,8 @@ async def download_result(
         in_place=in_place,
         root_motion=root_motion,
         events=events,
+        animation_only=animation_only,
+        dancer=dancer,
         max_frames=settings.max_output_frames,
         max_joint_frames=settings.max_joint_frames,
         bvh_limits=(limits.max_joints, limits.max_frames, limits.max_bytes),

@@ -1,8 +1,9 @@
 """Real round trips: the retargeted GLB imported by Blender and Godot themselves, headless.
 
-Debian's ``blender`` (3.4, with ``python3-numpy``) and ``godot3`` (3.2, run under ``xvfb-run``:
-its editor imports the GLBs, then ``tests/tools/godot_check.gd`` reads what came in). Each test
-skips with a message naming what is missing; ``tests/run.sh`` installs them with ``CI=true``.
+Blender as a Python module (``bpy`` from PyPI, Blender 5; tests/blender.py) and Debian's
+``godot3`` (3.2, run under ``xvfb-run``: its editor imports the GLBs, then
+``tests/tools/godot_check.gd`` reads what came in). Each test skips with a message naming what is
+missing; ``tests/run.sh`` installs both with ``CI=true``.
 
 The files: the skinned Unreal-style test character (``tests/motion/retarget/gltf_rig.py``) with a
 held-out-style walk retargeted onto it (its own file, the animation added, root motion on
@@ -39,6 +40,7 @@ from motion.refpose import without_reference_lead
 from motion.retarget import retarget
 from motion.retarget.character import gltf_character
 
+from ..blender import run_blender
 from .retarget.gltf_rig import NAMES, PARENTS, unreal_character_glb
 
 pytestmark = pytest.mark.slow
@@ -70,7 +72,9 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     ]
     couple = combine_characters(people, ["c0_", "c1_"])
     (folder / "couple.glb").write_bytes(glb_bytes(couple))
-    return {"folder": folder, "moved": moved, "events": events, "couple": people}
+    body_walk = walk.slice(0, 100)
+    (folder / "body_walk.glb").write_bytes(glb_bytes(body_walk, mesh="body"))
+    return {"folder": folder, "moved": moved, "events": events, "couple": people, "body_walk": body_walk}
 
 
 def _segue_positions(moved: Any) -> np.ndarray:
@@ -83,29 +87,8 @@ def _frame(moved: Any, t: float) -> int:
 
 # -- Blender ---------------------------------------------------------------------------------------
 def _blender(glb: Path, out: Path) -> dict[str, Any]:
-    blender = shutil.which("blender")
-    if blender is None:
-        pytest.skip("Blender is not installed (Debian: apt-get install blender python3-numpy)")
-    script = TOOLS / "blender_check.py"
-    args = [
-        blender,
-        "-b",
-        "--factory-startup",
-        "--python-expr",
-        "import bpy; bpy.ops.wm.read_factory_settings(use_empty=True)",
-    ]
-    # Debian's Blender embeds the system Python: keep another Python (pyenv, a venv) off its PATH
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("PYENV", "VIRTUAL_ENV", "PYTHONHOME"))}
-    env["PATH"] = os.pathsep.join(
-        p for p in env.get("PATH", "").split(os.pathsep) if "pyenv" not in p and "venv" not in p
-    )
-    res = subprocess.run(
-        [*args, "--python", str(script), "--", str(glb), str(out), ",".join(map(str, TIMES))],
-        capture_output=True, text=True, timeout=300, check=False, env=env,
-    )  # fmt: skip
+    res = run_blender(TOOLS / "blender_check.py", str(glb), str(out), ",".join(map(str, TIMES)))
     if not out.is_file():
-        if "No module named 'numpy'" in res.stdout + res.stderr:
-            pytest.skip("Blender's glTF importer needs numpy (Debian: apt-get install python3-numpy)")
         raise AssertionError(
             f"Blender did not import {glb.name}:\n{res.stdout[-3000:]}\n{res.stderr[-2000:]}"
         )
@@ -139,6 +122,17 @@ def test_blender_gives_each_dancer_an_armature_and_an_action(files: dict[str, An
         assert set(action["driven"]) == set(arm["bones"])  # its own bones, all of them
         assert all(b.startswith(arm["name"] + "_") for b in arm["bones"])
     assert sum(m["armature"] is not None for m in got["meshes"]) == 2
+
+
+def test_blender_deforms_the_mannequin_with_its_soles_on_the_floor(files: dict[str, Any]) -> None:
+    got = _blender(files["folder"] / "body_walk.glb", files["folder"] / "blender_body.json")
+    (arm,) = got["armatures"]
+    (mesh,) = got["meshes"]
+    assert mesh["armature"] == arm["name"] and mesh["vertices"] > 1000 and max(mesh["moved"]) > 0.5
+    walk = files["body_walk"]
+    feet = walk.global_positions()[:, [walk.skeleton.index("lFoot"), walk.skeleton.index("rFoot")], 1]
+    ankle = float(feet.min()) * walk.metres_per_unit  # the lowest an ankle comes in the walk (m)
+    assert all(-0.03 < low < ankle for low in mesh["lowest"])  # the sole, below the ankles, near the floor
 
 
 # -- Godot -----------------------------------------------------------------------------------------

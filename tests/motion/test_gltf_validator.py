@@ -23,7 +23,8 @@ import motion
 from motion.export.bind import bound_glb
 from motion.export.characters import combine_characters
 from motion.export.events import contact_events
-from motion.export.glb import write_glb
+from motion.export.glb import glb_bytes, write_glb
+from motion.export.mannequin import mannequin_glb
 from motion.io import save_motion
 from motion.resample import resample
 from motion.retarget import retarget
@@ -85,6 +86,12 @@ def _write(kind: str, path: Path) -> None:
         moved = retarget(_walk(), gltf_character(hero), root_motion=mode)
         evs = contact_events(moved)
         path.write_bytes(bound_glb(hero, moved, animation_only=kind == "bound-animation-only", events=evs))
+    elif kind == "mannequin":
+        path.write_bytes(mannequin_glb(motion.read_bvh(sample_path("walk-10-04"))))
+    elif kind == "body":
+        path.write_bytes(glb_bytes(_walk(), mesh="body"))
+    elif kind == "crowd-body":
+        path.write_bytes(glb_bytes(_crowd(3), mesh="body"))
     elif kind == "bvh-character":
         character = motion.read_bvh(sample_path("walk-10-04")).slice(0, 1)
         write_glb(retarget(_walk(), character, root_motion="hips"), path, ground_root=False)
@@ -110,6 +117,9 @@ KINDS = [
     "bound-hips",
     "bound-animation-only",
     "bvh-character",
+    "mannequin",
+    "body",
+    "crowd-body",
 ]
 
 

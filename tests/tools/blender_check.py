@@ -1,5 +1,6 @@
-"""Run inside Blender (``blender -b --factory-startup --python blender_check.py -- IN.glb OUT.json
-TIMES``): import a GLB with Blender's own glTF importer and write what came in as JSON.
+"""Run with Blender's Python (Blender as a module: ``$SEGUE_BPY_PYTHON blender_check.py -- IN.glb
+OUT.json TIMES``; tests/blender.py): import a GLB with Blender's own glTF importer into an empty
+scene and write what came in as JSON.
 
 For each armature: its bones (name -> parent), its actions (the active one and those stashed in
 NLA tracks) with the bones their channels drive, and, for each action at each time (seconds, comma
@@ -11,15 +12,12 @@ lowest height; and the scene's and the armatures' custom properties named ``even
 import json
 import sys
 
-import numpy
-
-if not hasattr(numpy, "bool"):
-    numpy.bool = bool  # Debian 12: Blender 3.4.1's glTF importer still uses numpy.bool (numpy 1.24)
-
 import bpy
+import numpy
 
 args = sys.argv[sys.argv.index("--") + 1 :]
 src, out_path, times = args[0], args[1], [float(t) for t in args[2].split(",")]
+bpy.ops.wm.read_factory_settings(use_empty=True)
 bpy.ops.import_scene.gltf(filepath=src)
 scene = bpy.context.scene
 fps = scene.render.fps / scene.render.fps_base
@@ -32,6 +30,15 @@ def gltf_axes(v):
 def set_time(t):
     frame = t * fps
     scene.frame_set(int(frame), subframe=frame - int(frame))
+
+
+def fcurves_of(action):
+    """An action's F-curves: Blender 4.4+ keeps them in layers/strips/channel bags (slotted
+    actions; ``Action.fcurves`` is gone in 5.0), older versions on the action itself."""
+    if hasattr(action, "layers"):
+        bags = [bag for layer in action.layers for strip in layer.strips for bag in strip.channelbags]
+        return [fc for bag in bags for fc in bag.fcurves]
+    return list(action.fcurves)
 
 
 def events_of(idblock):
@@ -52,7 +59,7 @@ for arm in arms:
             actions += [s.action for s in track.strips if s.action is not None]
     info = {"name": arm.name, "bones": bones, "events": events_of(arm), "actions": []}
     for act in dict.fromkeys(actions):
-        driven = sorted({fc.data_path.split('"')[1] for fc in act.fcurves if '"' in fc.data_path})
+        driven = sorted({fc.data_path.split('"')[1] for fc in fcurves_of(act) if '"' in fc.data_path})
         for track in ad.nla_tracks:  # play this action alone
             track.mute = True
         ad.action = act
@@ -63,7 +70,7 @@ for arm in arms:
         info["actions"].append({"name": act.name, "driven": driven, "heads": heads})
     report["armatures"].append(info)
 for ob in scene.objects:
-    if ob.type != "MESH":
+    if ob.type != "MESH" or not any(m.type == "ARMATURE" for m in ob.modifiers):
         continue
     dg = bpy.context.evaluated_depsgraph_get()
     set_time(times[0])

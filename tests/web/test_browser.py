@@ -62,14 +62,23 @@ BEST_DRAWN = (
 
 
 def wait(page: Any, condition: str, timeout_ms: float = GUARD_MS) -> None:
-    """Wait until a JavaScript condition on ``s`` (= window.__segue) holds; fail as soon as the page
-    records a new error, or on timeout, with the errors the page recorded."""
+    """Wait until a JavaScript condition on ``s`` (= window.__segue) holds (a condition that throws,
+    e.g. on a job the page has not submitted yet, does not hold); fail as soon as the page records a
+    new error, or on timeout, with the condition's own error and the errors the page recorded."""
     seen = page.evaluate("window.__segue.errors.length")
-    check = f"(() => {{ const s = window.__segue; return {condition}; }})()"
+    # a condition that throws is not met yet (``s.job.status`` before the click's job exists)
+    body = f"const s = window.__segue; try {{ return {condition}; }} catch (e) {{ return false; }}"
+    check = f"(() => {{ {body} }})()"
     try:
         page.wait_for_function(f"{check} || window.__segue.errors.length > {seen}", timeout=timeout_ms)
     except Exception:
-        pytest.fail(f"timed out waiting for {condition}; page errors: {state(page, '.errors')}")
+        why = page.evaluate(
+            f"(() => {{ const s = window.__segue; try {{ {condition}; return ''; }}"
+            " catch (e) { return String(e); } })()"
+        )
+        pytest.fail(
+            f"timed out waiting for {condition} ({why or 'false'}); page errors: {state(page, '.errors')}"
+        )
     if not page.evaluate(check):
         pytest.fail(f"error while waiting for {condition}: {state(page, '.errors')[seen:]}")
 

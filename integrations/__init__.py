@@ -1,0 +1,1 @@
+"""Clients of Segue that live inside other programs, over the HTTP API only (never importing Segue)."""

@@ -1,0 +1,1 @@
+"""The Blender add-on (``segue_blender``) and what packs it (``segue blender-addon``)."""
