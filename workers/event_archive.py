@@ -63,10 +63,13 @@ def merge(*sources: Iterable[JobEvent]) -> list[JobEvent]:
 
 def archive_events(store: Store, job_id: str, events: Iterable[JobEvent]) -> None:
     """Write a finished job's whole archive (``events.jsonl``): ``events`` merged with what the
-    store already holds, then remove its batches. A store failure is logged: the batches stay and
-    readers merge them."""
+    store already holds (read only when ``events`` are not every id from 1 on: something was
+    lost), then remove its batches. A store failure is logged: the batches stay and readers merge
+    them."""
+    events = merge(events)
+    whole = [e.id for e in events] == list(range(1, len(events) + 1))
     try:
-        merged = merge(events, read_archive(store, job_id))
+        merged = events if whole else merge(events, read_archive(store, job_id))
         store.put_events(job_id, [e.model_dump_json() for e in merged])
         store.delete_event_batches(job_id)
     except (OSError, NotFoundError):

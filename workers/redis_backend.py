@@ -270,7 +270,10 @@ class RedisBackend:
         if terminal is None:
             return  # the stream is gone too: the archive has what there is
         log.warning("job %s ended without its store records (its publisher died?); writing them", job_id)
-        await asyncio.to_thread(_write_records, self.store, info, streamed, terminal)
+        try:
+            await asyncio.to_thread(_write_records, self.store, info, streamed, terminal)
+        except OSError as exc:  # the store is away: the next round tries again
+            log.warning("job %s: its store records cannot be written yet (%s)", job_id, exc)
 
     def _still_unfinished(self, jobs: set[str]) -> set[str]:
         out = set()
