@@ -1,7 +1,9 @@
-# One image for the API and the workers (docker-compose.yml runs it with different commands). Its
-# /data is a cache only when SEGUE_STORE_URL names an object store (docker-compose.yml: MinIO, no
+# One image for the API and the workers (docker-compose.yml and deploy/*.compose.yml run it with
+# different commands; tag it with the package version, segue:0.1.0: an API and its workers must run
+# the same one). Its /data is a cache only when SEGUE_STORE_URL names an object store (MinIO, no
 # shared volume); without SEGUE_STORE_URL it is the store itself (mount a volume to keep it).
-FROM python:3.11-slim
+# The base image is pinned (a Python patch release on a Debian release), never a moving tag.
+FROM python:3.11.9-slim-bookworm
 WORKDIR /app
 COPY pyproject.toml README.md ./
 COPY motion motion

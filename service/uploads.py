@@ -174,14 +174,25 @@ async def parse_upload(
     if inline:
         return await anyio.to_thread.run_sync(store.put_clip, file_name, data, limits, units, limiter=limiter)
     digest = hashlib.sha256(data).hexdigest()
-    await run_in_threadpool(store.put_staged, digest, data)
+    staged = await run_in_threadpool(store.stage, data)
     payload = task_payload(
         "clip",
-        staged=digest,
+        staged=staged,
         digest=digest,
         name=file_name,
         units=units,
         limits=[limits.max_joints, limits.max_frames, limits.max_bytes, limits.max_joint_frames],
     )
-    done = await runner.run(f"clip:{digest}:{units}:{file_name}", payload, store, backend, metrics)
+    keep = False  # whether a small job may still read the staged bytes (it removes them when it ends)
+    try:
+        done = await runner.run(f"clip:{digest}:{units}:{file_name}", payload, store, backend, metrics)
+    except ApiError as exc:
+        keep = exc.code == "task_pending"
+        raise
+    except BaseException:  # the request was cancelled (the client left): the small job goes on
+        keep = True
+        raise
+    finally:
+        if not keep:  # answered, failed or refused: no job reads them any more
+            await run_in_threadpool(store.delete_staged, staged)
     return ClipInfo.model_validate(done["clip"])

@@ -16,11 +16,16 @@ time and is downloaded again.
 * A use is stamped with the nanosecond clock (``time.time_ns``), never later than the process's
   previous stamp: the kernel's own file times tick in jiffies (1-10 ms), so two uses in quick
   succession would otherwise tie and the order of use be lost.
+* A full disk (``ENOSPC``, a quota, the file-size limit) is the cache's problem, not the user's: the
+  least recently used database is evicted and the download tried again, until it fits or nothing
+  is left to evict; then :class:`CacheFull` says so (the worker gives the job back to the queue for
+  another host, :mod:`workers.redis_worker`, and tells the operator).
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import shutil
 import tempfile
@@ -31,6 +36,23 @@ from pathlib import Path
 from typing import Protocol
 
 from engines.base import container
+
+from .storage_errors import FULL
+
+log = logging.getLogger("segue.cache")
+
+
+class CacheFull(Exception):
+    """A database does not fit in this process's cache even with every other one evicted (the
+    disk holding ``SEGUE_DATA_DIR`` is full): a problem of this host, for its operator."""
+
+    def __init__(self, db_id: str, root: Path, needed: int, cause: OSError) -> None:
+        super().__init__(
+            f"the cache disk at {root} is full ({cause.strerror or cause}) and nothing more can be "
+            f"evicted: database {db_id} ({needed / 2**20:.1f} MiB) does not fit; free space on that "
+            "disk or lower SEGUE_DISK_CACHE_MB"
+        )
+        self.db_id, self.root, self.needed = db_id, root, needed
 
 
 class ObjectCache(Protocol):
@@ -83,10 +105,39 @@ class DiskCache:
         return d
 
     def fetch(self, db_id: str, manifest: container.Manifest, fetch: Fetch) -> Path:
-        """The directory of the database's arrays, downloaded with ``fetch`` unless cached."""
-        cached = self.path_if_cached(db_id)
-        if cached is not None:
-            return cached
+        """The directory of the database's arrays, downloaded with ``fetch`` unless cached. On a
+        full disk the least recently used databases are evicted one by one and the download tried
+        again; :class:`CacheFull` once nothing is left to evict."""
+        while True:
+            cached = self.path_if_cached(db_id)
+            if cached is not None:
+                return cached
+            try:
+                return self._download(db_id, manifest, fetch)
+            except OSError as exc:
+                if exc.errno not in FULL:
+                    raise
+                evicted = self._evict_oldest(keep=db_id)
+                if evicted is None:
+                    raise CacheFull(db_id, self.root, manifest.total_bytes, exc) from exc
+                log.warning(
+                    "cache disk %s full (%s): evicted database %s to make room for %s",
+                    self.root,
+                    exc.strerror or exc,
+                    evicted,
+                    db_id,
+                )
+
+    def _evict_oldest(self, keep: str) -> str | None:
+        """Evict the least recently used database but ``keep``; its id (None: nothing to evict)."""
+        with self._lock:
+            for _, _, db_id in self.entries():
+                if db_id != keep:
+                    self.evict(db_id)
+                    return db_id
+        return None
+
+    def _download(self, db_id: str, manifest: container.Manifest, fetch: Fetch) -> Path:
         self.root.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(dir=self.root, prefix=f".{db_id}."))
         try:

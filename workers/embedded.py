@@ -13,7 +13,7 @@ Recovery (the store's job records are the source of truth):
   job's current run is recorded (the supervisor also drops a replaced child's late messages), as
   the Redis backend's fence does across hosts (:mod:`workers.fencing`);
 * a build's terminal event leaves its database ``ready`` or ``failed`` with the reason
-  (:func:`workers.records.settle_database`);
+  (:func:`workers.records.settle_database`), and a small job's staged upload is removed;
 * at start-up, jobs a previous server process left ``queued`` or ``running`` are queued again, their
   events replayed from ``events.jsonl`` so clients resume with ``after=`` where they were;
 * the supervisor kills a job that ignores its cancel for ``cancel_grace_s``, runs past its time limit
@@ -22,15 +22,18 @@ Recovery (the store's job records are the source of truth):
 
 ``health()`` reports the processes alive and ready, restarts, the queue and running jobs; it is an
 error (``/healthz`` 503) when no engine process is alive and none can start.
+
+Jobs wait in a :class:`~workers.fair_queue.FairQueue`: one line per principal, served round-robin,
+so one principal's backlog delays another's next job by at most the job each process is running.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import time
-from collections import deque
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -40,7 +43,8 @@ from schemas.jobs import JobKind
 from .backend import BackendUnavailable, EventHub, JobNotFinished
 from .budget import shortfall
 from .execute import apply_event
-from .records import settle_database
+from .fair_queue import FairQueue
+from .records import settle, sweep_staged
 from .settings import Settings
 from .store import NotFoundError, Store
 from .supervisor import (
@@ -54,6 +58,12 @@ from .supervisor import (
 )
 
 log = logging.getLogger("segue.embedded")
+
+
+CACHE_FULL_MESSAGE = (
+    "the server has no room in its local cache for this job's database (its disk is full; the "
+    "operator is told in the server log); nothing is wrong with the request: submit it again later"
+)
 
 
 class EmbeddedBackend:
@@ -72,6 +82,8 @@ class EmbeddedBackend:
             plugins=settings.engine_plugins,
             engine_cache_bytes=settings.engine_cache_mb << 20,
             load_timeout_s=settings.load_timeout_s,
+            staged_max_age_s=settings.staged_max_age_s,
+            staged_sweep_s=settings.staged_sweep_s,
         )
 
     def __init__(
@@ -87,6 +99,8 @@ class EmbeddedBackend:
         plugins: str | None = None,
         engine_cache_bytes: int = 2048 << 20,
         load_timeout_s: float | None = 300.0,
+        staged_max_age_s: float = 3600.0,
+        staged_sweep_s: float = 300.0,
     ) -> None:
         self.store = store
         self.plugins, self.engine_cache_bytes = plugins, engine_cache_bytes
@@ -98,12 +112,15 @@ class EmbeddedBackend:
         self.hub = EventHub()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._processes: list[EngineProcess] = []
-        self._queue: deque[Task] = deque()
+        self._queue: FairQueue[Task] = FairQueue(lambda task: task.owner)
+        """Waiting jobs, served round-robin by principal (:mod:`workers.fair_queue`)."""
         self._running: dict[str, Task] = {}
         self._attempts: dict[str, int] = {}
         """The current run of each job (its latest dispatched attempt): only its events are recorded."""
         self._closing = False
         self.reruns = 0
+        self.staged_max_age_s, self.staged_sweep_s = staged_max_age_s, staged_sweep_s
+        self._sweeper: asyncio.Task[None] | None = None
 
     # -- lifecycle ------------------------------------------------------------------------------
     async def start(self) -> None:
@@ -134,11 +151,23 @@ class EmbeddedBackend:
             await asyncio.to_thread(process.ready.wait, 120)
         await self._requeue_unfinished()
         self._dispatch()
+        self._sweeper = asyncio.create_task(self._sweep_loop(), name="segue-staged-sweep")
+
+    async def _sweep_loop(self) -> None:
+        """Every ``staged_sweep_s``: remove orphaned staged uploads (off the event loop)."""
+        while True:
+            await asyncio.to_thread(sweep_staged, self.store, self.staged_max_age_s)
+            await asyncio.sleep(self.staged_sweep_s)
 
     async def close(self) -> None:
         """Stop the engine processes (running jobs stay ``running`` on disk and are re-queued by the
         next server process)."""
         self._closing = True
+        if self._sweeper is not None:
+            self._sweeper.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._sweeper
+            self._sweeper = None
         processes, self._processes = self._processes, []
         await asyncio.gather(*(asyncio.to_thread(p.close) for p in processes))
 
@@ -165,7 +194,7 @@ class EmbeddedBackend:
             if info.kind == JobKind.build and info.database:
                 self._reset_database(info.database)
             self._queue.append(
-                self._task(info.id, str(request["kind"]), dict(request["payload"]), attempts + 1)
+                self._task(info.id, str(request["kind"]), dict(request["payload"]), attempts + 1, info.owner)
             )
             self.reruns += 1
 
@@ -177,9 +206,11 @@ class EmbeddedBackend:
         if db.status == DatabaseStatus.building:
             self.store.put_database_info(db.model_copy(update={"status": DatabaseStatus.queued}))
 
-    def _task(self, job_id: str, kind: str, payload: dict[str, Any], attempt: int) -> Task:
+    def _task(
+        self, job_id: str, kind: str, payload: dict[str, Any], attempt: int, owner: str | None = None
+    ) -> Task:
         limit = time_limit(kind, payload, self.time_grace_s, self.build_timeout_s)
-        return Task(job_id, kind, payload, attempt=attempt, time_limit_s=limit)
+        return Task(job_id, kind, payload, attempt=attempt, time_limit_s=limit, owner=owner)
 
     # -- dispatch (event loop) --------------------------------------------------------------------
     def _dispatch(self) -> None:
@@ -189,12 +220,12 @@ class EmbeddedBackend:
             if not self._queue:
                 return
             if process.idle:
-                task = self._queue.popleft()
+                task = self._queue.pop()
                 if process.run(task):
                     self._running[task.job_id] = task
                     self._attempts[task.job_id] = task.attempt
                 else:
-                    self._queue.appendleft(task)
+                    self._queue.unpop(task)
 
     def _on_event(self, task: Task, type_: EventType, data: dict[str, Any], when: float) -> None:
         """Watch thread: relay an event of a running job (waits until it is recorded)."""
@@ -240,7 +271,10 @@ class EmbeddedBackend:
     async def _ended(self, task: Task, outcome: Outcome, detail: str) -> None:
         self._running.pop(task.job_id, None)
         try:
-            if outcome == "finished":
+            if outcome == "released":  # this host's cache disk: every engine process here shares it
+                log.error("job %s: %s", task.job_id, detail)
+                await self._fail(task.job_id, "cache_full", CACHE_FULL_MESSAGE)
+            elif outcome == "finished":
                 if not task.terminal:
                     await self._fail(task.job_id, "internal", "the job ended without a terminal event")
             elif outcome == "crashed":
@@ -259,7 +293,8 @@ class EmbeddedBackend:
                         "job %s: %s; running it again (attempt %d)", task.job_id, detail, task.attempt + 1
                     )
                     self.reruns += 1
-                    self._queue.appendleft(self._task(task.job_id, task.kind, task.payload, task.attempt + 1))
+                    again = self._task(task.job_id, task.kind, task.payload, task.attempt + 1, task.owner)
+                    self._queue.appendleft(again)
             elif not task.terminal:
                 type_, data = terminal_after_kill(outcome, task, detail)
                 await self._record(task.job_id, type_, data, time.time())
@@ -291,7 +326,7 @@ class EmbeddedBackend:
         self.store.put_job(info)
         if type_.terminal:
             self._attempts.pop(job_id, None)
-            settle_database(self.store, info, event)
+            settle(self.store, info, event)
         return event
 
     # -- the backend protocol ---------------------------------------------------------------------
@@ -301,7 +336,7 @@ class EmbeddedBackend:
         if not any(p.ready.is_set() or p.failed_starts < 3 for p in self._processes):
             raise BackendUnavailable("no engine process is alive and none could start")
         await self._record(info.id, EventType.queued, {}, time.time())
-        self._queue.append(self._task(info.id, kind, payload, 1))
+        self._queue.append(self._task(info.id, kind, payload, 1, info.owner))
         self._dispatch()
         return await self.status(info.id)
 

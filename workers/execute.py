@@ -23,6 +23,7 @@ from motion.quality import assess
 from schemas import DatabaseStatus, EventType, JobInfo, JobStatus, ProvenanceEntry, Report
 from schemas.bases import DatabaseSpecBase, JobRequestBase
 
+from .dbcache import CacheFull
 from .engine_cache import EngineCache as EngineCache  # re-exported: where it lived before
 from .engine_cache import OpenArrays
 from .prepare import PrepareError, prepare
@@ -161,7 +162,9 @@ def execute_job(
     open_arrays: OpenArrays | None = None,
     on_load: OnLoad | None = None,
 ) -> None:
-    """Run a job to its terminal event (never raises for job-level problems).
+    """Run a job to its terminal event (never raises for job-level problems; raises
+    :class:`~workers.dbcache.CacheFull` when this host cannot cache the job's database, which is
+    not the job's fault: the caller gives it to another worker).
 
     Parameters
     ----------
@@ -194,6 +197,8 @@ def execute_job(
         publish(EventType.failed, {"error": {"code": exc.code, "message": exc.message}})
     except (EngineError, MotionError, UnavailableError, NotFoundError, ValidationError) as exc:
         publish(EventType.failed, {"error": {"code": "invalid_request", "message": str(exc)}})
+    except CacheFull:
+        raise  # this host's problem, not the job's: its owner gives the job to another worker
     except Exception as exc:  # a storage failure names itself; anything else is a bug: report it
         problem = storage_problem(exc)
         if problem is not None:  # full, read-only or unreachable store (the API's 507 codes)
@@ -232,38 +237,35 @@ def _build(
     publish: Publish,
     should_stop: ShouldStop,
 ) -> None:
+    """Build a database and write its arrays and its ``ready`` record. A build that fails or is
+    cancelled writes no record: its terminal event does, through whoever publishes it
+    (:func:`workers.records.settle_database`), so the record's reason is the one the runtime
+    decided, and an engine process whose worker died (its events going nowhere) cannot leave a
+    ``failed`` of its own."""
     info = store.database_info(db_id)
     spec = parse_database_spec(store.database_spec(db_id))
     kind_class(spec.kind)
     store.put_database_info(info.model_copy(update={"status": DatabaseStatus.building}))
-    try:
-        clips = []
-        for source in spec.clips:
-            if source.clip is None:
-                raise JobFailure(
-                    "invalid_request", f"clip {source.display_name()!r} was not resolved to an upload"
-                )
-            labels = [lb.model_dump() for lb in source.labels]
-            # the spec's unit, else the clip's own (declared at upload, e.g. a bundled sample's, or guessed)
-            units = source.units if source.units is not None else store.clip_info(source.clip).units
-            clips.append(
-                ClipInput(
-                    source.display_name(), store.clip_bytes(source.clip), units, labels, source.animation
-                )
+    clips = []
+    for source in spec.clips:
+        if source.clip is None:
+            raise JobFailure(
+                "invalid_request", f"clip {source.display_name()!r} was not resolved to an upload"
             )
-        arrays, library = build_database_arrays(spec, clips, publish, should_stop)
-        store.put_database_arrays(db_id, arrays)
-    except JobFailure as exc:
-        store.put_database_info(
-            info.model_copy(update={"status": DatabaseStatus.failed, "error": exc.message})
+        labels = [lb.model_dump() for lb in source.labels]
+        # the spec's unit, else the clip's own (declared at upload, e.g. a bundled sample's, or guessed)
+        units = source.units if source.units is not None else store.clip_info(source.clip).units
+        clips.append(
+            ClipInput(source.display_name(), store.clip_bytes(source.clip), units, labels, source.animation)
         )
+    try:
+        arrays, library = build_database_arrays(spec, clips, publish, should_stop)
+    except JobFailure as exc:
         if exc.code == "cancelled":
             publish(EventType.cancelled, {"result": None})
             return
         raise
-    except Exception as exc:
-        store.put_database_info(info.model_copy(update={"status": DatabaseStatus.failed, "error": str(exc)}))
-        raise
+    store.put_database_arrays(db_id, arrays)
     store.put_database_info(
         info.model_copy(
             update={

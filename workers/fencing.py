@@ -28,6 +28,7 @@ cancel flag instead).
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -35,7 +36,8 @@ from typing import Any
 import redis
 
 from motion import Motion
-from schemas import DatabaseInfo, JobInfo, Report
+from motion.bvh import BvhLimits
+from schemas import ClipInfo, DatabaseInfo, JobInfo, Report
 
 from .execute import JobFailure
 from .store import Store
@@ -119,25 +121,53 @@ class Fence:
             raise StaleAttempt(self.job_id, self.attempt, self.lost_to)
 
 
+class OwnerGone(JobFailure):
+    """The engine process's owner (its worker, or the API of the embedded backend) is gone: nobody
+    relays its events, so nothing it writes may be kept (it is about to be killed)."""
+
+    def __init__(self, parent: int) -> None:
+        super().__init__("worker_lost", f"the engine process's owner (pid {parent}) is gone")
+
+
 class FencedStore(Store):
-    """The store of an engine process: each durable write checks the running job's :class:`Fence`
-    first (``fence`` is set per task; None: no fencing, the embedded backend)."""
+    """The store of an engine process: each durable write (results, database arrays and records,
+    job records, clips and exports made by small jobs) checks first that the process's owner is
+    still its parent (``parent``: a run whose worker died is stale whatever Redis says, and the
+    only fence the embedded backend needs, its attempts living in the owner's memory) and then the
+    running job's :class:`Fence` (``fence`` is set per task; None: the embedded backend)."""
 
     fence: Fence | None = None
+    parent: int | None = None
+    """The pid of the owner that started this engine process (None: not checked)."""
 
     def _check(self) -> None:
+        if self.parent is not None and os.getppid() != self.parent:
+            raise OwnerGone(self.parent)
         if self.fence is not None:
             self.fence.check()
 
+    def put_clip(
+        self, name: str, data: bytes, limits: BvhLimits | None = None, units: str | None = None
+    ) -> ClipInfo:
+        self._check()
+        return super().put_clip(name, data, limits, units)
+
+    def put_export(self, job_id: str, name: str, data: bytes) -> None:
+        self._check()
+        super().put_export(job_id, name, data)
+
     def put_result(self, job_id: str, result_id: str, motion: Motion, report: Report) -> None:
         """Write a result while the run holds its job; checked again once written, and removed when
-        another run took the job meanwhile (between the first check and the write, or while this
-        process was stopped there), so a run leaves no result written after it lost its job."""
+        another run took the job (or the owner died) meanwhile (between the first check and the
+        write, or while this process was stopped there), so a run leaves no result written after
+        it lost its job."""
         self._check()
         super().put_result(job_id, result_id, motion, report)
-        if self.fence is not None and not self.fence.current():
+        try:
+            self._check()
+        except JobFailure:
             self.delete_result(job_id, result_id)
-            raise StaleAttempt(self.fence.job_id, self.fence.attempt, self.fence.lost_to)
+            raise
 
     def put_database_arrays(self, db_id: str, arrays: Mapping[str, Any] | bytes) -> None:
         self._check()

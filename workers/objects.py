@@ -6,8 +6,10 @@
   (the default: ``./segue-data``, so the embedded setup needs nothing);
 * ``s3://bucket/prefix`` — :class:`S3Objects`, any S3-compatible server. The endpoint and credentials
   come from the standard AWS variables (``AWS_ENDPOINT_URL`` for MinIO, Ceph or moto;
-  ``AWS_ACCESS_KEY_ID``/``AWS_SECRET_ACCESS_KEY``; ``AWS_REGION``/``AWS_DEFAULT_REGION``), read by
-  boto3 itself, so a deployment configures Segue exactly as it configures the AWS CLI.
+  ``AWS_ACCESS_KEY_ID``/``AWS_SECRET_ACCESS_KEY``; ``AWS_CA_BUNDLE`` for a private CA), read by
+  boto3 itself, so a deployment configures Segue exactly as it configures the AWS CLI; the region
+  is ``AWS_REGION`` (what the AWS SDKs and CLI v2 read, and what wins when both are set), else
+  ``AWS_DEFAULT_REGION`` (:func:`s3_region`: botocore alone reads only the latter).
 
 An object is named by a *key*, a ``/``-separated relative path of safe characters
 (``clips/<sha256>.bvh``, ``databases/<id>/arrays/<name>.npy``). Semantics both backends keep:
@@ -97,6 +99,10 @@ class Objects(Protocol):
 
     def size(self, key: str) -> int:
         """The object's size in bytes; :class:`ObjectNotFound` when there is none."""
+        ...
+
+    def modified(self, key: str) -> float:
+        """When the object was last written, Unix seconds; :class:`ObjectNotFound` when there is none."""
         ...
 
     def open(self, key: str) -> BinaryIO:
@@ -195,6 +201,12 @@ class LocalObjects:
         except (FileNotFoundError, NotADirectoryError):
             raise ObjectNotFound(key) from None
 
+    def modified(self, key: str) -> float:
+        try:
+            return self._path(key).stat().st_mtime
+        except (FileNotFoundError, NotADirectoryError):
+            raise ObjectNotFound(key) from None
+
     def open(self, key: str) -> BinaryIO:
         try:
             return builtins.open(self._path(key), "rb")
@@ -249,7 +261,7 @@ class S3Objects:
                             "an s3:// store needs boto3: pip install 'segue[s3]'"
                         ) from None
                     config = Config(retries={"max_attempts": 5, "mode": "standard"}, connect_timeout=5)
-                    self._client = boto3.client("s3", config=config)
+                    self._client = boto3.client("s3", config=config, region_name=s3_region())
         return self._client
 
     def _key(self, key: str) -> str:
@@ -341,6 +353,9 @@ class S3Objects:
     def size(self, key: str) -> int:
         return int(self._call("head_object", key, Key=self._key(key))["ContentLength"])
 
+    def modified(self, key: str) -> float:
+        return float(self._call("head_object", key, Key=self._key(key))["LastModified"].timestamp())
+
     def open(self, key: str) -> BinaryIO:
         body = self._call("get_object", key, Key=self._key(key))["Body"]
         return cast(BinaryIO, body)
@@ -361,6 +376,13 @@ class S3Objects:
 
     def local_path(self, key: str) -> Path | None:
         return None
+
+
+def s3_region() -> str | None:
+    """The region of the S3 client: ``AWS_REGION`` (the variable every AWS SDK and the AWS CLI v2
+    read), else None, and boto3 reads ``AWS_DEFAULT_REGION`` or the profile's (botocore alone
+    ignores ``AWS_REGION``)."""
+    return os.environ.get("AWS_REGION") or None
 
 
 def open_objects(url: str | Path) -> LocalObjects | S3Objects:

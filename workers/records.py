@@ -12,7 +12,9 @@ ends. Both are written after the event that changes them was accepted (fenced, s
   it) or ``failed`` with the reason: a cancelled build, a killed one (time, memory, cancel grace), a
   dead-lettered or lost one. Only the record's own build job settles it (``build_job``), so the end
   of an older build of the same spec never touches a newer one's record. ``POST /v1/databases``
-  with a failed database's spec builds it again.
+  with a failed database's spec builds it again. A build's engine process writes ``building`` and
+  ``ready`` only: a ``failed`` record is always this function's, with the terminal event's reason;
+- :func:`settle_task`: a small job's terminal event removes the upload it was to parse.
 """
 
 from __future__ import annotations
@@ -49,6 +51,36 @@ def _reason(event: JobEvent) -> str:
     return "the build ended without writing the database"
 
 
+def settle(store: Store, job: JobInfo, event: JobEvent) -> None:
+    """Everything a job's terminal ``event`` settles in the store: a build's database record
+    (:func:`settle_database`), a small job's staged upload (:func:`settle_task`)."""
+    settle_database(store, job, event)
+    settle_task(store, job, event)
+
+
+def settle_task(store: Store, job: JobInfo, event: JobEvent) -> None:
+    """After a small job's terminal ``event``, whatever it was (done, failed by its parse, killed by
+    its time or memory limit, dead-lettered, cancelled): the staged upload it was to read is removed
+    (:meth:`Store.delete_staged`), so no outcome leaves one behind."""
+    if job.kind != JobKind.task or not event.type.terminal:
+        return
+    try:
+        request = store.job_request(job.id)
+    except NotFoundError:
+        return
+    payload = request.get("payload")
+    task = payload.get("request") if isinstance(payload, dict) else None
+    staged = task.get("staged") if isinstance(task, dict) else None
+    if not isinstance(staged, str):
+        return
+    try:
+        store.delete_staged(staged)
+    except NotFoundError:  # not a valid key: nothing was staged under it
+        return
+    except OSError as exc:  # the store is away: the sweep removes it later
+        log.warning("job %s: its staged upload %s stays for the sweep (%s)", job.id, staged, exc)
+
+
 def settle_database(store: Store, job: JobInfo, event: JobEvent) -> None:
     """After a build job's terminal ``event``: its database ends ``ready`` or ``failed`` (see the
     module docstring); nothing for other jobs and events."""
@@ -65,3 +97,21 @@ def settle_database(store: Store, job: JobInfo, event: JobEvent) -> None:
     reason = _reason(event)
     store.put_database_info(db.model_copy(update={"status": DatabaseStatus.failed, "error": reason}))
     log.warning("database %s: %s (job %s)", db.id, reason, job.id)
+
+
+def sweep_staged(store: Store, max_age_s: float) -> list[str]:
+    """Remove staged uploads older than ``max_age_s`` (:meth:`Store.sweep_staged`), logged for the
+    operator; a store error is logged and the next sweep tries again. The keys removed."""
+    try:
+        removed = store.sweep_staged(max_age_s)
+    except OSError as exc:
+        log.warning("the staged-upload sweep could not run (%s); it runs again later", exc)
+        return []
+    if removed:
+        log.warning(
+            "removed %d staged upload(s) older than %.0f s that no job removed: %s",
+            len(removed),
+            max_age_s,
+            ", ".join(removed[:10]),
+        )
+    return removed

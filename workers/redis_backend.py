@@ -6,7 +6,9 @@ best result, every job ends with exactly one of ``done``/``failed``/``cancelled`
 :mod:`workers.redis_keys`; events are published with :mod:`workers.redis_events`.
 
 - **submit**: ``SET segue:job:<job> <JobInfo> NX`` (a second submit of the same job id is a no-op:
-  jobs are idempotent), the ``queued`` event (id 1), then ``XADD segue:jobs {job, kind, payload}``.
+  jobs are idempotent), the ``queued`` event (id 1), then the job on its principal's waiting list
+  (:mod:`workers.redis_queue`: served round-robin; the entry stamped with this API's version,
+  :mod:`workers.version`), and the ``queued`` event written to the store's archive.
 - **status**: the JobInfo in Redis, else the store's ``info.json`` (kept in step by every publisher).
 - **cancel**: ``SET segue:cancel:<job> 1 EX``; the worker's ``should_stop`` sees it within ~50 ms and
   the job ends ``cancelled`` with its best result. A job still queued ends ``cancelled`` at once (the
@@ -17,7 +19,10 @@ best result, every job ends with exactly one of ``done``/``failed``/``cancelled`
   to the :class:`~workers.backend.EventHub`; any number of sockets follow the hub. The blocking part
   is shared: one ``XREAD BLOCK`` over every followed job's stream (:class:`_StreamPump`), so an API
   process holds one blocked connection, not one per job (redis-py pools default to 100
-  connections). A job Redis has forgotten replays from the store's ``events.jsonl`` archive.
+  connections). Events Redis lost (a restart without persistence, a flush) are read from the
+  store's archive (:mod:`workers.event_archive`): a reader never keeps a gap it can fill.
+  ``GET /events`` (:meth:`RedisBackend.backlog`) reads Redis again before it answers, so once the
+  status says a job ended its terminal event is in the answer.
 - **health**: live workers (heartbeat keys), queue length, pending entries, dead letters; an error
   (``/healthz`` 503) while Redis is unreachable.
 - **reconcile** (at start and every ``reconcile_s``): the store's job records are the source of
@@ -26,7 +31,8 @@ best result, every job ends with exactly one of ``done``/``failed``/``cancelled`
   queued again once it has been missing for ``requeue_after_s`` (longer than a worker's heartbeat
   period, so a worker still running it re-announces it first); its event counter is set to the last
   id clients may have seen, so the re-run's events follow them. The stream and its group are
-  recreated when missing.
+  recreated when missing. A job Redis says ended while the store does not (its publisher died
+  between the two) gets its store records written here (:func:`_write_records`).
 - **submit while Redis is down** raises :class:`~workers.backend.BackendUnavailable` (503, and the
   API removes the job's record).
 """
@@ -39,7 +45,7 @@ import functools
 import json
 import logging
 import uuid
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any, cast
 
 import redis
@@ -48,17 +54,14 @@ import redis.asyncio as aredis
 from schemas import EventType, JobEvent, JobInfo, JobStatus
 
 from .backend import BackendUnavailable, EventHub, JobLog, JobNotFinished
+from .event_archive import archive_event, archive_events, merge, read_archive
 from .fencing import StaleAttempt
-from .redis_events import (
-    RETENTION_S,
-    AsyncEventPublisher,
-    Entries,
-    decode_event,
-    read_archive,
-    stream_id,
-)
+from .records import put_job_record, settle
+from .redis_events import RETENTION_S, AsyncEventPublisher, Entries, decode_event, stream_id
 from .redis_keys import DEFAULT_PREFIX, RedisKeys
+from .redis_queue import BELL_MAX, SUBMIT_LUA, principal_list, queue_entry
 from .store import NotFoundError, Store
+from .version import describe, stamp
 
 log = logging.getLogger("segue.redis.backend")
 
@@ -94,6 +97,9 @@ class RedisBackend:
         self.requeue_after_s = 3.0
         self._unfinished: set[str] = set()
         self._missing: dict[str, float] = {}
+        self._finishing: dict[str, float] = {}
+        self._warned_versions: set[str] = set()
+        self._submit_lua: Any = None
         self._reconciler: asyncio.Task[None] | None = None
         self.requeued = 0
         self.redis_ok = False
@@ -113,6 +119,7 @@ class RedisBackend:
         )
         client = aredis.Redis.from_pool(pool)
         self._client = client
+        self._submit_lua = client.register_script(SUBMIT_LUA)
         self._publisher = AsyncEventPublisher(client, self.store, self.keys)
         self._unfinished = {
             i.id for i in await asyncio.to_thread(self.store.list_jobs) if not i.status.finished
@@ -121,7 +128,7 @@ class RedisBackend:
             await self._reconcile(first=True)
         except (redis.ConnectionError, redis.TimeoutError) as exc:
             log.warning("Redis is not reachable yet (%s); jobs are refused with 503 until it is", exc)
-        self._pump_ = _StreamPump(client, self.hub, self.keys, self.block_ms)
+        self._pump_ = _StreamPump(client, self.hub, self.keys, self.block_ms, self._append)
         self._pump_.start()
         self._reconciler = asyncio.create_task(self._reconcile_loop(), name="segue-reconcile")
 
@@ -166,8 +173,8 @@ class RedisBackend:
         try:
             if not await client.set(self.keys.job(info.id), info.model_dump_json(), nx=True):
                 return await self.status(info.id)  # submitted before: nothing to do
-            await publisher.publish(info.id, EventType.queued, {})
-            await client.xadd(self.keys.jobs, {"job": info.id, "kind": kind, "payload": json.dumps(payload)})
+            queued = await publisher.publish(info.id, EventType.queued, {})
+            await self._enqueue(client, info.id, kind, payload, info.owner)
         except (redis.ConnectionError, redis.TimeoutError) as exc:
             with contextlib.suppress(redis.RedisError):
                 await client.delete(
@@ -175,7 +182,18 @@ class RedisBackend:
                 )
             raise BackendUnavailable(f"Redis is unreachable: {exc}") from None
         self._unfinished.add(info.id)
+        if queued is not None:  # the history's first line, in the store at once (workers batch the rest)
+            await asyncio.to_thread(archive_event, self.store, queued)
         return await self.status(info.id)
+
+    async def _enqueue(
+        self, client: aredis.Redis, job_id: str, kind: str, payload: dict[str, Any], owner: str | None
+    ) -> None:
+        """Queue a job on its principal's waiting list (:mod:`workers.redis_queue`), stamped with
+        this API's version (:mod:`workers.version`)."""
+        entry = queue_entry(job_id, kind, payload, owner, **stamp())
+        keys = [principal_list(self.keys, owner), self.keys.queues, self.keys.bell]
+        await self._submit_lua(keys=keys, args=[entry, "tail", BELL_MAX])
 
     # -- reconcile -----------------------------------------------------------------------------------
     async def _reconcile_loop(self) -> None:
@@ -218,8 +236,11 @@ class RedisBackend:
                     running.add(str(job))
         now = asyncio.get_running_loop().time()
         for job_id in sorted(self._unfinished):
-            if await client.exists(self.keys.job(job_id)):
+            raw = await client.get(self.keys.job(job_id))
+            if raw:
                 self._missing.pop(job_id, None)
+                if JobInfo.model_validate_json(raw).status.finished:
+                    await self._settle_late(client, job_id, now)
                 continue
             info = await asyncio.to_thread(self.store.job_info, job_id)
             if job_id in running:  # a worker still runs it: give Redis its status back
@@ -230,6 +251,29 @@ class RedisBackend:
             if now - since >= self.requeue_after_s:
                 await self._requeue(client, info)
                 self._missing.pop(job_id, None)
+
+    async def _settle_late(self, client: aredis.Redis, job_id: str, now: float) -> None:
+        """A job Redis says finished while the store does not, ``requeue_after_s`` after this was
+        first seen: the process that published its terminal event died before writing the store's
+        copies. Write them from Redis (settle, archive, record) as that process would have."""
+        since = self._finishing.setdefault(job_id, now)
+        if now - since < self.requeue_after_s:
+            return
+        self._finishing.pop(job_id, None)
+        raw = await client.get(self.keys.job(job_id))
+        entries = cast(Entries, await client.xrange(self.keys.events(job_id)))
+        if not raw:
+            return
+        info = JobInfo.model_validate_json(raw)
+        streamed = [decode_event(fields) for _, fields in entries]
+        terminal = next((e for e in reversed(streamed) if e.type.terminal), None)
+        if terminal is None:
+            return  # the stream is gone too: the archive has what there is
+        log.warning("job %s ended without its store records (its publisher died?); writing them", job_id)
+        try:
+            await asyncio.to_thread(_write_records, self.store, info, streamed, terminal)
+        except OSError as exc:  # the store is away: the next round tries again
+            log.warning("job %s: its store records cannot be written yet (%s)", job_id, exc)
 
     def _still_unfinished(self, jobs: set[str]) -> set[str]:
         out = set()
@@ -252,9 +296,9 @@ class RedisBackend:
         )
         if not await client.set(self.keys.job(info.id), info.model_dump_json(), nx=True):
             return  # another API process got there first
-        # give the stream back the events this process knows (it followed the job), or at least the
-        # job's `queued` event, so the archive written at the end is whole and readers find them
-        known = list(self.hub.log(info.id).events) if self.hub.has(info.id) else []
+        # give the stream back the events this process knows (it followed the job) and the store's
+        # batches hold, or at least the job's `queued` event, so readers find them in Redis again
+        known = merge(self.hub.log(info.id).events if self.hub.has(info.id) else [], archived)
         if not known and floor >= 1:
             when = info.created_at.timestamp()
             known = [JobEvent(id=1, job=info.id, type=EventType.queued, time=when, data={})]
@@ -265,8 +309,7 @@ class RedisBackend:
                         self.keys.events(info.id), {"event": event.model_dump_json()}, id=stream_id(event.id)
                     )
         await client.set(self.keys.event_seq(info.id), floor, nx=True)
-        payload = json.dumps(request["payload"])
-        await client.xadd(self.keys.jobs, {"job": info.id, "kind": str(request["kind"]), "payload": payload})
+        await self._enqueue(client, info.id, str(request["kind"]), dict(request["payload"]), info.owner)
         self.requeued += 1
         log.warning("job %s was lost by Redis (status %s); queued again", info.id, info.status.value)
 
@@ -307,11 +350,16 @@ class RedisBackend:
         info = await self.status(job_id)
         if not info.status.finished:
             raise JobNotFinished(f"job {job_id} is {info.status.value}")
-        # the publisher of the terminal event writes the store's record and archive just after
-        # Redis says finished: delete once they are written, or they would bring the job back
+        # the publisher of the terminal event writes the store's archive, then its record, just
+        # after Redis says finished: delete once both are written, or they would bring the job back
         for _ in range(100):
-            archived = await asyncio.to_thread(read_archive, self.store, job_id)
-            if archived and archived[-1].type.terminal:
+            archived = await asyncio.to_thread(self.store.events, job_id)
+            stored = await asyncio.to_thread(self.store.job_info, job_id)
+            if (
+                archived
+                and stored.status.finished
+                and JobEvent.model_validate_json(archived[-1]).type.terminal
+            ):
                 break
             await asyncio.sleep(0.05)
         else:
@@ -335,11 +383,22 @@ class RedisBackend:
 
     # -- events ------------------------------------------------------------------------------------
     async def backlog(self, job_id: str, after: int = 0) -> list[JobEvent]:
-        await self.status(job_id)  # NotFoundError for unknown jobs
+        info = await self.status(job_id)  # NotFoundError for unknown jobs
         job_log = self.hub.log(job_id)
         if not job_log.terminal:
             await self._ensure_reader(job_id).wait()  # set once the reader caught up (XRANGE, archive)
+            await self._refresh(job_id, info.status.finished)
         return [e for e in job_log.events if e.id > after]
+
+    async def _refresh(self, job_id: str, finished: bool) -> None:
+        """Bring a followed job's log up to now: an event committed before this call is in it
+        (the reader's pump may not have delivered it yet), so a client that read the status
+        ``done`` finds the terminal event. A job Redis forgot that ended: its archive."""
+        client, _ = self._redis()
+        with contextlib.suppress(redis.ConnectionError, redis.TimeoutError):
+            await self._catch_up(client, job_id)
+        if finished and not self.hub.log(job_id).terminal:
+            await self._read_archive(job_id)
 
     async def events(self, job_id: str, after: int = 0) -> AsyncIterator[JobEvent]:
         await self.status(job_id)  # NotFoundError for unknown jobs
@@ -375,7 +434,8 @@ class RedisBackend:
             log.error("event reader of job %s failed", job_id, exc_info=task.exception())
 
     async def _catch_up(self, client: aredis.Redis, job_id: str) -> int:
-        """Append every event in Redis after the hub's last one; returns how many."""
+        """Append every event in Redis after the hub's last one (and, where Redis lacks earlier
+        ones, the store's archive of them first); returns how many."""
         job_log = self.hub.log(job_id)
         added = 0
         while True:
@@ -384,12 +444,22 @@ class RedisBackend:
                 await client.xrange(self.keys.events(job_id), min=stream_id(job_log.last_id + 1), count=1000),
             )
             for _, fields in entries:
-                added += await self.hub.append(decode_event(fields))
+                added += await self._append(decode_event(fields))
             if len(entries) < 1000:
                 return added
 
+    async def _append(self, event: JobEvent) -> bool:
+        """Add an event to the hub, after the events before it that Redis lost (a restart without
+        persistence, a flush) and the store's archive holds: a log never has a gap it could fill."""
+        job_log = self.hub.log(event.job)
+        if event.id > job_log.last_id + 1:
+            for archived in await asyncio.to_thread(read_archive, self.store, event.job):
+                if job_log.last_id < archived.id < event.id:
+                    await self.hub.append(archived)
+        return await self.hub.append(event)
+
     async def _read_archive(self, job_id: str) -> None:
-        for event in read_archive(self.store, job_id):
+        for event in await asyncio.to_thread(read_archive, self.store, job_id):
             await self.hub.append(event)
 
     async def _read_job(self, job_id: str, ready: asyncio.Event) -> None:
@@ -432,6 +502,21 @@ class RedisBackend:
                 await self.hub.set_exhausted(job_id)
 
     # -- health ------------------------------------------------------------------------------------
+    async def _worker_versions(self, client: aredis.Redis, names: list[str]) -> dict[str, str]:
+        """Each live worker's version as its heartbeat announces it; a worker of another version
+        than this API is logged (it refuses this API's jobs)."""
+        out: dict[str, str] = {}
+        mine = describe(stamp())
+        for name in names:
+            with contextlib.suppress(ValueError, TypeError, AttributeError):
+                beat = json.loads(await client.get(self.keys.worker(name)) or "{}")
+                out[name] = describe({"version": beat.get("version"), "format": beat.get("format")})
+        for name, theirs in out.items():
+            if theirs != mine and name not in self._warned_versions:
+                self._warned_versions.add(name)
+                log.error("worker %s is %s, this API %s: it refuses this API's jobs", name, theirs, mine)
+        return out
+
     async def health(self) -> dict[str, Any]:
         client, _ = self._redis()
         facts: dict[str, Any] = {"backend": "redis"}
@@ -444,11 +529,21 @@ class RedisBackend:
                     if group["name"] == self.keys.group:
                         pending = int(group["pending"])
             length = int(await client.xlen(self.keys.jobs))  # finished entries are deleted
+            lists = cast(list[str], await client.zrange(self.keys.queues, 0, -1))
+            waiting = 0
+            if lists:
+                async with client.pipeline(transaction=False) as pipe:
+                    for name in lists:
+                        pipe.llen(name)
+                    waiting = sum(int(n) for n in await pipe.execute())
+            versions = await self._worker_versions(client, names)
             facts.update(
                 redis="ok",
                 workers=len(names),
                 worker_names=names,
-                queued=max(length - pending, 0),
+                worker_versions=versions,
+                queued=waiting + max(length - pending, 0),
+                principals_waiting=len(lists),
                 pending=pending,
                 dead_letters=int(await client.xlen(self.keys.dead)),
                 followed_jobs=len(self._readers),
@@ -458,6 +553,13 @@ class RedisBackend:
         except redis.RedisError as exc:
             facts.update(redis="unreachable", error=f"Redis is unreachable: {exc}")
         return facts
+
+
+def _write_records(store: Store, info: JobInfo, events: list[JobEvent], terminal: JobEvent) -> None:
+    """A finished job's store copies, in the order its publisher writes them."""
+    settle(store, info, terminal)
+    archive_events(store, info.id, events)
+    put_job_record(store, info)
 
 
 async def _changed(job_log: JobLog, last: int) -> None:
@@ -473,8 +575,17 @@ class _StreamPump:
     wake stream: adding a job ``XADD``\\ s to it, so a read blocked on the old set returns at once.
     """
 
-    def __init__(self, client: aredis.Redis, hub: EventHub, keys: RedisKeys, block_ms: int) -> None:
+    def __init__(
+        self,
+        client: aredis.Redis,
+        hub: EventHub,
+        keys: RedisKeys,
+        block_ms: int,
+        append: Callable[[JobEvent], Awaitable[bool]] | None = None,
+    ) -> None:
         self.client, self.hub, self.keys, self.block_ms = client, hub, keys, block_ms
+        self.append = append or hub.append
+        """Adds an event to the hub (the backend's fills a gap from the store's archive first)."""
         self.jobs: set[str] = set()
         self._wake_key = keys.api_wake(uuid.uuid4().hex)
         self._wake_cursor = "0-0"
@@ -486,9 +597,11 @@ class _StreamPump:
 
     async def stop(self) -> None:
         if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+            # cancelled until it ends: redis-py can swallow a cancel that lands inside a blocking
+            # read, and the loop would go on (close() then waited for ever)
+            while not self._task.done():
+                self._task.cancel()
+                await asyncio.wait({self._task}, timeout=1.0)
             self._task = None
         with contextlib.suppress(redis.RedisError):
             await self.client.delete(self._wake_key)
@@ -524,7 +637,7 @@ class _StreamPump:
                         self._wake_cursor = entries[-1][0]
                         continue
                     for _, fields in entries:
-                        await self.hub.append(decode_event(fields))
+                        await self.append(decode_event(fields))
                 self.jobs = {j for j in self.jobs if not self.hub.log(j).terminal}
             except (redis.ConnectionError, redis.TimeoutError) as exc:
                 log.warning("event pump: %s; retrying in %.1f s", exc, backoff)

@@ -21,15 +21,18 @@ marker and attempt; ``MULTI``/``EXEC``; retried if another process published in 
 
 After the transaction the JobInfo is also written to the store's ``info.json`` when the status
 changes (``queued``, ``started``, the terminal event; not for every progress or solution event, which
-would cost a file write each; never backwards, :func:`workers.records.put_job_record`), and the
-process that published the terminal event archives the whole stream to the store's ``events.jsonl``
-(the file the embedded backend writes), so finished jobs replay after Redis forgot them, and settles
-a build's database record (:func:`workers.records.settle_database`).
+would cost a file write each; never backwards, :func:`workers.records.put_job_record`). A worker's
+publisher copies every event to the store in batches as it goes (:mod:`workers.event_archive`), so
+a Redis that loses its memory loses no history. The process that publishes the terminal event
+settles a build's database record and a small job's staged upload (:func:`workers.records.settle`),
+writes the job's whole archive to the store's ``events.jsonl`` (the file the embedded backend
+writes: the stream merged with the batches), so finished jobs replay after Redis forgot them, and
+only then the job's finished ``info.json``.
 """
 
 from __future__ import annotations
 
-import json
+import asyncio
 import logging
 import time
 from dataclasses import dataclass
@@ -40,9 +43,10 @@ import redis.asyncio as aredis
 
 from schemas import EventType, JobEvent, JobInfo
 
+from .event_archive import BatchArchiver, archive_events, merge
 from .execute import apply_event
 from .fencing import StaleAttempt
-from .records import put_job_record, settle_database
+from .records import put_job_record, settle
 from .redis_keys import EVENTS_MAXLEN, RedisKeys
 from .store import NotFoundError, Store
 
@@ -76,24 +80,6 @@ def fold_info(current: JobInfo, event: JobEvent) -> JobInfo | None:
     if current.status.finished or current.last_event >= event.id:
         return None
     return apply_event(current, event.type, event.data, event.id)
-
-
-def archive_events(store: Store, job_id: str, entries: Entries) -> None:
-    """Write a job's events to the store's ``events.jsonl`` (atomically, whole file)."""
-    lines = [decode_event(fields).model_dump_json() for _, fields in entries]
-    try:
-        store.put_events(job_id, lines)
-    except (OSError, NotFoundError):
-        log.exception("could not archive the events of job %s", job_id)
-
-
-def read_archive(store: Store, job_id: str) -> list[JobEvent]:
-    """The events archived in the store (empty when there are none)."""
-    try:
-        lines = store.events(job_id)
-    except NotFoundError:
-        return []
-    return [JobEvent.model_validate(json.loads(line)) for line in lines]
 
 
 @dataclass(slots=True)
@@ -198,15 +184,25 @@ class _Publisher(Generic[Client]):
         keys = self.keys
         return [keys.event_seq(job_id), keys.job(job_id), keys.terminal(job_id), keys.attempt(job_id)]
 
-    def _recorded(self, plan: _Plan, entries: Entries | None) -> None:
-        """After the transaction: the store's status when it changed, the archive of a finished
-        job's events (``entries``, read when the event is terminal) and its database's record."""
-        if plan.info is not None and plan.event.type in DISK_STATUS_EVENTS:
+    def _recorded(
+        self, plan: _Plan, entries: Entries | None, unwritten: list[JobEvent] | None = None
+    ) -> None:
+        """After the transaction: the store's copies. A terminal event (``entries``: the job's
+        stream, read after it) settles the job's database or staged upload, writes its whole
+        archive (the stream merged with the batches already stored and ``unwritten``, so what
+        Redis lost is kept), then its finished record: a reader that sees the store say finished
+        finds the terminal event archived, and the API's delete waits for both. Other events
+        rewrite the record when the status changes."""
+        if entries is None:
+            if plan.info is not None and plan.event.type in DISK_STATUS_EVENTS:
+                put_job_record(self.store, plan.info)
+            return
+        if plan.info is not None:
+            settle(self.store, plan.info, plan.event)
+        streamed = [decode_event(fields) for _, fields in entries]
+        archive_events(self.store, plan.event.job, merge([plan.event], streamed, unwritten or []))
+        if plan.info is not None:
             put_job_record(self.store, plan.info)
-        if entries is not None:
-            archive_events(self.store, plan.event.job, entries)
-            if plan.info is not None:
-                settle_database(self.store, plan.info, plan.event)
 
 
 class EventPublisher(_Publisher[redis.Redis]):
@@ -219,9 +215,13 @@ class EventPublisher(_Publisher[redis.Redis]):
         keys: RedisKeys,
         maxlen: int = EVENTS_MAXLEN,
         retention_s: int = RETENTION_S,
+        archiver: BatchArchiver | None = None,
     ) -> None:
         super().__init__(client, store, keys, maxlen, retention_s)
         self._last: dict[str, int] = {}  # last event id published per running job (survives a flush)
+        self.archiver = archiver
+        """Copies each published event to the store in batches (None: only the whole archive at
+        the end)."""
 
     def publish(
         self,
@@ -259,11 +259,15 @@ class EventPublisher(_Publisher[redis.Redis]):
                     break
                 except redis.WatchError:
                     continue
-        entries = cast(Entries, self.client.xrange(keys.events(job_id))) if type_.terminal else None
-        self._recorded(plan, entries)
         if type_.terminal:
+            unwritten = self.archiver.take(job_id) if self.archiver is not None else []
+            entries = cast(Entries, self.client.xrange(keys.events(job_id)))
+            self._recorded(plan, entries, unwritten)
             self._last.pop(job_id, None)
         else:
+            if self.archiver is not None:
+                self.archiver.add(plan.event)
+            self._recorded(plan, None)
             self._last[job_id] = plan.event.id
         return plan.event
 
@@ -312,6 +316,9 @@ class AsyncEventPublisher(_Publisher[aredis.Redis]):
                     break
                 except redis.WatchError:
                     continue
-        entries = cast(Entries, await self.client.xrange(keys.events(job_id))) if type_.terminal else None
-        self._recorded(plan, entries)
+        if type_.terminal:
+            entries = cast(Entries, await self.client.xrange(keys.events(job_id)))
+            await asyncio.to_thread(self._recorded, plan, entries)
+        else:
+            await asyncio.to_thread(self._recorded, plan, None)
         return plan.event

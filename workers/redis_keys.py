@@ -2,7 +2,12 @@
 
 Queue (a Redis with ``maxmemory-policy noeviction``)::
 
-    segue:jobs                   stream of jobs {job, kind, payload (JSON)}; consumer group ``segue-workers``
+    segue:queue:<principal>      a principal's waiting jobs (list of JSON entries; :mod:`workers.redis_queue`)
+    segue:queues                 the waiting lists that hold jobs (sorted set, served round-robin by name)
+    segue:queues:turn            the waiting list served last (the round-robin cursor)
+    segue:queues:bell            one token per job queued: idle workers BLPOP it instead of polling
+    segue:jobs                   stream of the jobs being run {job, kind, payload (JSON), owner, format,
+                                 version}; consumer group ``segue-workers``
     segue:jobs:dead              dead letters: jobs delivered more than ``max_deliveries`` times
     segue:job:<job>              JobInfo JSON (status is a fold over the job's events)
     segue:job:<job>:terminal     SET NX by whoever publishes the job's terminal event (exactly once)
@@ -44,6 +49,21 @@ class RedisKeys:
     @property
     def jobs(self) -> str:
         return f"{self.prefix}jobs"
+
+    def queue(self, principal: str) -> str:
+        return f"{self.prefix}queue:{principal}"
+
+    @property
+    def queues(self) -> str:
+        return f"{self.prefix}queues"
+
+    @property
+    def queues_turn(self) -> str:
+        return f"{self.prefix}queues:turn"
+
+    @property
+    def bell(self) -> str:
+        return f"{self.prefix}queues:bell"
 
     @property
     def dead(self) -> str:

@@ -2,9 +2,18 @@
 
 Protocol (key names in :mod:`workers.redis_keys`):
 
-- **Delivery.** Workers share the consumer group ``segue-workers`` on ``segue:jobs`` (created with
-  ``MKSTREAM``) and take one entry at a time with ``XREADGROUP ... >``. An entry stays in the group's
-  pending list until the job's terminal event is published; then ``XACK`` + ``XDEL``.
+- **Delivery.** Jobs wait in one list per principal; a worker with nothing to do takes the next
+  principal's next job (round-robin, :mod:`workers.redis_queue`), which puts it in ``segue:jobs``
+  and reads it for this worker (consumer group ``segue-workers``) in one atomic step, and waits on
+  the queue's bell when there is none. An entry stays in the group's pending list until the job's
+  terminal event is published; then ``XACK`` + ``XDEL``.
+- **Versions.** A job whose entry carries another job format or package version than this worker's
+  (:mod:`workers.version`) is refused with an error log and given back to its principal's list; the
+  worker then takes nothing for ``refuse_backoff_s``.
+- **A full cache disk.** A run whose engine process cannot cache the job's database even after
+  evicting every other (:class:`~workers.dbcache.CacheFull`) is logged for the operator and the job
+  given back, marked, for a worker that has not failed it; when every live worker has, it fails
+  with code ``cache_full``.
 - **Heartbeats.** A background thread ``SET segue:worker:<name> ... EX ttl`` every ``heartbeat_s``.
   While a job runs it also resets the entry's idle time (``XCLAIM ... JUSTID``, only if the entry is
   still ours) until the job's deadline (2 × budget + grace; builds: one hour), and extends the build
@@ -34,10 +43,15 @@ Protocol (key names in :mod:`workers.redis_keys`):
   bounded by bytes (:class:`~workers.engine_cache.EngineCache`).
   A build takes ``segue:lock:build:<db>`` (``SET NX EX``); a second build of the same database waits
   for the lock, then reuses the ready database instead of building it again.
+- **History.** Every event the worker publishes is also copied to the store in batches
+  (:mod:`workers.event_archive`, a thread of its own), so a Redis that loses its memory loses none.
+- **Housekeeping.** A thread removes staged uploads older than ``staged_max_age_s`` (orphans of
+  parses whose processes were lost) every ``staged_sweep_s``.
 - **Stopping.** SIGTERM/SIGINT: finish the current job, then exit. A second signal releases the job
   at once (not acked; the heartbeat key is deleted so another worker reclaims it immediately).
 
-All processes must see the same data directory (the store holds clips, databases and results).
+All processes share one store (``SEGUE_STORE_URL``, or one data directory); a worker's own
+``SEGUE_DATA_DIR`` is then only its cache.
 """
 
 from __future__ import annotations
@@ -62,9 +76,12 @@ from engines.registry import warm_compiled
 from schemas import DatabaseStatus, EventType
 
 from .budget import shortfall
+from .event_archive import BatchArchiver
 from .fencing import ACQUIRE_LUA, StaleAttempt
+from .records import sweep_staged
 from .redis_events import EventPublisher
 from .redis_keys import DEAD_MAXLEN, RedisKeys
+from .redis_queue import BELL_MAX, RELEASE_LUA, TAKE_LUA, entry_of_fields, principal_list
 from .settings import Settings
 from .store import NotFoundError, Store
 from .supervisor import (
@@ -77,6 +94,7 @@ from .supervisor import (
     terminal_after_kill,
     time_limit,
 )
+from .version import mismatch, stamp
 
 log = logging.getLogger("segue.redis.worker")
 
@@ -120,6 +138,23 @@ class _Running:
     lock: tuple[str, str] | None = None
 
 
+CACHE_FULL_FIELD = "cache_full"
+"""A given-back job's field naming the workers whose cache disk had no room for it."""
+
+
+class _Released(Exception):
+    """The engine process gave the job back: this host cannot run it (its cache disk is full)."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+def _marks(fields: dict[str, str]) -> list[str]:
+    """The workers whose cache had no room for a job (its :data:`CACHE_FULL_FIELD`)."""
+    return [name for name in fields.get(CACHE_FULL_FIELD, "").split(",") if name]
+
+
 def default_name() -> str:
     """A unique consumer name: host, pid and a random suffix."""
     return f"{socket.gethostname()}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
@@ -143,7 +178,8 @@ class Worker:
         self.client = redis.Redis.from_url(redis_url, decode_responses=True, socket_timeout=timeout)
         cache_url = s.redis_cache_url or redis_url
         self.cache_client = redis.Redis.from_url(cache_url)
-        self.publisher = EventPublisher(self.client, self.store, self.keys)
+        self.archiver = BatchArchiver(self.store, s.event_archive_s)
+        self.publisher = EventPublisher(self.client, self.store, self.keys, archiver=self.archiver)
         config = ChildConfig(
             store_root=self.store.url,
             plugins=engine_plugins(s.engine_plugins),
@@ -170,6 +206,8 @@ class Worker:
         self._release = self.client.register_script(_RELEASE_LUA)
         self._ack_owned = self.client.register_script(_ACK_LUA)
         self._acquire_lua = self.client.register_script(ACQUIRE_LUA)
+        self._take_lua = self.client.register_script(TAKE_LUA)
+        self._release_lua = self.client.register_script(RELEASE_LUA)
         self._running: _Running | None = None
         self._stop = threading.Event()
         self._next_reclaim = 0.0
@@ -185,6 +223,12 @@ class Worker:
         beater = threading.Thread(
             target=self._heartbeat_loop, args=(beat_stop,), name="segue-heartbeat", daemon=True
         )
+        sweeper = threading.Thread(
+            target=self._sweep_loop, args=(beat_stop,), name="segue-sweep", daemon=True
+        )
+        archiving = threading.Thread(
+            target=self.archiver.run, args=(beat_stop,), name="segue-event-archive", daemon=True
+        )
         startup = True
         backoff = 0.1
         try:
@@ -193,6 +237,11 @@ class Worker:
                     self._ensure_group()
                     self._announce("{}")
                     break
+                except (redis.AuthenticationError, redis.exceptions.AuthorizationError) as exc:
+                    raise redis.AuthenticationError(
+                        f"Redis refused this worker's credentials ({exc}): check the password in "
+                        "SEGUE_REDIS_URL (redis://:PASSWORD@host:port/0)"
+                    ) from None
                 except (redis.ConnectionError, redis.TimeoutError) as exc:
                     log.warning("waiting for Redis (%s); retrying in %.1f s", exc, backoff)
                     self._stop.wait(backoff)
@@ -201,6 +250,8 @@ class Worker:
                 return self.processed
             self._beat()
             beater.start()
+            sweeper.start()
+            archiving.start()
             self.engine.start()
             while not self.engine.ready.wait(0.2):  # spawning + imports take ~1 s
                 if self._stop.is_set():
@@ -238,8 +289,9 @@ class Worker:
         finally:
             self.engine.close()
             beat_stop.set()
-            if beater.is_alive():
-                beater.join(timeout=5)
+            for thread in (beater, sweeper, archiving):
+                if thread.is_alive():
+                    thread.join(timeout=5)
             # gone at once: other workers reclaim anything we leave pending without waiting the TTL
             with contextlib.suppress(redis.RedisError):
                 self.client.delete(self.keys.worker(self.name))
@@ -256,16 +308,45 @@ class Worker:
                 raise
 
     def _read(self) -> Entry | None:
-        response = cast(
-            list[Any],
-            self.client.xreadgroup(
-                self.keys.group, self.name, {self.keys.jobs: ">"}, count=1, block=self.settings.block_ms
-            ),
-        )
-        for _stream, entries in response or []:
-            for entry_id, fields in entries:
-                return str(entry_id), dict(fields or {}), 1
-        return None
+        """The next job, from the principals' waiting lists in turn (:mod:`workers.redis_queue`);
+        when there is none, wait for the bell (at most ``block_ms``) and look once more."""
+        entry = self._take()
+        if entry is None:
+            self.client.blpop([self.keys.bell], timeout=self.settings.block_ms / 1000)
+            entry = self._take()
+        return entry
+
+    def _take(self) -> Entry | None:
+        keys = [self.keys.queues, self.keys.queues_turn, self.keys.jobs]
+        got = cast(list[str] | None, self._take_lua(keys=keys, args=[self.keys.group, self.name]))
+        if not got:
+            return None
+        entry_id, flat = got[0], got[1:]
+        return str(entry_id), dict(zip(flat[::2], flat[1::2], strict=True)), 1
+
+    def _give_back(self, entry_id: str, fields: dict[str, str], why: str) -> bool:
+        """Put a job this worker will not run back first in its principal's waiting list (acked and
+        removed from the stream in the same step); False when the entry is no longer ours."""
+        keys = [
+            self.keys.jobs,
+            principal_list(self.keys, fields.get("owner")),
+            self.keys.queues,
+            self.keys.bell,
+        ]
+        args: list[str | int] = [self.keys.group, self.name, entry_id, entry_of_fields(fields), BELL_MAX]
+        given = bool(self._release_lua(keys=keys, args=args))
+        if given:
+            log.warning("job %s given back to the queue: %s", fields.get("job"), why)
+        return given
+
+    # -- housekeeping ---------------------------------------------------------------------------
+    def _sweep_loop(self, stop: threading.Event) -> None:
+        """Every ``staged_sweep_s``: remove orphaned staged uploads (:meth:`Store.sweep_staged`);
+        in its own thread, so a slow store never holds up heartbeats or jobs."""
+        while True:
+            sweep_staged(self.store, self.settings.staged_max_age_s)
+            if stop.wait(self.settings.staged_sweep_s):
+                return
 
     # -- heartbeats -----------------------------------------------------------------------------
     def _heartbeat_loop(self, beat_stop: threading.Event) -> None:
@@ -278,7 +359,12 @@ class Worker:
 
     def _beat(self) -> None:
         running = self._running
-        info = {"pid": os.getpid(), "host": socket.gethostname(), "job": running.job_id if running else None}
+        info = {
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "job": running.job_id if running else None,
+            **stamp(),
+        }
         try:
             self._announce(json.dumps(info))
             if running is None:
@@ -416,6 +502,17 @@ class Worker:
             log.info("job %s already ended; dropping its entry %s", job_id, entry_id)
             self._ack(entry_id)
             return
+        refused = mismatch(fields)
+        if refused is not None:
+            log.error(
+                "worker %s refuses job %s: %s; run workers of the API's version (the job stays queued)",
+                self.name,
+                job_id,
+                refused,
+            )
+            self._give_back(entry_id, fields, "another version")
+            self._stop.wait(self.settings.refuse_backoff_s)  # leave it to a worker of its version
+            return
         if deliveries > self.settings.max_deliveries:
             self._dead_letter(
                 entry_id,
@@ -425,12 +522,18 @@ class Worker:
                 "its workers kept dying",
             )
             return
+        if self.name in _marks(fields) and self._others(_marks(fields)):
+            # this worker's cache had no room for it: leave it to another worker
+            self._give_back(entry_id, fields, f"worker {self.name}'s cache disk had no room for it")
+            self._stop.wait(0.5)
+            return
         attempt = self._acquire(job_id, deliveries - 1)
         if attempt <= 0:
             log.info("job %s already ended; dropping its entry %s", job_id, entry_id)
             self._ack(entry_id)
             return
         self._running = _Running(entry_id, job_id, time.monotonic() + self._time_limit(kind, payload))
+        released: str | None = None
         try:
             publish = self._publisher_for(job_id, attempt)
             should_stop = self._stop_check(job_id, attempt)
@@ -440,11 +543,54 @@ class Worker:
                 self._supervised(job_id, kind, payload, attempt)
         except StaleAttempt as exc:
             log.warning("%s; this worker publishes nothing more of it", exc.message)
+        except _Released as exc:
+            released = exc.reason
         finally:
             self._running = None
             self.publisher.forget(job_id)
+        if released is not None:
+            self._cache_full(entry_id, fields, attempt, released)
+            return
         self._ack(entry_id)
         self.processed += 1
+
+    def _cache_full(self, entry_id: str, fields: dict[str, str], attempt: int, reason: str) -> None:
+        """This host cannot cache the job's database (:class:`~workers.dbcache.CacheFull`): the
+        operator is told, and the job goes back to the queue for a worker whose cache has not
+        failed it; when every live worker's has, it fails naming the servers' problem (never the
+        user's ``storage_full``)."""
+        job_id = fields["job"]
+        marks = [*_marks(fields), self.name]
+        others = self._others(marks)
+        log.error(
+            "worker %s: %s; job %s %s",
+            self.name,
+            reason,
+            job_id,
+            "goes back to the queue for another worker" if others else "fails: no other worker can take it",
+        )
+        if others:
+            self._give_back(entry_id, {**fields, CACHE_FULL_FIELD: ",".join(marks)}, "cache disk full")
+            return
+        message = (
+            "no worker has room in its local cache for this job's database (the servers' disks are full; "
+            "their operator is told in the worker logs); nothing is wrong with the request: submit it "
+            "again later"
+        )
+        with contextlib.suppress(StaleAttempt):
+            self.publisher.publish(
+                job_id,
+                EventType.failed,
+                {"error": {"code": "cache_full", "message": message}},
+                attempt=attempt,
+            )
+        self._ack(entry_id)
+
+    def _others(self, marks: list[str]) -> list[str]:
+        """Live workers (heartbeat keys) other than ``marks``."""
+        cut = len(self.keys.worker(""))
+        names = [str(k)[cut:] for k in self.client.scan_iter(match=self.keys.worker_pattern, count=500)]
+        return sorted(set(names) - set(marks) - {self.name})
 
     # -- running a job in the engine process ------------------------------------------------------
     def _supervised(self, job_id: str, kind: str, payload: dict[str, Any], attempt: int) -> None:
@@ -454,6 +600,8 @@ class Worker:
             task, outcome, detail = self._run_once(job_id, kind, payload, attempt)
             if task.stale:
                 return  # another run holds the job: nothing of this one is published
+            if outcome == "released":
+                raise _Released(detail)
             if outcome == "finished":
                 if not task.terminal:
                     self._publish_safely(

@@ -44,7 +44,14 @@ class Settings(BaseSettings):
     disk_cache_mb: int = Field(
         default=8192, ge=1, description="databases downloaded from an object store kept on local disk, MiB"
     )
-    redis_url: str | None = Field(default=None, description="Redis job backend; unset = embedded pool")
+    redis_url: str | None = Field(
+        default=None,
+        repr=False,
+        description="Redis job backend (unset = embedded pool): redis://[[user]:password@]host:port/db, "
+        "rediss://... for TLS (?ssl_ca_certs=/path/ca.crt to trust a private CA; ssl_certfile and "
+        "ssl_keyfile for client certificates), or unix:///path.sock; a password with URL-reserved "
+        "characters is percent-encoded",
+    )
     workers: int = Field(default=2, ge=1, le=256, description="embedded backend: worker processes")
     api_tokens: Annotated[tuple[str, ...], NoDecode] = Field(
         default=(),
@@ -125,7 +132,10 @@ class Settings(BaseSettings):
 
     # -- the Redis runtime (``segue worker`` and the API's Redis backend) --------------------------
     redis_cache_url: str | None = Field(
-        default=None, description="a separate Redis (allkeys-lru) for the database cache; unset = redis_url"
+        default=None,
+        repr=False,
+        description="a separate Redis (allkeys-lru) for the database cache, a URL as redis_url; "
+        "unset = redis_url",
     )
     redis_prefix: str = Field(default=DEFAULT_PREFIX, min_length=1, description="Redis key prefix")
     worker_name: str | None = Field(
@@ -139,6 +149,12 @@ class Settings(BaseSettings):
     block_ms: int = Field(default=1000, ge=1, description="XREADGROUP block time (bounds a stop's wait)")
     reclaim_idle_s: float = Field(
         default=30.0, gt=0, description="entries not refreshed this long are taken over (hung workers)"
+    )
+    refuse_backoff_s: float = Field(
+        default=2.0,
+        gt=0,
+        description="a worker that refused a job of another version takes no job for this long "
+        "(a worker of the job's version takes it meanwhile)",
     )
     cache_chunk_bytes: int = Field(default=CHUNK_SIZE, ge=1, description="database cache chunk size")
     engine_cache_mb: int = Field(
@@ -164,6 +180,19 @@ class Settings(BaseSettings):
     publish_retry_s: float = Field(
         default=300.0, gt=0, description="how long a worker retries an event while Redis is away"
     )
+    event_archive_s: float = Field(
+        default=1.0,
+        gt=0,
+        description="segue worker: a running job's events are copied to the store in batches at most "
+        "this old (the history that survives a Redis restart without persistence)",
+    )
+    staged_max_age_s: float = Field(
+        default=3600.0,
+        gt=0,
+        description="staged uploads (bytes a worker is to parse) older than this are removed as orphans "
+        "by the sweep every worker and the embedded backend run every staged_sweep_s",
+    )
+    staged_sweep_s: float = Field(default=300.0, gt=0, description="how often the staged-upload sweep runs")
     log_level: str = Field(default="INFO", description="log level of segue worker")
     request_timeout_s: float = Field(
         default=30.0,

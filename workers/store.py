@@ -20,7 +20,9 @@ Keys::
     databases/<id>/data.npz       the same arrays as written before (read, and converted once)
     jobs/<id>/request.json        {"kind", "payload"}
     jobs/<id>/info.json           JobInfo
-    jobs/<id>/events.jsonl        the job's events (the backends' archive)
+    jobs/<id>/events.jsonl        the job's events (the backends' archive), written whole at its end
+    jobs/<id>/events/<n>.jsonl    batches of a running job's events from event n on (Redis backend:
+                                  written as they are published, removed once events.jsonl is)
     jobs/<id>/results/<rid>.npz   result motion (motion.serialize arrays)
     jobs/<id>/results/<rid>.json  Report
     jobs/<id>/exports/<name>      derived bytes of a result (exports), by whoever makes them
@@ -41,6 +43,8 @@ import hashlib
 import io
 import json
 import threading
+import time
+import uuid
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from datetime import UTC, datetime
@@ -653,6 +657,30 @@ class Store:
             return []
         return [line for line in data.decode("utf-8").splitlines() if line.strip()]
 
+    def put_event_batch(self, job_id: str, first_id: int, lines: list[str]) -> None:
+        """Store a batch of a running job's events (``lines``, from event ``first_id`` on) beside
+        its archive (``jobs/<id>/events/<first id>.jsonl``), until its whole archive is written."""
+        if first_id < 1:
+            raise ValueError(f"event ids start at 1, not {first_id}")
+        key = f"{self._job(job_id)}/events/{first_id:010d}.jsonl"
+        self.objects.put(key, ("\n".join(lines) + "\n").encode())
+
+    def event_batches(self, job_id: str) -> list[str]:
+        """The lines of a job's event batches (:meth:`put_event_batch`), in id order of their first."""
+        prefix = f"{self._job(job_id)}/events"
+        lines: list[str] = []
+        for name in self.objects.children(prefix):
+            try:
+                data = self.objects.get(f"{prefix}/{name}")
+            except (ObjectNotFound, ValueError):  # removed meanwhile (the whole archive was written)
+                continue
+            lines.extend(line for line in data.decode("utf-8").splitlines() if line.strip())
+        return lines
+
+    def delete_event_batches(self, job_id: str) -> None:
+        """Remove a job's event batches (its whole archive holds them)."""
+        self.objects.delete_prefix(f"{self._job(job_id)}/events")
+
     def put_export(self, job_id: str, name: str, data: bytes) -> None:
         """Store derived bytes of a job's result (an export) under ``name`` (a safe file name)."""
         self.objects.put(self._export_key(job_id, name), data)
@@ -701,6 +729,16 @@ class Store:
         return int(shape[0]), int(shape[1]), fps
 
     # -- staged uploads: bytes kept until a worker has checked them (workers.tasks) -------------
+    # Removed by the small job that reads them, by whoever publishes that job's terminal event
+    # (workers.records.settle_task: a parse killed by its limits, dead-lettered or cancelled), by
+    # the API when no job will read them, and, for whatever a lost process left, by
+    # sweep_staged (run by every worker and the embedded backend).
+    def stage(self, data: bytes) -> str:
+        """Keep an upload's bytes under a new key until a worker has checked them; the key."""
+        key = uuid.uuid4().hex
+        self.put_staged(key, data)
+        return key
+
     def put_staged(self, key: str, data: bytes) -> None:
         """Keep an upload's bytes until a worker has checked them (:meth:`delete_staged` after)."""
         self.objects.put(f"staged/{_safe_id(key)}", data)
@@ -710,3 +748,22 @@ class Store:
 
     def delete_staged(self, key: str) -> None:
         self.objects.delete(f"staged/{_safe_id(key)}")
+
+    def staged_keys(self) -> list[str]:
+        """The keys of every staged upload."""
+        return self.objects.children("staged")
+
+    def sweep_staged(self, older_than_s: float, now_s: float | None = None) -> list[str]:
+        """Remove the staged uploads written more than ``older_than_s`` seconds ago (orphans: the
+        process that staged or was to read them is gone); their keys."""
+        cutoff = (time.time() if now_s is None else now_s) - older_than_s
+        removed = []
+        for key in self.staged_keys():
+            try:
+                if self.objects.modified(f"staged/{key}") >= cutoff:
+                    continue
+                self.delete_staged(key)
+            except (ObjectNotFound, NotFoundError, ValueError):  # gone meanwhile, or not a key of ours
+                continue
+            removed.append(key)
+        return removed

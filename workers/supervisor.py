@@ -8,6 +8,9 @@ process, or a ``segue worker``) gives it a :class:`Task`; a watch thread of the 
 child's events (``on_event``) and calls ``on_end`` once per task with an :data:`Outcome`:
 
 * ``finished`` — the child reported the job over (it published the terminal event itself);
+* ``released`` — the child could not run the job on this host (its cache disk is full:
+  :class:`~workers.dbcache.CacheFull`) and published no terminal event: the owner gives the job
+  to another worker, or fails it naming the host's problem;
 * ``crashed`` — the child died (SIGKILL, the OOM killer, a segfault): the owner re-runs the job;
 * ``cancel_timeout`` — a cancel was asked and the job had not ended ``cancel_grace_s`` later;
 * ``time_limit`` — the job ran past its hard time limit (``budget_s`` + room for assembly), or
@@ -18,7 +21,12 @@ child's events (``on_event``) and calls ``on_end`` once per task with an :data:`
 In the last three cases the supervisor kills the child (SIGKILL); the owner publishes the terminal
 event (:func:`terminal_after_kill`). Every dead child is replaced at once. Because the owner's threads
 do no engine work, the owner's heartbeats (Redis pending-entry refreshes) keep their pace however
-busy the engine is. The child polls its parent and exits when the parent is gone.
+busy the engine is. A child dies with its owner (:func:`die_with_parent`: Linux's parent-death
+signal, checked against the parent it was started by, and a poll as a second guard), so no engine
+process outlives the worker that relays its events; every durable write it makes is checked
+against its owner and its job's attempt first (:class:`workers.fencing.FencedStore`). Children are
+started from a thread that lives as long as they do (the watch thread, or the embedded backend's
+event loop thread): the kernel's signal follows the thread that started them.
 
 Hand-written because ``concurrent.futures.ProcessPoolExecutor`` breaks for good when one process
 dies (``BrokenProcessPool``) and cannot kill the process running a given job.
@@ -27,9 +35,12 @@ dies (``BrokenProcessPool``) and cannot kill the process running a given job.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import logging
 import multiprocessing as mp
 import os
+import signal
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -41,7 +52,7 @@ from schemas import EventType
 
 log = logging.getLogger("segue.supervisor")
 
-Outcome = Literal["finished", "crashed", "cancel_timeout", "time_limit", "memory_limit"]
+Outcome = Literal["finished", "released", "crashed", "cancel_timeout", "time_limit", "memory_limit"]
 
 PAGE_SIZE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
@@ -76,12 +87,16 @@ class Task:
     payload: dict[str, Any]
     attempt: int = 1
     time_limit_s: float | None = None
+    owner: str | None = None
+    """The principal that submitted the job (its place in the fair queue)."""
     seq: int = 0
     started: float = 0.0
     cancel_asked: float | None = None
     loading_since: float | None = None
     """When the child started loading the job's database (timed apart from the job's limit)."""
     best: str | None = None
+    released: str | None = None
+    """Why the child gave the job back without ending it (``released``), else None."""
     terminal: bool = False
     stale: bool = False
     """The run lost its job to a later attempt (its events are refused; it is being stopped)."""
@@ -124,11 +139,55 @@ def rss_bytes(pid: int) -> int:
 
 
 # -- the child --------------------------------------------------------------------------------------
+PR_SET_PDEATHSIG = 1
+"""``prctl`` option: the signal the kernel sends a process when the thread that created it exits."""
+PARENT_DEATH_SIGNAL = signal.SIGUSR1
+
+
+def parent_gone(parent: int) -> bool:
+    """True once the process that started this one is no longer its parent (it died: the child was
+    re-parented to init or a subreaper)."""
+    return os.getppid() != parent
+
+
+def _exit_if_orphaned(parent: int) -> None:
+    """Kill this process (SIGKILL: no handler, no ``atexit``, no flush) when its owner is gone."""
+    if parent_gone(parent):
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def die_with_parent(parent: int) -> bool:
+    """Make this (child) process die with the owner process ``parent`` that started it; True when the
+    kernel will tell it (Linux), False where only :func:`_watch_parent`'s poll does.
+
+    Linux sends :data:`PARENT_DEATH_SIGNAL` when the *thread* that created this process exits
+    (``prctl(PR_SET_PDEATHSIG)``), which is also its owner's death (SIGKILL, the OOM killer). Its
+    handler checks that the parent really changed before killing this process (a spawning thread
+    that ended while its process lives is not the owner's death: the signal is then ignored), and
+    the same check runs once right after ``prctl``, since an owner that died before the call sends
+    nothing. So an engine process never outlives its worker: it cannot run the catch-all of a job
+    whose events nobody reads and write a record the runtime did not decide (an orphan's
+    ``failed``). The Python handler runs before the next bytecode, so no Python code of the job
+    runs after the signal arrives."""
+    armed = False
+    if sys.platform.startswith("linux"):
+        signal.signal(PARENT_DEATH_SIGNAL, lambda _sig, _frame: _exit_if_orphaned(parent))
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            armed = libc.prctl(PR_SET_PDEATHSIG, int(PARENT_DEATH_SIGNAL), 0, 0, 0) == 0
+        except (OSError, AttributeError):
+            armed = False
+        if not armed:
+            log.warning("prctl(PR_SET_PDEATHSIG) failed; the engine process polls its parent instead")
+    _exit_if_orphaned(parent)  # the owner died before the signal was armed
+    return armed
+
+
 def _watch_parent(parent: int) -> None:
+    """The portable fallback of :func:`die_with_parent` (and a second guard): poll the parent."""
     while True:
         time.sleep(0.5)
-        if os.getppid() != parent:
-            os._exit(0)  # the worker is gone: nobody will read our events
+        _exit_if_orphaned(parent)  # the worker is gone: nobody will read our events
 
 
 def _fence_client(config: ChildConfig) -> tuple[Any, Any] | None:
@@ -148,10 +207,12 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
 
     from motion.allocator import tune_process
 
+    from .dbcache import CacheFull
     from .engine_cache import EngineCache
     from .execute import execute_job
     from .fencing import Fence, FencedStore
 
+    die_with_parent(parent)
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="segue-parent-watch").start()
     tune_process()
     for module in config.plugins:
@@ -176,6 +237,7 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
         disk_cache_bytes=config.disk_cache_bytes,
         object_cache=object_cache,
     )
+    store.parent = parent
     cache = EngineCache(config.engine_cache_bytes)
     events.send(("ready", os.getpid()))
     while True:
@@ -201,17 +263,10 @@ def _child_main(tasks: Connection, events: Connection, cancel: Any, config: Chil
         def on_load(loading: bool, seq: int = seq) -> None:
             events.send(("load", seq, loading, time.monotonic()))
 
-        execute_job(
-            store,
-            job_id,
-            kind,
-            payload,
-            publish,
-            should_stop,
-            cache,
-            attempt,
-            on_load=on_load,
-        )
+        try:
+            execute_job(store, job_id, kind, payload, publish, should_stop, cache, attempt, on_load=on_load)
+        except CacheFull as exc:
+            events.send(("release", seq, str(exc)))
         events.send(("end", seq))
 
 
@@ -462,8 +517,13 @@ class EngineProcess:
             elif task.loading_since is not None:
                 task.started += now - task.loading_since  # the load is not the job's time
                 task.loading_since = None
+        elif kind == "release":
+            task.released = str(message[2])
         elif kind == "end":
-            self._finish(task, "finished", "")
+            if task.released is not None:
+                self._finish(task, "released", task.released)
+            else:
+                self._finish(task, "finished", "")
 
     def _finish(self, task: Task, outcome: Outcome, detail: str) -> None:
         with self._lock:

@@ -366,7 +366,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--redis", help="Redis URL, e.g. redis://127.0.0.1:6379/0 (default $SEGUE_REDIS_URL; one is needed)"
     )
-    p.add_argument("--data", help="data directory shared with the API (default $SEGUE_DATA_DIR)")
+    p.add_argument(
+        "--data",
+        help="this worker's local directory (default $SEGUE_DATA_DIR or ./segue-data): its cache of "
+        "databases when $SEGUE_STORE_URL names an object store, else the store itself (then the same "
+        "directory as the API's)",
+    )
     p.add_argument("--name", help="worker name (default host-pid)")
     p.add_argument(
         "--no-warm", action="store_true", help="do not compile the control kernels before the first job"

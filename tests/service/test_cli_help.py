@@ -111,3 +111,11 @@ def test_worker_without_any_redis_url_says_so(
     finally:
         get_settings.cache_clear()
     assert "give --redis URL or set SEGUE_REDIS_URL" in capsys.readouterr().err
+
+
+def test_worker_data_help_calls_it_this_workers_own_directory() -> None:
+    """Across hosts a worker's ``--data`` is its own cache, shared with nobody (issue 39)."""
+    worker = _subcommands()["worker"]
+    data = next(a for a in worker._actions if "--data" in a.option_strings)
+    assert "shared with the API" not in str(data.help)
+    assert "cache" in str(data.help) and "SEGUE_STORE_URL" in str(data.help)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import resource
 import shutil
 import signal
 import socket
@@ -210,11 +211,20 @@ def worker_thread(redis_url: str, store: Store, name: str, **fields: Any) -> Ite
 
 
 def spawn_worker(
-    redis_url: str, store: Store, name: str, log: Path | None = None, **settings: str
+    redis_url: str,
+    store: Store,
+    name: str,
+    log: Path | None = None,
+    data_dir: Path | None = None,
+    file_size_limit: int | None = None,
+    **settings: str,
 ) -> subprocess.Popen[bytes]:
     """A ``segue worker`` process (heartbeat 0.2 s, TTL 5 s, 100-ms blocking reads; ``settings``:
     more :class:`workers.settings.Settings` fields as their ``SEGUE_*`` variables, e.g.
-    ``heartbeat_ttl_s="600"``; its stderr appended to ``log`` when given). The TTL bounds how soon a
+    ``heartbeat_ttl_s="600"``; its stderr appended to ``log`` when given; ``data_dir``: its own
+    local directory, default the store's; ``file_size_limit``: the largest file it and its engine
+    process may write, bytes (``RLIMIT_FSIZE``: beyond it a write fails with ``EFBIG``, as on a
+    full disk)). The TTL bounds how soon a
     killed worker's job is taken over; with 1 s, a live worker that a loaded machine left unscheduled
     for 0.8 s had its job taken by another as if it had died."""
     own = {"heartbeat_s": "0.2", "heartbeat_ttl_s": "5.0", "block_ms": "100", "log_level": "WARNING"}
@@ -225,11 +235,28 @@ def spawn_worker(
         SEGUE_STORE_URL=store.url,
     )
     env.update({f"SEGUE_{key.upper()}": value for key, value in {**own, **settings}.items()})
-    cmd = [sys.executable, "-m", "service.cli", "worker", "--redis", redis_url, "--data", str(store.root)]
+    data = str(data_dir or store.root)
+    cmd = [
+        sys.executable,
+        "-m",
+        "service.cli",
+        "worker",
+        "--redis",
+        redis_url,
+        "--data",
+        data,
+        "--name",
+        name,
+    ]
+
+    def limit() -> None:
+        if file_size_limit is not None:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (file_size_limit, file_size_limit))
+
     if log is None:
-        return subprocess.Popen([*cmd, "--name", name], env=env, cwd=REPO)
+        return subprocess.Popen(cmd, env=env, cwd=REPO, preexec_fn=limit)
     with log.open("ab") as sink:
-        return subprocess.Popen([*cmd, "--name", name], env=env, cwd=REPO, stderr=sink)
+        return subprocess.Popen(cmd, env=env, cwd=REPO, stderr=sink, preexec_fn=limit)
 
 
 @contextlib.contextmanager

@@ -8,6 +8,10 @@ for a cancel: a test that cancels after seeing them then knows exactly which sol
 however long the cancel takes to arrive on a loaded machine. With ``go_file`` it waits (the same
 way) until that file exists before its first step: a test can kill it mid-job at its leisure. Each
 solution is a real excerpt of the database's first clip (10 + i frames), so results download.
+
+The ``held`` database kind (engine ``held``) builds like ``clips`` but, like a long real build,
+reports progress every ``tick_s`` until ``go_file`` exists (polling ``should_stop``): a test can
+kill a worker in the middle of a build that keeps talking to it.
 """
 
 from __future__ import annotations
@@ -18,9 +22,10 @@ from typing import Literal
 
 from pydantic import Field
 
-from engines.base import Engine, EngineError, Run, Solution, Stopped
+from engines.base import Arrays, Emitter, Engine, EngineError, Run, ShouldStop, Solution, Stopped
+from engines.library import MotionLibrary
 from engines.registry import register
-from schemas.bases import JobRequestBase
+from schemas.bases import DatabaseSpecBase, JobRequestBase
 from schemas.databases import ClipsDatabaseSpec
 
 
@@ -94,3 +99,37 @@ class ScriptedEngine(Engine[ScriptedRequest, ClipsDatabaseSpec]):
                 )
             )
         return Stopped.work
+
+
+class HeldSpec(DatabaseSpecBase):
+    """A clips database whose build reports progress until ``go_file`` exists."""
+
+    kind: Literal["held"] = "held"
+    go_file: str = Field(description="the build ends once this file exists")
+    tick_s: float = Field(default=0.01, gt=0, le=10, description="seconds between progress events")
+
+
+class HeldRequest(JobRequestBase):
+    engine: Literal["held"] = "held"
+
+
+@register
+class HeldEngine(Engine[HeldRequest, HeldSpec]):
+    name = "held"
+    kind = "held"
+    request_model = HeldRequest
+    spec_model = HeldSpec
+
+    @classmethod
+    def build(cls, spec: HeldSpec, library: MotionLibrary, emit: Emitter, should_stop: ShouldStop) -> Arrays:
+        ticks = 0
+        while not os.path.exists(spec.go_file):
+            if should_stop():
+                raise InterruptedError("build cancelled")
+            ticks += 1
+            emit.progress(0.5, f"held build: tick {ticks}")
+            time.sleep(spec.tick_s)
+        return {}
+
+    def search(self, request: HeldRequest, run: Run) -> Stopped:
+        raise EngineError("the held engine only builds")

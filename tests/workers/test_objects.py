@@ -97,3 +97,19 @@ def test_unreachable_store_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> 
     store._client = boto3.client("s3", config=Config(retries={"max_attempts": 1}, connect_timeout=1))
     with pytest.raises(StoreUnavailable, match="unreachable"):
         store.get("clips/a.json")
+
+
+def test_aws_region_is_the_s3_clients_region(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """``AWS_REGION`` (what the AWS SDKs and CLI v2 read) names the region, and wins over
+    ``AWS_DEFAULT_REGION`` when both are set; botocore alone read only the latter."""
+    pytest.importorskip("boto3")
+    monkeypatch.setenv("AWS_CONFIG_FILE", str(tmp_path / "none"))  # no profile's region
+    monkeypatch.setenv("AWS_ACCESS_KEY_ID", "k")
+    monkeypatch.setenv("AWS_SECRET_ACCESS_KEY", "s")
+    monkeypatch.delenv("AWS_DEFAULT_REGION", raising=False)
+    monkeypatch.setenv("AWS_REGION", "eu-west-3")
+    assert S3Objects("bucket").client.meta.region_name == "eu-west-3"
+    monkeypatch.setenv("AWS_DEFAULT_REGION", "us-west-2")
+    assert S3Objects("bucket").client.meta.region_name == "eu-west-3"
+    monkeypatch.delenv("AWS_REGION")
+    assert S3Objects("bucket").client.meta.region_name == "us-west-2"

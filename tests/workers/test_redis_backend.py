@@ -11,9 +11,11 @@ import pytest
 import redis
 
 from schemas import EventType, JobEvent, JobStatus
+from workers.event_archive import read_archive
 from workers.redis_backend import RedisBackend
-from workers.redis_events import EventPublisher, read_archive
+from workers.redis_events import EventPublisher
 from workers.redis_keys import RedisKeys
+from workers.redis_queue import TAKE_LUA, principal_list
 from workers.store import NotFoundError, Store
 
 from .conftest import GUARD_S, add_database, new_job, run, synth, wait_for, worker_thread
@@ -36,6 +38,14 @@ async def wait_archived(store: Store, job_id: str, count: int, timeout: float = 
     while len(read_archive(store, job_id)) < count:
         assert time.monotonic() < deadline, f"job {job_id}: archive not written within {timeout} s"
         await asyncio.sleep(0.02)
+
+
+def take_as(client: redis.Redis, consumer: str) -> str:
+    """Deliver the next waiting job to ``consumer`` as a worker takes it; its stream entry id."""
+    take = client.register_script(TAKE_LUA)
+    got = take(keys=[KEYS.queues, KEYS.queues_turn, KEYS.jobs], args=[KEYS.group, consumer])
+    assert got, "a job was waiting"
+    return str(got[0])
 
 
 def stream_events(client: redis.Redis, job_id: str) -> list[JobEvent]:
@@ -145,9 +155,10 @@ def test_resume_after_replays_exactly_the_missed_events(
             assert await collect(other, job.id, after=7) == []
         finally:
             await other.close()
-        # Redis forgot the job (retention): status and events come from the store's archive, which
-        # the worker writes just after publishing the terminal event
+        # Redis forgot the job (retention): status and events come from the store's archive and
+        # record, which the worker writes just after publishing the terminal event (in that order)
         await wait_archived(store, job.id, len(full))
+        await asyncio.to_thread(wait_for, lambda: store.job_info(job.id).status.finished)
         rclient.delete(KEYS.events(job.id), KEYS.job(job.id))
         third = RedisBackend(store, redis_url)
         await third.start()
@@ -235,7 +246,7 @@ def test_submit_is_idempotent_and_unknown_jobs_raise(
             job, payload = synth(store, "nodb")
             first = await backend.submit(job, "synth", payload)
             again = await backend.submit(job, "synth", payload)
-            assert first == again and rclient.xlen(KEYS.jobs) == 1
+            assert first == again and rclient.llen(principal_list(KEYS, None)) == 1
             assert [e.type for e in stream_events(rclient, job.id)] == ["queued"]
             with pytest.raises(NotFoundError):
                 await backend.status("nosuchjob")
@@ -266,7 +277,7 @@ def test_failed_job_and_dead_letter_after_max_deliveries(
 
     doomed = run(submit({"request": {"engine": "scripted", "database": db, "steps": 2}}))
     # a worker "ghost" took it and died; it was already redelivered once (2 deliveries so far)
-    [[_, [(entry_id, _fields)]]] = rclient.xreadgroup(KEYS.group, "ghost", {KEYS.jobs: ">"}, count=1)
+    entry_id = take_as(rclient, "ghost")
     rclient.xclaim(KEYS.jobs, KEYS.group, "ghost", 0, [entry_id], retrycount=2)
     failing = run(submit({"request": {"engine": "scripted", "database": db, "steps": 3, "fail_at": 1}}))
     rclient.xadd(KEYS.jobs, {"job": "x", "kind": "synth"})  # malformed: no payload
@@ -334,7 +345,7 @@ def test_reclaim_hung_worker_and_own_leftovers(redis_url: str, rclient: redis.Re
     # with the name of the worker about to start, which left an entry behind
     rclient.set(KEYS.worker("zombie"), "{}", ex=60)
     for consumer in ("zombie", "t1"):
-        [[_, [(entry_id, _fields)]]] = rclient.xreadgroup(KEYS.group, consumer, {KEYS.jobs: ">"}, count=1)
+        entry_id = take_as(rclient, consumer)
         if consumer == "zombie":
             rclient.xclaim(KEYS.jobs, KEYS.group, "zombie", 0, [entry_id], idle=60_000, justid=True)
     with worker_thread(redis_url, store, "t1"):
