@@ -207,6 +207,35 @@ class Settings(BaseSettings):
         description="segue serve: open HTTP and WebSocket connections kept at once; one more is "
         "answered 503 and closed at once (the open-files limit is raised to fit, when allowed)",
     )
+    max_connections_per_address: int = Field(
+        default=512,
+        ge=1,
+        description="segue serve: open connections (HTTP and WebSocket) from one client address; one "
+        "more is answered 503 too_many_connections and closed at once",
+    )
+    max_connections_per_principal: int = Field(
+        default=256,
+        ge=1,
+        description="segue serve, with tokens: requests in progress and open WebSockets of one "
+        "principal; one more is answered 503 too_many_connections (and closed) before its body is read",
+    )
+    request_deadline_s: float = Field(
+        default=600.0,
+        gt=0,
+        description="segue serve: a request's headers and body must have arrived within this many "
+        "seconds of its start (408 and the connection closed otherwise; the handler's own time, a "
+        "long-poll or a WebSocket, does not count)",
+    )
+    min_body_rate: int = Field(
+        default=1024,
+        ge=0,
+        description="segue serve: slowest request body, bytes per second: t seconds into a body at "
+        "least min_body_rate x (t - body_rate_grace_s) bytes must have arrived (408 and the connection "
+        "closed otherwise; time the server itself stops reading does not count; 0: no minimum)",
+    )
+    body_rate_grace_s: float = Field(
+        default=10.0, gt=0, description="segue serve: seconds a body may send slowly before min_body_rate"
+    )
 
     @field_validator("api_tokens", "admins", "allowed_hosts", "cors_origins", mode="before")
     @classmethod
