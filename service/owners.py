@@ -70,11 +70,13 @@ def hold(
     response: Response,
     name: str | None = None,
     restore: Callable[[], None] | None = None,
+    more: dict[str, Any] | None = None,
 ) -> None:
-    """Record the principal as a holder of a content-addressed upload under its own ``name``
-    (``restore`` writes the bytes back when another holder deleted them meanwhile); the answer is
-    200 instead of 201 when it held the same bytes already."""
-    if not store.add_owner(kind, item_id, principal.name, record(name), restore):
+    """Record the principal as a holder of a content-addressed upload under its own ``name`` (and
+    ``more`` of its own facts, e.g. a clip's ``units``; an earlier record is kept) (``restore``
+    writes the bytes back when another holder deleted them meanwhile); the answer is 200 instead
+    of 201 when it held the same bytes already."""
+    if not store.add_owner(kind, item_id, principal.name, record(name, **(more or {})), restore):
         response.status_code = status.HTTP_200_OK
 
 

@@ -4,13 +4,13 @@ get and delete them."""
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from motion.samples import upload_units
-from motion.units import METRES_PER_UNIT
+from motion.units import METRES_PER_UNIT, guess_units
 from schemas import ClipInfo
 
 from ..deps import BackendDep, MetricsDep, ParseLimiterDep, PrincipalDep, SettingsDep, StoreDep
@@ -68,29 +68,66 @@ async def upload_clip(
 
     A bundled sample's own file (as ``GET /samples`` serves it) is read in the unit the sample
     catalogue declares unless ``units`` says otherwise. Stored once per content hash: 201 for a
-    new clip, 200 when you uploaded the same bytes before
-    (409 ``units_conflict`` when that upload declared or was guessed other ``units``).
+    new clip, 200 when you uploaded the same bytes before (409 ``units_conflict`` when you uploaded
+    them in other ``units``). Bytes another principal uploaded answer as if you were the first: in
+    your ``units`` (declared, or guessed as for a new upload), whatever theirs.
     """
     file_name, data = await read_upload(request, settings.max_upload_bytes, name)
     existing = await run_in_threadpool(stored, store.clip_info, data)
+    own: dict[str, Any] = {}
     if existing is None:
         unit = units.value if units is not None else upload_units(file_name, data)
         existing = await parse_upload(
-            file_name, data, unit, settings.bvh_limits, store, backend, metrics, runner, limiter
-        )
-    elif units is not None and units.value != existing.units:
-        raise ApiError(
-            409,
-            "units_conflict",
-            f"these bytes were uploaded before as clip {existing.id} in units {existing.units!r}; a clip's "
-            f"units cannot change (delete it first to upload it again with units={units.value!r})",
-            {"clip": existing.id, "units": existing.units},
-        )
+            file_name, data, unit, settings.bvh_limits, store, backend, metrics, runner, limiter,
+            principal.name,
+        )  # fmt: skip
+    elif principal.name in await run_in_threadpool(store.owners, "clips", existing.id):
+        mine = await run_in_threadpool(seen, store, principal, "clips", existing)
+        if units is not None and units.value != mine.units:
+            raise ApiError(
+                409,
+                "units_conflict",
+                f"you uploaded these bytes before as clip {mine.id} in units {mine.units!r}; a clip's "
+                f"units cannot change (delete it first to upload it again with units={units.value!r})",
+                {"clip": mine.id, "units": mine.units},
+            )
+    else:
+        own = holder_units(existing, file_name, data, units.value if units is not None else None)
     clip = existing
     await run_in_threadpool(
-        hold, store, principal, "clips", clip.id, response, file_name, lambda: store.restore_clip(clip, data)
+        hold,
+        store,
+        principal,
+        "clips",
+        clip.id,
+        response,
+        file_name,
+        lambda: store.restore_clip(clip, data),
+        own,
     )
     return await run_in_threadpool(seen, store, principal, "clips", clip)
+
+
+def holder_units(shared: ClipInfo, file_name: str, data: bytes, units: str | None) -> dict[str, Any]:
+    """A new holder's own ``units`` and ``height_m`` for bytes another principal uploaded, as a
+    first upload would have read them (``units`` declared, else the sample catalogue's, else the
+    guess from the height); empty when they are the shared record's. Raises
+    :class:`~service.errors.ApiError` 400 for a unit a glTF file cannot have (as a first upload)."""
+    if shared.format == "gltf":
+        if units not in (None, "m"):
+            raise ApiError(
+                400,
+                "invalid_bvh",
+                f"{file_name}: a glTF file is in metres (glTF's rule); units {units!r} do not apply",
+            )
+        return {}
+    if shared.units not in METRES_PER_UNIT:
+        return {}
+    file_height = shared.height_m / METRES_PER_UNIT[shared.units]
+    unit = units or upload_units(file_name, data) or guess_units(file_height).units
+    if unit == shared.units or unit not in METRES_PER_UNIT:
+        return {}
+    return {"units": unit, "height_m": round(file_height * METRES_PER_UNIT[unit], 4)}
 
 
 @router.get("", response_model=list[ClipInfo], responses=responses(401))

@@ -80,7 +80,10 @@ def resolve_clips(
                 {"index": i, field: ref},
             ) from None
         name = source.name or ClipSource(bvh=source.bvh or info.name).display_name()
-        resolved.append(source.model_copy(update={"clip": info.id, "bvh": None, "name": name}))
+        update: dict[str, Any] = {"clip": info.id, "bvh": None, "name": name}
+        if source.units is None and info.units != store.clip_info(info.id).units:
+            update["units"] = info.units  # the principal's own unit for shared bytes
+        resolved.append(source.model_copy(update=update))
     names = [c.display_name() for c in resolved]
     repeated = sorted({n for n in names if names.count(n) > 1})
     if repeated:
@@ -369,20 +372,30 @@ async def get_database(
 
 @router.delete("/{db_id}", **delete_route(409))
 def delete_database(db_id: str, store: StoreDep, principal: PrincipalDep) -> Response:
-    """Delete your database (409 while it is being built, or while unfinished jobs use it). The data
-    goes when no other principal holds the same database."""
+    """Delete your database (409 while it is being built, or while your unfinished jobs use it). The
+    data goes when no other principal holds the same database; other principals' jobs on it are
+    theirs (your hold goes, their data stays)."""
     info = store.database_info(database_for(store, principal, db_id).id)  # the shared record: the build
     if info.status in (DatabaseStatus.queued, DatabaseStatus.building) and _usable(store, info):
         raise conflict("database_building", f"database {db_id} is {info.status.value}; delete it once built")
     users = [
-        j.id
+        j
         for j in store.list_jobs()
         if j.database == db_id and j.id != info.build_job and not j.status.finished
     ]
-    if users:
+    mine = [j.id for j in users if principal.may(j.owner)]
+    if mine:
         raise conflict(
             "database_in_use",
-            f"{len(users)} unfinished job(s) use database {db_id}; cancel them or wait for them to end",
-            {"jobs": users[:20]},
+            f"{len(mine)} unfinished job(s) of yours use database {db_id}; cancel them or wait for them "
+            "to end",
+            {"jobs": mine[:20]},
+        )
+    if len(users) > len(mine) and not (store.owners("databases", db_id) - {principal.name}):
+        # the last hold, and jobs of others (an admin's) still read the data: not now, naming none
+        raise conflict(
+            "database_in_use",
+            f"database {db_id} is still in use; try again later",
+            {"jobs": []},
         )
     return release(store, principal, "databases", db_id, store.delete_database)
