@@ -73,8 +73,10 @@ async def result_download(
     metrics: Metrics,
     runner: TaskRunner,
     limiter: anyio.CapacityLimiter,
+    owner: str | None = None,
 ) -> Response:
-    """The download ``spec`` asks for, streamed from the store (made first when it is not there)."""
+    """The download ``spec`` asks for, streamed from the store (made first when it is not there, by
+    ``owner``'s small job when a worker makes it)."""
     key = spec.key()
     try:
         fh = await run_in_threadpool(store.open_export, spec.job, key)
@@ -88,7 +90,7 @@ async def result_download(
             await run_in_threadpool(store.put_export, spec.job, key, data)
             return _response(spec, data)
         payload = task_payload("export", spec=spec.to_dict())
-        await runner.run(f"export:{spec.job}:{key}", payload, store, backend, metrics)
+        await runner.run(f"export:{spec.job}:{key}", payload, store, backend, metrics, owner=owner)
         fh = await run_in_threadpool(store.open_export, spec.job, key)
     return StreamingResponse(_chunks(fh), media_type=MEDIA_TYPES[spec.format], headers=_headers(spec, fh))
 

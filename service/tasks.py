@@ -48,8 +48,11 @@ class TaskRunner:
         backend: JobBackend,
         metrics: Metrics,
         wait_s: float = TASK_WAIT_S,
+        owner: str | None = None,
     ) -> dict[str, Any]:
-        """The ``done`` data of the small job ``payload`` (one per ``key`` at a time).
+        """The ``done`` data of the small job ``payload`` (one per ``key`` at a time), submitted as
+        ``owner``'s (the principal whose request needs it: fair scheduling serves it in that
+        principal's line; a request joining one already running leaves it the first one's).
 
         Raises :class:`~service.errors.ApiError`: the task's own error (its ``status`` and
         ``code``), 503 when the backend cannot take it, the job was lost or ``wait_s`` passed."""
@@ -57,7 +60,7 @@ class TaskRunner:
         if future is None:
             future = asyncio.get_running_loop().create_future()
             self._pending[key] = future
-            driver = asyncio.create_task(self._drive(key, payload, future, store, backend, metrics))
+            driver = asyncio.create_task(self._drive(key, payload, future, store, backend, metrics, owner))
             self._drivers.add(driver)
             driver.add_done_callback(self._drivers.discard)
         try:
@@ -100,10 +103,11 @@ class TaskRunner:
         store: Store,
         backend: JobBackend,
         metrics: Metrics,
+        owner: str | None,
     ) -> None:
         job_id: str | None = None
         try:
-            info = await submit_job(store, backend, metrics, JobKind.task, payload)
+            info = await submit_job(store, backend, metrics, JobKind.task, payload, owner=owner)
             job_id = info.id
             outcome: dict[str, Any] = {"type": EventType.cancelled, "data": {}}
             async for event in backend.events(job_id):

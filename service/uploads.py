@@ -163,9 +163,10 @@ async def parse_upload(
     metrics: Metrics,
     runner: TaskRunner,
     limiter: anyio.CapacityLimiter,
+    owner: str | None = None,
 ) -> ClipInfo:
     """Check and store a new BVH or glTF upload (module docstring): 400 ``invalid_bvh`` naming the
-    fault, as :func:`motion.io.parse_motion` words it."""
+    fault, as :func:`motion.io.parse_motion` words it. A worker's parse is ``owner``'s small job."""
     if is_gltf(data):
         inline = len(data) <= INLINE_GLTF_BYTES
     else:
@@ -185,7 +186,8 @@ async def parse_upload(
     )
     keep = False  # whether a small job may still read the staged bytes (it removes them when it ends)
     try:
-        done = await runner.run(f"clip:{digest}:{units}:{file_name}", payload, store, backend, metrics)
+        key = f"clip:{digest}:{units}:{file_name}"
+        done = await runner.run(key, payload, store, backend, metrics, owner=owner)
     except ApiError as exc:
         keep = exc.code == "task_pending"
         raise

@@ -397,7 +397,7 @@ async def download_result(
         max_joint_frames=settings.max_joint_frames,
         bvh_limits=(limits.max_joints, limits.max_frames, limits.max_bytes),
     )
-    return await result_download(spec, store, backend, metrics, runner, limiter)
+    return await result_download(spec, store, backend, metrics, runner, limiter, principal.name)
 
 
 @router.get("/{job_id}/report", response_model=Report, responses=responses(401, 404, 409, 422))

@@ -7,13 +7,16 @@ from __future__ import annotations
 import gzip
 import io
 import time
+from collections.abc import Callable
 from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
 
 from motion import BvhError, parse_bvh, write_bvh
+from schemas import JobInfo
 from tests.motion.retarget.characters import character
+from workers.settings import Settings
 from workers.store import Store
 
 from .conftest import WALK_CLIP, wait_events
@@ -142,3 +145,24 @@ def test_a_resampling_past_the_joint_frame_limit_is_413(
     override_settings(max_joint_frames=5000)
     r = client.get(f"/v1/jobs/{walk_job}/result", params={"format": "json", "fps": 1000})
     assert "joint-frames" in error_of(r, 413, "too_large")["message"]
+
+
+@pytest.mark.usefixtures("worker_sized")
+def test_a_worker_parse_is_the_uploaders_small_job(
+    client: TestClient, override_settings: Callable[..., Settings], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Fair scheduling serves a small job in its principal's line: it is submitted with its owner."""
+    override_settings(api_tokens=("gina:tg",))
+    backend = client.app.state.backend  # type: ignore[attr-defined]
+    submitted: list[tuple[str, str | None]] = []
+    submit_job = backend.submit
+
+    async def spy(info: JobInfo, kind: str, payload: dict[str, Any]) -> JobInfo:
+        submitted.append((info.kind.value, info.owner))
+        return await submit_job(info, kind, payload)
+
+    monkeypatch.setattr(backend, "submit", spy)
+    data = _bvh(4.0 + time.time_ns() % 971 / 1e4)
+    r = client.post("/v1/clips", files={"file": ("gina.bvh", data)}, headers={"Authorization": "Bearer tg"})
+    assert r.status_code == 201, r.text
+    assert submitted == [("task", "gina")]
