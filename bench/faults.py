@@ -50,7 +50,9 @@ Rows for the hardening of issue 40 (each printed with its own fields):
 * ``upload_parse_killed``: a 100k-frame upload (gzip) whose parse a 300-MiB memory limit kills:
   the answer and the staged objects left in the store;
 * ``fairness_embedded`` / ``fairness_redis``: ``bench/fairness.py`` (256 jobs of one principal, one of
-  another: how long the other's waits, in jobs).
+  another: how long the other's waits, in jobs);
+* ``slow_clients``: ``bench/slow_clients.py`` (4,100 connections of one principal from one address,
+  each trickling a body byte every 12 s: another principal's request latency and failures).
 
 Per scenario: ``jobs_lost`` (jobs not ``done``), ``events_lost`` (gaps in the event ids the clients
 received), ``duplicate_executions`` (a run of a job still publishing after a later run of the same
@@ -784,6 +786,7 @@ SCENARIOS = (
     "upload_parse_killed",
     "fairness_embedded",
     "fairness_redis",
+    "slow_clients",
 )
 
 
@@ -801,6 +804,10 @@ def run_one(name: str, args: argparse.Namespace) -> dict[str, Any]:
         from fairness import fairness  # bench/fairness.py
 
         return fairness(name.removeprefix("fairness_"))
+    if name == "slow_clients":
+        from slow_clients import slow_clients  # bench/slow_clients.py
+
+        return slow_clients(connections=4100)
     return scenario(name, args.jobs, args.budget, args.hang)
 
 
