@@ -320,3 +320,10 @@ def test_a_websocket_outlives_the_request_timeouts(deadlines: str) -> None:
             events.append(json.loads(message))
     assert events[-1]["type"] == "done"
     assert sum(e["type"] == "solution" for e in events) == 32
+
+
+def test_a_long_poll_outlives_the_request_timeouts(deadlines: str) -> None:
+    job = long_job(deadlines, TOKENS["alice"], steps=32)  # ends in 8 s: twice the deadline
+    headers = {"Authorization": f"Bearer {TOKENS['alice']}"}
+    r = httpx.get(f"{deadlines}/v1/jobs/{job}/events?wait=60", headers=headers, timeout=GUARD_S)
+    assert r.status_code == 200 and r.json()[-1]["type"] == "done"
