@@ -98,7 +98,7 @@ class GuardedH11Protocol(H11Protocol):
     min_body_rate: float = 1024.0
     body_rate_grace_s: float = 10.0
     max_connections: int = 4096
-    max_per_address: int = 1024
+    max_per_address: int = 512
     per_address: ClassVar[Counter[str]] = Counter()
     _rejected = 0
     _next_warning = 0.0
