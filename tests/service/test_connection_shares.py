@@ -116,6 +116,25 @@ def answer_and_eof(sock: socket.socket) -> bytes:
     return received
 
 
+def trickle_until_closed(sock: socket.socket, pause: float = 0.25) -> tuple[bytes, bool]:
+    """Send a body byte every ``pause`` seconds, reading what comes back, until the server closes
+    the connection (True) or the guard passes (False)."""
+    sock.settimeout(pause)
+    answer = b""
+    for _ in range(int(GUARD_S / pause)):
+        try:
+            sock.sendall(b"x")
+            chunk = sock.recv(65536)
+        except TimeoutError:
+            continue
+        except OSError:  # reset, broken pipe: closed
+            return answer, True
+        if not chunk:
+            return answer, True
+        answer += chunk
+    return answer, False
+
+
 def status_of(answer: bytes) -> int:
     return int(answer.split(b" ", 2)[1]) if answer.startswith(b"HTTP/1.1 ") else 0
 
@@ -226,8 +245,9 @@ def test_a_body_without_a_valid_token_is_refused_before_it_is_read(shares: str) 
     for token, json_route in ((None, False), ("not-a-token", False), (None, True)):
         sock = open_from(shares, "127.0.0.2")
         sock.sendall(upload_head(token, json_route=json_route) + b"{")  # 99,999 bytes owed
-        answer = answer_and_eof(sock)
+        answer, closed = trickle_until_closed(sock)  # the body goes on trickling after the answer
         sock.close()
+        assert closed, "the connection stayed open after its 401"
         assert status_of(answer) == 401
         assert error_code(answer) == ("unauthorized" if token is None else "invalid_token")
         assert b"www-authenticate: bearer" in answer.lower()
