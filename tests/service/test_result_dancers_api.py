@@ -12,7 +12,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from motion import parse_bvh
-from tests.motion.retarget.gltf_rig import read_glb, unreal_character_glb
+from tests.glb_writer import read_glb
+from tests.motion.retarget.gltf_rig import unreal_character_glb
 
 from .conftest import wait_events
 from .test_api import error_of
