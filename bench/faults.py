@@ -86,6 +86,7 @@ from websockets.sync.client import connect
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from motion.samples import sample_path  # noqa: E402
+from tests.processes import engine_children  # noqa: E402
 
 SEGUE = [sys.executable, "-m", "service.cli"]
 JSON = {"Content-Type": "application/json"}
@@ -283,24 +284,6 @@ class Topology:
                 proc.kill()
                 proc.wait()
         self.log.close()
-
-
-def engine_children(pid: int) -> list[int]:
-    """PIDs of a process's engine children (``multiprocessing`` spawn children, not the tracker)."""
-    out = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            kids = (task / "children").read_text().split()
-        except OSError:
-            continue
-        for kid in kids:
-            try:
-                cmd = Path(f"/proc/{kid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
-            except OSError:
-                continue
-            if "resource_tracker" not in cmd:
-                out.append(int(kid))
-    return out
 
 
 def job_log_facts(http: httpx.Client, job: str) -> dict[str, int]:
