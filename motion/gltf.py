@@ -222,34 +222,6 @@ def _sample(doc: GltfFile, sampler: dict[str, Any], path: str, grid: Array) -> A
     return np.asarray(out, dtype=np.float64)
 
 
-def _joint_order(doc: GltfFile, joints: list[int]) -> tuple[list[int], list[int]]:
-    """The skin's joints, each after its parent joint (a stable topological order), and each one's
-    parent in that order (``-1`` for the root)."""
-    in_skin = set(joints)
-
-    def joint_parent(node: int) -> int | None:
-        p = doc.parent.get(node)
-        while p is not None and p not in in_skin:
-            p = doc.parent.get(p)
-        return p
-
-    order: list[int] = []
-    placed: set[int] = set()
-    pending = list(dict.fromkeys(joints))
-    while pending:
-        ready = next((i for i in pending if joint_parent(i) is None or joint_parent(i) in placed), None)
-        if ready is None:
-            raise doc.error("the skin's joint hierarchy has a cycle")
-        order.append(ready)
-        placed.add(ready)
-        pending.remove(ready)
-    index = {node: k for k, node in enumerate(order)}
-    parents = [-1 if joint_parent(n) is None else index[joint_parent(n)] for n in order]  # type: ignore[index]
-    if sum(p < 0 for p in parents) != 1:
-        raise doc.error("the skin's joints do not form one tree (several root joints)")
-    return order, parents
-
-
 def parse_gltf(
     raw: bytes,
     *,
@@ -292,7 +264,7 @@ def parse_gltf(
             raise doc.error("the glTF file has no skin: a motion needs a skinned skeleton")
         raise doc.error(f"animation {label!r} moves none of the skins' joints")
     skin = doc.doc["skins"][skin_index]
-    order, parents = _joint_order(doc, [int(j) for j in skin["joints"]])
+    order, parents = doc.skin_tree([int(j) for j in skin["joints"]])
     if len(order) > max_joints:
         raise doc.error(f"the skin has {len(order)} joints, more than the {max_joints}-joint limit")
     start, fps, frames = _timing(doc, anim)

@@ -17,9 +17,10 @@ Units are the file's: metres, Y up, as glTF says; node rotations are quaternions
 
 from __future__ import annotations
 
+import heapq
 import json
 import struct
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -190,6 +191,44 @@ class GltfFile:
             return {int(i): of(int(i)) for i in wanted}
         except RecursionError:
             raise self.error("the node hierarchy has a cycle") from None
+
+    def skin_tree(self, joints: Sequence[int]) -> tuple[list[int], list[int]]:
+        """A skin's ``joints`` (node indices), each after its parent joint, and each one's parent
+        in that order (``-1`` for the root). The order is the skin's own where it already puts
+        parents first (any glTF exporter's), else the first joint in skin order whose parent is
+        placed (Kahn's algorithm on skin positions: O(J log J)). A joint's parent is its nearest
+        ancestor node in the skin. Raises for a cycle or for joints that form several trees."""
+        unique = list(dict.fromkeys(int(j) for j in joints))
+        at = {node: k for k, node in enumerate(unique)}
+        up: dict[int, int | None] = {}
+        for node in unique:
+            p = self.parent.get(node)
+            for _ in range(len(self.nodes) + 1):  # every node above it at most: a cycle ends here
+                if p is None or p in at:
+                    break
+                p = self.parent.get(p)
+            else:
+                raise self.error("the node hierarchy has a cycle")
+            up[node] = p
+        children: dict[int, list[int]] = {}
+        for node in unique:
+            if up[node] is not None:
+                children.setdefault(int(up[node]), []).append(node)  # type: ignore[arg-type]
+        ready = [at[n] for n in unique if up[n] is None]
+        heapq.heapify(ready)
+        order: list[int] = []
+        while ready:
+            node = unique[heapq.heappop(ready)]
+            order.append(node)
+            for c in children.get(node, []):
+                heapq.heappush(ready, at[c])
+        if len(order) != len(unique):
+            raise self.error("the skin's joint hierarchy has a cycle")
+        index = {node: k for k, node in enumerate(order)}
+        parents = [-1 if up[n] is None else index[int(up[n])] for n in order]  # type: ignore[arg-type]
+        if sum(p < 0 for p in parents) != 1:
+            raise self.error("the skin's joints do not form one tree (several root joints)")
+        return order, parents
 
     def name(self, i: int) -> str:
         """Node ``i``'s name (``joint<i>`` when it has none)."""

@@ -60,39 +60,11 @@ def gltf_character(raw: bytes, name: str = "character") -> Motion:
         raise MotionError("the glTF file has no skin with joints: a character needs a skinned skeleton")
     try:
         joints = [int(j) for j in skins[0]["joints"]]
-        parent = gltf.parent
-        in_skin = set(joints)
-
-        def joint_parent(node: int) -> int | None:
-            p = parent.get(node)
-            for _ in range(len(nodes) + 1):  # every node above it at most: a cycle ends here
-                if p is None or p in in_skin:
-                    return p
-                p = parent.get(p)
-            raise MotionError("the glTF node hierarchy has a cycle")
-
-        # the skin's order, each joint after its parent (a stable topological order)
-        order: list[int] = []
-        placed: set[int] = set()
-        pending = list(dict.fromkeys(joints))
-        while pending:
-            ready = next((i for i in pending if joint_parent(i) is None or joint_parent(i) in placed), None)
-            if ready is None:
-                raise MotionError("the skin's joint hierarchy has a cycle")
-            order.append(ready)
-            placed.add(ready)
-            pending.remove(ready)
-        index = {node: k for k, node in enumerate(order)}
-        parents = []
-        for node in order:
-            p = joint_parent(node)
-            parents.append(-1 if p is None else index[p])
+        order, parents = gltf.skin_tree(joints)
         world = gltf.world_matrices(order)
         mats = [world[i] for i in order]
     except (IndexError, KeyError, TypeError, ValueError, RecursionError) as exc:
         raise MotionError(f"malformed glTF node hierarchy: {exc}") from None
-    if sum(p < 0 for p in parents) != 1:
-        raise MotionError("the skin's joints do not form one tree (several root joints)")
     pos = np.array([m[:3, 3] for m in mats])
     rots = []
     for m in mats:
