@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from . import rotations as rot
-from .errors import ExportError, MotionError
+from .errors import ExportError, GltfError, MotionError
 
 Array = npt.NDArray[np.float64]
 
@@ -47,21 +47,21 @@ _CHUNK_JSON = 0x4E4F534A
 
 def gltf_json(raw: bytes) -> dict[str, Any]:
     """The JSON document of a GLB container or a ``.gltf`` text, without reading its buffers
-    (:class:`MotionError` when it is not glTF)."""
+    (:class:`GltfError` when it is not glTF)."""
     try:
         if raw[:4] == b"glTF":
             if len(raw) < 20:
-                raise MotionError("truncated GLB header")
+                raise GltfError("truncated GLB header")
             length, kind = struct.unpack_from("<II", raw, 12)
             if kind != _CHUNK_JSON:
-                raise MotionError("the GLB's first chunk is not JSON")
+                raise GltfError("the GLB's first chunk is not JSON")
             doc = json.loads(raw[20 : 20 + length])
         else:
             doc = json.loads(raw)
     except (ValueError, struct.error) as exc:
-        raise MotionError(f"not a glTF/GLB file: {exc}") from None
+        raise GltfError(f"not a glTF/GLB file: {exc}") from None
     if not isinstance(doc, dict):
-        raise MotionError("not a glTF document (its JSON is not an object)")
+        raise GltfError("not a glTF document (its JSON is not an object)")
     return doc
 
 
@@ -92,7 +92,7 @@ class GltfFile:
         try:
             doc, buffer = read_gltf(raw, base_dir)
         except (ExportError, MotionError) as exc:
-            raise MotionError(f"{source}: {exc}") from None
+            raise GltfError(f"{source}: {exc}") from None
         return cls(doc, buffer, source)
 
     @classmethod
@@ -102,11 +102,11 @@ class GltfFile:
         try:
             doc = gltf_json(raw)
         except MotionError as exc:
-            raise MotionError(f"{source}: {exc}") from None
+            raise GltfError(f"{source}: {exc}") from None
         return cls(doc, b"", source)
 
-    def error(self, problem: str) -> MotionError:
-        return MotionError(f"{self.source}: {problem}")
+    def error(self, problem: str) -> GltfError:
+        return GltfError(f"{self.source}: {problem}")
 
     def accessor(self, index: int) -> Array:
         """Accessor ``index`` as ``(count, width)`` float64: normalised integers scaled to [0, 1]
@@ -133,6 +133,8 @@ class GltfFile:
                 offset=start,
                 strides=(stride, dtype.itemsize),
             )
+        except MotionError:
+            raise
         except (IndexError, KeyError, TypeError, ValueError) as exc:
             raise self.error(f"malformed accessor {index}: {exc}") from None
         out = raw.astype(np.float64)
@@ -158,6 +160,8 @@ class GltfFile:
             t = np.array(node.get("translation", [0.0, 0.0, 0.0]), dtype=np.float64)
             q = np.array(node.get("rotation", [0.0, 0.0, 0.0, 1.0]), dtype=np.float64)
             s = np.array(node.get("scale", [1.0, 1.0, 1.0]), dtype=np.float64)
+        except MotionError:
+            raise
         except (TypeError, ValueError) as exc:
             raise self.error(f"node {i} has a malformed transform: {exc}") from None
         if not (t.shape == (3,) and q.shape == (4,) and s.shape == (3,)):

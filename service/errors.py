@@ -7,6 +7,7 @@ each to a status and a stable code, so a client mistake is always a 4xx with a m
 exception                                  status  code
 =========================================  ======  =====================
 ``workers.store.NotFoundError``            404     ``not_found``
+``motion.GltfError`` (a glTF input)        400     ``invalid_gltf``
 ``motion.BvhError`` / ``motion.MotionError``  400  ``invalid_bvh``
 ``RequestValidationError`` / ``ValidationError``  422  ``invalid_request``
 ``schemas.jobs.RequestError``              422     ``invalid_request``
@@ -36,7 +37,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
 from engines.registry import UnavailableError
-from motion import MotionError
+from motion import GltfError, MotionError
 from schemas import ErrorBody, ErrorResponse
 from schemas.jobs import RequestError
 from workers.backend import BackendUnavailable
@@ -125,7 +126,8 @@ async def _not_found(request: Request, exc: Exception) -> JSONResponse:
 
 
 async def _motion_error(request: Request, exc: Exception) -> JSONResponse:
-    return error_response(400, "invalid_bvh", str(exc))
+    code = "invalid_gltf" if isinstance(exc, GltfError) else "invalid_bvh"
+    return error_response(400, code, str(exc))
 
 
 async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
