@@ -300,3 +300,25 @@ def test_a_stalled_store_is_503_and_not_ready(
         fake.resume()
     assert client.get(f"/v1/jobs/{job}").status_code == 200
     assert client.get("/readyz").status_code == 200
+
+
+@pytest.mark.parametrize(
+    ("health", "part"),
+    [
+        ({"backend": "redis", "redis": "unreachable", "error": "Redis is unreachable: refused"}, "redis"),
+        ({"backend": "redis", "redis": "ok", "workers": 0}, "workers"),
+        ({"backend": "embedded", "workers": 2, "workers_ready": 0}, "workers"),
+    ],
+)
+def test_readiness_names_the_part_that_is_not_ready(
+    client: TestClient, app: FastAPI, monkeypatch: pytest.MonkeyPatch, health: dict[str, Any], part: str
+) -> None:
+    """Redis away or no live worker: ``/readyz`` is 503 naming it, while the store is ``ok``."""
+
+    async def facts() -> dict[str, Any]:
+        return health
+
+    monkeypatch.setattr(app.state.backend, "health", facts)
+    r = client.get("/readyz")
+    assert r.status_code == 503
+    assert list(r.json()["not_ready"]) == [part] and r.json()["checks"]["store"] == "ok"
