@@ -265,7 +265,7 @@ def stalling_store(app: FastAPI, client: TestClient) -> Iterator[Callable[[], St
     assert isinstance(timed, TimedObjects)
     inner, timeout = timed.inner, timed.timeout_s
     fake = Stalling(inner)
-    timed.inner, timed.timeout_s = fake, 0.5  # type: ignore[assignment]
+    timed.inner, timed.timeout_s = fake, 0.5
     try:
         yield lambda: fake
     finally:

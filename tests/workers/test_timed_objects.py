@@ -37,7 +37,7 @@ def test_a_stalled_call_times_out_and_queued_ones_never_run(tmp_path: Path) -> N
     local = LocalObjects(tmp_path)
     local.put("a/b", b"x")
     gate = Gate(local)
-    timed = TimedObjects(gate, 0.2, threads=1)  # type: ignore[arg-type]
+    timed = TimedObjects(gate, 0.2, threads=1)
     try:
         with pytest.raises(StoreTimeout) as stalled:
             timed.get("a/b")
