@@ -215,7 +215,7 @@ def quiet_response(request: Request, exc: BaseException) -> Response | None:
     error raised from it): 503 ``store_unavailable`` for a stalled store, 499 for a client that
     left; None for anything else."""
     if disconnected(exc):
-        log.info("%s %s: the client disconnected", request.method, request.url.path)
+        log.warning("%s %s: the client disconnected (499)", request.method, request.url.path)
         return Response(status_code=CLIENT_CLOSED)
     stalled = _stalled(exc)
     if stalled is None and isinstance(exc, BaseExceptionGroup):
@@ -236,7 +236,9 @@ def _store_unavailable(request: Request, exc: StoreTimeout) -> JSONResponse:
 async def _client_disconnect(request: Request, exc: Exception) -> Response:
     """The client closed the connection before its request was read: one log line, and 499 (the
     status nobody receives; counted as such in ``/metrics``, not as a 500)."""
-    log.info("%s %s: the client disconnected before its request was read", request.method, request.url.path)
+    log.warning(
+        "%s %s: the client disconnected before its request was read (499)", request.method, request.url.path
+    )
     return Response(status_code=CLIENT_CLOSED)
 
 
