@@ -29,6 +29,7 @@ from schemas.movement_graph import GraphEdits
 from workers.backend import JobBackend
 from workers.embedded import EmbeddedBackend
 from workers.engine_cache import EngineCache
+from workers.objects import S3Objects
 from workers.store import Store
 from workers.timed_objects import TimedObjects
 
@@ -84,6 +85,8 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings: Settings = app.state.settings
     load_plugins(settings.engine_plugins)  # the engine processes get them from the settings too
     store = Store.from_settings(settings)
+    if isinstance(store.objects, S3Objects):  # a stalled call's thread ends too (botocore's own timeout)
+        store.objects.read_timeout_s = settings.store_timeout_s
     timed = TimedObjects(store.objects, settings.store_timeout_s)
     store.objects = timed  # no request waits on a stalled store past SEGUE_STORE_TIMEOUT_S
     backend = make_backend(settings, store)

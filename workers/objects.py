@@ -267,6 +267,9 @@ class S3Objects:
         self.url = f"s3://{bucket}/{self.prefix}" if self.prefix else f"s3://{bucket}"
         self._client = client
         self._lock = threading.Lock()
+        self.read_timeout_s: float | None = None
+        """botocore's socket read timeout (None: its 60 s); set before the first call to bound a
+        call on a stalled server (the API sets ``SEGUE_STORE_TIMEOUT_S``)."""
 
     @property
     def client(self) -> Any:
@@ -280,7 +283,10 @@ class S3Objects:
                         raise StoreUnavailable(
                             "an s3:// store needs boto3: pip install 'segue[s3]'"
                         ) from None
-                    config = Config(retries={"max_attempts": 5, "mode": "standard"}, connect_timeout=5)
+                    timeouts = {"read_timeout": self.read_timeout_s} if self.read_timeout_s else {}
+                    config = Config(
+                        retries={"max_attempts": 5, "mode": "standard"}, connect_timeout=5, **timeouts
+                    )
                     self._client = boto3.client("s3", config=config, region_name=s3_region())
         return self._client
 
