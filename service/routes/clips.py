@@ -18,7 +18,7 @@ from ..errors import ApiError, responses
 from ..jsonbody import delete_route
 from ..owners import clip_for, hold, only_visible, release, seen
 from ..tasks import TaskRunnerDep
-from ..uploads import parse_upload, read_upload, stored, upload_body
+from ..uploads import INLINE_UPLOAD_BYTES, Upload, parse_upload, receive_upload, stored, upload_body
 
 router = APIRouter(prefix="/v1/clips", tags=["clips"])
 
@@ -41,6 +41,7 @@ _UPLOAD_BODY = upload_body(
         401,
         413,
         422,
+        503,
         extra={200: {"model": ClipInfo, "description": "the same bytes were already uploaded"}},
     ),
 )
@@ -71,26 +72,41 @@ async def upload_clip(
     new clip, 200 when you uploaded the same bytes before
     (409 ``units_conflict`` when that upload declared or was guessed other ``units``).
     """
-    file_name, data = await read_upload(request, settings.max_upload_bytes, name)
-    existing = await run_in_threadpool(stored, store.clip_info, data)
-    if existing is None:
-        unit = units.value if units is not None else upload_units(file_name, data)
-        existing = await parse_upload(
-            file_name, data, unit, settings.bvh_limits, store, backend, metrics, runner, limiter
+    async with receive_upload(request, settings.max_upload_bytes, name) as upload:
+        existing = await run_in_threadpool(stored, store.clip_info, upload.digest)
+        if existing is None:
+            unit = units.value if units is not None else await _sample_units(upload)
+            existing = await parse_upload(
+                upload, unit, settings.bvh_limits, store, backend, metrics, runner, limiter
+            )
+        elif units is not None and units.value != existing.units:
+            raise ApiError(
+                409,
+                "units_conflict",
+                f"these bytes were uploaded before as clip {existing.id} in units {existing.units!r}; a "
+                f"clip's units cannot change (delete it first to upload it again with units={units.value!r})",
+                {"clip": existing.id, "units": existing.units},
+            )
+        clip = existing
+        await run_in_threadpool(
+            hold,
+            store,
+            principal,
+            "clips",
+            clip.id,
+            response,
+            upload.name,
+            lambda: store.restore_clip(clip, upload.file),
         )
-    elif units is not None and units.value != existing.units:
-        raise ApiError(
-            409,
-            "units_conflict",
-            f"these bytes were uploaded before as clip {existing.id} in units {existing.units!r}; a clip's "
-            f"units cannot change (delete it first to upload it again with units={units.value!r})",
-            {"clip": existing.id, "units": existing.units},
-        )
-    clip = existing
-    await run_in_threadpool(
-        hold, store, principal, "clips", clip.id, response, file_name, lambda: store.restore_clip(clip, data)
-    )
     return await run_in_threadpool(seen, store, principal, "clips", clip)
+
+
+async def _sample_units(upload: Upload) -> str | None:
+    """The declared unit of an upload that is a bundled sample's own file (samples are small: a
+    larger upload is none)."""
+    if upload.size > INLINE_UPLOAD_BYTES:
+        return None
+    return upload_units(upload.name, await run_in_threadpool(upload.read))
 
 
 @router.get("", response_model=list[ClipInfo], responses=responses(401))
