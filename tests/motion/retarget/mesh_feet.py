@@ -7,6 +7,7 @@ animation. Used by ``tests/motion/retarget/test_feet_mesh.py`` and ``bench/feet_
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -39,9 +40,16 @@ def _doc(raw: bytes) -> dict[str, Any]:
     return dict(json.loads(raw[20 : 20 + n]))
 
 
-def measure(out_glb: bytes, source: Motion, rest: Motion, naming: str) -> dict[str, Any]:
+def measure(
+    out_glb: bytes,
+    source: Motion,
+    rest: Motion,
+    naming: str,
+    name_of: Callable[[str, str], str] = name_in,
+) -> dict[str, Any]:
     """The figures of one output file (``out_glb``: ``source`` retargeted onto the character
-    whose rest pose, in Unreal names, is ``rest``, its joints named after ``naming``):
+    whose rest pose, in Unreal names, is ``rest``, its joints named after ``naming``: joint ``u``
+    of ``rest`` is ``name_of(naming, u)`` in the file):
 
     * ``sink_cm``: how far the mesh goes under its rest floor (the bind pose's lowest vertex), at
       worst (``sink_frame``);
@@ -75,7 +83,7 @@ def measure(out_glb: bytes, source: Motion, rest: Motion, naming: str) -> dict[s
     sides: dict[str, tuple[int, ...]] = {}
     for side, s in (("Left", "l"), ("Right", "r")):
         sides[side] = tuple(
-            node_of[name_in(naming, u)] for u in (f"foot_{s}", f"ball_{s}") if name_in(naming, u) in node_of
+            node_of[name_of(naming, u)] for u in (f"foot_{s}", f"ball_{s}") if name_of(naming, u) in node_of
         )
     foot_vertices = {}
     for side, joints in sides.items():

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import struct
+from collections.abc import Callable
 
 import numpy as np
 
@@ -76,16 +77,19 @@ def role_map(naming: str = "own", *, toes: bool = True) -> dict[str, str]:
     }
 
 
-def renamed_glb(raw: bytes, naming: str) -> bytes:
-    """A GLB in Unreal names with its nodes renamed to ``naming`` (:data:`NAMINGS`)."""
-    if naming == "unreal":
-        return raw
+def renamed_glb(raw: bytes, naming: str, rename: Callable[[str], str] | None = None) -> bytes:
+    """A GLB in Unreal names with its joints renamed to ``naming`` (:data:`NAMINGS`), or any GLB
+    with each joint ``n`` renamed to ``rename(n)``."""
+    if rename is None:
+        if naming == "unreal":
+            return raw
+        rename = lambda n: name_in(naming, n)  # noqa: E731
     n = struct.unpack_from("<I", raw, 12)[0]
     doc = json.loads(raw[20 : 20 + n])
     joints = {int(j) for skin in doc.get("skins", []) for j in skin["joints"]}
     for i, node in enumerate(doc["nodes"]):
         if i in joints and "name" in node:
-            node["name"] = name_in(naming, node["name"])
+            node["name"] = rename(node["name"])
     text = json.dumps(doc).encode()
     text += b" " * (-len(text) % 4)
     rest = raw[20 + n :]
