@@ -48,12 +48,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from motion import Motion, Skeleton  # noqa: E402
+from motion import Motion  # noqa: E402
 from motion.export.mannequin import mannequin_glb  # noqa: E402
 from motion.io import load_motion  # noqa: E402
 from motion.refpose import without_reference_lead  # noqa: E402
@@ -69,30 +67,12 @@ from tests.motion.retarget.mesh_feet import measure  # noqa: E402
 from tests.motion.retarget.namings import (  # noqa: E402
     NAMINGS,
     ROLE_OF_UNREAL,
+    bandai_rig,
     game_rig,
     name_in,
 )
 
 DATA = ROOT.parent / "shared" / "data"
-BANDAI_UNREAL = {
-    "Hips": "pelvis", "Spine": "spine_01", "Chest": "spine_02", "Neck": "neck_01", "Head": "head",
-    "Shoulder_L": "clavicle_l", "UpperArm_L": "upperarm_l", "LowerArm_L": "lowerarm_l", "Hand_L": "hand_l",
-    "Shoulder_R": "clavicle_r", "UpperArm_R": "upperarm_r", "LowerArm_R": "lowerarm_r", "Hand_R": "hand_r",
-    "UpperLeg_L": "thigh_l", "LowerLeg_L": "calf_l", "Foot_L": "foot_l", "Toes_L": "ball_l",
-    "UpperLeg_R": "thigh_r", "LowerLeg_R": "calf_r", "Foot_R": "foot_r", "Toes_R": "ball_r",
-}  # fmt: skip
-
-
-def bandai_rig() -> Motion:
-    """Bandai-Namco's skeleton in Unreal names, its first frame (metres): a rest pose from a clip."""
-    m = load_motion(DATA / "bandai-namco" / "dataset-2" / "dataset-2_walk_normal_002.bvh").slice(0, 1)
-    m = m.to_units("m")
-    sk = m.skeleton
-    names = tuple(BANDAI_UNREAL.get(n, n) for n in sk.names)
-    renamed = Skeleton(names, sk.parents, sk.offsets, sk.channels, sk.end_site_parents, sk.end_site_offsets)
-    root = np.array(m.root_positions, copy=True)
-    root[:, [0, 2]] = 0.0
-    return Motion(renamed, root, m.rotations, m.fps, m.joint_translations, m.units, "bandai_rig")
 
 
 def role_map_of(rest: Motion, naming: str, toes: bool) -> dict[str, str]:

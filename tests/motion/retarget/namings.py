@@ -11,14 +11,21 @@ from __future__ import annotations
 import json
 import struct
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
 from motion import Motion, Skeleton
 from motion import rotations as rot
+from motion.io import load_motion
 from motion.skeleton import default_channels
 
 NAMINGS = ("unreal", "mixamo", "own")
+
+BANDAI_WALK = (
+    Path(__file__).resolve().parents[4] / "shared/data/bandai-namco/dataset-2/dataset-2_walk_normal_002.bvh"
+)
+"""A Bandai-Namco clip whose first frame is :func:`bandai_rig` (``../shared/data``)."""
 
 _SIDES = {"l": ("Left", "L"), "r": ("Right", "R")}
 
@@ -124,6 +131,27 @@ def game_rig(root: bool = True) -> Motion:
     )
     q = np.tile(rot.IDENTITY, (1, len(names), 1))
     return Motion(skeleton, offsets[:1].copy(), q, 30.0, units="m", name="game_rig")
+
+
+BANDAI_UNREAL = {
+    "Hips": "pelvis", "Spine": "spine_01", "Chest": "spine_02", "Neck": "neck_01", "Head": "head",
+    "Shoulder_L": "clavicle_l", "UpperArm_L": "upperarm_l", "LowerArm_L": "lowerarm_l", "Hand_L": "hand_l",
+    "Shoulder_R": "clavicle_r", "UpperArm_R": "upperarm_r", "LowerArm_R": "lowerarm_r", "Hand_R": "hand_r",
+    "UpperLeg_L": "thigh_l", "LowerLeg_L": "calf_l", "Foot_L": "foot_l", "Toes_L": "ball_l",
+    "UpperLeg_R": "thigh_r", "LowerLeg_R": "calf_r", "Foot_R": "foot_r", "Toes_R": "ball_r",
+}  # fmt: skip
+
+
+def bandai_rig() -> Motion:
+    """Bandai-Namco's skeleton in Unreal names, its first frame (metres): a rest pose from a clip."""
+    m = load_motion(BANDAI_WALK).slice(0, 1)
+    m = m.to_units("m")
+    sk = m.skeleton
+    names = tuple(BANDAI_UNREAL.get(n, n) for n in sk.names)
+    renamed = Skeleton(names, sk.parents, sk.offsets, sk.channels, sk.end_site_parents, sk.end_site_offsets)
+    root = np.array(m.root_positions, copy=True)
+    root[:, [0, 2]] = 0.0
+    return Motion(renamed, root, m.rotations, m.fps, m.joint_translations, m.units, "bandai_rig")
 
 
 def mannequin_character(naming: str = "unreal", rest: Motion | None = None) -> bytes:
