@@ -9,9 +9,10 @@ a viewer deforms the mesh (linear blend skinning on those points):
 
 * **from the skinned mesh** (:func:`mesh_soles`, a glTF/GLB character with a mesh): the vertices
   weighted mostly to the foot and its toes (at least half their weight in the foot's subtree),
-  within :data:`SOLE_BAND` of the foot's length above the foot's lowest vertex in the rest pose,
-  reduced to the corners of their convex hull (heel and toe parts apart: the lowest point of a
-  rigid set of points, however it turns, is a corner of its hull), with their own skin weights;
+  all of them, not only those near the floor in the rest pose (a source may turn a foot over: a
+  flick that points the sole up puts the top of the foot lowest), reduced to the corners of
+  their convex hull (heel and toe parts apart: the lowest point of a rigid set of points,
+  however it turns, is a corner of its hull), with their own skin weights;
 * **from the bones** (:func:`bone_soles`, a BVH character, a glTF skin without a mesh): a heel
   behind the ankle, the ball under the toe joint (or 70 % of the way from the heel to the tip
   without one) and the toe tip (the toe's End Site or child), each with an inner and an outer
@@ -39,9 +40,6 @@ from .transfer import Pose, tip_positions
 Array = npt.NDArray[np.float64]
 
 SIDES = ("Left", "Right")
-SOLE_BAND = 0.25
-"""Vertices up to this fraction of the foot's length above its lowest vertex (rest pose) can touch
-the floor when the foot turns (a heel landing 30 degrees toe-up, a toe pushing off)."""
 HEEL_BACK = 0.2
 """A bone sole's heel lies this fraction of the foot's length behind the ankle."""
 BALL_AT = 0.7
@@ -178,7 +176,6 @@ def mesh_soles(mesh: BoundMesh, character: Motion, roles: dict[str, int]) -> tup
     m = mesh.reindexed(character.skeleton.names)
     first = character.slice(0, 1)
     rest = Pose.of(first)
-    tips = tip_positions(first, rest)
     scale = 1.0 / character.metres_per_unit  # the mesh is in metres, the character in its units
     # every vertex in the rest pose of the character (the nodes' pose, which may differ from the
     # bind pose a little): skinned by the character's rest pose
@@ -201,9 +198,6 @@ def mesh_soles(mesh: BoundMesh, character: Motion, roles: dict[str, int]) -> tup
                 f"({character.skeleton.names[ankle]!r})"
             )
         idx = np.flatnonzero(on)
-        length = max(_foot_length(rest, tips, ankle, toe), float(np.ptp(placed[idx, 2])), 1e-9)
-        low = placed[idx, 1] <= placed[idx, 1].min() + SOLE_BAND * length
-        idx = idx[low]
         toe_share = np.where(below[m.joints[idx]], m.weights[idx], 0.0).sum(axis=1)
         on_toe = toe_share > 0.5 + 1e-6
         keep = []
