@@ -128,7 +128,8 @@ def feet_report(
     pos, grot = result.fk()
     m = result.metres_per_unit
     lowest = {s.side: s.positions(pos, grot)[:, :, 1].min(axis=1) - floor for s in soles}
-    sink = max(0.0, -float(min(v.min() for v in lowest.values()))) * m
+    under = min(float(s.around(pos, grot)[:, :, 1].min()) - floor for s in soles)
+    sink = max(0.0, -under) * m
     plants = sole_plants(result, groups, soles, floor)
     lifts = [lowest[("Left", "Right")[g]][a:b].max() for g, a, b in plants if ("Left", "Right")[g] in lowest]
     scale = (leg_length(character.global_positions()[0], tr) * character.metres_per_unit) / max(
