@@ -11,6 +11,8 @@ solo and a 20-dancer crowd job, measures the API process's idle RSS, then sends 
 * ``flac_hour``: an hour of 96 kHz stereo FLAC, then jobs dancing to it (1 and 10,000 dancers);
 * ``crowd_json``: the crowd's result as ``?format=json&fps=1000``;
 * ``characters``: six parallel ``GET .../result?character=<the 1.9M-frame clip>``;
+* ``uploads``: eight parallel 60 MiB input-file uploads (``POST /v1/files``, each body streamed
+  by the client in 1 MiB chunks, distinct bytes so none is a duplicate);
 
 while bob submits a trivial job (then cancels it) every 0.5 s. Prints one JSON object: per step
 its HTTP statuses, seconds and the API's peak RSS over idle; overall the peak RSS over idle
@@ -389,6 +391,21 @@ def run(
             return [f.result() for f in futures]
 
     step("characters", [characters])
+
+    def uploads(count: int = 8, mib: int = 60) -> Any:
+        def body(i: int) -> Any:
+            block = bytes((i * 37 + j) % 256 for j in range(256)) * 4096  # 1 MiB
+            for k in range(mib):
+                yield block[k % 256 :] + block[: k % 256]
+
+        def one(i: int) -> Any:
+            r = alice.post("/v1/files", params={"name": f"big{i}.bin"}, content=body(i))
+            return r.status_code
+
+        with ThreadPoolExecutor(count) as pool:
+            return sorted(pool.map(one, range(count)))
+
+    step("uploads", [uploads])
     prober.stop()
     prober.join(10)
     sampler.stop()

@@ -49,6 +49,11 @@ Rows for the hardening of issue 40 (each printed with its own fields):
   ``storage_full``, and the operator's log lines;
 * ``upload_parse_killed``: a 100k-frame upload (gzip) whose parse a 300-MiB memory limit kills:
   the answer and the staged objects left in the store;
+* ``s3_store_stall``: the API (embedded backend) over an S3 store (``moto_server``) that stops
+  answering (SIGSTOP) for ``--stall`` seconds, ``SEGUE_STORE_TIMEOUT_S`` 2: per request made during
+  the stall (``GET /v1/jobs/{id}``, ``GET /v1/jobs``, ``/readyz``, ``/healthz``) its status, code
+  and seconds; after SIGCONT, the seconds until ``/readyz`` is 200 again and whether the job reads
+  back (issue 40 item 9: the stall hung ``GET /v1/jobs/{id}`` over 8 s while ``/healthz`` said ok);
 * ``fairness_embedded`` / ``fairness_redis``: ``bench/fairness.py`` (256 jobs of one principal, one of
   another: how long the other's waits, in jobs);
 * ``slow_clients``: ``bench/slow_clients.py`` (4,100 connections of one principal from one address,
@@ -61,7 +66,7 @@ job, in each job's whole event log read back at the end), ``stale_events`` (even
 last ``started`` that carry another attempt), ``reruns`` (runs after the first) and ``recovery_s``
 (from the fault to the first event any client received afterwards). Prints one JSON object.
 
-    python bench/faults.py [--jobs 4] [--budget 2] [--hang 8] [--trials 3] [--only NAME,...]
+    python bench/faults.py [--jobs 4] [--budget 2] [--hang 8] [--trials 3] [--stall 20] [--only NAME,...]
 
 (the s3 rows need ``pip install -e '.[dev]'``: boto3 and ``moto[server]``)
 """
@@ -79,6 +84,7 @@ import sys
 import tempfile
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -88,6 +94,7 @@ from websockets.sync.client import connect
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from motion.samples import sample_path  # noqa: E402
+from tests.processes import engine_children  # noqa: E402
 
 SEGUE = [sys.executable, "-m", "service.cli"]
 JSON = {"Content-Type": "application/json"}
@@ -285,24 +292,6 @@ class Topology:
                 proc.kill()
                 proc.wait()
         self.log.close()
-
-
-def engine_children(pid: int) -> list[int]:
-    """PIDs of a process's engine children (``multiprocessing`` spawn children, not the tracker)."""
-    out = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            kids = (task / "children").read_text().split()
-        except OSError:
-            continue
-        for kid in kids:
-            try:
-                cmd = Path(f"/proc/{kid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
-            except OSError:
-                continue
-            if "resource_tracker" not in cmd:
-                out.append(int(kid))
-    return out
 
 
 def job_log_facts(http: httpx.Client, job: str) -> dict[str, int]:
@@ -771,6 +760,64 @@ def upload_parse_killed(frames: int = 100_000, memory_mb: int = 300) -> dict[str
         shutil.rmtree(root, ignore_errors=True)
 
 
+def s3_store_stall(stall_s: float = 20.0, timeout_s: float = 2.0) -> dict[str, Any]:
+    """The object store stalls (SIGSTOP of ``moto_server``) under an embedded API with
+    ``SEGUE_STORE_TIMEOUT_S`` ``timeout_s``: what requests made during the stall get, and how soon
+    after SIGCONT the API is ready again."""
+    root = Path(tempfile.mkdtemp(prefix="segue-faults-stall-"))
+    top = Topology(root, None, workers=1, s3=True)
+    top.env["SEGUE_STORE_TIMEOUT_S"] = str(timeout_s)
+    out: dict[str, Any] = {"stall_s": stall_s, "store_timeout_s": timeout_s}
+    try:
+        top.start()
+        http = httpx.Client(base_url=top.url, timeout=120)
+        db = walk_graph(http)
+        job = http.post("/v1/jobs", json={"engine": "graph", "database": db, "frames": 60, "budget_s": 0.5})
+        job_id = job.json()["id"]
+        deadline = time.monotonic() + 120
+        while http.get(f"/v1/jobs/{job_id}").json()["status"] not in ("done", "failed", "cancelled"):
+            if time.monotonic() > deadline:
+                raise RuntimeError("the job did not end")
+            time.sleep(0.2)
+
+        def probe(path: str) -> dict[str, Any]:
+            t0 = time.perf_counter()
+            try:
+                r = http.get(path)
+            except httpx.HTTPError as exc:
+                return {"status": type(exc).__name__, "s": round(time.perf_counter() - t0, 2)}
+            code = (r.json().get("error") or {}).get("code") if r.status_code >= 400 and r.content else None
+            return {"status": r.status_code, "code": code, "s": round(time.perf_counter() - t0, 2)}
+
+        os.kill(top.procs["s3"].pid, signal.SIGSTOP)
+        resume = threading.Timer(stall_s, os.kill, (top.procs["s3"].pid, signal.SIGCONT))
+        resume.start()  # SIGCONT after stall_s whatever the probes wait for (a hanging API too)
+        try:
+            paths = {
+                "job": f"/v1/jobs/{job_id}",
+                "jobs": "/v1/jobs",
+                "readyz": "/readyz",
+                "healthz": "/healthz",
+            }
+            with ThreadPoolExecutor(len(paths)) as pool:
+                during = dict(zip(paths, pool.map(probe, paths.values()), strict=True))
+            out["during_stall"] = during
+            resume.join()
+        finally:
+            resume.cancel()
+            os.kill(top.procs["s3"].pid, signal.SIGCONT)
+        resumed = time.monotonic()
+        while http.get("/readyz").status_code != 200 and time.monotonic() - resumed < 120:
+            time.sleep(0.1)
+        out["ready_again_s"] = round(time.monotonic() - resumed, 2)
+        out["job_after"] = probe(f"/v1/jobs/{job_id}")
+        http.close()
+        return out
+    finally:
+        top.stop()
+        shutil.rmtree(root, ignore_errors=True)
+
+
 SCENARIOS = (
     "embedded_worker_kill",
     "redis_worker_kill",
@@ -784,6 +831,7 @@ SCENARIOS = (
     "terminal_after_done",
     "cache_disk_full",
     "upload_parse_killed",
+    "s3_store_stall",
     "fairness_embedded",
     "fairness_redis",
     "slow_clients",
@@ -800,6 +848,8 @@ def run_one(name: str, args: argparse.Namespace) -> dict[str, Any]:
         return cache_disk_full(args.jobs)
     if name == "upload_parse_killed":
         return upload_parse_killed()
+    if name == "s3_store_stall":
+        return s3_store_stall(args.stall)
     if name.startswith("fairness_"):
         from fairness import fairness  # bench/fairness.py
 
@@ -817,6 +867,7 @@ def main() -> None:
     ap.add_argument("--budget", type=float, default=2.0)
     ap.add_argument("--hang", type=float, default=8.0, help="seconds a hung worker stays stopped")
     ap.add_argument("--trials", type=int, default=3, help="build_worker_kill: tries of the kills")
+    ap.add_argument("--stall", type=float, default=20.0, help="s3_store_stall: seconds the store stalls")
     ap.add_argument("--only", default=",".join(SCENARIOS))
     args = ap.parse_args()
     out = {name: run_one(name, args) for name in args.only.split(",") if name}

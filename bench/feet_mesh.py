@@ -43,46 +43,36 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from motion import Motion, Skeleton  # noqa: E402
+from motion import Motion  # noqa: E402
 from motion.export.mannequin import mannequin_glb  # noqa: E402
 from motion.io import load_motion  # noqa: E402
 from motion.refpose import without_reference_lead  # noqa: E402
+from motion.retarget.character import gltf_character  # noqa: E402
+from tests.motion.retarget.heldout import (  # noqa: E402
+    bpy_interpreter,
+    build_heldout,
+    heldout_glb,
+    heldout_role_map,
+)
+from tests.motion.retarget.heldout import name_of as heldout_name_of  # noqa: E402
 from tests.motion.retarget.mesh_feet import measure  # noqa: E402
 from tests.motion.retarget.namings import (  # noqa: E402
     NAMINGS,
     ROLE_OF_UNREAL,
+    bandai_rig,
     game_rig,
     name_in,
 )
 
 DATA = ROOT.parent / "shared" / "data"
-BANDAI_UNREAL = {
-    "Hips": "pelvis", "Spine": "spine_01", "Chest": "spine_02", "Neck": "neck_01", "Head": "head",
-    "Shoulder_L": "clavicle_l", "UpperArm_L": "upperarm_l", "LowerArm_L": "lowerarm_l", "Hand_L": "hand_l",
-    "Shoulder_R": "clavicle_r", "UpperArm_R": "upperarm_r", "LowerArm_R": "lowerarm_r", "Hand_R": "hand_r",
-    "UpperLeg_L": "thigh_l", "LowerLeg_L": "calf_l", "Foot_L": "foot_l", "Toes_L": "ball_l",
-    "UpperLeg_R": "thigh_r", "LowerLeg_R": "calf_r", "Foot_R": "foot_r", "Toes_R": "ball_r",
-}  # fmt: skip
-
-
-def bandai_rig() -> Motion:
-    """Bandai-Namco's skeleton in Unreal names, its first frame (metres): a rest pose from a clip."""
-    m = load_motion(DATA / "bandai-namco" / "dataset-2" / "dataset-2_walk_normal_002.bvh").slice(0, 1)
-    m = m.to_units("m")
-    sk = m.skeleton
-    names = tuple(BANDAI_UNREAL.get(n, n) for n in sk.names)
-    renamed = Skeleton(names, sk.parents, sk.offsets, sk.channels, sk.end_site_parents, sk.end_site_offsets)
-    root = np.array(m.root_positions, copy=True)
-    root[:, [0, 2]] = 0.0
-    return Motion(renamed, root, m.rotations, m.fps, m.joint_translations, m.units, "bandai_rig")
 
 
 def role_map_of(rest: Motion, naming: str, toes: bool) -> dict[str, str]:
@@ -93,6 +83,41 @@ def role_map_of(rest: Motion, naming: str, toes: bool) -> dict[str, str]:
         for u, role in ROLE_OF_UNREAL.items()
         if u in names and (toes or not role.endswith("Toes"))
     }
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A test character: its rest pose in Unreal names, its GLB in each naming, the role map of
+    its own names (with or without its toes) and where each Unreal joint is in a naming."""
+
+    name: str
+    rest: Motion
+    glb: Callable[[str], bytes]
+    role_map: Callable[[str, bool], dict[str, str]]
+    name_of: Callable[[str, str], str]
+
+
+def mannequin_rig(name: str, rest: Motion) -> Rig:
+    """Segue's mannequin on ``rest`` (Unreal names)."""
+    return Rig(
+        name,
+        rest,
+        lambda naming: mannequin_glb(rest, names=[name_in(naming, n) for n in rest.skeleton.names]),
+        lambda naming, toes: role_map_of(rest, naming, toes),
+        name_in,
+    )
+
+
+def heldout_rig(python: Path, folder: Path) -> Rig:
+    """The held-out character (``tests/motion/retarget/heldout.py``), built by Blender once."""
+    own = build_heldout(python, folder)
+    return Rig(
+        "heldout",
+        gltf_character(heldout_glb(own, "unreal")),
+        lambda naming: heldout_glb(own, naming),
+        lambda naming, toes: {r: j for r, j in heldout_role_map().items() if toes or not r.endswith("Toes")},
+        heldout_name_of,
+    )
 
 
 def sources(folder: Path, full: bool) -> list[tuple[str, Path]]:
@@ -135,28 +160,34 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--code", type=Path, default=ROOT, help="the checkout whose segue retargets")
     ap.add_argument("--keep", type=Path, help="keep the characters and outputs in this folder")
-    ap.add_argument("--quick", action="store_true", help="the bundled sources only, the game rig only")
+    ap.add_argument("--quick", action="store_true", help="the bundled sources only, no Bandai rig")
     args = ap.parse_args()
     folder = args.keep or Path(tempfile.mkdtemp(prefix="feet-mesh-"))
     folder.mkdir(parents=True, exist_ok=True)
     code = args.code.resolve()
-    rigs = [("game-rig", game_rig())]
+    rigs = [mannequin_rig("game-rig", game_rig())]
     if not args.quick and (DATA / "bandai-namco").is_dir():
-        rigs.append(("bandai-rig", bandai_rig()))
+        rigs.append(mannequin_rig("bandai-rig", bandai_rig()))
+    python = bpy_interpreter()
+    if python is not None:
+        rigs.append(heldout_rig(python, folder))
+    else:
+        print("no Blender (SEGUE_BPY_PYTHON): no held-out character rows", file=sys.stderr)
     rows = []
     for src_name, src_path in sources(folder, not args.quick):
         source = _load_source(src_path)
-        for rig_name, rest in rigs:
+        for rig in rigs:
+            rig_name, rest = rig.name, rig.rest
             for naming in NAMINGS:
                 char = folder / f"{rig_name}-{naming}.glb"
-                char.write_bytes(mannequin_glb(rest, names=[name_in(naming, n) for n in rest.skeleton.names]))
+                char.write_bytes(rig.glb(naming))
                 out = folder / f"{src_name}-on-{rig_name}-{naming}.glb"
-                role_map = role_map_of(rest, naming, toes=True) if naming == "own" else None
+                role_map = rig.role_map(naming, True) if naming == "own" else None
                 t0 = time.perf_counter()
                 ok, message = _retarget(code, src_path, char, out, role_map)
                 map_toes = role_map is not None
                 if not ok and role_map is not None:  # a map cannot name toes the source lacks there
-                    role_map = role_map_of(rest, naming, toes=False)
+                    role_map = rig.role_map(naming, False)
                     ok, message = _retarget(code, src_path, char, out, role_map)
                     map_toes = False
                 row: dict[str, Any] = {"source": src_name, "rig": rig_name, "naming": naming}
@@ -166,7 +197,7 @@ def main() -> None:
                     rows.append({**row, "error": message.splitlines()[-1] if message else "failed"})
                     continue
                 row["retarget_s"] = round(time.perf_counter() - t0, 2)
-                row.update(measure(out.read_bytes(), source, rest, naming))
+                row.update(measure(out.read_bytes(), source, rest, naming, rig.name_of))
                 rows.append(row)
                 print(json.dumps(row), file=sys.stderr)
     worst: dict[str, dict[str, Any]] = {}

@@ -35,6 +35,11 @@ class BvhError(MotionError):
         super().__init__(f"{where}: {problem}")
 
 
+class GltfError(MotionError):
+    """A glTF file (GLB, or ``.gltf`` with its buffers) could not be read as a motion or a
+    character."""
+
+
 class ExportError(MotionError):
     """A motion could not be written in the requested format or convention."""
 

@@ -42,7 +42,6 @@ Everything else a glTF file holds (meshes, materials, morph targets, cameras) is
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,7 +51,8 @@ import numpy as np
 import numpy.typing as npt
 
 from . import rotations as rot
-from .errors import MotionError, ReadWarning
+from .errors import ReadWarning
+from .gltf_file import GltfFile
 from .motion import Motion
 from .skeleton import DEFAULT_JOINT_CHANNELS, DEFAULT_ROOT_CHANNELS, Skeleton
 
@@ -64,16 +64,6 @@ _MOVING_BONE_M = 1e-6
 """A bone vector that changes by more than this over the animation (metres) makes its joint a
 translated one (position channels)."""
 _POSITIONS = ("Xposition", "Yposition", "Zposition")
-_COMPONENTS = {
-    5120: np.int8,
-    5121: np.uint8,
-    5122: np.int16,
-    5123: np.uint16,
-    5125: np.uint32,
-    5126: np.float32,
-}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
-_NORMALIZED = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
 _PATHS = {"translation": 3, "rotation": 4, "scale": 3}
 
 
@@ -96,84 +86,7 @@ class GltfAnimation:
     skin: int
 
 
-class _Doc:
-    """A glTF document and its one binary buffer, with accessor reads and node relations."""
-
-    def __init__(self, raw: bytes, base_dir: str | Path | None, source: str) -> None:
-        from .export.gltf_doc import read_gltf
-
-        self.source = source
-        try:
-            self.doc, self.buffer = read_gltf(raw, base_dir)
-        except MotionError as exc:
-            raise MotionError(f"{source}: {exc}") from None
-        self.nodes: list[dict[str, Any]] = list(self.doc.get("nodes") or [])
-        self.parent: dict[int, int] = {}
-        for i, node in enumerate(self.nodes):
-            for c in node.get("children") or []:
-                self.parent[int(c)] = i
-
-    def error(self, problem: str) -> MotionError:
-        return MotionError(f"{self.source}: {problem}")
-
-    def accessor(self, index: int) -> Array:
-        """Accessor ``index`` as ``(count, width)`` float64 (normalised integers scaled to [-1, 1])."""
-        try:
-            acc = self.doc["accessors"][int(index)]
-            if "sparse" in acc:
-                raise self.error(f"accessor {index} is sparse, which Segue does not read; re-export the file")
-            dtype = np.dtype(_COMPONENTS[int(acc["componentType"])]).newbyteorder("<")
-            width = _WIDTH[str(acc["type"])]
-            count = int(acc["count"])
-            if "bufferView" not in acc:
-                return np.zeros((count, width))
-            view = self.doc["bufferViews"][int(acc["bufferView"])]
-            start = int(view.get("byteOffset", 0)) + int(acc.get("byteOffset", 0))
-            item = dtype.itemsize * width
-            stride = int(view.get("byteStride", 0)) or item
-            if count and start + stride * (count - 1) + item > len(self.buffer):
-                raise self.error(f"accessor {index} reads past the end of its buffer")
-            raw = np.ndarray(
-                shape=(count, width),
-                dtype=dtype,
-                buffer=bytes(self.buffer),
-                offset=start,
-                strides=(stride, dtype.itemsize),
-            )
-        except (IndexError, KeyError, TypeError, ValueError) as exc:
-            raise self.error(f"malformed accessor {index}: {exc}") from None
-        out = raw.astype(np.float64)
-        if acc.get("normalized") and int(acc["componentType"]) in _NORMALIZED:
-            out = np.maximum(out / _NORMALIZED[int(acc["componentType"])], -1.0)
-        if not np.all(np.isfinite(out)):
-            raise self.error(f"accessor {index} holds values that are not finite")
-        return out
-
-    def local(self, i: int) -> tuple[Array, Array, Array]:
-        """A node's own translation ``(3,)``, rotation ``(4,)`` (x, y, z, w) and scale ``(3,)``."""
-        node = self.nodes[i]
-        if "matrix" in node:
-            m = np.array(node["matrix"], dtype=np.float64).reshape(4, 4).T
-            scale = np.linalg.norm(m[:3, :3], axis=0)
-            if np.any(scale <= 0) or np.linalg.det(m[:3, :3]) < 0:
-                raise self.error(f"node {i} ({node.get('name', '')!r}) has a degenerate or mirroring matrix")
-            q = rot.from_matrix(m[:3, :3] / scale)
-            return m[:3, 3].copy(), np.asarray(q, dtype=np.float64), scale
-        t = np.array(node.get("translation", [0.0, 0.0, 0.0]), dtype=np.float64)
-        q = np.array(node.get("rotation", [0.0, 0.0, 0.0, 1.0]), dtype=np.float64)
-        s = np.array(node.get("scale", [1.0, 1.0, 1.0]), dtype=np.float64)
-        if not (t.shape == (3,) and q.shape == (4,) and s.shape == (3,)):
-            raise self.error(f"node {i} has a malformed translation, rotation or scale")
-        norm = float(np.linalg.norm(q))
-        if not norm > 0:
-            raise self.error(f"node {i} has a zero rotation quaternion")
-        return t, q / norm, s
-
-    def name(self, i: int) -> str:
-        return str(self.nodes[i].get("name") or f"joint{i}")
-
-
-def _animations(doc: _Doc) -> list[dict[str, Any]]:
+def _animations(doc: GltfFile) -> list[dict[str, Any]]:
     anims = doc.doc.get("animations") or []
     if not isinstance(anims, list):
         raise doc.error("'animations' is not a list")
@@ -184,7 +97,7 @@ def _anim_name(anim: dict[str, Any], index: int) -> str:
     return str(anim.get("name") or f"animation{index}")
 
 
-def _skin_of(doc: _Doc, anim: dict[str, Any]) -> int:
+def _skin_of(doc: GltfFile, anim: dict[str, Any]) -> int:
     """The skin whose joints the animation's channels move most (``-1``: none)."""
     targets = {int(c["target"]["node"]) for c in anim.get("channels") or [] if "node" in c.get("target", {})}
     best, most = -1, 0
@@ -196,7 +109,7 @@ def _skin_of(doc: _Doc, anim: dict[str, Any]) -> int:
     return best
 
 
-def _timing(doc: _Doc, anim: dict[str, Any]) -> tuple[float, float, int]:
+def _timing(doc: GltfFile, anim: dict[str, Any]) -> tuple[float, float, int]:
     """``(start_s, fps, frames)`` of an animation (module docstring, *Frames*)."""
     starts, ends, rate = [], [], 0.0
     for sampler in anim.get("samplers") or []:
@@ -222,7 +135,7 @@ def gltf_animations(
     raw: bytes, *, base_dir: str | Path | None = None, source: str = "<bytes>"
 ) -> list[GltfAnimation]:
     """Every animation of a glTF/GLB file (see :class:`GltfAnimation`), in file order."""
-    doc = _Doc(raw, base_dir, source)
+    doc = GltfFile.read(raw, base_dir, source)
     out = []
     for i, anim in enumerate(_animations(doc)):
         start, fps, frames = _timing(doc, anim)
@@ -234,7 +147,7 @@ def gltf_animations(
     return out
 
 
-def _pick(doc: _Doc, animation: str | int | None) -> tuple[int, dict[str, Any]]:
+def _pick(doc: GltfFile, animation: str | int | None) -> tuple[int, dict[str, Any]]:
     anims = _animations(doc)
     names = [_anim_name(a, i) for i, a in enumerate(anims)]
     if not anims:
@@ -258,7 +171,7 @@ def _pick(doc: _Doc, animation: str | int | None) -> tuple[int, dict[str, Any]]:
     return k, anims[k]
 
 
-def _sample(doc: _Doc, sampler: dict[str, Any], path: str, grid: Array) -> Array:
+def _sample(doc: GltfFile, sampler: dict[str, Any], path: str, grid: Array) -> Array:
     """A sampler's values at the times ``grid (F,)``: ``(F, 3 or 4)`` (module docstring)."""
     times = doc.accessor(int(sampler["input"]))[:, 0]
     values = doc.accessor(int(sampler["output"]))
@@ -309,34 +222,6 @@ def _sample(doc: _Doc, sampler: dict[str, Any], path: str, grid: Array) -> Array
     return np.asarray(out, dtype=np.float64)
 
 
-def _joint_order(doc: _Doc, joints: list[int]) -> tuple[list[int], list[int]]:
-    """The skin's joints, each after its parent joint (a stable topological order), and each one's
-    parent in that order (``-1`` for the root)."""
-    in_skin = set(joints)
-
-    def joint_parent(node: int) -> int | None:
-        p = doc.parent.get(node)
-        while p is not None and p not in in_skin:
-            p = doc.parent.get(p)
-        return p
-
-    order: list[int] = []
-    placed: set[int] = set()
-    pending = list(dict.fromkeys(joints))
-    while pending:
-        ready = next((i for i in pending if joint_parent(i) is None or joint_parent(i) in placed), None)
-        if ready is None:
-            raise doc.error("the skin's joint hierarchy has a cycle")
-        order.append(ready)
-        placed.add(ready)
-        pending.remove(ready)
-    index = {node: k for k, node in enumerate(order)}
-    parents = [-1 if joint_parent(n) is None else index[joint_parent(n)] for n in order]  # type: ignore[index]
-    if sum(p < 0 for p in parents) != 1:
-        raise doc.error("the skin's joints do not form one tree (several root joints)")
-    return order, parents
-
-
 def parse_gltf(
     raw: bytes,
     *,
@@ -370,7 +255,7 @@ def parse_gltf(
         Naming ``source``: not glTF, no animation or no such animation, no skin the animation
         moves, malformed accessors or samplers, or a limit exceeded.
     """
-    doc = _Doc(raw, base_dir, source)
+    doc = GltfFile.read(raw, base_dir, source)
     index, anim = _pick(doc, animation)
     label = _anim_name(anim, index)
     skin_index = _skin_of(doc, anim)
@@ -379,7 +264,7 @@ def parse_gltf(
             raise doc.error("the glTF file has no skin: a motion needs a skinned skeleton")
         raise doc.error(f"animation {label!r} moves none of the skins' joints")
     skin = doc.doc["skins"][skin_index]
-    order, parents = _joint_order(doc, [int(j) for j in skin["joints"]])
+    order, parents = doc.skin_tree([int(j) for j in skin["joints"]])
     if len(order) > max_joints:
         raise doc.error(f"the skin has {len(order)} joints, more than the {max_joints}-joint limit")
     start, fps, frames = _timing(doc, anim)
@@ -470,7 +355,7 @@ def parse_gltf(
     return motion
 
 
-def _depth(doc: _Doc, i: int) -> int:
+def _depth(doc: GltfFile, i: int) -> int:
     d = 0
     while i in doc.parent and d <= len(doc.nodes):
         i = doc.parent[i]
@@ -483,7 +368,7 @@ def _as_motion(
     parents: npt.NDArray[np.intp],
     names: list[str],
     sites: list[int],
-    doc: _Doc,
+    doc: GltfFile,
     wpos: dict[int, Array],
     wrot: dict[int, Array],
     fps: float,
@@ -591,23 +476,3 @@ def _rerooted(motion: Motion, keep: Sequence[int], root: int, pose: tuple[Array,
         else np.zeros((motion.num_frames, 0, 3))
     )
     return Motion(skeleton, pose[0].copy(), rotations, motion.fps, jt, motion.units, motion.name)
-
-
-def gltf_header(raw: bytes) -> dict[str, Any]:
-    """The JSON document of a GLB container or ``.gltf`` text without reading its buffers
-    (:class:`MotionError` when it is not glTF): what an API process can afford on an upload."""
-    import json
-
-    try:
-        if raw[:4] == b"glTF":
-            length, kind = struct.unpack_from("<II", raw, 12)
-            if kind != 0x4E4F534A:
-                raise MotionError("the GLB's first chunk is not JSON")
-            doc = json.loads(raw[20 : 20 + length])
-        else:
-            doc = json.loads(raw)
-    except (ValueError, struct.error) as exc:
-        raise MotionError(f"not a glTF/GLB file: {exc}") from None
-    if not isinstance(doc, dict):
-        raise MotionError("not a glTF document (its JSON is not an object)")
-    return doc

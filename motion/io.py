@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from .bvh import BvhLimits, parse_bvh, write_bvh
-from .errors import ExportError, MotionError, ReadWarning
+from .errors import ExportError, GltfError, MotionError, ReadWarning
 from .export.arrays import write_json, write_npz
 from .export.events import contact_events_of, sorted_events
 from .export.targets import get_target, output_units, to_target
@@ -84,32 +84,49 @@ def parse_motion(
     name when empty). ``warnings``: when given, the departures from the format the reader accepted
     (:class:`~motion.errors.ReadWarning`) are appended to it. Raises :class:`MotionError` (a
     :class:`~motion.errors.BvhError` for BVH) naming ``source``."""
-    from .gltf import is_gltf, parse_gltf
+    from .gltf import is_gltf
 
     if is_gltf(data):
-        if units not in (None, "m"):
-            raise MotionError(
-                f"{source}: a glTF file is in metres (glTF's rule); units {units!r} do not apply"
-            )
-        lim = limits or BvhLimits()
-        motion = parse_gltf(
-            data,
-            animation=animation,
-            name=name or None,
-            source=source,
-            base_dir=base_dir,
-            max_joints=lim.max_joints,
-            max_joint_frames=lim.max_joint_frames,
-            warnings=warnings,
-        )
-        if motion.num_frames > lim.max_frames:
-            raise MotionError(
-                f"{source}: {motion.num_frames} frames is over the {lim.max_frames}-frame limit"
-            )
-        return motion
+        try:
+            return _gltf_motion(data, units, limits, animation, name, source, warnings, base_dir)
+        except GltfError:
+            raise
+        except MotionError as exc:  # every fault of a glTF input is named as one (400 invalid_gltf)
+            raise GltfError(str(exc)) from None
     if animation is not None:
         raise MotionError(f"{source}: a BVH file holds one motion; 'animation' is for glTF files")
     return parse_bvh(data, units=units, limits=limits, source=source, name=name, warnings=warnings)
+
+
+def _gltf_motion(
+    data: bytes,
+    units: str | None,
+    limits: BvhLimits | None,
+    animation: str | int | None,
+    name: str,
+    source: str,
+    warnings: list[ReadWarning] | None,
+    base_dir: str | Path | None,
+) -> Motion:
+    """:func:`parse_motion` of a glTF file."""
+    from .gltf import parse_gltf
+
+    if units not in (None, "m"):
+        raise MotionError(f"{source}: a glTF file is in metres (glTF's rule); units {units!r} do not apply")
+    lim = limits or BvhLimits()
+    motion = parse_gltf(
+        data,
+        animation=animation,
+        name=name or None,
+        source=source,
+        base_dir=base_dir,
+        max_joints=lim.max_joints,
+        max_joint_frames=lim.max_joint_frames,
+        warnings=warnings,
+    )
+    if motion.num_frames > lim.max_frames:
+        raise MotionError(f"{source}: {motion.num_frames} frames is over the {lim.max_frames}-frame limit")
+    return motion
 
 
 def save_motion(

@@ -23,28 +23,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from . import rotations as rot
-from .errors import ExportError, MotionError
+from .errors import MotionError
+from .gltf_file import GltfFile
 from .motion import Motion
 
 Array = npt.NDArray[np.float64]
 
 __all__ = ["BoundMesh", "animation_pose", "read_skinned_mesh", "skin", "skin_motion"]
-
-_COMPONENTS: dict[int, tuple[str, float]] = {  # componentType -> dtype, normalised divisor
-    5120: ("<i1", 127.0),
-    5121: ("<u1", 255.0),
-    5122: ("<i2", 32767.0),
-    5123: ("<u2", 65535.0),
-    5125: ("<u4", 4294967295.0),
-    5126: ("<f4", 1.0),
-}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
 
 @dataclass(frozen=True)
@@ -91,60 +81,14 @@ class BoundMesh:
         return BoundMesh(self.vertices, order[self.joints], self.weights, names, rots, pos)
 
 
-def _accessor(doc: dict[str, Any], data: bytes | bytearray, index: int) -> Array:
-    """The values ``(count, width)`` of accessor ``index`` as floats (normalised integers scaled
-    to [0, 1] or [-1, 1]; plain integers as they are; sparse accessors are refused)."""
-    acc = doc["accessors"][int(index)]
-    if "sparse" in acc:
-        raise MotionError("sparse glTF accessors are not read here")
-    kind, scale = _COMPONENTS[int(acc["componentType"])]
-    width = _WIDTH[str(acc["type"])]
-    count = int(acc["count"])
-    if "bufferView" not in acc:
-        return np.zeros((count, width))
-    view = doc["bufferViews"][int(acc["bufferView"])]
-    item = np.dtype(kind).itemsize * width
-    stride = int(view.get("byteStride", 0)) or item
-    start = int(view.get("byteOffset", 0)) + int(acc.get("byteOffset", 0))
-    if count and start + stride * (count - 1) + item > len(data):
-        raise MotionError(f"glTF accessor {index} reaches past the end of its buffer")
-    raw = np.frombuffer(bytes(data), dtype=np.uint8)
-    rows = np.lib.stride_tricks.as_strided(raw[start:], shape=(count, item), strides=(stride, 1))
-    values = np.ascontiguousarray(rows).view(kind).reshape(count, width).astype(np.float64)
-    if acc.get("normalized") and kind != "<f4":
-        values = np.maximum(values / scale, -1.0)
-    return values
-
-
-def _node_world(doc: dict[str, Any]) -> list[Array]:
-    """``(4, 4)`` rest world matrix of every node (parents' transforms applied)."""
-    from .retarget.character import _node_matrix  # the one reader of a node's transform
-
-    nodes = doc.get("nodes", [])
-    parent = {int(c): i for i, nd in enumerate(nodes) for c in nd.get("children", [])}
-    world: dict[int, Array] = {}
-
-    def of(i: int) -> Array:
-        if i not in world:
-            m = _node_matrix(nodes[i])
-            world[i] = of(parent[i]) @ m if i in parent else m
-        return world[i]
-
-    return [of(i) for i in range(len(nodes))]
-
-
 def read_skinned_mesh(raw: bytes, base_dir: str | Path | None = None) -> BoundMesh | None:
     """The mesh primitives bound to the first skin of a glTF/GLB file, as one
     :class:`BoundMesh` (triangles are not needed: only vertices touch the floor); ``None`` when
     no mesh is bound to that skin or its primitives have no ``JOINTS_0``/``WEIGHTS_0``.
 
     Raises :class:`MotionError` for a file that is not glTF or whose skin data is malformed."""
-    from .export.gltf_doc import read_gltf
-
-    try:
-        doc, data = read_gltf(raw, base_dir)
-    except ExportError as exc:
-        raise MotionError(str(exc)) from None
+    gltf = GltfFile.read(raw, base_dir, source="character")
+    doc = gltf.doc
     try:
         skins = doc.get("skins") or []
         if not skins or not skins[0].get("joints"):
@@ -153,10 +97,10 @@ def read_skinned_mesh(raw: bytes, base_dir: str | Path | None = None) -> BoundMe
         joints = [int(j) for j in skins[0]["joints"]]
         names = tuple(str(nodes[j].get("name") or f"joint{j}") for j in joints)
         if "inverseBindMatrices" in skins[0]:
-            ibm = _accessor(doc, data, int(skins[0]["inverseBindMatrices"])).reshape(-1, 4, 4)
+            ibm = gltf.accessor(int(skins[0]["inverseBindMatrices"])).reshape(-1, 4, 4)
             bind = np.linalg.inv(np.swapaxes(ibm, 1, 2))  # column-major
         else:
-            world = _node_world(doc)
+            world = gltf.world_matrices(joints)
             bind = np.array([world[j] for j in joints])
         if bind.shape[0] != len(joints):
             raise MotionError("the skin's inverse bind matrices do not match its joints")
@@ -168,10 +112,10 @@ def read_skinned_mesh(raw: bytes, base_dir: str | Path | None = None) -> BoundMe
                 attrs = prim.get("attributes", {})
                 if "POSITION" not in attrs or "JOINTS_0" not in attrs or "WEIGHTS_0" not in attrs:
                     continue
-                verts.append(_accessor(doc, data, attrs["POSITION"]))
+                verts.append(gltf.accessor(attrs["POSITION"]))
                 sets = sorted(int(k.split("_")[1]) for k in attrs if k.startswith("JOINTS_"))
-                vj.append(np.concatenate([_accessor(doc, data, attrs[f"JOINTS_{s}"]) for s in sets], axis=1))
-                vw.append(np.concatenate([_accessor(doc, data, attrs[f"WEIGHTS_{s}"]) for s in sets], axis=1))
+                vj.append(np.concatenate([gltf.accessor(attrs[f"JOINTS_{s}"]) for s in sets], axis=1))
+                vw.append(np.concatenate([gltf.accessor(attrs[f"WEIGHTS_{s}"]) for s in sets], axis=1))
     except (IndexError, KeyError, TypeError, ValueError) as exc:
         raise MotionError(f"malformed glTF skin or mesh: {exc}") from None
     if not verts:
@@ -254,26 +198,19 @@ def animation_pose(
     joints in the world (nodes above the skin included, their scale in the bind transforms) at
     the animation's key times ``times (F,)`` (the sampler input with the most keys, seconds); other
     channels are interpolated there (LINEAR; STEP and CUBICSPLINE samplers are refused)."""
-    from .export.gltf_doc import read_gltf
-    from .retarget.character import _node_matrix
-
-    try:
-        doc, data = read_gltf(raw, base_dir)
-    except ExportError as exc:
-        raise MotionError(str(exc)) from None
+    gltf = GltfFile.read(raw, base_dir, source="character")
+    doc = gltf.doc
     try:
         anim = doc["animations"][animation]
         nodes = doc["nodes"]
         inputs = {int(s["input"]) for s in anim["samplers"]}
         main = max(inputs, key=lambda a: int(doc["accessors"][a]["count"]))
-        times = _accessor(doc, data, main)[:, 0]
+        times = gltf.accessor(main)[:, 0]
         count = times.size
         trs = []
-        for nd in nodes:
-            m = _node_matrix(nd)
-            scale = np.linalg.norm(m[:3, :3], axis=0)
-            q = rot.from_matrix(m[:3, :3] / np.where(scale > 0, scale, 1.0))
-            trs.append([np.tile(m[:3, 3], (count, 1)), np.tile(q, (count, 1)), scale])
+        for i in range(len(nodes)):
+            t, q, scale = gltf.local(i)
+            trs.append([np.tile(t, (count, 1)), np.tile(q, (count, 1)), scale])
         for ch in anim["channels"]:
             sampler = anim["samplers"][int(ch["sampler"])]
             if sampler.get("interpolation", "LINEAR") != "LINEAR":
@@ -281,8 +218,8 @@ def animation_pose(
             path = ch["target"]["path"]
             if path not in ("translation", "rotation"):
                 continue
-            keys = _accessor(doc, data, int(sampler["input"]))[:, 0]
-            values = _accessor(doc, data, int(sampler["output"]))
+            keys = gltf.accessor(int(sampler["input"]))[:, 0]
+            values = gltf.accessor(int(sampler["output"]))
             trs[int(ch["target"]["node"])][0 if path == "translation" else 1] = _interpolate(
                 times, keys, values, path == "rotation"
             )

@@ -32,7 +32,7 @@ class AnnotatedDatabaseSpec(DatabaseSpecBase):
     """
 
     kind: Literal["annotated"] = "annotated"
-    fps: float | None = Field(default=30.0, gt=0, le=1000, description="database rate (blocks are frames)")
+    fps: float | None = Field(default=30.0, ge=1, le=1000, description="database rate (blocks are frames)")
     window_s: float = Field(
         default=1.0, gt=0, le=10, description="SVM embedding: joint positions over this window (s)"
     )

@@ -16,7 +16,7 @@ class DatabaseSpecBase(Strict):
 
     kind: str
     clips: list[ClipSource] = Field(min_length=1, max_length=100_000)
-    fps: float | None = Field(default=None, gt=0, le=1000, description="resample every clip to this rate")
+    fps: float | None = Field(default=None, ge=1, le=1000, description="resample every clip to this rate")
     name: str | None = Field(default=None, max_length=128)
 
 

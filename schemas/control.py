@@ -124,7 +124,7 @@ class ControlDatabaseSpec(DatabaseSpecBase):
 
     kind: Literal["control"] = "control"
     pairs: list[ControlPair] = Field(min_length=1, max_length=1000)
-    fps: float | None = Field(default=30.0, gt=0, le=1000, description="database rate (full-rate re-timing)")
+    fps: float | None = Field(default=30.0, ge=1, le=1000, description="database rate (full-rate re-timing)")
     segmentation: Segmentation = Field(default_factory=Segmentation)
     control_joints: list[str] | None = Field(
         default=None, description="joints of the control point cloud (default: hips, head, hands)"
@@ -334,7 +334,7 @@ class ControlRequest(JobRequestBase):
         "floor translation (closed form; the paper's), 'rigid' = full 3-D rigid transform (Procrustes; "
         "about 30x slower preparation; may tilt or lift the target, e.g. for controls not on a level floor)",
     )
-    solve_fps: float = Field(default=10.0, gt=0, le=240, description="rate of the downsampled solve")
+    solve_fps: float = Field(default=10.0, ge=1, le=240, description="rate of the downsampled solve")
     beam: float | None = Field(
         default=None,
         ge=0,

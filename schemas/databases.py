@@ -36,7 +36,7 @@ class GraphDatabaseSpec(DatabaseSpecBase):
 
     kind: Literal["graph"] = "graph"
     fps: float | None = Field(
-        default=30.0, gt=0, le=1000, description="database rate (graphs work at 30 fps)"
+        default=30.0, ge=1, le=1000, description="database rate (graphs work at 30 fps)"
     )
     tau: float = Field(default=1.0, gt=0, le=100, description="edge threshold on the transition cost")
     joint_weights: dict[str, float] = Field(

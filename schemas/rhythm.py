@@ -220,7 +220,7 @@ class RhythmRequest(JobRequestBase):
         le=0.9,
         description="beat accent: slow the time warp at each music beat by this fraction (0 = linear warp)",
     )
-    fps: float | None = Field(default=None, gt=0, le=240, description="output rate (default: the database's)")
+    fps: float | None = Field(default=None, ge=1, le=240, description="output rate (default: the database's)")
     footskate: bool = Field(default=True, description="keep planted feet still (motion.footskate)")
     feet: FeetMode | None = Field(default=None, description=FEET_DESCRIPTION)
 

@@ -1,6 +1,7 @@
 """The Segue HTTP API: ``create_app(settings)`` builds the FastAPI app; ``run`` serves it.
 
-The lifespan loads engine plugins, opens the :class:`~workers.store.Store` and starts the job
+The lifespan loads engine plugins, opens the :class:`~workers.store.Store` (every store call bounded
+by ``SEGUE_STORE_TIMEOUT_S``: :mod:`workers.timed_objects`) and starts the job
 backend: an :class:`~workers.embedded.EmbeddedBackend` (a local process pool) by default, or
 ``workers.redis_backend.RedisBackend`` when ``SEGUE_REDIS_URL`` is set. ``app.state`` holds the
 settings, store, backend and metrics; routes reach them through :mod:`service.deps`.
@@ -28,7 +29,9 @@ from schemas.movement_graph import GraphEdits
 from workers.backend import JobBackend
 from workers.embedded import EmbeddedBackend
 from workers.engine_cache import EngineCache
+from workers.objects import S3Objects
 from workers.store import Store
+from workers.timed_objects import TimedObjects
 
 from .errors import install_error_handlers
 from .guard import CatchAll, HostOriginGuard
@@ -82,6 +85,10 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings: Settings = app.state.settings
     load_plugins(settings.engine_plugins)  # the engine processes get them from the settings too
     store = Store.from_settings(settings)
+    if isinstance(store.objects, S3Objects):  # a stalled call's thread ends too (botocore's own timeout)
+        store.objects.read_timeout_s = settings.store_timeout_s
+    timed = TimedObjects(store.objects, settings.store_timeout_s)
+    store.objects = timed  # no request waits on a stalled store past SEGUE_STORE_TIMEOUT_S
     backend = make_backend(settings, store)
     observe_terminal_events(backend.hub, app.state.metrics, since=time.time())
     app.state.job_quota = JobQuota(store, settings.max_queued_jobs)
@@ -96,6 +103,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         for _ in range(5):
             await asyncio.sleep(0)
         await backend.close()
+        timed.close()
 
 
 BODY_SCHEMAS: dict[str, Any] = {
@@ -132,7 +140,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             {"name": "characters", "description": "characters for a viewer: bindings and models"},
             {"name": "jobs", "description": "synthesis requests, results and reports"},
             {"name": "events", "description": "job events (WebSocket stream, HTTP fallback)"},
-            {"name": "health", "description": "liveness and metrics"},
+            {"name": "health", "description": "liveness, readiness and metrics"},
         ],
     )
     app.state.settings = settings

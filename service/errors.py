@@ -7,11 +7,14 @@ each to a status and a stable code, so a client mistake is always a 4xx with a m
 exception                                  status  code
 =========================================  ======  =====================
 ``workers.store.NotFoundError``            404     ``not_found``
+``motion.GltfError`` (a glTF input)        400     ``invalid_gltf``
 ``motion.BvhError`` / ``motion.MotionError``  400  ``invalid_bvh``
 ``RequestValidationError`` / ``ValidationError``  422  ``invalid_request``
 ``schemas.jobs.RequestError``              422     ``invalid_request``
 ``engines.registry.UnavailableError``      422     ``unavailable``
 ``workers.backend.BackendUnavailable``     503     ``backend_unavailable`` (+ ``Retry-After``)
+``workers.storage_errors.StoreTimeout``     503     ``store_unavailable`` (+ ``Retry-After``): a stalled store
+``starlette.requests.ClientDisconnect``     499     (none: the client left; one log line, no traceback)
 ``OSError``: a full disk or quota            507     ``storage_full`` (``ENOSPC``, ``EDQUOT``, ``EFBIG``)
 ``OSError``: a read-only store              507     ``storage_read_only`` (``EROFS``)
 ``OSError``: an unreachable store           507     ``storage_unavailable`` (``EIO``, ``ESTALE``,
@@ -30,17 +33,18 @@ from typing import Any, cast
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.requests import ClientDisconnect
 from starlette.routing import Match
 
 from engines.registry import UnavailableError
-from motion import MotionError
+from motion import GltfError, MotionError
 from schemas import ErrorBody, ErrorResponse
 from schemas.jobs import RequestError
 from workers.backend import BackendUnavailable
-from workers.storage_errors import storage_problem
+from workers.storage_errors import StoreTimeout, storage_problem
 from workers.store import NotFoundError
 
 log = logging.getLogger("segue.service")
@@ -125,7 +129,8 @@ async def _not_found(request: Request, exc: Exception) -> JSONResponse:
 
 
 async def _motion_error(request: Request, exc: Exception) -> JSONResponse:
-    return error_response(400, "invalid_bvh", str(exc))
+    code = "invalid_gltf" if isinstance(exc, GltfError) else "invalid_bvh"
+    return error_response(400, code, str(exc))
 
 
 async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
@@ -182,8 +187,73 @@ async def _backend_unavailable(request: Request, exc: Exception) -> JSONResponse
     )
 
 
-async def _storage(request: Request, exc: Exception) -> JSONResponse:
-    """507 for a storage failure (:func:`workers.storage_errors.storage_problem`), else 500."""
+STORE_RETRY_AFTER_S = 10
+"""``Retry-After`` of a 503 ``store_unavailable``."""
+
+
+def _stalled(exc: BaseException) -> StoreTimeout | None:
+    """The :class:`StoreTimeout` ``exc`` is or was raised from, if any."""
+    current: BaseException | None = exc
+    for _ in range(8):
+        if current is None:
+            return None
+        if isinstance(current, StoreTimeout):
+            return current
+        current = current.__cause__ or current.__context__
+    return None
+
+
+def disconnected(exc: BaseException) -> bool:
+    """Whether ``exc`` is, or groups only, :class:`ClientDisconnect` (the client left)."""
+    if isinstance(exc, ClientDisconnect):
+        return True
+    if isinstance(exc, BaseExceptionGroup):
+        return all(disconnected(e) for e in exc.exceptions)
+    return False
+
+
+def quiet_response(request: Request, exc: BaseException) -> Response | None:
+    """The answer to an exception that is no bug, wherever it surfaces (an exception group, an
+    error raised from it): 503 ``store_unavailable`` for a stalled store, 499 for a client that
+    left; None for anything else."""
+    if disconnected(exc):
+        log.warning("%s %s: the client disconnected (499)", request.method, request.url.path)
+        return Response(status_code=CLIENT_CLOSED)
+    stalled = _stalled(exc)
+    if stalled is None and isinstance(exc, BaseExceptionGroup):
+        stalled = next((s for s in map(_stalled, exc.exceptions) if s is not None), None)
+    return _store_unavailable(request, stalled) if stalled is not None else None
+
+
+def _store_unavailable(request: Request, exc: StoreTimeout) -> JSONResponse:
+    log.warning("%s %s: %s", request.method, request.url.path, exc.strerror)
+    return error_response(
+        503,
+        "store_unavailable",
+        f"the store does not answer ({exc.strerror}); try again later",
+        headers={"Retry-After": str(STORE_RETRY_AFTER_S)},
+    )
+
+
+async def _client_disconnect(request: Request, exc: Exception) -> Response:
+    """The client closed the connection before its request was read: one log line, and 499 (the
+    status nobody receives; counted as such in ``/metrics``, not as a 500)."""
+    log.warning(
+        "%s %s: the client disconnected before its request was read (499)", request.method, request.url.path
+    )
+    return Response(status_code=CLIENT_CLOSED)
+
+
+CLIENT_CLOSED = 499
+"""The status recorded for a request its client abandoned (nginx's "client closed request")."""
+
+
+async def _storage(request: Request, exc: Exception) -> Response:
+    """503 for a stalled store, 507 for a storage failure
+    (:func:`workers.storage_errors.storage_problem`), else 500."""
+    stalled = _stalled(exc)
+    if stalled is not None:
+        return _store_unavailable(request, stalled)
     problem = storage_problem(exc)
     if problem is None:
         return await _internal(request, exc)
@@ -192,8 +262,11 @@ async def _storage(request: Request, exc: Exception) -> JSONResponse:
     return error_response(507, code, message, headers={"Retry-After": "60"})
 
 
-async def _internal(request: Request, exc: Exception) -> JSONResponse:
-    problem = storage_problem(exc)  # raised from within another error (e.g. an ExceptionGroup)
+async def _internal(request: Request, exc: Exception) -> Response:
+    stalled = _stalled(exc)  # raised from within another error (e.g. an ExceptionGroup)
+    if stalled is not None:
+        return _store_unavailable(request, stalled)
+    problem = storage_problem(exc)
     if problem is not None:
         log.error("%s %s: %s (%s)", request.method, request.url.path, problem[1], exc)
         return error_response(507, *problem, headers={"Retry-After": "60"})
@@ -212,6 +285,7 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(UnavailableError, _unavailable)
     app.add_exception_handler(BackendUnavailable, _backend_unavailable)
     app.add_exception_handler(StarletteHTTPException, _http_error)
+    app.add_exception_handler(ClientDisconnect, _client_disconnect)
     app.add_exception_handler(OSError, _storage)
     app.add_exception_handler(Exception, _internal)
 
@@ -228,7 +302,8 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
         415: "a JSON route was sent a body that is not 'Content-Type: application/json'",
         422: "the request is invalid (details lists each problem)",
         429: "too many unfinished jobs or live sessions for this principal (see Retry-After)",
-        503: "the job backend cannot take jobs now (see Retry-After); nothing was stored",
+        503: "the server cannot take this now: the job backend or the store does not answer, or "
+        "too many uploads are in flight (see Retry-After); nothing was stored",
         507: "the server's storage is full, read-only or unreachable; nothing was stored",
     }.items()
 }

@@ -24,9 +24,10 @@ from collections.abc import Iterable
 from urllib.parse import urlsplit
 
 from starlette.datastructures import Headers
+from starlette.requests import Request
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from .errors import error_body, error_response
+from .errors import disconnected, error_body, error_response, quiet_response
 
 log = logging.getLogger("segue.service")
 
@@ -148,6 +149,12 @@ class CatchAll:
         try:
             await self.app(scope, receive, tracked)
         except Exception as exc:
+            quiet = quiet_response(Request(scope), exc)
+            if quiet is not None and not started:
+                await quiet(scope, receive, send)
+                return
+            if quiet is not None and disconnected(exc):
+                return  # the client left mid-answer: nothing to say, nobody to say it to
             log.exception("unhandled error on %s %s", scope.get("method"), scope.get("path"), exc_info=exc)
             if started:
                 raise  # half a response is out: only closing the connection can say so

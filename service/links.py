@@ -2,7 +2,8 @@
 
 A client (or a stateful API fuzzer such as schemathesis) follows them to go from an upload to reading
 it back, from a database build to its build job, and from a submitted job to its status, events,
-result and report.
+result and report (the best result by id, from a job's status: the fuzzer varies the result
+route's other query parameters, ``format``, ``mesh``, ``feet``, ``dancer``... on a real result).
 """
 
 from __future__ import annotations
@@ -50,6 +51,25 @@ LINKS: list[tuple[str, str, tuple[str, ...], list[tuple[str, str, str, dict[str,
             ("JobResult", "/v1/jobs/{job_id}/result", "get", {"job_id": "$response.body#/id"}),
             ("JobReport", "/v1/jobs/{job_id}/report", "get", {"job_id": "$response.body#/id"}),
             ("CancelJob", "/v1/jobs/{job_id}/cancel", "post", {"job_id": "$response.body#/id"}),
+        ],
+    ),
+    (
+        "/v1/jobs/{job_id}",
+        "get",
+        ("200",),
+        [  # the best result by its id: the result route's other query parameters are the fuzzer's
+            (
+                "BestResult",
+                "/v1/jobs/{job_id}/result",
+                "get",
+                {"job_id": "$response.body#/id", "query.result": "$response.body#/result"},
+            ),
+            (
+                "BestReport",
+                "/v1/jobs/{job_id}/report",
+                "get",
+                {"job_id": "$response.body#/id", "query.result": "$response.body#/result"},
+            ),
         ],
     ),
 ]

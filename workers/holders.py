@@ -33,9 +33,10 @@ import json
 import os
 import time
 from collections.abc import Callable, Iterator, Mapping
-from typing import Any
+from typing import Any, cast
 
 from .objects import LocalObjects, ObjectNotFound, Objects, S3Objects
+from .timed_objects import untimed
 
 Record = dict[str, Any]
 """A holder's own facts (``name``, ``created_at``, ``build_job``; JSON values); empty: none kept."""
@@ -106,13 +107,14 @@ def hold(
     """Record ``principal`` as a holder with ``record`` (kept as it is when it holds already, unless
     it had none, or ``replace``); then, when the bytes are gone (``present()`` false: deleted by
     another holder meanwhile), ``restore()`` them. True when the principal did not hold the thing before."""
-    if isinstance(objects, S3Objects):
-        added = _hold_s3(objects, key, principal, record, replace)
+    base = untimed(objects)
+    if isinstance(base, S3Objects):
+        added = _hold_s3(cast(S3Objects, objects), key, principal, record, replace)
         if restore is not None and not present():
             restore()
         return added
-    assert isinstance(objects, LocalObjects)
-    with _dir_lock(objects, key.split("/", 1)[0]):
+    assert isinstance(base, LocalObjects)
+    with _dir_lock(base, key.split("/", 1)[0]):
         current = read(objects, key)
         had = current.holders.get(principal)
         if had is None or replace or (not had and record):
@@ -151,10 +153,11 @@ def release(
     """Drop ``principal``'s hold; when no other principal holds the thing (or ``force``: an admin),
     ``delete()`` it (which must remove the owners object, last). True when it was deleted. Locally
     nothing is written before the delete (it works on a full disk)."""
-    if isinstance(objects, S3Objects):
-        return _release_s3(objects, key, principal, delete, force)
-    assert isinstance(objects, LocalObjects)
-    with _dir_lock(objects, key.split("/", 1)[0]):
+    base = untimed(objects)
+    if isinstance(base, S3Objects):
+        return _release_s3(cast(S3Objects, objects), key, principal, delete, force)
+    assert isinstance(base, LocalObjects)
+    with _dir_lock(base, key.split("/", 1)[0]):
         current = read(objects, key)
         if force or set(current.holders) <= {principal}:
             delete()

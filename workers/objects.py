@@ -49,6 +49,9 @@ from urllib.parse import urlparse
 
 from .storage_errors import StoreUnavailable as StoreUnavailable  # the API answers it with 507
 
+STREAM_CHUNK = 1 << 20
+"""Bytes read at once from a file stored by ``put_stream``."""
+
 KEY_RE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9._\-]*(/[A-Za-z0-9_\-][A-Za-z0-9._\-]*)*$")
 """Object keys: relative, ``/``-separated, no empty, dot-led or ``..`` parts."""
 
@@ -76,6 +79,11 @@ class Objects(Protocol):
     def put(self, key: str, data: bytes, *, if_absent: bool = False) -> bool:
         """Store ``data`` under ``key`` (atomic replace); with ``if_absent``, only when no object
         has that key. True when written."""
+        ...
+
+    def put_stream(self, key: str, source: BinaryIO) -> None:
+        """Store the bytes of the open file ``source`` (from its current position to its end)
+        under ``key`` (atomic replace), read in chunks of :data:`STREAM_CHUNK` bytes: never held whole."""
         ...
 
     def delete(self, key: str) -> None:
@@ -169,6 +177,18 @@ class LocalObjects:
         finally:
             Path(tmp).unlink(missing_ok=True)
 
+    def put_stream(self, key: str, source: BinaryIO) -> None:
+        path = self._path(key)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                shutil.copyfileobj(source, fh, STREAM_CHUNK)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
     def delete(self, key: str) -> None:
         with contextlib.suppress(FileNotFoundError, NotADirectoryError):
             self._path(key).unlink()
@@ -247,6 +267,9 @@ class S3Objects:
         self.url = f"s3://{bucket}/{self.prefix}" if self.prefix else f"s3://{bucket}"
         self._client = client
         self._lock = threading.Lock()
+        self.read_timeout_s: float | None = None
+        """botocore's socket read timeout (None: its 60 s); set before the first call to bound a
+        call on a stalled server (the API sets ``SEGUE_STORE_TIMEOUT_S``)."""
 
     @property
     def client(self) -> Any:
@@ -260,7 +283,10 @@ class S3Objects:
                         raise StoreUnavailable(
                             "an s3:// store needs boto3: pip install 'segue[s3]'"
                         ) from None
-                    config = Config(retries={"max_attempts": 5, "mode": "standard"}, connect_timeout=5)
+                    timeouts = {"read_timeout": self.read_timeout_s} if self.read_timeout_s else {}
+                    config = Config(
+                        retries={"max_attempts": 5, "mode": "standard"}, connect_timeout=5, **timeouts
+                    )
                     self._client = boto3.client("s3", config=config, region_name=s3_region())
         return self._client
 
@@ -306,6 +332,10 @@ class S3Objects:
                 raise
             return False
         return True
+
+    def put_stream(self, key: str, source: BinaryIO) -> None:
+        """One streamed ``PUT`` (botocore reads the file in chunks and seeks it back to retry)."""
+        self._call("put_object", key, Key=self._key(key), Body=source)
 
     def delete(self, key: str) -> None:
         with contextlib.suppress(ObjectNotFound):

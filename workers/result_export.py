@@ -312,10 +312,19 @@ def make_export(store: Store, spec: ExportSpec) -> bytes:
         motion = _dancer(motion, spec.dancer, rid)
     rig: bytes | None = None
     if spec.character is not None:
+        from motion.export.characters import split_characters
         from motion.retarget import correspond, retarget
         from motion.retarget.rootmotion import default_root_motion
         from motion.skinning import read_skinned_mesh
 
+        dancers = split_characters(motion)
+        if dancers is not None and len(dancers) > 1:
+            raise ExportFailure(
+                422,
+                "export_failed",
+                f"result {rid} has {len(dancers)} dancers; a character wears one: download each "
+                f"with dancer=0..{len(dancers) - 1} and character={spec.character.ref}",
+            )
         limits = BvhLimits(*spec.bvh_limits)
         char, rig = character_of(store, spec.character, spec.rest, limits)
         mode = "none" if in_place else None if spec.root_motion is None else spec.root_motion.value

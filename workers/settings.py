@@ -68,6 +68,18 @@ class Settings(BaseSettings):
         ge=1,
         description="largest BVH text after gunzip (a gzip bomb stops here); default 4 x max_upload_bytes",
     )
+    max_uploads: int = Field(
+        default=16,
+        ge=1,
+        description="uploads (clips, files) received at once by one API process, each spooled to disk "
+        "in 1 MiB chunks; one more is answered 503 too_many_uploads with Retry-After",
+    )
+    store_timeout_s: float = Field(
+        default=10.0,
+        gt=0,
+        description="the API's bound on one store call (a streamed upload's: 10 x this); a store that "
+        "does not answer in time is answered 503 store_unavailable with Retry-After, and /readyz says so",
+    )
     max_json_bytes: int = Field(default=1 * MiB, ge=64, description="largest JSON request body, bytes")
     max_parses: int = Field(
         default=2, ge=1, le=256, description="request bodies (JSON, clip uploads) parsed at once"

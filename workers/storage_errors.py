@@ -67,3 +67,8 @@ def _classify(exc: OSError) -> tuple[str, str] | None:
     if exc.errno in UNREACHABLE:
         return "storage_unavailable", f"the server's storage cannot be reached ({name}); try again later"
     return None
+
+
+class StoreTimeout(StoreUnavailable):
+    """A store call did not answer within its time limit (``SEGUE_STORE_TIMEOUT_S``): the store
+    stalls (an object store that accepts connections and never answers, a hung network mount)."""

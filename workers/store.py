@@ -114,6 +114,26 @@ def _media_type(data: bytes) -> str:
     return "application/octet-stream"
 
 
+Source = bytes | BinaryIO
+"""Bytes to store: in memory, or an open file (an upload spooled to disk) stored in chunks."""
+
+
+def source_facts(source: Source) -> tuple[str, int, bytes]:
+    """``(sha256 hex, size, first 16 bytes)`` of ``source`` (a file is read from its start in
+    chunks, then rewound)."""
+    if isinstance(source, bytes):
+        return hashlib.sha256(source).hexdigest(), len(source), source[:16]
+    source.seek(0)
+    hasher, size, head = hashlib.sha256(), 0, b""
+    for chunk in iter(lambda: source.read(1 << 20), b""):
+        if not head:
+            head = chunk[:16]
+        hasher.update(chunk)
+        size += len(chunk)
+    source.seek(0)
+    return hasher.hexdigest(), size, head
+
+
 def _safe_id(value: str) -> str:
     if not value or any(c not in "0123456789abcdefghijklmnopqrstuvwxyz-_" for c in value) or len(value) > 80:
         raise NotFoundError(f"no such id {value!r}")
@@ -185,6 +205,14 @@ class Store:
                 self._infos[key] = data
         return data
 
+    def _write(self, key: str, source: Source) -> None:
+        """Store ``source`` under ``key``: bytes at once, a file streamed from its start."""
+        if isinstance(source, bytes):
+            self.objects.put(key, source)
+            return
+        source.seek(0)
+        self.objects.put_stream(key, source)
+
     def _forget(self, key: str) -> None:
         with self._lock:
             self._infos.pop(key, None)
@@ -243,9 +271,9 @@ class Store:
             return ClipInfo.model_validate_json(self.objects.get(key))  # a concurrent upload won
         return info
 
-    def restore_clip(self, info: ClipInfo, data: bytes) -> None:
+    def restore_clip(self, info: ClipInfo, data: Source) -> None:
         """Write a clip's bytes and info back (an upload whose bytes another holder deleted)."""
-        self.objects.put(f"clips/{info.id}.bvh", data)
+        self._write(f"clips/{info.id}.bvh", data)
         self.objects.put(f"clips/{info.id}.json", info.model_dump_json().encode())
 
     def clip_info(self, clip_id: str) -> ClipInfo:
@@ -486,18 +514,17 @@ class Store:
         self.cache.evict(db_id)
 
     # -- other input files (MIDI...) ------------------------------------------------------------
-    def put_file(self, name: str, data: bytes) -> FileInfo:
-        """Store an uploaded input file once per content hash (no parsing: engines validate it)."""
-        digest = hashlib.sha256(data).hexdigest()
+    def put_file(self, name: str, data: Source) -> FileInfo:
+        """Store an uploaded input file once per content hash (no parsing: engines validate it);
+        ``data`` may be an open file, stored in chunks (never read whole)."""
+        digest, size, head = source_facts(data)
         key = f"files/{digest}.json"
         try:
             return FileInfo.model_validate_json(self.objects.get(key))
         except ObjectNotFound:
             pass
-        info = FileInfo(
-            id=digest, name=name, size_bytes=len(data), media_type=_media_type(data), created_at=now()
-        )
-        self.objects.put(f"files/{digest}.bin", data)
+        info = FileInfo(id=digest, name=name, size_bytes=size, media_type=_media_type(head), created_at=now())
+        self._write(f"files/{digest}.bin", data)
         if not self.objects.put(key, info.model_dump_json().encode(), if_absent=True):
             return FileInfo.model_validate_json(self.objects.get(key))  # a concurrent upload won
         return info
@@ -508,9 +535,9 @@ class Store:
             self.objects.delete(f"files/{info.id}{suffix}")
         self._forget(f"files/{info.id}.json")
 
-    def restore_file(self, info: FileInfo, data: bytes) -> None:
+    def restore_file(self, info: FileInfo, data: Source) -> None:
         """Write a file's bytes and info back (an upload whose bytes another holder deleted)."""
-        self.objects.put(f"files/{info.id}.bin", data)
+        self._write(f"files/{info.id}.bin", data)
         self.objects.put(f"files/{info.id}.json", info.model_dump_json().encode())
 
     def file_info(self, file_id: str) -> FileInfo:
@@ -733,15 +760,16 @@ class Store:
     # (workers.records.settle_task: a parse killed by its limits, dead-lettered or cancelled), by
     # the API when no job will read them, and, for whatever a lost process left, by
     # sweep_staged (run by every worker and the embedded backend).
-    def stage(self, data: bytes) -> str:
-        """Keep an upload's bytes under a new key until a worker has checked them; the key."""
+    def stage(self, data: Source) -> str:
+        """Keep an upload's bytes (or an open file's, streamed) under a new key until a worker has
+        checked them; the key."""
         key = uuid.uuid4().hex
         self.put_staged(key, data)
         return key
 
-    def put_staged(self, key: str, data: bytes) -> None:
+    def put_staged(self, key: str, data: Source) -> None:
         """Keep an upload's bytes until a worker has checked them (:meth:`delete_staged` after)."""
-        self.objects.put(f"staged/{_safe_id(key)}", data)
+        self._write(f"staged/{_safe_id(key)}", data)
 
     def staged_bytes(self, key: str) -> bytes:
         return self._get(f"staged/{_safe_id(key)}", f"no staged upload {key!r}")

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from motion import BvhLimits, MotionError
+from motion import BvhLimits, GltfError, MotionError
 from schemas import EventType
 
 from .result_export import ExportFailure, ExportSpec, make_export
@@ -41,6 +41,12 @@ def task_payload(task: str, **fields: Any) -> dict[str, Any]:
     return {"request": {"task": task, "budget_s": TASK_BUDGET_S, **fields}}
 
 
+def error_code(exc: MotionError) -> str:
+    """The API's code for an input file that cannot be read: ``invalid_gltf`` for a glTF file,
+    ``invalid_bvh`` for the rest (BVH files, and motion errors not tied to a file type)."""
+    return "invalid_gltf" if isinstance(exc, GltfError) else "invalid_bvh"
+
+
 def _clip(store: Store, request: dict[str, Any]) -> dict[str, Any]:
     key = str(request["staged"])
     try:
@@ -53,7 +59,7 @@ def _clip(store: Store, request: dict[str, Any]) -> dict[str, Any]:
     try:
         info = store.put_clip(str(request["name"]), data, limits, request.get("units"))
     except MotionError as exc:
-        raise TaskFailure(400, "invalid_bvh", str(exc)) from None
+        raise TaskFailure(400, error_code(exc), str(exc)) from None
     finally:
         store.delete_staged(key)
     return {"clip": info.model_dump(mode="json")}
@@ -89,6 +95,6 @@ def run_task(store: Store, request: dict[str, Any], publish: Any) -> None:
         publish(EventType.failed, {"error": {"code": "not_found", "message": str(exc), "status": 404}})
         return
     except MotionError as exc:  # a character file that is not one (as the API answers MotionError)
-        publish(EventType.failed, {"error": {"code": "invalid_bvh", "message": str(exc), "status": 400}})
+        publish(EventType.failed, {"error": {"code": error_code(exc), "message": str(exc), "status": 400}})
         return
     publish(EventType.done, {"result": None, **data})

@@ -47,6 +47,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .music import MusicError
+from .music_facts import audio_channels, channel_problem
 
 Array = npt.NDArray[np.float64]
 
@@ -127,6 +128,9 @@ def decode(data: bytes) -> tuple[Array, float]:
 
     if audio_media_type(data[:16]) is None:
         raise MusicError("audio: not a WAV, FLAC, Ogg or MP3 file (unrecognized content)")
+    too_many = channel_problem(audio_channels(data))
+    if too_many is not None:
+        raise MusicError(too_many)
     y: Any
     try:
         info = sf.info(io.BytesIO(data))

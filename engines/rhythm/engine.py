@@ -56,7 +56,7 @@ from .build import build_rhythm
 from .choreography import edited_arrays, movement_graph, resolve_edits
 from .database import RhythmDatabase
 from .music import MusicError, bpm_beats, parse_midi
-from .music_facts import audio_facts, midi_facts
+from .music_facts import audio_facts, channel_problem, midi_facts, wav_channels
 from .session import LiveDancer
 from .synth import Control, Dancers, SpeedLimits, Tables, initial_dancers, synthesize
 
@@ -120,9 +120,12 @@ def music_estimate(request: RhythmRequest) -> MusicEstimate:
         midi = midi_facts(_attached(request, music.midi))
         length, problems = midi.duration_s, midi.problems
     elif music.audio is not None:
-        audio = audio_facts(_attached(request, music.audio))
+        data = _attached(request, music.audio)
+        audio = audio_facts(data)
         if audio is not None:
             length, decode = audio.duration_s, audio.decoded_bytes
+        too_many = channel_problem(audio.channels if audio is not None else wav_channels(data))
+        problems = (too_many,) if too_many is not None else ()
     if music.duration_s is not None:
         length = float(music.duration_s) if length is None else min(length, float(music.duration_s))
     return MusicEstimate(length, decode, problems)

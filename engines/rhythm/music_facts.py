@@ -28,6 +28,9 @@ MIN_TEMPO_US = 60_000
 can dance to, and a 1-us tempo puts millions of beats into a few seconds."""
 DEFAULT_TEMPO_US = 500_000
 """The SMF default tempo (120 BPM) before the first set-tempo event."""
+MAX_CHANNELS = 64
+"""Most channels of a recording (a 7.1.4 mix has 12; a WAV header may claim 65,535, which
+decoders misread or choke on): more is refused at submission and by the decoder."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -211,3 +214,38 @@ def audio_facts(data: bytes) -> AudioFacts | None:
     if info.samplerate <= 0 or info.frames < 0:
         return None
     return AudioFacts(int(info.frames), int(info.samplerate), max(int(info.channels), 1))
+
+
+def wav_channels(data: bytes) -> int | None:
+    """The channel count a RIFF/WAVE (or RF64) header declares in its ``fmt`` chunk, read from the
+    first 64 KiB only; None when ``data`` is not a WAV file or has no readable ``fmt`` chunk."""
+    if len(data) < 12 or data[:4] not in (b"RIFF", b"RF64") or data[8:12] != b"WAVE":
+        return None
+    pos, end = 12, min(len(data), 1 << 16)
+    while pos + 8 <= end:
+        chunk, size = data[pos : pos + 4], struct.unpack_from("<I", data, pos + 4)[0]
+        if chunk == b"fmt ":
+            return (
+                int(struct.unpack_from("<H", data, pos + 10)[0])
+                if size >= 4 and pos + 12 <= len(data)
+                else None
+            )
+        pos += 8 + size + (size & 1)
+    return None
+
+
+def audio_channels(data: bytes) -> int | None:
+    """The channel count of a recording: what libsndfile reads from its header, else what a WAV
+    header declares (a header libsndfile refuses, e.g. 65,535 channels); None when neither says."""
+    facts = audio_facts(data)
+    return facts.channels if facts is not None else wav_channels(data)
+
+
+def channel_problem(channels: int | None) -> str | None:
+    """A sentence when a recording has more than :data:`MAX_CHANNELS` channels, else None."""
+    if channels is None or channels <= MAX_CHANNELS:
+        return None
+    return (
+        f"audio: the recording has {channels} channels; at most {MAX_CHANNELS} are read "
+        "(mix it down to stereo or mono)"
+    )

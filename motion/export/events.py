@@ -54,17 +54,27 @@ def contact_runs(motion: Motion, feet: Sequence[tuple[int, ...]] | None = None) 
 
 
 def contact_events(
-    motion: Motion, character: str | None = None, feet: Sequence[tuple[int, ...]] | None = None
+    motion: Motion,
+    character: str | None = None,
+    feet: Sequence[tuple[int, ...]] | None = None,
+    plants: Sequence[tuple[int, int, int]] | None = None,
 ) -> list[Event]:
     """One ``contact`` event per foot plant of ``motion`` (:func:`contact_runs`; ``feet`` as
-    there), named after the foot's ankle joint.
+    there), named after the foot's ankle joint. ``plants``: the plants when the caller knows them
+    better (``(group index into feet, start, end exclusive)``, e.g. a retargeted character's
+    :func:`motion.retarget.report.sole_plants`: where its soles touch the floor).
 
     A motion without joints named like feet has no contacts (an empty list, not an error). The
     duration of a run of ``n`` frames is ``n / fps`` seconds (each frame stands for one period).
     """
     out: list[Event] = []
     names = motion.skeleton.names
-    for j, a, b in contact_runs(motion, feet):
+    if plants is not None:
+        groups = foot_groups(motion.skeleton) if feet is None else [tuple(g) for g in feet]
+        runs = [(groups[g][0], a, b) for g, a, b in plants]
+    else:
+        runs = contact_runs(motion, feet)
+    for j, a, b in runs:
         ev: Event = {
             "type": "contact",
             "joint": names[j],

@@ -8,16 +8,13 @@ are guessed from its height as for any BVH (:mod:`motion.units`). glTF/GLB: the 
 scale (a parent ``Armature`` node's transform, e.g. a 0.01 scale, is applied); the character is in
 metres, and its BVH offsets are the bind pose's bone vectors in the parent's frame.
 
-The glTF reader is hand-written (the JSON chunk and node transforms only, ~60 lines) rather than
-pulling in ``pygltflib``: no buffers or accessors are needed to know a skeleton's bind pose.
+The glTF file is read by :mod:`motion.gltf_file` (the JSON chunk and node transforms only: no
+buffers or accessors are needed to know a skeleton's bind pose).
 """
 
 from __future__ import annotations
 
-import json
-import struct
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -25,6 +22,7 @@ import numpy.typing as npt
 from .. import rotations as rot
 from ..bvh import BvhLimits
 from ..errors import MotionError
+from ..gltf_file import GltfFile, gltf_json
 from ..io import load_motion
 from ..motion import Motion
 from ..skeleton import Skeleton, default_channels
@@ -53,83 +51,20 @@ def load_character(
     return zero_pose(motion) if rest == "zero" else motion.slice(0, 1)
 
 
-def _gltf_json(raw: bytes) -> dict[str, Any]:
-    """The JSON document of a GLB container or a ``.gltf`` text file."""
-    try:
-        if raw[:4] == b"glTF":
-            if len(raw) < 20:
-                raise MotionError("truncated GLB header")
-            length, kind = struct.unpack_from("<II", raw, 12)
-            if kind != 0x4E4F534A:
-                raise MotionError("the GLB's first chunk is not JSON")
-            doc = json.loads(raw[20 : 20 + length])
-        else:
-            doc = json.loads(raw)
-    except (ValueError, struct.error) as exc:
-        raise MotionError(f"not a glTF/GLB file: {exc}") from None
-    if not isinstance(doc, dict):
-        raise MotionError("not a glTF document (its JSON is not an object)")
-    return doc
-
-
-def _node_matrix(node: dict[str, Any]) -> Array:
-    """The 4x4 local transform of a glTF node (``matrix`` or TRS)."""
-    if "matrix" in node:
-        return np.array(node["matrix"], dtype=np.float64).reshape(4, 4).T
-    m = np.eye(4)
-    q = np.array(node.get("rotation", [0.0, 0.0, 0.0, 1.0]), dtype=np.float64)
-    m[:3, :3] = rot.to_matrix(q / np.linalg.norm(q)) * np.array(node.get("scale", [1.0, 1.0, 1.0]))
-    m[:3, 3] = node.get("translation", [0.0, 0.0, 0.0])
-    return m
-
-
 def gltf_character(raw: bytes, name: str = "character") -> Motion:
     """The first skin of a glTF/GLB document as a one-frame motion in its bind pose (metres)."""
-    doc = _gltf_json(raw)
-    nodes = doc.get("nodes", [])
+    gltf = GltfFile.json_only(raw, source=name)
+    doc, nodes = gltf.doc, gltf.nodes
     skins = doc.get("skins", [])
     if not skins or not skins[0].get("joints"):
         raise MotionError("the glTF file has no skin with joints: a character needs a skinned skeleton")
     try:
         joints = [int(j) for j in skins[0]["joints"]]
-        parent = {int(c): i for i, nd in enumerate(nodes) for c in nd.get("children", [])}
-        world: dict[int, Array] = {}
-
-        def world_of(i: int) -> Array:
-            if i not in world:
-                m = _node_matrix(nodes[i])
-                world[i] = world_of(parent[i]) @ m if i in parent else m
-            return world[i]
-
-        in_skin = set(joints)
-
-        def joint_parent(node: int) -> int | None:
-            p = parent.get(node)
-            while p is not None and p not in in_skin:
-                p = parent.get(p)
-            return p
-
-        # the skin's order, each joint after its parent (a stable topological order)
-        order: list[int] = []
-        placed: set[int] = set()
-        pending = list(dict.fromkeys(joints))
-        while pending:
-            ready = next((i for i in pending if joint_parent(i) is None or joint_parent(i) in placed), None)
-            if ready is None:
-                raise MotionError("the skin's joint hierarchy has a cycle")
-            order.append(ready)
-            placed.add(ready)
-            pending.remove(ready)
-        index = {node: k for k, node in enumerate(order)}
-        parents = []
-        for node in order:
-            p = joint_parent(node)
-            parents.append(-1 if p is None else index[p])
-        mats = [world_of(i) for i in order]
+        order, parents = gltf.skin_tree(joints)
+        world = gltf.world_matrices(order)
+        mats = [world[i] for i in order]
     except (IndexError, KeyError, TypeError, ValueError, RecursionError) as exc:
         raise MotionError(f"malformed glTF node hierarchy: {exc}") from None
-    if sum(p < 0 for p in parents) != 1:
-        raise MotionError("the skin's joints do not form one tree (several root joints)")
     pos = np.array([m[:3, 3] for m in mats])
     rots = []
     for m in mats:
@@ -162,7 +97,7 @@ def gltf_character(raw: bytes, name: str = "character") -> Motion:
 def gltf_timing(raw: bytes) -> tuple[int, float] | None:
     """``(frames, fps)`` of a glTF/GLB document's first animation (its first sampler's keyframe
     times: the accessor's count, min and max, which glTF requires), None when it has none."""
-    doc = _gltf_json(raw)
+    doc = gltf_json(raw)
     try:
         anims = doc.get("animations") or []
         if not anims or not anims[0].get("samplers"):

@@ -245,7 +245,7 @@ def _residual(motion: Motion, soles: tuple[Sole, ...], floor: float, rate: float
     pos, grot = motion.fk()
     out = np.zeros((motion.num_frames, len(soles)))
     for k, sole in enumerate(soles):
-        deficit = np.maximum(floor - _lowest(sole, sole.positions(pos, grot), None), 0.0)
+        deficit = np.maximum(floor - _lowest(sole, sole.around(pos, grot), None), 0.0)
         out[:, k] = upper_envelope(deficit, rate) if deficit.any() else 0.0
     return out
 

@@ -3,8 +3,9 @@ prints and writes with ``--report``.
 
 * ``sink_cm``: how far the character's soles (:mod:`motion.retarget.sole`: its skinned mesh's
   lowest foot vertices, or soles made from its bones) go under its floor, at worst;
-* ``planted_lift_cm``: how far a planted sole (a plant of :func:`motion.contacts.foot_plants`, the
-  contact events' detector, on the result) is above the floor, at worst;
+* ``planted_lift_cm``: how far a planted sole (a plant of :func:`sole_plants`, the contact
+  events' plants: from where the sole lands to where it leaves the floor) is above the floor, at
+  worst;
 * ``foot_speed_m_s``: the fastest foot joint (ankle or toe) of the result, frame to frame, against
   ``source_foot_speed_m_s``, the source's fastest foot (:func:`fastest_foot`: its ankle and toe,
   or the foot's tip where it has no toe joint) scaled to the character (by the ratio of the two
@@ -24,10 +25,42 @@ from ..contacts import foot_plants
 from ..motion import Motion
 from .legik import foot_groups_of
 from .names import Correspondence
-from .sole import Sole
+from .sole import SIDES, Sole
 from .transfer import Pose, leg_length, tip_positions, zero_pose
 
 Array = npt.NDArray[np.float64]
+
+
+ON_FLOOR_M = 0.01
+"""A sole is on the floor while its lowest point is within this many metres of it."""
+
+
+def sole_plants(
+    motion: Motion, groups: list[tuple[int, ...]], soles: tuple[Sole, ...], floor: float
+) -> list[tuple[int, int, int]]:
+    """The plants of ``motion`` (a character, its ``soles`` standing on ``floor``, its units) as
+    its contact events give them: each plant of :func:`motion.contacts.foot_plants` (one per plant
+    of its ankle and toe joints, ``groups``: the feet ankle first, sides in :data:`SIDES` order)
+    from the frame its sole lands on the floor (lowest point within :data:`ON_FLOOR_M`) to the
+    frame after it last touches it: a joint's plant starts before the sole lands (a heel coming
+    down slowly) and ends after it leaves (a toe rising slowly). A plant whose sole never reaches
+    the floor is none. ``(group index, start, end exclusive)``."""
+    pos, grot = motion.fk()
+    by_side = {s.side: s for s in soles}
+    near = ON_FLOOR_M / motion.metres_per_unit
+    on: dict[int, npt.NDArray[np.bool_]] = {}
+    out = []
+    for g, a, b in foot_plants(motion, groups, positions=pos):
+        sole = by_side.get(SIDES[g]) if g < len(SIDES) else None
+        if sole is None:
+            out.append((g, a, b))
+            continue
+        if g not in on:
+            on[g] = sole.positions(pos, grot)[:, :, 1].min(axis=1) - floor <= near
+        touching = np.flatnonzero(on[g][a:b])
+        if touching.size:
+            out.append((g, a + int(touching[0]), a + int(touching[-1]) + 1))
+    return out
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,8 +128,9 @@ def feet_report(
     pos, grot = result.fk()
     m = result.metres_per_unit
     lowest = {s.side: s.positions(pos, grot)[:, :, 1].min(axis=1) - floor for s in soles}
-    sink = max(0.0, -float(min(v.min() for v in lowest.values()))) * m
-    plants = foot_plants(result, groups, positions=pos)
+    under = min(float(s.around(pos, grot)[:, :, 1].min()) - floor for s in soles)
+    sink = max(0.0, -under) * m
+    plants = sole_plants(result, groups, soles, floor)
     lifts = [lowest[("Left", "Right")[g]][a:b].max() for g, a, b in plants if ("Left", "Right")[g] in lowest]
     scale = (leg_length(character.global_positions()[0], tr) * character.metres_per_unit) / max(
         leg_length(zero_pose(source).global_positions()[0], sr) * source.metres_per_unit, 1e-300

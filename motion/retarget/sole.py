@@ -9,9 +9,10 @@ a viewer deforms the mesh (linear blend skinning on those points):
 
 * **from the skinned mesh** (:func:`mesh_soles`, a glTF/GLB character with a mesh): the vertices
   weighted mostly to the foot and its toes (at least half their weight in the foot's subtree),
-  within :data:`SOLE_BAND` of the foot's length above the foot's lowest vertex in the rest pose,
-  reduced to the corners of their convex hull (heel and toe parts apart: the lowest point of a
-  rigid set of points, however it turns, is a corner of its hull), with their own skin weights;
+  all of them, not only those near the floor in the rest pose (a source may turn a foot over: a
+  flick that points the sole up puts the top of the foot lowest), reduced to the corners of
+  their convex hull (heel and toe parts apart: the lowest point of a rigid set of points,
+  however it turns, is a corner of its hull), with their own skin weights;
 * **from the bones** (:func:`bone_soles`, a BVH character, a glTF skin without a mesh): a heel
   behind the ankle, the ball under the toe joint (or 70 % of the way from the heel to the tip
   without one) and the toe tip (the toe's End Site or child), each with an inner and an outer
@@ -25,7 +26,8 @@ moving mostly with the toe bone, which bends at the ball when the heel lifts).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 import numpy.typing as npt
@@ -39,9 +41,6 @@ from .transfer import Pose, tip_positions
 Array = npt.NDArray[np.float64]
 
 SIDES = ("Left", "Right")
-SOLE_BAND = 0.25
-"""Vertices up to this fraction of the foot's length above its lowest vertex (rest pose) can touch
-the floor when the foot turns (a heel landing 30 degrees toe-up, a toe pushing off)."""
 HEEL_BACK = 0.2
 """A bone sole's heel lies this fraction of the foot's length behind the ankle."""
 BALL_AT = 0.7
@@ -49,6 +48,9 @@ BALL_AT = 0.7
 FOOT_WIDTH = 0.38
 """A bone sole is this fraction of its length wide (an adult foot: 9-10 cm for 25-26 cm)."""
 _MIN_WEIGHT = 1e-4
+GUARD_SHARE = 0.25
+"""Vertices with at least this share of their weight in a foot (and less than half) move enough
+with it that lifting the foot lifts them: they are kept above the floor with it."""
 
 
 @dataclass(frozen=True)
@@ -75,6 +77,10 @@ class Sole:
         middle in the rest pose) in the foot joint's and in the toe joint's own frames: the axis
         the foot pitches and the toes roll about, turning with them (a direction from the ankle
         to the sole flips as the foot points down; this does not).
+    guard:
+        Points that move partly with the foot (from :data:`GUARD_SHARE` to half their weight in
+        its subtree: a heel vertex that automatic weights shared with the shin) and must not go
+        under the floor, but do not stand on it (:meth:`around`); ``None`` for a bone sole.
     """
 
     side: str
@@ -87,6 +93,15 @@ class Sole:
     rest: Array
     across: Array
     toe_across: Array
+    guard: Sole | None = None
+
+    def around(self, positions: Array, rotations: Array) -> Array:
+        """``(F, P', 3)`` :meth:`positions` and those of :attr:`guard`'s points: every point of the
+        foot that must stay above the floor."""
+        here = self.positions(positions, rotations)
+        if self.guard is None:
+            return here
+        return np.concatenate((here, self.guard.positions(positions, rotations)), axis=1)
 
     def across_world(self, rotations: Array, toe: bool = False) -> Array:
         """``(F, 3)`` the unit axis across the foot (or its toes) in the world, on the floor's
@@ -170,6 +185,30 @@ def _foot_length(rest: Pose, tips: Array, ankle: int, toe: int) -> float:
     return float(np.linalg.norm((tip - rest.positions[0, ankle])[[0, 2]]))
 
 
+_NONE = (
+    np.zeros((0, 1), dtype=np.intp),
+    np.zeros((0, 1)),
+    np.zeros((0, 1, 3)),
+    np.zeros(0, bool),
+    np.zeros((0, 3)),
+)
+
+
+def _mesh_points(
+    foot: Sole,
+    m: BoundMesh,
+    placed: Array,
+    below: npt.NDArray[np.bool_],
+    rest: Pose,
+    chosen: npt.NDArray[np.intp],
+) -> Sole:
+    """``foot`` (its side, joints and axes) made of the mesh vertices ``chosen`` (``placed``: in
+    the rest pose), each bound as the skin binds it; ``below``: the joints under the ankle."""
+    joints, weights, local = _bound(placed[chosen], m.joints[chosen], m.weights[chosen], rest)
+    toe_part = np.where(below[m.joints[chosen]], m.weights[chosen], 0.0).sum(axis=1) > 0.5 + 1e-6
+    return replace(foot, joints=joints, weights=weights, local=local, on_toe=toe_part, rest=placed[chosen])
+
+
 def mesh_soles(mesh: BoundMesh, character: Motion, roles: dict[str, int]) -> tuple[Sole, ...]:
     """Each foot's sole from the character's skinned mesh (module docstring), ``character`` in
     its rest pose (frame 0, the skin's joints, metres) and ``roles`` its role -> joint index.
@@ -178,7 +217,6 @@ def mesh_soles(mesh: BoundMesh, character: Motion, roles: dict[str, int]) -> tup
     m = mesh.reindexed(character.skeleton.names)
     first = character.slice(0, 1)
     rest = Pose.of(first)
-    tips = tip_positions(first, rest)
     scale = 1.0 / character.metres_per_unit  # the mesh is in metres, the character in its units
     # every vertex in the rest pose of the character (the nodes' pose, which may differ from the
     # bind pose a little): skinned by the character's rest pose
@@ -201,9 +239,6 @@ def mesh_soles(mesh: BoundMesh, character: Motion, roles: dict[str, int]) -> tup
                 f"({character.skeleton.names[ankle]!r})"
             )
         idx = np.flatnonzero(on)
-        length = max(_foot_length(rest, tips, ankle, toe), float(np.ptp(placed[idx, 2])), 1e-9)
-        low = placed[idx, 1] <= placed[idx, 1].min() + SOLE_BAND * length
-        idx = idx[low]
         toe_share = np.where(below[m.joints[idx]], m.weights[idx], 0.0).sum(axis=1)
         on_toe = toe_share > 0.5 + 1e-6
         keep = []
@@ -212,10 +247,11 @@ def mesh_soles(mesh: BoundMesh, character: Motion, roles: dict[str, int]) -> tup
             if sel.size:
                 keep.append(sel[_hull_corners(placed[sel])])
         chosen = np.concatenate(keep)
-        joints, weights, local = _bound(placed[chosen], m.joints[chosen], m.weights[chosen], rest)
-        toe_part = np.where(below[m.joints[chosen]], m.weights[chosen], 0.0).sum(axis=1) > 0.5 + 1e-6
         across = _across(rest, ankle, toe, placed[chosen])
-        out.append(Sole(side, ankle, toe, joints, weights, local, toe_part, placed[chosen], *across))
+        points = partial(_mesh_points, Sole(side, ankle, toe, *_NONE, *across), m, placed, below, rest)
+        shared = np.flatnonzero((share >= GUARD_SHARE) & ~on)
+        guard = points(shared[_hull_corners(placed[shared])]) if shared.size else None
+        out.append(replace(points(chosen), guard=guard))
     return tuple(out)
 
 

@@ -74,6 +74,30 @@ def frame_matrix(up: Array, lateral: Array) -> Array:
     return np.stack((x, y, z), axis=-1)
 
 
+def _frame(up: Array, lateral: Array, what: str, rest: bool) -> Array:
+    """:func:`frame_matrix` of ``up`` and ``lateral`` ``(F, 3)`` each, for frames where they span
+    a plane. A frame where they do not (a zero-length bone, coincident joints, the left-right axis
+    along the up direction) takes the nearest good frame's axes; a rest pose where they do not,
+    or a motion with no good frame, is refused naming ``what`` (and the frame)."""
+    nu = np.linalg.norm(up, axis=-1)
+    scale = max(float(nu.max(initial=0.0)), float(np.linalg.norm(lateral, axis=-1).max(initial=0.0)), 1e-300)
+    x = lateral - np.sum(lateral * up, axis=-1, keepdims=True) * up / np.maximum(nu, 1e-300)[:, None] ** 2
+    good = (nu > 1e-6 * scale) & (np.linalg.norm(x, axis=-1) > 1e-6 * scale)
+    if not good.all():
+        first = int(np.flatnonzero(~good)[0])
+        if rest or not good.any():
+            where = "" if rest else f" in every frame (frame {first}, ...)"
+            raise MotionError(f"{what} do not span a plane{where}: a zero-length bone or coincident joints")
+        idx = np.flatnonzero(good)
+        frames = np.arange(len(good))
+        at = np.searchsorted(idx, frames)
+        after, before = idx[np.minimum(at, len(idx) - 1)], idx[np.maximum(at - 1, 0)]
+        pick = np.where(np.abs(frames - before) < np.abs(after - frames), before, after)
+        up = np.where(good[:, None], up, up[pick])
+        lateral = np.where(good[:, None], lateral, lateral[pick])
+    return frame_matrix(up, lateral)
+
+
 @dataclass(frozen=True)
 class Pose:
     """World positions ``(F, J, 3)`` and rotations ``(F, J, 4)`` of a motion."""
@@ -195,6 +219,18 @@ def transfer_rotations(
             c = nxt[0]
         return c
 
+    def apart(lt: int, rt: int) -> tuple[int, int]:
+        """The left and right joints to span a branching joint's left-right axis with: ``lt`` and
+        ``rt``, or the first driven joints below them that are apart in both rest poses (collars
+        that start where the chest ends, at one point, give no axis; their shoulders do)."""
+        while np.linalg.norm(pt0[lt] - pt0[rt]) <= tol_t or (
+            np.linalg.norm(ps0[corr.pairs[lt]] - ps0[corr.pairs[rt]]) <= tol_s
+        ):
+            if not (children[lt] and children[rt]):
+                break
+            lt, rt = children[lt][0], children[rt][0]
+        return lt, rt
+
     align: dict[int, Array] = {}
     desired: dict[int, Array] = {}
     for j in range(nj):  # parents first: a leaf needs its parent's alignment
@@ -206,7 +242,7 @@ def transfer_rotations(
         left = [reach(j, c) for c in kids if side.get(c, 0) > 0]
         right = [reach(j, c) for c in kids if side.get(c, 0) < 0]
         if left and right:
-            lt, rt = left[0], right[0]
+            lt, rt = apart(left[0], right[0])
             ls, rs = corr.pairs[lt], corr.pairs[rt]
             if centre:
                 up_t0 = pt0[centre[0]] - pt0[j]
@@ -216,9 +252,10 @@ def transfer_rotations(
                 up_t0 = 2 * pt0[j] - pt0[lt] - pt0[rt]
                 up_s0 = 2 * ps0[s] - ps0[ls] - ps0[rs]
                 up_s = 2 * ps[:, s] - ps[:, ls] - ps[:, rs]
-            ft0 = frame_matrix(up_t0, pt0[lt] - pt0[rt])
-            fs0 = frame_matrix(up_s0, ps0[ls] - ps0[rs])
-            fs = frame_matrix(up_s, ps[:, ls] - ps[:, rs])
+            what = f"{source.skeleton.names[s]}'s up and left-right axes"
+            ft0 = _frame(up_t0[None], (pt0[lt] - pt0[rt])[None], f"the character's {sk.names[j]}", True)[0]
+            fs0 = _frame(up_s0[None], (ps0[ls] - ps0[rs])[None], f"the source's rest pose: {what}", True)[0]
+            fs = _frame(up_s, ps[:, ls] - ps[:, rs], f"the source: {what}", False)
             align[j] = rot.from_matrix(ft0 @ fs0.T)
             desired[j] = rot.multiply(rot.from_matrix(fs @ ft0.T), gt0[j])
         elif kids:

@@ -350,7 +350,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     from motion.retarget import correspond, retarget
     from motion.retarget.character import GLTF_SUFFIXES, load_character
     from motion.retarget.legik import character_soles, foot_groups_of, sole_floor
-    from motion.retarget.report import feet_report
+    from motion.retarget.report import feet_report, sole_plants
     from motion.retarget.rootmotion import default_root_motion
     from motion.skinning import read_skinned_mesh
     from motion.units import METRES_PER_UNIT
@@ -386,9 +386,9 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     out = retarget(motion, character, name_map=name_map, feet=feet, root_motion=mode, mesh=mesh)
     groups = foot_groups_of(corr.target_roles)
     soles = character_soles(character, corr.target_roles, mesh)
-    report = feet_report(
-        motion, out, character, corr, soles, sole_floor(out, soles, character, corr.target_roles)
-    )
+    floor = sole_floor(out, soles, character, corr.target_roles)
+    report = feet_report(motion, out, character, corr, soles, floor)
+    plants = sole_plants(out, groups, soles, floor) if kinds else None  # where the soles touch
     if args.report:
         try:
             Path(args.report).write_text(json.dumps({"feet": feet, **report.as_dict()}, indent=1) + "\n")
@@ -396,7 +396,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
             raise MotionError(f"cannot write {args.report}: {exc.strerror or exc}") from None
     notes: list[str] = []
     if glb_out:
-        events = contact_events(out, feet=groups) if kinds else None
+        events = contact_events(out, feet=groups, plants=plants) if kinds else None
         if gltf_character:  # the character's own file, with the animation added
             data = bound_glb(
                 to.read_bytes(), out, animation_only=args.animation_only, events=events, base_dir=to.parent
@@ -410,7 +410,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     else:
         # the character's own units, exactly
         keep = out.units in METRES_PER_UNIT
-        extra = contact_events(out, feet=groups) if kinds else None
+        extra = contact_events(out, feet=groups, plants=plants) if kinds else None
         notes = save_motion(
             out,
             args.out,

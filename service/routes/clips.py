@@ -18,7 +18,7 @@ from ..errors import ApiError, responses
 from ..jsonbody import delete_route
 from ..owners import clip_for, hold, only_visible, release, seen
 from ..tasks import TaskRunnerDep
-from ..uploads import parse_upload, read_upload, stored, upload_body
+from ..uploads import INLINE_UPLOAD_BYTES, Upload, parse_upload, receive_upload, stored, upload_body
 
 router = APIRouter(prefix="/v1/clips", tags=["clips"])
 
@@ -41,6 +41,7 @@ _UPLOAD_BODY = upload_body(
         401,
         413,
         422,
+        503,
         extra={200: {"model": ClipInfo, "description": "the same bytes were already uploaded"}},
     ),
 )
@@ -72,45 +73,54 @@ async def upload_clip(
     them in other ``units``). Bytes another principal uploaded answer as if you were the first: in
     your ``units`` (declared, or guessed as for a new upload), whatever theirs.
     """
-    file_name, data = await read_upload(request, settings.max_upload_bytes, name)
-    existing = await run_in_threadpool(stored, store.clip_info, data)
-    own: dict[str, Any] = {}
-    if existing is None:
-        unit = units.value if units is not None else upload_units(file_name, data)
-        existing = await parse_upload(
-            file_name, data, unit, settings.bvh_limits, store, backend, metrics, runner, limiter,
-            principal.name,
-        )  # fmt: skip
-    elif principal.name in await run_in_threadpool(store.owners, "clips", existing.id):
-        mine = await run_in_threadpool(seen, store, principal, "clips", existing)
-        if units is not None and units.value != mine.units:
-            raise ApiError(
-                409,
-                "units_conflict",
-                f"you uploaded these bytes before as clip {mine.id} in units {mine.units!r}; a clip's "
-                f"units cannot change (delete it first to upload it again with units={units.value!r})",
-                {"clip": mine.id, "units": mine.units},
+    async with receive_upload(request, settings.max_upload_bytes, name) as upload:
+        existing = await run_in_threadpool(stored, store.clip_info, upload.digest)
+        own: dict[str, Any] = {}
+        if existing is None:
+            unit = units.value if units is not None else await _sample_units(upload)
+            existing = await parse_upload(
+                upload, unit, settings.bvh_limits, store, backend, metrics, runner, limiter, principal.name
             )
-    else:
-        own = holder_units(existing, file_name, data, units.value if units is not None else None)
-    clip = existing
-    await run_in_threadpool(
-        hold,
-        store,
-        principal,
-        "clips",
-        clip.id,
-        response,
-        file_name,
-        lambda: store.restore_clip(clip, data),
-        own,
-    )
+        elif principal.name in await run_in_threadpool(store.owners, "clips", existing.id):
+            mine = await run_in_threadpool(seen, store, principal, "clips", existing)
+            if units is not None and units.value != mine.units:
+                raise ApiError(
+                    409,
+                    "units_conflict",
+                    f"you uploaded these bytes before as clip {mine.id} in units {mine.units!r}; a "
+                    f"clip's units cannot change (delete it first to upload it again with "
+                    f"units={units.value!r})",
+                    {"clip": mine.id, "units": mine.units},
+                )
+        else:
+            declared = units.value if units is not None else await _sample_units(upload)
+            own = holder_units(existing, upload.name, declared)
+        clip = existing
+        await run_in_threadpool(
+            hold,
+            store,
+            principal,
+            "clips",
+            clip.id,
+            response,
+            upload.name,
+            lambda: store.restore_clip(clip, upload.file),
+            own,
+        )
     return await run_in_threadpool(seen, store, principal, "clips", clip)
 
 
-def holder_units(shared: ClipInfo, file_name: str, data: bytes, units: str | None) -> dict[str, Any]:
+async def _sample_units(upload: Upload) -> str | None:
+    """The declared unit of an upload that is a bundled sample's own file (samples are small: a
+    larger upload is none)."""
+    if upload.size > INLINE_UPLOAD_BYTES:
+        return None
+    return upload_units(upload.name, await run_in_threadpool(upload.read))
+
+
+def holder_units(shared: ClipInfo, file_name: str, units: str | None) -> dict[str, Any]:
     """A new holder's own ``units`` and ``height_m`` for bytes another principal uploaded, as a
-    first upload would have read them (``units`` declared, else the sample catalogue's, else the
+    first upload would have read them (``units``: declared, or the sample catalogue's; else the
     guess from the height); empty when they are the shared record's. Raises
     :class:`~service.errors.ApiError` 400 for a unit a glTF file cannot have (as a first upload)."""
     if shared.format == "gltf":
@@ -124,7 +134,7 @@ def holder_units(shared: ClipInfo, file_name: str, data: bytes, units: str | Non
     if shared.units not in METRES_PER_UNIT:
         return {}
     file_height = shared.height_m / METRES_PER_UNIT[shared.units]
-    unit = units or upload_units(file_name, data) or guess_units(file_height).units
+    unit = units or guess_units(file_height).units
     if unit == shared.units or unit not in METRES_PER_UNIT:
         return {}
     return {"units": unit, "height_m": round(file_height * METRES_PER_UNIT[unit], 4)}

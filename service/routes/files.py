@@ -17,7 +17,7 @@ from ..deps import PrincipalDep, SettingsDep, StoreDep
 from ..errors import responses
 from ..jsonbody import delete_route
 from ..owners import file_for, hold, only_visible, release, seen
-from ..uploads import read_upload, stored, upload_body
+from ..uploads import receive_upload, stored, upload_body
 
 router = APIRouter(prefix="/v1/files", tags=["files"])
 
@@ -37,6 +37,7 @@ _UPLOAD_BODY = upload_body(
         401,
         413,
         422,
+        503,
         extra={200: {"model": FileInfo, "description": "the same bytes were already uploaded"}},
     ),
 )
@@ -50,14 +51,21 @@ async def upload_file(
 ) -> FileInfo:
     """Upload an input file, stored once per content hash (201 new, 200 already there). Its content
     is checked by the engine that reads it, when a job runs."""
-    file_name, data = await read_upload(request, settings.max_upload_bytes, name)
-    existing = await run_in_threadpool(stored, store.file_info, data)
-    if existing is None:
-        existing = await run_in_threadpool(store.put_file, file_name, data)
-    file = existing
-    await run_in_threadpool(
-        hold, store, principal, "files", file.id, response, file_name, lambda: store.restore_file(file, data)
-    )
+    async with receive_upload(request, settings.max_upload_bytes, name) as upload:
+        existing = await run_in_threadpool(stored, store.file_info, upload.digest)
+        if existing is None:
+            existing = await run_in_threadpool(store.put_file, upload.name, upload.file)
+        file = existing
+        await run_in_threadpool(
+            hold,
+            store,
+            principal,
+            "files",
+            file.id,
+            response,
+            upload.name,
+            lambda: store.restore_file(file, upload.file),
+        )
     return await run_in_threadpool(seen, store, principal, "files", file)
 
 

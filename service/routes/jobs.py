@@ -47,7 +47,13 @@ JOB_REQUEST_BODY = json_body_doc(
 route parses the body itself with :func:`engines.registry.parse_job_request` so plugin engines work."""
 
 JobRequestBody = Annotated[JobRequestBase, Depends(json_body(parse_job_request))]
-ResultQuery = Annotated[str | None, Query(description="result id (default: the job's best result so far)")]
+ResultQuery = Annotated[
+    str | None,
+    Query(
+        pattern=r"^[0-9a-z_-]{1,80}$",
+        description="result id: lowercase letters, digits, '-' and '_' (default: the job's best result)",
+    ),
+]
 
 
 @router.post(

@@ -155,3 +155,23 @@ def test_movements_start_on_the_downbeat() -> None:
     np.testing.assert_allclose(_on_the_bar(early, 1, 4), early[1:])
     np.testing.assert_allclose(_on_the_bar(beats, None, 4), beats)
     np.testing.assert_allclose(_on_the_bar(beats, 4, 4), beats)
+
+
+def _wav_header_claiming(channels: int, frames: int = 400, rate: int = 8000) -> bytes:
+    """A PCM WAV whose ``fmt`` chunk declares ``channels`` channels (16-bit samples that are not
+    all zero), as a hostile upload would send it."""
+    import struct
+
+    data = b"\x00\x10" * channels * frames
+    fmt = struct.pack("<HHIIHH", 1, channels, rate, rate * channels * 2, (channels * 2) & 0xFFFF, 16)
+    body = b"WAVEfmt " + struct.pack("<I", len(fmt)) + fmt + b"data" + struct.pack("<I", len(data)) + data
+    return b"RIFF" + struct.pack("<I", len(body)) + body
+
+
+def test_an_absurd_channel_count_is_a_clear_error() -> None:
+    """A WAV header claiming 65,535 channels was decoded into garbage (or failed with a raw
+    ValueError further on); it is a MusicError naming the count and the limit."""
+    with pytest.raises(MusicError, match="65535 channels; at most 64"):
+        decode(_wav_header_claiming(65_535))
+    y, _ = decode(_wav_header_claiming(2, frames=8000))  # an ordinary header still decodes
+    assert y.size > 0

@@ -108,8 +108,9 @@ def test_a_job_thread_shows_each_new_best_and_ends_with_its_report(serve: Serve,
 
 def test_cancel_keeps_the_best_so_far(serve: Serve, walks: str) -> None:
     client = SegueClient(serve.url)
-    goal = {"type": "body", "frame": 239, "position": [3.0, 6.0]}
-    request = {"engine": "graph", "database": walks, "frames": 240, "seed": 1, "rounds": None,
+    # long by its work (a search also ends when it converges): a minute of motion, the goal 40 m away
+    goal = {"type": "body", "frame": 1439, "position": [30.0, 28.0]}
+    request = {"engine": "graph", "database": walks, "frames": 1440, "seed": 1, "rounds": None,
                "budget_s": 300, "constraints": [goal]}  # fmt: skip
     seen: list[str] = []
 

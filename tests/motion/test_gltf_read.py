@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import base64
 import json
-import struct
 
 import numpy as np
 import pytest
@@ -22,24 +21,9 @@ from motion.export.gltf_doc import read_gltf
 from motion.gltf import gltf_animations, parse_gltf
 from motion.io import load_motion, parse_motion
 from motion.samples import SAMPLES
+from tests.glb_writer import glb
 
 MOTION_SAMPLES = [name for name, file in SAMPLES.items() if ".bvh" in file]
-
-
-def _glb(doc: dict[str, object], binary: bytes) -> bytes:
-    text = json.dumps(doc).encode()
-    text += b" " * (-len(text) % 4)
-    binary += b"\0" * (-len(binary) % 4)
-    total = 12 + 8 + len(text) + 8 + len(binary)
-    return b"".join(
-        (
-            struct.pack("<4sII", b"glTF", 2, total),
-            struct.pack("<II", len(text), 0x4E4F534A),
-            text,
-            struct.pack("<II", len(binary), 0x004E4942),
-            binary,
-        )
-    )
 
 
 @pytest.mark.parametrize("sample", MOTION_SAMPLES)
@@ -97,7 +81,7 @@ def test_node_transforms_above_the_skin_are_applied() -> None:
     )
     scene = doc["scenes"][0]["nodes"]
     scene[scene.index(0)] = len(doc["nodes"]) - 1
-    motion = parse_gltf(_glb(doc, bytes(binary)))
+    motion = parse_gltf(glb(doc, bytes(binary)))
     expected = 2.0 * rot.rotate(turn, bvh.global_positions())
     assert np.abs(motion.global_positions() - expected).max() < 1e-4
 
@@ -192,10 +176,10 @@ def test_files_that_are_not_motions_say_why() -> None:
     doc, binary = read_gltf(data)
     without = {k: v for k, v in doc.items() if k != "animations"}
     with pytest.raises(MotionError, match="has no animation"):
-        parse_gltf(_glb(without, bytes(binary)))
+        parse_gltf(glb(without, bytes(binary)))
     unskinned = {k: v for k, v in doc.items() if k != "skins"}
     with pytest.raises(MotionError, match="no skin"):
-        parse_gltf(_glb(unskinned, bytes(binary)))
+        parse_gltf(glb(unskinned, bytes(binary)))
     with pytest.raises(MotionError, match="a glTF file is in metres"):
         parse_motion(data, units="cm")
     with pytest.raises(MotionError, match="'animation' is for glTF files"):

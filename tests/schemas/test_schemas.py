@@ -27,7 +27,7 @@ def test_database_spec_union_on_kind() -> None:
         ({"kind": "clips", "clips": []}, "at least 1"),
         ({"kind": "clips", "clips": [{}]}, "exactly one of"),
         ({"kind": "clips", "clips": [{"bvh": "a", "clip": "b"}]}, "exactly one of"),
-        ({"kind": "clips", "clips": [{"bvh": "a.bvh"}], "fps": -1}, "greater than 0"),
+        ({"kind": "clips", "clips": [{"bvh": "a.bvh"}], "fps": -1}, "greater than or equal to 1"),
         ({"kind": "clips", "clips": [{"bvh": "a.bvh", "units": "furlong"}]}, "unknown units"),
         (
             {"kind": "clips", "clips": [{"bvh": "a.bvh", "labels": [{"label": "x", "start": 5, "end": 2}]}]},

@@ -286,7 +286,7 @@ def test_result_errors(client: TestClient, walk_db: dict[str, Any]) -> None:
     error_of(client.get(f"/v1/jobs/{job_id}/result", params={"result": "r9"}), 404, "not_found")
     error_of(client.get(f"/v1/jobs/{job_id}/result", params={"format": "fbx"}), 422, "invalid_request")
     error_of(client.get(f"/v1/jobs/{job_id}/result", params={"fps": -5}), 422, "invalid_request")
-    error_of(client.get(f"/v1/jobs/{job_id}/report", params={"result": "../x"}), 404, "not_found")
+    error_of(client.get(f"/v1/jobs/{job_id}/report", params={"result": "../x"}), 422, "invalid_request")
     error_of(client.get("/v1/jobs/nope/result"), 404, "not_found")
     error_of(client.get("/v1/jobs/nope"), 404, "not_found")
     error_of(client.post("/v1/jobs/nope/cancel", headers=JSON), 404, "not_found")

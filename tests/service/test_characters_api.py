@@ -171,7 +171,7 @@ def test_a_result_download_wears_the_mannequin(
 ) -> None:
     """``mesh=body``: a GLB download on Segue's mannequin (what the viewer shows a result on when
     no character is chosen), with the contacts measured on it; a glTF character wears its own."""
-    from tests.motion.retarget.gltf_rig import read_glb
+    from tests.glb_writer import read_glb
 
     from .conftest import WALK_CLIP, wait_events
     from .test_api import submit

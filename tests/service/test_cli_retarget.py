@@ -103,7 +103,7 @@ def test_errors_name_the_problem(
 
 
 def test_a_bvh_character_keeps_exactly_its_hierarchy_in_glb(tmp_path: Path, unreal_bvh: Path) -> None:
-    from tests.motion.retarget.gltf_rig import read_glb
+    from tests.glb_writer import read_glb
 
     out = tmp_path / "o.glb"
     assert main(["retarget", "sample:walk-05-01", "--to", str(unreal_bvh), "--out", str(out), "-q"]) == 0
@@ -121,7 +121,8 @@ def test_animation_only_needs_a_gltf_character(
 
 
 def test_root_motion_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from tests.motion.retarget.gltf_rig import read_glb, unreal_character_glb
+    from tests.glb_writer import read_glb
+    from tests.motion.retarget.gltf_rig import unreal_character_glb
 
     hero = tmp_path / "hero.glb"
     hero.write_bytes(unreal_character_glb())

@@ -75,6 +75,25 @@ def test_a_glb_is_a_clip_of_the_same_frames_and_height(client: TestClient, walk_
     assert db["summary"]["clips"][0]["frames"] == 80  # 317 frames at 120 fps, at 30 fps
 
 
+def test_a_broken_gltf_upload_is_named_as_gltf(client: TestClient) -> None:
+    # Regression: a glTF upload that cannot be read answered 400 ``invalid_bvh``
+    good = _walk_glb()
+    for name, data, says in [
+        ("cut.glb", good[: len(good) // 2], "cut.glb"),
+        (
+            "still.glb",
+            glb_bytes(load_motion("sample:walk").slice(0, 1).to_units("m"), animation=False),
+            "animation",
+        ),
+    ]:
+        r = client.post("/v1/clips", files={"file": (name, data)})
+        assert r.status_code == 400, r.text
+        err = r.json()["error"]
+        assert err["code"] == "invalid_gltf" and says in err["message"], err
+    bvh = client.post("/v1/clips", files={"file": ("x.bvh", b"HIERARCHY\nROOT")})
+    assert bvh.json()["error"]["code"] == "invalid_bvh"
+
+
 def test_a_spec_is_checked_against_its_clips_at_submission(
     client: TestClient, walk_clip: dict[str, Any]
 ) -> None:

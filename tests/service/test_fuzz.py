@@ -6,11 +6,15 @@ cases and 25 s, runs in the acceptance check ``robust.py``; this test keeps to t
 
 from __future__ import annotations
 
+import json
+import re
 import shutil
 import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qsl, urlsplit
 
 import httpx
 import pytest
@@ -48,9 +52,31 @@ def test_schemathesis_finds_no_server_error_and_no_undocumented_status(tmp_path:
             [SCHEMATHESIS, "run", f"{url}/openapi.json",
              "--checks", "not_a_server_error,status_code_conformance", "--max-examples", "4",
              "--seed", "7", "--request-timeout", "120", "--workers", "1",
-             "--phases", "examples,fuzzing,stateful", "--suppress-health-check", "all"],
+             "--phases", "examples,fuzzing,stateful", "--suppress-health-check", "all",
+             "--report", "har", "--report-har-path", str(tmp_path / "run.har")],
             capture_output=True, text=True, timeout=600, cwd=tmp_path,
         )  # fmt: skip
     summary = [line for line in run.stdout.splitlines() if "generated" in line or "Stateful" in line]
     assert run.returncode == 0, run.stdout[-4000:]
     assert summary, run.stdout[-2000:]
+    _check_result_route_coverage(json.loads((tmp_path / "run.har").read_text()))
+
+
+RESULT_ROUTE = re.compile(r"/v1/jobs/[0-9a-f]{32}/result$")
+RESULT_QUERY = {"result", "format", "mesh", "feet", "dancer", "animation_only", "fps", "events", "units"}
+
+
+def _check_result_route_coverage(har: dict[str, Any]) -> None:
+    """The run reached the result route of real jobs (ids the links carried: 32 hex digits) with
+    ``result`` and at least four more of the route's query parameters, and exported a real result
+    (200) at least once: the fuzz covers the route's parameters on real jobs, not only 404s."""
+    names: set[str] = set()
+    statuses: list[int] = []
+    for entry in har["log"]["entries"]:
+        url = urlsplit(entry["request"]["url"])
+        if entry["request"]["method"] == "GET" and RESULT_ROUTE.search(url.path):
+            names.update(name for name, _ in parse_qsl(url.query, keep_blank_values=True))
+            statuses.append(int(entry["response"]["status"]))
+    assert statuses, "the run never reached the result route of a real job"
+    assert "result" in names and len(names & RESULT_QUERY) >= 5, names
+    assert 200 in statuses, sorted(set(statuses))

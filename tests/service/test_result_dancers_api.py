@@ -12,7 +12,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from motion import parse_bvh
-from tests.motion.retarget.gltf_rig import read_glb, unreal_character_glb
+from tests.glb_writer import read_glb
+from tests.motion.retarget.gltf_rig import unreal_character_glb
 
 from .conftest import wait_events
 from .test_api import error_of
@@ -87,6 +88,13 @@ def test_animation_only_is_the_characters_skeleton_and_the_animation(
         "export_failed",
     )
     assert "animation_only is for format=glb onto a glTF/GLB character" in err["message"]
+    # Regression: several dancers onto one character said the motion "has no joint for: hips"
+    err = error_of(
+        client.get(f"/v1/jobs/{pair_job}/result", params={"format": "glb", "character": f["id"]}),
+        422,
+        "export_failed",
+    )
+    assert "has 2 dancers; a character wears one: download each with dancer=0..1" in err["message"]
 
 
 def test_a_summary_gives_the_performers_hip_height(client: TestClient, walks_db: dict[str, Any]) -> None:

@@ -58,7 +58,8 @@ def test_result_on_an_uploaded_glb_character(client: TestClient, walk_job: str) 
 
 
 def test_a_glb_download_is_the_characters_own_file(client: TestClient, walk_job: str) -> None:
-    from tests.motion.retarget.gltf_rig import read_glb, unreal_character_glb
+    from tests.glb_writer import read_glb
+    from tests.motion.retarget.gltf_rig import unreal_character_glb
 
     hero = unreal_character_glb()
     f = client.post("/v1/files", files={"file": ("hero.glb", hero)}).json()

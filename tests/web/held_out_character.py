@@ -11,14 +11,13 @@ in two primitives with two named materials: ``skin`` (head, neck, hands) and ``s
 
 from __future__ import annotations
 
-import json
-import struct
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from motion import rotations as rot
+from tests.glb_writer import armature_nodes, glb
 
 Array = npt.NDArray[np.float64]
 P = "mixamorig:"
@@ -154,22 +153,7 @@ def held_out_character_glb() -> bytes:
             for k in range(len(NAMES))
         ]
     )
-    arm_m = np.diag([arm, arm, arm, 1.0])
-    nodes: list[dict[str, Any]] = [{"name": "Armature", "scale": [arm] * 3, "children": [1]}]
-    for k, name in enumerate(NAMES):
-        parent = world[PARENTS[k]] if PARENTS[k] >= 0 else arm_m
-        local = np.linalg.inv(parent) @ world[k]
-        q = rot.multiply(rot.inverse(g[PARENTS[k]]), g[k]) if PARENTS[k] >= 0 else g[k]
-        node: dict[str, Any] = {
-            "name": name,
-            "translation": [float(x) for x in local[:3, 3]],
-            "rotation": [float(x) for x in rot.normalize(q)],
-        }
-        kids = [c + 1 for c, p in enumerate(PARENTS) if p == k]
-        if kids:
-            node["children"] = kids
-        nodes.append(node)
-    nodes.append({"name": "body", "mesh": 0, "skin": 0})
+    nodes = armature_nodes(world, g, NAMES, PARENTS, ARMATURE_SCALE, "body")
     data = bytearray()
     views: list[dict[str, Any]] = []
     accessors: list[dict[str, Any]] = []
@@ -245,15 +229,4 @@ def held_out_character_glb() -> bytes:
         "bufferViews": views,
         "buffers": [{"byteLength": len(data)}],
     }
-    text = json.dumps(doc).encode()
-    text += b" " * (-len(text) % 4)
-    total = 12 + 8 + len(text) + 8 + len(data)
-    return b"".join(
-        (
-            struct.pack("<4sII", b"glTF", 2, total),
-            struct.pack("<II", len(text), 0x4E4F534A),
-            text,
-            struct.pack("<II", len(data), 0x004E4942),
-            bytes(data),
-        )
-    )
+    return glb(doc, data)

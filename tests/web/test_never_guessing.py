@@ -33,6 +33,7 @@ from .test_browser import (
     state,
     wait,
 )
+from .test_characters_browser import constraints_search
 
 pytestmark = pytest.mark.slow
 
@@ -108,16 +109,7 @@ def test_switching_tools_clears_the_other_tools_job(page: Any, segue: SegueClien
 def test_a_finished_job_says_so_with_its_verdict(page: Any, segue: SegueClient) -> None:
     """Beside Cancel: `done · best rN · ok` (or `not ok`), as the result's report says."""
     needs_engine("graph")
-    db = segue.build_database(DEMOS["graph"].spec).id
-    reload_databases(page)
-    page.click("#tabs button[data-tool='constraints']")
-    select_database(page, "cons-db", db)
-    drag(page, "#cons-pad", [(0.5, 0.5), (0.5, 0.6)])
-    drag(page, "#cons-pad", [(0.52, 0.9), (0.52, 0.95)])
-    page.fill("#cons-length", "4")
-    page.fill("#cons-budget", "1")
-    page.click("#cons-go")
-    wait(page, f"s.job.status === 'done' && {BEST_DRAWN}")
+    constraints_search(page, segue)
     s = state(page)
     report = segue.report(s["job"]["id"], s["job"]["end"]["result"])
     verdict = "ok" if report.ok else "not ok"

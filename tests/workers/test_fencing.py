@@ -16,6 +16,7 @@ import redis
 from motion import parse_bvh
 from motion.samples import sample_path
 from schemas import EventType, JobEvent, JobStatus, Report
+from tests.processes import engine_children
 from workers.fencing import Fence, FencedStore, StaleAttempt
 from workers.redis_backend import RedisBackend
 from workers.redis_events import EventPublisher
@@ -29,24 +30,6 @@ KEYS = RedisKeys()
 
 def stream_events(client: redis.Redis, job_id: str) -> list[JobEvent]:
     return [JobEvent.model_validate_json(f["event"]) for _, f in client.xrange(KEYS.events(job_id))]
-
-
-def engine_children(pid: int) -> list[int]:
-    """A worker's engine process (its ``multiprocessing`` children but the resource tracker)."""
-    out = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            kids = (task / "children").read_text().split()
-        except OSError:
-            continue
-        for kid in kids:
-            try:
-                cmd = Path(f"/proc/{kid}/cmdline").read_bytes()
-            except OSError:
-                continue
-            if b"resource_tracker" not in cmd:
-                out.append(int(kid))
-    return out
 
 
 def running_job(client: redis.Redis, worker: str) -> str | None:

@@ -146,3 +146,21 @@ def test_a_control_glb_counts_its_frames() -> None:
     request.attach_inputs({"lead.glb": glb_bytes(lead)})
     assert estimate_work(request, _facts(lead.fps)).frames == lead.num_frames
     assert estimate_work(request, _facts(2 * lead.fps)).frames == 2 * lead.num_frames - 1
+
+
+def test_an_absurd_channel_count_is_refused_at_submission() -> None:
+    """A 65,535-channel WAV (libsndfile refuses its header, so it had no facts and passed) is a
+    problem naming the channels; an ordinary recording is none."""
+    from engines.rhythm.music_facts import wav_channels
+
+    from ..engines.test_rhythm_audio import _wav_header_claiming
+
+    hostile = _wav_header_claiming(65_535)
+    assert wav_channels(hostile) == 65_535
+    work = estimate_work(_rhythm({"audio": "many.wav"}, {"many.wav": hostile}), _facts(120.0))
+    assert any("65535 channels" in p for p in check_work(work, WorkLimits()))
+    buf = io.BytesIO()
+    sf.write(buf, np.zeros((8_000, 2), dtype=np.int16), 8_000, format="WAV")
+    assert wav_channels(buf.getvalue()) == 2
+    ok = estimate_work(_rhythm({"audio": "two.wav"}, {"two.wav": buf.getvalue()}), _facts(120.0))
+    assert not any("channels" in p for p in check_work(ok, WorkLimits()))

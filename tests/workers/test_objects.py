@@ -113,3 +113,21 @@ def test_aws_region_is_the_s3_clients_region(monkeypatch: pytest.MonkeyPatch, tm
     assert S3Objects("bucket").client.meta.region_name == "eu-west-3"
     monkeypatch.delenv("AWS_REGION")
     assert S3Objects("bucket").client.meta.region_name == "us-west-2"
+
+
+def test_put_stream_stores_a_file_in_chunks(objects: Objects, tmp_path: Path) -> None:
+    """An upload spooled to disk is stored from its file (several chunks, replacing atomically)."""
+    import os
+
+    from workers.objects import STREAM_CHUNK
+
+    data = os.urandom(2 * STREAM_CHUNK + 123)
+    spooled = tmp_path / "spooled"
+    spooled.write_bytes(data)
+    with spooled.open("rb") as fh:
+        objects.put_stream("files/big.bin", fh)
+    assert objects.get("files/big.bin") == data and objects.size("files/big.bin") == len(data)
+    with spooled.open("rb") as fh:
+        fh.seek(len(data) - 10)  # from the file's current position
+        objects.put_stream("files/big.bin", fh)
+    assert objects.get("files/big.bin") == data[-10:]

@@ -25,6 +25,7 @@ from engines.registry import parse_database_spec
 from motion.samples import sample_path
 from schemas import DatabaseInfo, DatabaseStatus, EventType, JobEvent, JobInfo
 from schemas.databases import database_id
+from tests.processes import engine_children
 from workers.redis_backend import RedisBackend
 from workers.redis_keys import RedisKeys
 from workers.store import Store, now
@@ -34,24 +35,6 @@ from .conftest import GUARD_S, REPO, add_database, new_job, run, spawn_worker, w
 pytestmark = pytest.mark.slow
 
 KEYS = RedisKeys()
-
-
-def engine_children(pid: int) -> list[int]:
-    """The pids of a process's children other than multiprocessing's resource tracker."""
-    out = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            kids = (task / "children").read_text().split()
-        except OSError:
-            continue
-        for kid in kids:
-            try:
-                cmd = Path(f"/proc/{kid}/cmdline").read_bytes()
-            except OSError:
-                continue
-            if b"resource_tracker" not in cmd:
-                out.append(int(kid))
-    return out
 
 
 def gone(pid: int) -> bool:

@@ -26,7 +26,7 @@ from schemas import EventType, JobEvent
 from service.errors import ApiError
 from service.metrics import Metrics
 from service.tasks import TaskRunner
-from service.uploads import parse_upload
+from service.uploads import Upload, parse_upload
 from tests.motion.retarget.characters import character
 from workers.embedded import EmbeddedBackend
 from workers.redis_backend import RedisBackend
@@ -124,8 +124,7 @@ def test_an_upload_the_backend_refuses_leaves_no_staged_upload(
         try:
             with pytest.raises(ApiError) as refused:
                 await parse_upload(
-                    "big.bvh.gz",
-                    _upload(),
+                    Upload.from_bytes("big.bvh.gz", _upload()),
                     None,
                     BvhLimits(*LIMITS),
                     store,

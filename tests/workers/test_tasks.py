@@ -12,6 +12,8 @@ from typing import Any
 import pytest
 
 from motion import write_bvh
+from motion.export.glb import glb_bytes
+from motion.io import load_motion
 from schemas import EventType
 from service.errors import ApiError
 from service.metrics import Metrics
@@ -21,7 +23,7 @@ from workers.execute import EngineCache, execute_job
 from workers.redis_backend import RedisBackend
 from workers.result_export import CharacterRef, ExportSpec, ResultFormat, make_export
 from workers.store import NotFoundError, Store
-from workers.tasks import task_payload
+from workers.tasks import run_task, task_payload
 
 from .conftest import add_database, run, synth, worker_thread
 
@@ -113,3 +115,17 @@ def test_a_store_failure_during_a_run_is_named_not_internal(tmp_path: Path) -> N
     assert kind == EventType.failed
     assert data["error"]["code"] == "storage_unavailable"
     assert "cannot be reached" in data["error"]["message"]
+
+
+def test_a_staged_gltf_that_cannot_be_read_fails_as_gltf(tmp_path: Path) -> None:
+    # a glTF upload over the inline size is parsed by a small job: its fault is named as glTF
+    store = Store(tmp_path / "data")
+    cut = glb_bytes(load_motion("sample:walk").to_units("m"))[:5000]
+    events: list[tuple[EventType, dict[str, Any]]] = []
+    key = store.stage(cut)
+    limits = [100, 100_000, 10_000_000, 10_000_000]
+    request = task_payload("clip", staged=key, name="cut.glb", units=None, limits=limits)["request"]
+    run_task(store, request, lambda kind, data: events.append((kind, data)))
+    ((kind, data),) = events
+    assert kind is EventType.failed and data["error"]["code"] == "invalid_gltf", data
+    assert "cut.glb" in data["error"]["message"]

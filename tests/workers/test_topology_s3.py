@@ -30,10 +30,10 @@ from motion import parse_bvh
 from motion.samples import sample_path
 from schemas import EventType, JobEvent, JobStatus
 from service.client import SegueClient
+from tests.processes import engine_children
 from workers.redis_keys import RedisKeys
 
 from .conftest import GUARD_S, PLUGINS, REPO, wait_for
-from .test_fencing import engine_children
 
 pytestmark = pytest.mark.slow  # real processes: tests/run.sh runs it with CI=true or SEGUE_SLOW=1
 

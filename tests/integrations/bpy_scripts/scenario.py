@@ -574,7 +574,13 @@ def scenario_live() -> dict:
     at_return = state.SESSION.job.state
     states = _pump()
     done = {"at_return": at_return, "states": states, "job": job_report(), "action": action_report(char)}
-    # a long search, cancelled once its first solution shows: the best so far stays on the rig
+    # a long search, cancelled once its first solution shows: the best so far stays on the rig.
+    # Long by its work, not only its budget (a search also ends when it converges, and the short
+    # one above converges within a second on an idle machine): a minute of motion, the end goal
+    # 40 m away, so each round costs ~20 times more and the cancel arrives long before convergence
+    setup_scene(1, 1441)
+    bpy.data.objects["End"]["segue_frame"] = 1441
+    bpy.data.objects["End"].location = (30.0, -28.0, 0.0)
     long = json.dumps({"rounds": None, "budget_s": 300})
     assert bpy.ops.segue.generate(database=CFG["database"], scene_goals=True, request=long) == {"FINISHED"}
     ops = addon_module("ops")

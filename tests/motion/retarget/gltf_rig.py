@@ -12,14 +12,13 @@ bound to its bone with weight 1, with one named material.
 
 from __future__ import annotations
 
-import json
-import struct
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from motion import rotations as rot
+from tests.glb_writer import armature_nodes, glb
 
 Array = npt.NDArray[np.float64]
 
@@ -131,22 +130,7 @@ def unreal_character_glb() -> bytes:
     """The test character as GLB bytes (module docstring)."""
     world = rest_world()
     g = _world_rotations()
-    arm = np.diag([ARMATURE_SCALE, ARMATURE_SCALE, ARMATURE_SCALE, 1.0])
-    nodes: list[dict[str, Any]] = [{"name": "Armature", "scale": [ARMATURE_SCALE] * 3, "children": [1]}]
-    for k, name in enumerate(NAMES):
-        parent = world[PARENTS[k]] if PARENTS[k] >= 0 else arm
-        local = np.linalg.inv(parent) @ world[k]
-        q = rot.multiply(rot.inverse(g[PARENTS[k]]), g[k]) if PARENTS[k] >= 0 else g[k]
-        node: dict[str, Any] = {
-            "name": name,
-            "translation": [float(x) for x in local[:3, 3]],
-            "rotation": [float(x) for x in rot.normalize(q)],
-        }
-        kids = [c + 1 for c, p in enumerate(PARENTS) if p == k]
-        if kids:
-            node["children"] = kids
-        nodes.append(node)
-    nodes.append({"name": "hero_body", "mesh": 0, "skin": 0})
+    nodes = armature_nodes(world, g, NAMES, PARENTS, ARMATURE_SCALE, "hero_body")
     verts, joints, tris = _boxes(world)
     n = len(verts)
     joint4 = np.zeros((n, 4), np.uint16)
@@ -205,26 +189,7 @@ def unreal_character_glb() -> bytes:
         "bufferViews": views,
         "buffers": [{"byteLength": len(data)}],
     }
-    text = json.dumps(doc).encode()
-    text += b" " * (-len(text) % 4)
-    total = 12 + 8 + len(text) + 8 + len(data)
-    return b"".join(
-        (
-            struct.pack("<4sII", b"glTF", 2, total),
-            struct.pack("<II", len(text), 0x4E4F534A),
-            text,
-            struct.pack("<II", len(data), 0x004E4942),
-            bytes(data),
-        )
-    )
-
-
-def read_glb(raw: bytes) -> tuple[dict[str, Any], bytes]:
-    """The JSON document and the BIN chunk of a GLB."""
-    n = struct.unpack_from("<I", raw, 12)[0]
-    doc = json.loads(raw[20 : 20 + n])
-    rest = raw[20 + n :]
-    return doc, rest[8 : 8 + struct.unpack_from("<I", rest, 0)[0]] if rest else b""
+    return glb(doc, data)
 
 
 def accessor(doc: dict[str, Any], binary: bytes, index: int) -> Array:

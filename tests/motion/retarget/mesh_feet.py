@@ -7,20 +7,41 @@ animation. Used by ``tests/motion/retarget/test_feet_mesh.py`` and ``bench/feet_
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from motion import Motion
 from motion.contacts import foot_plants
-from motion.retarget import detect_roles
-from motion.retarget.report import fastest_foot
+from motion.export.bind import bound_glb
+from motion.export.events import contact_events
+from motion.retarget import correspond, detect_roles, retarget
+from motion.retarget.character import gltf_character
+from motion.retarget.legik import character_soles, foot_groups_of, sole_floor
+from motion.retarget.report import fastest_foot, sole_plants
+from motion.retarget.rootmotion import default_root_motion
 from motion.retarget.transfer import leg_length, zero_pose
 from motion.skinning import animation_pose, read_skinned_mesh, skin
 
 from .namings import ROLE_OF_UNREAL, name_in
 
 CHUNK = 128  # frames skinned at a time
+
+
+def written(source: Motion, raw: bytes, name_map: dict[str, str] | None = None) -> bytes:
+    """``source`` retargeted onto the glTF character ``raw`` and written into its own file with
+    its contact events, as ``segue retarget SOURCE --to CHAR.glb --out OUT.glb --events contacts
+    [--map MAP]`` writes it (root motion as for glTF, feet locked, events where the soles touch)."""
+    character = gltf_character(raw)
+    mesh = read_skinned_mesh(raw)
+    corr = correspond(source.skeleton, character.skeleton, name_map)
+    mode = default_root_motion("gltf", corr.target_roles["Hips"])
+    out = retarget(source, character, name_map=name_map, root_motion=mode, mesh=mesh)
+    groups = foot_groups_of(corr.target_roles)
+    soles = character_soles(character, corr.target_roles, mesh)
+    plants = sole_plants(out, groups, soles, sole_floor(out, soles, character, corr.target_roles))
+    return bound_glb(raw, out, events=contact_events(out, feet=groups, plants=plants))
 
 
 def _subtree(parents: list[int], top: int) -> np.ndarray:
@@ -39,9 +60,16 @@ def _doc(raw: bytes) -> dict[str, Any]:
     return dict(json.loads(raw[20 : 20 + n]))
 
 
-def measure(out_glb: bytes, source: Motion, rest: Motion, naming: str) -> dict[str, Any]:
+def measure(
+    out_glb: bytes,
+    source: Motion,
+    rest: Motion,
+    naming: str,
+    name_of: Callable[[str, str], str] = name_in,
+) -> dict[str, Any]:
     """The figures of one output file (``out_glb``: ``source`` retargeted onto the character
-    whose rest pose, in Unreal names, is ``rest``, its joints named after ``naming``):
+    whose rest pose, in Unreal names, is ``rest``, its joints named after ``naming``: joint ``u``
+    of ``rest`` is ``name_of(naming, u)`` in the file):
 
     * ``sink_cm``: how far the mesh goes under its rest floor (the bind pose's lowest vertex), at
       worst (``sink_frame``);
@@ -75,7 +103,7 @@ def measure(out_glb: bytes, source: Motion, rest: Motion, naming: str) -> dict[s
     sides: dict[str, tuple[int, ...]] = {}
     for side, s in (("Left", "l"), ("Right", "r")):
         sides[side] = tuple(
-            node_of[name_in(naming, u)] for u in (f"foot_{s}", f"ball_{s}") if name_in(naming, u) in node_of
+            node_of[name_of(naming, u)] for u in (f"foot_{s}", f"ball_{s}") if name_of(naming, u) in node_of
         )
     foot_vertices = {}
     for side, joints in sides.items():

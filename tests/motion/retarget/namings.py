@@ -10,14 +10,22 @@ from __future__ import annotations
 
 import json
 import struct
+from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
 from motion import Motion, Skeleton
 from motion import rotations as rot
+from motion.io import load_motion
 from motion.skeleton import default_channels
 
 NAMINGS = ("unreal", "mixamo", "own")
+
+BANDAI_WALK = (
+    Path(__file__).resolve().parents[4] / "shared/data/bandai-namco/dataset-2/dataset-2_walk_normal_002.bvh"
+)
+"""A Bandai-Namco clip whose first frame is :func:`bandai_rig` (``../shared/data``)."""
 
 _SIDES = {"l": ("Left", "L"), "r": ("Right", "R")}
 
@@ -76,16 +84,19 @@ def role_map(naming: str = "own", *, toes: bool = True) -> dict[str, str]:
     }
 
 
-def renamed_glb(raw: bytes, naming: str) -> bytes:
-    """A GLB in Unreal names with its nodes renamed to ``naming`` (:data:`NAMINGS`)."""
-    if naming == "unreal":
-        return raw
+def renamed_glb(raw: bytes, naming: str, rename: Callable[[str], str] | None = None) -> bytes:
+    """A GLB in Unreal names with its joints renamed to ``naming`` (:data:`NAMINGS`), or any GLB
+    with each joint ``n`` renamed to ``rename(n)``."""
+    if rename is None:
+        if naming == "unreal":
+            return raw
+        rename = lambda n: name_in(naming, n)  # noqa: E731
     n = struct.unpack_from("<I", raw, 12)[0]
     doc = json.loads(raw[20 : 20 + n])
     joints = {int(j) for skin in doc.get("skins", []) for j in skin["joints"]}
     for i, node in enumerate(doc["nodes"]):
         if i in joints and "name" in node:
-            node["name"] = name_in(naming, node["name"])
+            node["name"] = rename(node["name"])
     text = json.dumps(doc).encode()
     text += b" " * (-len(text) % 4)
     rest = raw[20 + n :]
@@ -120,6 +131,27 @@ def game_rig(root: bool = True) -> Motion:
     )
     q = np.tile(rot.IDENTITY, (1, len(names), 1))
     return Motion(skeleton, offsets[:1].copy(), q, 30.0, units="m", name="game_rig")
+
+
+BANDAI_UNREAL = {
+    "Hips": "pelvis", "Spine": "spine_01", "Chest": "spine_02", "Neck": "neck_01", "Head": "head",
+    "Shoulder_L": "clavicle_l", "UpperArm_L": "upperarm_l", "LowerArm_L": "lowerarm_l", "Hand_L": "hand_l",
+    "Shoulder_R": "clavicle_r", "UpperArm_R": "upperarm_r", "LowerArm_R": "lowerarm_r", "Hand_R": "hand_r",
+    "UpperLeg_L": "thigh_l", "LowerLeg_L": "calf_l", "Foot_L": "foot_l", "Toes_L": "ball_l",
+    "UpperLeg_R": "thigh_r", "LowerLeg_R": "calf_r", "Foot_R": "foot_r", "Toes_R": "ball_r",
+}  # fmt: skip
+
+
+def bandai_rig() -> Motion:
+    """Bandai-Namco's skeleton in Unreal names, its first frame (metres): a rest pose from a clip."""
+    m = load_motion(BANDAI_WALK).slice(0, 1)
+    m = m.to_units("m")
+    sk = m.skeleton
+    names = tuple(BANDAI_UNREAL.get(n, n) for n in sk.names)
+    renamed = Skeleton(names, sk.parents, sk.offsets, sk.channels, sk.end_site_parents, sk.end_site_offsets)
+    root = np.array(m.root_positions, copy=True)
+    root[:, [0, 2]] = 0.0
+    return Motion(renamed, root, m.rotations, m.fps, m.joint_translations, m.units, "bandai_rig")
 
 
 def mannequin_character(naming: str = "unreal", rest: Motion | None = None) -> bytes:

@@ -14,6 +14,7 @@ from motion.export.bind import bound_glb
 from motion.io import load_motion
 from motion.retarget import retarget
 from motion.retarget.character import gltf_character
+from tests.glb_writer import read_glb
 
 from .gltf_rig import (
     ARMATURE_SCALE,
@@ -21,7 +22,6 @@ from .gltf_rig import (
     PARENTS,
     animated_world,
     node_index,
-    read_glb,
     unreal_character_glb,
 )
 

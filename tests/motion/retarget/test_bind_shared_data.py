@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from service.cli import main
+from tests.glb_writer import read_glb
 
-from .gltf_rig import NAMES, PARENTS, animated_world, node_index, read_glb, unreal_character_glb
+from .gltf_rig import NAMES, PARENTS, animated_world, node_index, unreal_character_glb
 
 DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data"
 CLIPS = ("cmu-daz/walks/08_03.bvh", "cmu-walks/007_02.bvh")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +13,7 @@ from motion.export.glb import write_glb
 from motion.io import load_motion
 from motion.retarget import retarget
 from motion.retarget.character import gltf_character, load_character
+from tests.glb_writer import glb
 
 from .characters import LIMBS, angle_deg, bone_directions, character, walk
 
@@ -46,12 +46,6 @@ def test_glb_character_matches_the_bvh_it_was_written_from(tmp_path: Path) -> No
     assert angle_deg(bone_directions(walk(60), LIMBS), bone_directions(out, LIMBS)).max() < 0.5
 
 
-def _glb(doc: dict[str, object]) -> bytes:
-    body = json.dumps(doc).encode()
-    body += b" " * (-len(body) % 4)
-    return b"glTF" + struct.pack("<II", 2, 20 + len(body)) + struct.pack("<II", len(body), 0x4E4F534A) + body
-
-
 def test_gltf_armature_scale_and_rotation_are_applied() -> None:
     # a DCC export: an "Armature" node scaled 0.01 and turned, joints in centimetres below it
     doc = {
@@ -67,7 +61,7 @@ def test_gltf_armature_scale_and_rotation_are_applied() -> None:
         ],
         "skins": [{"joints": [1, 2]}],
     }
-    char = gltf_character(_glb(doc))
+    char = gltf_character(glb(doc))
     assert char.skeleton.names == ("Hips", "Spine") and char.units == "m"
     np.testing.assert_allclose(char.global_positions()[0], [[0.0, 1.0, 0.0], [0.0, 1.1, 0.0]], atol=1e-9)
     text = gltf_character(json.dumps(doc).encode())  # .gltf: plain JSON

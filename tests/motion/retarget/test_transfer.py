@@ -4,6 +4,7 @@ rotations of unmapped joints, bad input."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from motion import MotionError
 from motion import rotations as rot
 from motion.io import load_motion
 from motion.retarget import retarget
-from motion.retarget.transfer import frame_matrix, shortest_arc
+from motion.retarget.transfer import _frame, frame_matrix, shortest_arc
 
 from .characters import LIMBS, angle_deg, bone_directions, character, renamed_limbs, walk
 
@@ -96,3 +97,33 @@ def test_non_finite_input_is_an_error() -> None:
     bad[3, 5] = np.nan
     with pytest.raises(MotionError, match="motion has non-finite rotations"):
         retarget(replace(src, rotations=bad), character("mixamo"))
+
+
+BOXING = Path(__file__).resolve().parents[2] / "data" / "bvh-corpus" / "Boxing_Toes.bvh.gz"
+
+
+def test_collars_starting_at_one_point_take_the_shoulders_axis() -> None:
+    """A chest whose neck and both collars start at one point (the corpus's Boxing_Toes: the
+    collars' rest bones have zero length) spans its left-right axis with the shoulders below them.
+    Before, the rest frame had no lateral axis and the retarget died in scipy on a null matrix."""
+    src = load_motion(BOXING).slice(0, 300)
+    out = retarget(src, load_motion("sample:walk").slice(0, 1), feet="free")
+    ps, pt = src.global_positions(), out.global_positions()
+    sn, tn = src.skeleton.names, out.skeleton.names
+    s_axis = ps[:, sn.index("LeftShoulder")] - ps[:, sn.index("RightShoulder")]
+    t_axis = pt[:, tn.index("lShldr")] - pt[:, tn.index("rShldr")]
+    unit = lambda v: v / np.linalg.norm(v, axis=-1, keepdims=True)  # noqa: E731
+    assert angle_deg(unit(s_axis), unit(t_axis)).max() < 5.0
+
+
+def test_a_frame_without_axes_takes_the_nearest_good_frames_and_a_rest_pose_without_is_refused() -> None:
+    up = np.tile([0.0, 1.0, 0.0], (5, 1))
+    lateral = np.tile([1.0, 0.0, 0.0], (5, 1))
+    lateral[2] = 0.0  # coincident left and right joints
+    lateral[3] = [0.0, 2.0, 0.0]  # left-right along up
+    m = _frame(up, lateral, "the chest's axes", rest=False)
+    np.testing.assert_allclose(m, np.tile(np.eye(3), (5, 1, 1)), atol=1e-12)
+    with pytest.raises(MotionError, match="the chest's axes do not span a plane in every frame"):
+        _frame(up, np.zeros((5, 3)), "the chest's axes", rest=False)
+    with pytest.raises(MotionError, match="rest pose: the chest's axes do not span a plane: a zero-length"):
+        _frame(up[:1], lateral[2:3], "rest pose: the chest's axes", rest=True)
