@@ -43,6 +43,7 @@ from .transfer import (
     hip_height_ratio,
     hips_path,
     leg_length,
+    locals_from_globals,
     place_hips,
     planted_feet,
     transfer_rotations,
@@ -264,19 +265,10 @@ def apply_binding(binding: Binding, motion: Motion, character: Motion) -> Motion
         raise MotionError("the binding was made for other skeletons (joint names differ)")
     _, g_source = motion.fk()
     sk = character.skeleton
-    n, nj = motion.num_frames, sk.num_joints
+    n = motion.num_frames
     pairs = enumerate(zip(binding.driven, binding.sources, strict=True))
     desired = {int(j): rot.multiply(g_source[:, int(s)], binding.offsets[k]) for k, (j, s) in pairs}
-    glob = np.empty((n, nj, 4))
-    local = np.empty((n, nj, 4))
-    for j in range(nj):
-        p = int(sk.parents[j])
-        if j in desired:
-            glob[:, j] = desired[j]
-            local[:, j] = glob[:, j] if p < 0 else rot.multiply(rot.inverse(glob[:, p]), glob[:, j])
-        else:
-            local[:, j] = binding.rest_local[j]
-            glob[:, j] = local[:, j] if p < 0 else rot.multiply(glob[:, p], local[:, j])
+    local = locals_from_globals(sk, desired, binding.rest_local, n)
     rest = character.slice(0, 1)
     out = Motion(
         sk,

@@ -30,6 +30,7 @@ only sets how twist is carried over). Character rest pose: frame 0 of the charac
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +40,7 @@ from .. import rotations as rot
 from ..contacts import detect_contacts
 from ..errors import MotionError
 from ..motion import Motion
+from ..skeleton import Skeleton
 from .names import Correspondence
 
 Array = npt.NDArray[np.float64]
@@ -279,10 +281,18 @@ def transfer_rotations(
             desired[j] = rot.multiply(delta, gt0[j])
     for j, planted in planted_feet(source, character, corr, sp, t0).items():
         desired[j] = planted
-    rest_local = character.rotations[0]
-    glob = np.empty((n, nj, 4))
-    local = np.empty((n, nj, 4))
-    for j in range(nj):
+    return np.asarray(
+        rot.standardize(rot.normalize(locals_from_globals(sk, desired, character.rotations[0], n)))
+    )
+
+
+def locals_from_globals(sk: Skeleton, desired: Mapping[int, Array], rest_local: Array, n: int) -> Array:
+    """``(n, J, 4)`` local rotations of skeleton ``sk`` whose joints in ``desired`` take those
+    global rotations (``(n, 4)`` each, world frame) and whose other joints keep their local
+    ``rest_local[j]`` (``(J, 4)``) under their posed parents."""
+    glob = np.empty((n, sk.num_joints, 4))
+    local = np.empty((n, sk.num_joints, 4))
+    for j in range(sk.num_joints):
         p = int(sk.parents[j])
         if j in desired:
             glob[:, j] = desired[j]
@@ -290,7 +300,7 @@ def transfer_rotations(
         else:
             local[:, j] = rest_local[j]
             glob[:, j] = local[:, j] if p < 0 else rot.multiply(glob[:, p], local[:, j])
-    return np.asarray(rot.standardize(rot.normalize(local)))
+    return local
 
 
 def floor_heading(positions: Array, left: int, right: int) -> Array:
