@@ -204,8 +204,9 @@ class Topology:
         binary = shutil.which("moto_server")
         if binary is None:
             raise RuntimeError("moto_server is not installed (pip install 'moto[server]')")
+        atomic = REPO / "tests" / "moto_atomic.py"  # each request atomic, as S3's are
         self.procs["s3"] = subprocess.Popen(
-            [binary, "-H", "127.0.0.1", "-p", str(self.s3_port)],
+            [sys.executable, str(atomic), "-H", "127.0.0.1", "-p", str(self.s3_port)],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         )  # fmt: skip
         endpoint = f"http://127.0.0.1:{self.s3_port}"

@@ -1,4 +1,5 @@
-"""A real S3-protocol server for the tests: moto's server mode (``moto_server``), on a free port.
+"""A real S3-protocol server for the tests: moto's server mode (``moto_server``), on a free port,
+with each request atomic as S3's are (``tests/moto_atomic.py`` says why).
 
 Never a mock of our own: the store talks HTTP to this server exactly as it would to MinIO or AWS.
 ``moto[server]`` is in the dev extra; without it the S3 tests fail under CI (``CI=true``) and are
@@ -12,15 +13,18 @@ import os
 import shutil
 import socket
 import subprocess
+import sys
 import time
 import urllib.error
 import urllib.request
 import uuid
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 GUARD_S = 120.0
+ATOMIC = Path(__file__).with_name("moto_atomic.py")  # moto, each request atomic (its docstring)
 CREDENTIALS = {
     "AWS_ACCESS_KEY_ID": "testing",
     "AWS_SECRET_ACCESS_KEY": "testing",
@@ -47,7 +51,7 @@ def moto_server() -> Iterator[str]:
     for _attempt in range(3):
         port = _free_port()
         proc = subprocess.Popen(
-            [binary, "-H", "127.0.0.1", "-p", str(port)],
+            [sys.executable, str(ATOMIC), "-H", "127.0.0.1", "-p", str(port)],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )
