@@ -36,7 +36,11 @@ ON_FLOOR_M = 0.01
 
 
 def sole_plants(
-    motion: Motion, groups: list[tuple[int, ...]], soles: tuple[Sole, ...], floor: float
+    motion: Motion,
+    groups: list[tuple[int, ...]],
+    soles: tuple[Sole, ...],
+    floor: float,
+    pose: tuple[Array, Array] | None = None,
 ) -> list[tuple[int, int, int]]:
     """The plants of ``motion`` (a character, its ``soles`` standing on ``floor``, its units) as
     its contact events give them: each plant of :func:`motion.contacts.foot_plants` (one per plant
@@ -44,8 +48,9 @@ def sole_plants(
     from the frame its sole lands on the floor (lowest point within :data:`ON_FLOOR_M`) to the
     frame after it last touches it: a joint's plant starts before the sole lands (a heel coming
     down slowly) and ends after it leaves (a toe rising slowly). A plant whose sole never reaches
-    the floor is none. ``(group index, start, end exclusive)``."""
-    pos, grot = motion.fk()
+    the floor is none. ``(group index, start, end exclusive)``. ``pose``: ``motion.fk()`` when the
+    caller has it."""
+    pos, grot = pose if pose is not None else motion.fk()
     by_side = {s.side: s for s in soles}
     near = ON_FLOOR_M / motion.metres_per_unit
     on: dict[int, npt.NDArray[np.bool_]] = {}
@@ -120,17 +125,22 @@ def feet_report(
     corr: Correspondence,
     soles: tuple[Sole, ...],
     floor: float,
+    plants: list[tuple[int, int, int]] | None = None,
 ) -> FeetReport:
     """The figures of ``result`` (``source`` retargeted onto ``character``, in its rest pose at
-    frame 0, with correspondence ``corr``), its ``soles`` and their ``floor`` (character units)."""
+    frame 0, with correspondence ``corr``), its ``soles`` and their ``floor`` (character units).
+    ``plants``: :func:`sole_plants` of the result when the caller has them (its contact events)."""
     tr, sr = corr.target_roles, corr.source_roles
     groups = foot_groups_of(tr)
     pos, grot = result.fk()
     m = result.metres_per_unit
     lowest = {s.side: s.positions(pos, grot)[:, :, 1].min(axis=1) - floor for s in soles}
-    under = min(float(s.around(pos, grot)[:, :, 1].min()) - floor for s in soles)
-    sink = max(0.0, -under) * m
-    plants = sole_plants(result, groups, soles, floor)
+    guards = [
+        float(s.guard.positions(pos, grot)[:, :, 1].min()) - floor for s in soles if s.guard is not None
+    ]
+    sink = max(0.0, -min([*(float(v.min()) for v in lowest.values()), *guards])) * m
+    if plants is None:
+        plants = sole_plants(result, groups, soles, floor, (pos, grot))
     lifts = [lowest[("Left", "Right")[g]][a:b].max() for g, a, b in plants if ("Left", "Right")[g] in lowest]
     scale = (leg_length(character.global_positions()[0], tr) * character.metres_per_unit) / max(
         leg_length(zero_pose(source).global_positions()[0], sr) * source.metres_per_unit, 1e-300

@@ -26,8 +26,7 @@ moving mostly with the toe bone, which bends at the ball when the heel lifts).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from functools import partial
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -179,34 +178,15 @@ def _hull_corners(points: Array) -> npt.NDArray[np.intp]:
         return np.arange(points.shape[0])
 
 
-def _foot_length(rest: Pose, tips: Array, ankle: int, toe: int) -> float:
-    """Horizontal distance from the ankle to the foot's tip (the toe's tip, or the foot's)."""
-    tip = tips[0, toe] if toe >= 0 else tips[0, ankle]
-    return float(np.linalg.norm((tip - rest.positions[0, ankle])[[0, 2]]))
-
-
-_NONE = (
-    np.zeros((0, 1), dtype=np.intp),
-    np.zeros((0, 1)),
-    np.zeros((0, 1, 3)),
-    np.zeros(0, bool),
-    np.zeros((0, 3)),
-)
-
-
 def _mesh_points(
-    foot: Sole,
-    m: BoundMesh,
-    placed: Array,
-    below: npt.NDArray[np.bool_],
-    rest: Pose,
-    chosen: npt.NDArray[np.intp],
-) -> Sole:
-    """``foot`` (its side, joints and axes) made of the mesh vertices ``chosen`` (``placed``: in
-    the rest pose), each bound as the skin binds it; ``below``: the joints under the ankle."""
+    m: BoundMesh, placed: Array, below: npt.NDArray[np.bool_], rest: Pose, chosen: npt.NDArray[np.intp]
+) -> tuple[npt.NDArray[np.intp], Array, Array, npt.NDArray[np.bool_], Array]:
+    """The mesh vertices ``chosen`` (``placed``: in the rest pose) as a sole's points: ``joints``,
+    ``weights`` and ``local`` bound as the skin binds them, ``on_toe`` (more than half their weight
+    under the ankle: ``below``) and ``rest``."""
     joints, weights, local = _bound(placed[chosen], m.joints[chosen], m.weights[chosen], rest)
     toe_part = np.where(below[m.joints[chosen]], m.weights[chosen], 0.0).sum(axis=1) > 0.5 + 1e-6
-    return replace(foot, joints=joints, weights=weights, local=local, on_toe=toe_part, rest=placed[chosen])
+    return joints, weights, local, toe_part, placed[chosen]
 
 
 def mesh_soles(mesh: BoundMesh, character: Motion, roles: dict[str, int]) -> tuple[Sole, ...]:
@@ -248,10 +228,14 @@ def mesh_soles(mesh: BoundMesh, character: Motion, roles: dict[str, int]) -> tup
                 keep.append(sel[_hull_corners(placed[sel])])
         chosen = np.concatenate(keep)
         across = _across(rest, ankle, toe, placed[chosen])
-        points = partial(_mesh_points, Sole(side, ankle, toe, *_NONE, *across), m, placed, below, rest)
         shared = np.flatnonzero((share >= GUARD_SHARE) & ~on)
-        guard = points(shared[_hull_corners(placed[shared])]) if shared.size else None
-        out.append(replace(points(chosen), guard=guard))
+        guard = None
+        if shared.size:
+            corners = shared[_hull_corners(placed[shared])]
+            guard = Sole(side, ankle, toe, *_mesh_points(m, placed, below, rest, corners), *across)
+        out.append(
+            Sole(side, ankle, toe, *_mesh_points(m, placed, below, rest, chosen), *across, guard=guard)
+        )
     return tuple(out)
 
 

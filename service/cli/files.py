@@ -387,8 +387,8 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     groups = foot_groups_of(corr.target_roles)
     soles = character_soles(character, corr.target_roles, mesh)
     floor = sole_floor(out, soles, character, corr.target_roles)
-    report = feet_report(motion, out, character, corr, soles, floor)
-    plants = sole_plants(out, groups, soles, floor) if kinds else None  # where the soles touch
+    plants = sole_plants(out, groups, soles, floor)  # where the soles touch: the report's and events'
+    report = feet_report(motion, out, character, corr, soles, floor, plants)
     if args.report:
         try:
             Path(args.report).write_text(json.dumps({"feet": feet, **report.as_dict()}, indent=1) + "\n")
