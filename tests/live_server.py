@@ -44,31 +44,40 @@ def live_server(data: Path, plugins: str | None = None, workers: int = 2) -> Ite
     if plugins:
         env["SEGUE_ENGINE_PLUGINS"] = plugins
     port = free_port()
-    log_path = data / "uvicorn.log"
+    command = [sys.executable, "-m", "uvicorn", "--factory", "service.app:create_app",
+               "--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"]  # fmt: skip
+    with serving(command, env, port, data / "uvicorn.log", signal.SIGINT) as url:
+        yield url
+
+
+@contextmanager
+def serving(
+    command: list[str], env: dict[str, str], port: int, log_path: Path, stop: int = signal.SIGTERM
+) -> Iterator[str]:
+    """Run ``command`` (a server listening on 127.0.0.1:``port``; its output in ``log_path``) from
+    the repository, yield its base URL once ``/healthz`` answers, then stop it with ``stop``
+    (killed after 20 s). Fails the test if it exits first or does not answer within 120 s (a hang
+    guard: a loaded machine may take a while to import and start it)."""
     with log_path.open("wb") as log:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "--factory", "service.app:create_app",
-             "--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"],
-            cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT,
-        )  # fmt: skip
+        proc = subprocess.Popen(command, cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT)
         url = f"http://127.0.0.1:{port}"
         deadline = time.monotonic() + 120
         while True:
             if proc.poll() is not None:
-                pytest.fail(f"uvicorn exited with {proc.returncode}: {log_path.read_text()[-2000:]}")
+                pytest.fail(f"{command[2]} exited with {proc.returncode}: {log_path.read_text()[-2000:]}")
             try:
-                if httpx.get(f"{url}/healthz", timeout=1).status_code == 200:
+                if httpx.get(f"{url}/healthz", timeout=5).status_code == 200:
                     break
             except httpx.TransportError:
                 pass
             if time.monotonic() > deadline:
                 proc.kill()
-                pytest.fail("uvicorn did not answer /healthz within 120 s")
+                pytest.fail(f"{command[2]} did not answer /healthz within 120 s")
             time.sleep(0.05)
         try:
             yield url
         finally:
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(stop)
             try:
                 proc.wait(timeout=20)
             except subprocess.TimeoutExpired:

@@ -16,7 +16,6 @@ import contextlib
 import json
 import os
 import socket
-import subprocess
 import sys
 import time
 from collections.abc import Iterator
@@ -27,7 +26,7 @@ import pytest
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
-from tests.live_server import REPO, free_port
+from tests.live_server import REPO, free_port, serving
 
 from .conftest import PLUGINS, WALK
 
@@ -51,36 +50,10 @@ def segue_serve(data: Path, **limits: str) -> Iterator[str]:
     )
     env.pop("SEGUE_REDIS_URL", None)
     port = free_port()
-    log_path = data / "serve.log"
-    with log_path.open("wb") as log:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "service.cli", "serve", "--port", str(port), "--workers", "1",
-             "--no-warm", "--log-level", "warning"],
-            cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT,
-        )  # fmt: skip
-        url = f"http://127.0.0.1:{port}"
-        deadline = time.monotonic() + GUARD_S
-        while True:
-            if proc.poll() is not None:
-                pytest.fail(f"segue serve exited with {proc.returncode}: {log_path.read_text()[-2000:]}")
-            try:
-                if httpx.get(f"{url}/healthz", timeout=5).status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            if time.monotonic() > deadline:
-                proc.kill()
-                pytest.fail("segue serve did not answer /healthz in time")
-            time.sleep(0.1)
-        try:
-            yield url
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+    command = [sys.executable, "-m", "service.cli", "serve", "--port", str(port), "--workers", "1",
+               "--no-warm", "--log-level", "warning"]  # fmt: skip
+    with serving(command, env, port, data / "serve.log") as url:
+        yield url
 
 
 def port_of(url: str) -> int:
