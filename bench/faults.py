@@ -353,19 +353,12 @@ def scenario(name: str, n_jobs: int, budget: float, hang_s: float = 8.0) -> dict
     try:
         top.start()
         http = httpx.Client(base_url=top.url, timeout=30)
-        walk = sample_path("walk")
-        clip = http.post("/v1/clips", files={"file": (walk.name, walk.read_bytes())}).json()
-        db = http.post("/v1/databases", json={"kind": "graph", "clips": [{"clip": clip["id"]}]}).json()
-        deadline = time.monotonic() + 120
-        while http.get(f"/v1/databases/{db['id']}").json()["status"] != "ready":
-            if time.monotonic() > deadline:
-                raise RuntimeError("the database did not build")
-            time.sleep(0.1)
+        db_id = walk_graph(http)
         jobs = []
         for k in range(n_jobs):
             r = http.post(
                 "/v1/jobs",
-                json={"engine": "graph", "database": db["id"], "frames": 150 + k, "budget_s": budget},
+                json={"engine": "graph", "database": db_id, "frames": 150 + k, "budget_s": budget},
             )
             r.raise_for_status()
             jobs.append(r.json()["id"])
