@@ -258,14 +258,14 @@ def deadlines(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         yield url
 
 
-def test_a_body_below_the_minimum_rate_gets_408(deadlines: str) -> None:
-    sock = open_from(deadlines, "127.0.0.2")
-    sock.sendall(upload_head(TOKENS["bob"]))
-    sock.settimeout(0.2)
+def send_until_answered(sock: socket.socket, piece: bytes, every_s: float) -> bytes:
+    """Send ``piece`` every ``every_s`` seconds until the server answers and closes (or the hang
+    guard); what it answered. The socket is closed after."""
+    sock.settimeout(every_s)
     answer = b""
-    for _ in range(int(GUARD_S / 0.2)):  # one byte every 0.2 s: 5 bytes/s against 1000
+    for _ in range(int(GUARD_S / every_s)):
         try:
-            sock.sendall(b"x")
+            sock.sendall(piece)
         except OSError:
             break
         try:
@@ -278,6 +278,13 @@ def test_a_body_below_the_minimum_rate_gets_408(deadlines: str) -> None:
         if not chunk:
             break
     sock.close()
+    return answer
+
+
+def test_a_body_below_the_minimum_rate_gets_408(deadlines: str) -> None:
+    sock = open_from(deadlines, "127.0.0.2")
+    sock.sendall(upload_head(TOKENS["bob"]))
+    answer = send_until_answered(sock, b"x", 0.2)  # one byte every 0.2 s: 5 bytes/s against 1000
     assert status_of(answer) == 408 and error_code(answer) == "request_timeout"
     assert served(deadlines, "alice") == 200
 
@@ -285,23 +292,7 @@ def test_a_body_below_the_minimum_rate_gets_408(deadlines: str) -> None:
 def test_a_body_past_the_request_deadline_gets_408(deadlines: str) -> None:
     sock = open_from(deadlines, "127.0.0.2")
     sock.sendall(upload_head(TOKENS["bob"], length=10_000_000))
-    sock.settimeout(0.25)
-    answer = b""
-    for _ in range(int(GUARD_S / 0.25)):  # 20 kB every 0.25 s: 80 kB/s, far above the rate, for 125 s
-        try:
-            sock.sendall(b"x" * 20_000)
-        except OSError:
-            break
-        try:
-            chunk = sock.recv(65536)
-        except TimeoutError:
-            continue
-        except ConnectionResetError:
-            break
-        answer += chunk
-        if not chunk:
-            break
-    sock.close()
+    answer = send_until_answered(sock, b"x" * 20_000, 0.25)  # 80 kB/s, far above the rate, for 125 s
     assert status_of(answer) == 408 and error_code(answer) == "request_timeout"
 
 
